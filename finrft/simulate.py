@@ -1,0 +1,187 @@
+"""Run a plate test (drag or rotate) on MuJoCo and collect its results.
+
+The drive joint carries a very large armature, so the RFT load cannot change its speed; each step starts from the
+exact prescribed position and velocity, and the force the drive must apply to hold that motion is read back as
+``-armature * qacc``. At a reversal of the triangle wave the base's velocity jumps; the hinges then receive the
+impulse that an ideal kinematic constraint would give them (computed with the plate's own mass matrix).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Iterator
+
+import mujoco
+import numpy as np
+
+from .coupling import PythonCoupling, installed
+from .drive import Drive
+from .models import PlateModel, build_plate
+from .scene import Scene
+
+_BAD_STATE = (mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL)
+
+
+class SimulationUnstable(RuntimeError):
+    """The integration blew up; the message says when and what to change."""
+
+
+@dataclass
+class Run:
+    """Results of one plate test, SI units. Drag: metres and newtons; rotate: radians and newton-metres."""
+
+    scene: Scene
+    drive: Drive
+    time: np.ndarray               # (T,) s
+    displacement: np.ndarray       # (T,) base displacement along +y (m) or rod rotation about z (rad)
+    segment_angle: np.ndarray      # (T, N) rad, change of each segment's absolute orientation since t = 0
+    hinge_angle: np.ndarray        # (T, N) rad, hinge angles (zero for a rigid plate)
+    drive_force: np.ndarray        # (T,) N or N m that the drive applies to the plate along +y / about +z
+    rft_force: np.ndarray          # (T, N, 3) N, RFT force on each segment, world frame
+    stroke_impulse: np.ndarray     # (strokes,) integral of the drive force over each stroke (N s or N m s)
+    peak_drive_force: float        # max |drive force| over every step
+    steps: int
+    wall_s: float
+    backend: str = "python"
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def quantity(self) -> str:
+        return "force" if self.drive.kind == "drag" else "torque"
+
+    @property
+    def unit(self) -> str:
+        return "N" if self.drive.kind == "drag" else "Nm"
+
+    def cycle_table(self) -> list[dict[str, float]]:
+        """Per out-and-back cycle: mean drive force/torque in the recovery (out) and power (back) strokes and the
+        net impulse the medium gives the plate (minus the drive's), positive along +y / about +z."""
+        if self.drive.cycles is None:
+            return []
+        q, u, ts = self.quantity, self.unit, self.drive.stroke_time
+        rows = []
+        for c in range(self.drive.cycles):
+            out, back = self.stroke_impulse[2 * c], self.stroke_impulse[2 * c + 1]
+            rows.append({f"mean_recovery_{q}_{u}": out / ts, f"mean_power_{q}_{u}": back / ts,
+                         f"net_impulse_{u}s": -(out + back)})
+        return rows
+
+    def summary(self) -> dict[str, Any]:
+        """The figures `finrft ... --json` prints."""
+        q, u = self.quantity, self.unit
+        out: dict[str, Any] = {
+            "test": self.drive.kind,
+            "plate": self.scene.plate.kind,
+            "final_segment_angle_deg": np.degrees(self.segment_angle[-1]).tolist(),
+            "final_hinge_angle_deg": np.degrees(self.hinge_angle[-1]).tolist(),
+            f"peak_drive_{q}_{u}": self.peak_drive_force,
+            "steps": self.steps,
+            "sim_time_s": self.steps * self.scene.sim.dt,
+            "wall_s": self.wall_s,
+            "backend": self.backend,
+            "integrator": self.scene.sim.integrator,
+            "dt": self.scene.sim.dt,
+        }
+        cycles = self.cycle_table()
+        if cycles:
+            later = cycles[1:] or cycles
+            out["first_cycle"] = cycles[0]
+            out["cycles"] = cycles
+            for key in (f"mean_recovery_{q}_{u}", f"mean_power_{q}_{u}", f"net_impulse_{u}s"):
+                out[key] = float(np.mean([row[key] for row in later]))
+            out["cycles_averaged"] = f"{2 if len(cycles) > 1 else 1}..{len(cycles)}"
+        return out
+
+
+def _impulse_on_reversal(plate: PlateModel, m: mujoco.MjModel, d: mujoco.MjData, jump: float) -> None:
+    """Change the drive's velocity by ``jump`` as an ideal constraint would: M0 dq = e_b lambda, dq_b = jump,
+    with M0 the mass matrix without the drive's artificial armature."""
+    mujoco.mj_forward(m, d)
+    mass = np.zeros((m.nv, m.nv))
+    mujoco.mj_fullM(m, d, mass)
+    b = plate.drive_dof
+    mass[b, b] -= plate.armature
+    column = np.linalg.solve(mass, np.eye(m.nv)[b])
+    d.qvel[:] += column * (jump / column[b])
+
+
+def _unstable(scene: Scene, t: float, messages: list[str]) -> SimulationUnstable:
+    what = messages[0].rstrip(".") if messages else "NaN, Inf or huge value in the state"
+    return SimulationUnstable(
+        f"simulation went unstable at t = {t:.4g} s ({what}) with integrator {scene.sim.integrator}, "
+        f"dt = {scene.sim.dt:g} s: reduce sim.dt, raise the inertias or rft.v_reg, or use sim.integrator = "
+        f"implicitfast")
+
+
+@contextlib.contextmanager
+def _captured_warnings(messages: list[str]) -> Iterator[None]:
+    """Collect MuJoCo's warnings (they would go to stderr) so that a failure can quote them."""
+    previous = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(messages.append)
+    try:
+        yield
+    finally:
+        mujoco.set_mju_user_warning(previous)
+
+
+def simulate(scene: Scene, drive: Drive, *, progress: Callable[[float], None] | None = None) -> Run:
+    """Simulate one plate test; raises SimulationUnstable rather than return a diverged run."""
+    start = time.perf_counter()
+    plate = build_plate(scene, drive.kind, drive.attack_deg)
+    m = plate.model
+    d = mujoco.MjData(m)
+    coupling = PythonCoupling(plate, scene)
+    dt = scene.sim.dt
+    steps = max(1, round(drive.duration / dt))
+    times = np.arange(steps + 1) * dt
+    position = np.array([drive.position(t) for t in times])
+    velocity = np.array([drive.velocity(t) for t in times])
+    stroke = np.array([drive.stroke_index(t + 0.5 * dt) for t in times])
+    every = max(1, round(scene.sim.record_dt / dt))
+    samples = np.unique(np.r_[np.arange(0, steps, every), steps])
+    is_sample = np.zeros(steps + 1, dtype=bool)
+    is_sample[samples] = True
+
+    n = scene.plate.segments
+    rec_q = np.zeros((len(samples), n))
+    rec_f = np.zeros(len(samples))
+    rec_rft = np.zeros((len(samples), n, 3))
+    force = np.zeros(steps)
+    b, bq, arm = plate.drive_dof, plate.drive_qpos, plate.armature
+    hinges = plate.hinge_qpos
+    counts = d.warning.number
+    w0, w1, w2 = (int(w) for w in _BAD_STATE)
+    messages: list[str] = []
+
+    d.qvel[b] = velocity[0]
+    sample = 0
+    with installed(coupling), _captured_warnings(messages):
+        for step in range(steps + 1):
+            if step and velocity[step] != velocity[step - 1]:
+                _impulse_on_reversal(plate, m, d, velocity[step] - velocity[step - 1])
+            d.qpos[bq], d.qvel[b] = position[step], velocity[step]
+            if is_sample[step]:
+                mujoco.mj_forward(m, d)
+                rec_q[sample, :len(hinges)] = d.qpos[hinges]
+                rec_f[sample] = -arm * d.qacc[b]
+                rec_rft[sample] = coupling.force
+                sample += 1
+                if progress is not None:
+                    progress(step / steps)
+            if step == steps:
+                break
+            mujoco.mj_step(m, d)
+            if counts[w0] or counts[w1] or counts[w2]:
+                raise _unstable(scene, times[step], messages)
+            force[step] = -arm * d.qacc[b]
+
+    impulse = np.bincount(stroke[:-1], weights=force * dt, minlength=drive.strokes)
+    segment_angle = np.cumsum(rec_q, axis=1)
+    if drive.kind == "rotate":
+        segment_angle += position[samples][:, None]
+    return Run(scene=scene, drive=drive, time=times[samples], displacement=position[samples],
+               segment_angle=segment_angle, hinge_angle=rec_q, drive_force=rec_f, rft_force=rec_rft,
+               stroke_impulse=impulse, peak_drive_force=float(np.max(np.abs(force))), steps=steps,
+               wall_s=time.perf_counter() - start)

@@ -1,0 +1,1 @@
+"""The MJCF models, installed as the package data ``finrft.mjcf``."""

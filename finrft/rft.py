@@ -61,7 +61,7 @@ def table_force(v: np.ndarray, x_axis: np.ndarray, y_axis: np.ndarray, table: Fo
     attack = np.arctan2(np.abs(vy), np.abs(vx))
     perp = np.interp(attack, table.attack, table.f_perp)
     par = np.interp(attack, table.attack, table.f_par)
-    return -ramp[..., None] * (perp * np.sign(vy)[..., None] * y_axis + par * np.sign(vx)[..., None] * x_axis)
+    return -ramp[..., None] * ((perp * np.sign(vy))[..., None] * y_axis + (par * np.sign(vx))[..., None] * x_axis)
 
 
 def read_table(path: str | Path) -> ForceTable:

@@ -1,0 +1,207 @@
+"""File writers for one plate run: an HDF5 file for analysis and a rerun recording (.rrd) for viewing.
+
+Both writers go through a temporary file in the target's directory and `os.replace` it onto the target, so an
+interrupted or failed write never leaves a truncated file where a complete one is expected.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import json
+import os
+import uuid
+from datetime import datetime, timezone
+from importlib import metadata
+from pathlib import Path
+from typing import Any, Iterator
+
+import h5py
+import mujoco
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+from .models import initial_heading
+from .scene import to_toml
+from .simulate import Run
+
+SCHEMA = "finrft.run/1"
+SIGN_CONVENTION = (
+    "A drag moves the base along +y; a rotation turns the rod about +z through the base. Angles are positive "
+    "counter-clockwise about +z. The drive force (torque) is what the drive applies to the plate, along +y "
+    "(about +z).")
+# Written by write_h5 itself; extra_attrs may not replace them, or a file could contradict its own data.
+_ROOT_ATTRS = ("schema", "scene_toml", "scene_json", "drive_json", "summary_json", "finrft_version",
+               "mujoco_version", "numpy_version", "created_utc", "sign_convention")
+
+
+@contextlib.contextmanager
+def _atomic_path(path: str | Path) -> Iterator[Path]:
+    """A temporary path next to ``path`` that replaces it when the block succeeds and is removed when it fails."""
+    target = Path(path)
+    # Not tempfile.mkstemp: its 0600 mode would carry over to the result; the writers create the file themselves.
+    tmp = target.with_name(f".{target.name}.{uuid.uuid4().hex[:12]}.tmp")
+    try:
+        yield tmp
+        os.replace(tmp, target)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def _finrft_version() -> str:
+    try:
+        return metadata.version("finrft")
+    except metadata.PackageNotFoundError:
+        return "unknown"
+
+
+def _motion(run: Run) -> tuple[str, str, str, str]:
+    """Names and units of the drive's position and load: (position, its unit, load, its unit)."""
+    if run.drive.kind == "drag":
+        return "displacement", "m", "drive_force", "N"
+    return "rotation", "rad", "drive_torque", "N m"
+
+
+def write_h5(run: Run, path: str | Path, *, extra_attrs: dict[str, Any] | None = None) -> None:
+    """Write a run to HDF5: time series at the root with SI ``units`` attributes, the scene, drive and summary as
+    root attributes. ``extra_attrs`` are added to the root attributes."""
+    extra = dict(extra_attrs or {})
+    clash = sorted(set(extra) & set(_ROOT_ATTRS))
+    if clash:
+        raise ValueError(f"extra_attrs may not replace {', '.join(clash)}")
+    position, position_unit, load, load_unit = _motion(run)
+    impulse_unit = "N s" if run.drive.kind == "drag" else "N m s"
+    series = [
+        (position, run.displacement, position_unit,
+         "base displacement along +y" if run.drive.kind == "drag" else "rod rotation about +z"),
+        ("segment_angle", run.segment_angle, "rad", "change of each segment's absolute orientation since t = 0"),
+        ("hinge_angle", run.hinge_angle, "rad", "hinge angles, segment i relative to the body before it"),
+        (load, run.drive_force, load_unit, "force (torque) the drive applies to the plate"),
+        ("rft_force", run.rft_force, "N", "resistive force of the medium on each segment, at its midpoint"),
+    ]
+    with _atomic_path(path) as tmp, h5py.File(tmp, "w", track_order=True) as f:
+        t = f.create_dataset("time", data=run.time)
+        t.attrs.update(units="s", description="simulated time of each sample")
+        t.make_scale("time")
+        for name, data, unit, description in series:
+            big = data.ndim > 1
+            ds = f.create_dataset(name, data=data, chunks=True if big else None,
+                                  compression="gzip" if big else None, shuffle=big)
+            ds.attrs.update(units=unit, description=description)
+            ds.dims[0].label = "time"
+            ds.dims[0].attach_scale(t)
+            if big:
+                ds.dims[1].label = "segment"
+        f["rft_force"].attrs["frame"] = "world"
+        impulse = f.create_dataset("stroke_impulse", data=run.stroke_impulse)
+        impulse.attrs.update(units=impulse_unit, description="integral of the drive load over each stroke")
+        f.attrs.update(
+            schema=SCHEMA,
+            scene_toml=to_toml(run.scene),
+            scene_json=json.dumps(run.scene.to_dict()),
+            drive_json=json.dumps(dataclasses.asdict(run.drive)),
+            summary_json=json.dumps(run.summary()),
+            finrft_version=_finrft_version(),
+            mujoco_version=mujoco.__version__,
+            numpy_version=np.__version__,
+            created_utc=datetime.now(timezone.utc).isoformat(timespec="seconds"),
+            sign_convention=SIGN_CONVENTION,
+        )
+        f.attrs.update(extra)
+
+
+def plate_points(run: Run) -> np.ndarray:
+    """The plate's centre line, (T, N + 2, 3) m: base point, rod tip (first hinge), the other hinges, plate tip."""
+    p = run.scene.plate
+    heading = initial_heading(run.drive.kind, run.drive.attack_deg)
+    count = len(run.time)
+    base = np.zeros((count, 3))
+    if run.drive.kind == "drag":
+        base[:, 1] = run.displacement
+        rod_angle = np.full(count, heading)
+    else:
+        rod_angle = heading + run.displacement
+    angles = np.column_stack([rod_angle, heading + run.segment_angle])
+    lengths = np.r_[p.rod_length, np.full(p.segments, p.segment_length)]
+    steps = np.zeros((count, p.segments + 1, 3))
+    steps[..., 0] = lengths * np.cos(angles)
+    steps[..., 1] = lengths * np.sin(angles)
+    return np.concatenate([base[:, None], base[:, None] + np.cumsum(steps, axis=1)], axis=1)
+
+
+def _blueprint(run: Run, points: np.ndarray, load: tuple[str, str], motion: tuple[str, str]) -> rrb.Blueprint:
+    low, high = points.min(axis=(0, 1)), points.max(axis=(0, 1))
+    centre = (low + high) / 2
+    span = float(np.max(high - low)) or run.scene.plate.segment_length
+    # Straight down the -z axis, with +y (the drag direction) up on screen.
+    eye = rrb.EyeControls3D(position=centre + [0.0, 0.0, 2.0 * span], look_target=centre, eye_up=[0.0, 1.0, 0.0])
+    # The default 1 m grid is coarser than the whole plate.
+    grid = rrb.LineGrid3D(spacing=0.01)
+    plate = rrb.Spatial3DView(name="Plate (top view, 1 cm grid)", origin="plate", eye_controls=eye, line_grid=grid)
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Tabs(plate, rrb.TextDocumentView(name="Scene", origin="scene"), active_tab=0),
+            rrb.Vertical(
+                rrb.TimeSeriesView(name="Segment angles (deg)", origin="angles/segment"),
+                rrb.TimeSeriesView(name="Hinge angles (deg)", origin="angles/hinge"),
+                *(rrb.TimeSeriesView(name=label.capitalize(), origin=entity) for entity, label in (load, motion)),
+            ),
+            column_shares=[3, 2],
+        ),
+    )
+
+
+def _send_scalars(rec: rr.RecordingStream, entity: str, label: str, times: rr.TimeColumn,
+                  values: np.ndarray) -> None:
+    rec.log(entity, rr.SeriesLines(names=label), static=True)
+    rec.send_columns(entity, indexes=[times], columns=rr.Scalars.columns(scalars=values))
+
+
+def write_rrd(run: Run, path: str | Path) -> None:
+    """Write a run as a rerun recording with a ready-made layout: the plate and its RFT forces seen from above,
+    and time series of the segment angles, hinge angles and the drive, on the timeline ``sim_time``."""
+    p = run.scene.plate
+    n = p.segments
+    count = len(run.time)
+    if run.drive.kind == "drag":
+        load = ("drive/force", "drive force (N)")
+        motion, motion_values = ("drive/displacement", "displacement (mm)"), 1e3 * run.displacement
+    else:
+        load = ("drive/torque", "drive torque (N m)")
+        motion, motion_values = ("drive/rotation", "rotation (deg)"), np.degrees(run.displacement)
+    points = plate_points(run)
+    midpoints = (points[:, 1:-1] + points[:, 2:]) / 2
+    peak = float(np.max(np.linalg.norm(run.rft_force, axis=-1), initial=0.0))
+    arrow_scale = p.segment_length / peak if peak > 0 else 0.0
+
+    rec = rr.RecordingStream("finrft", recording_id=uuid.uuid4())
+    if not rec.is_enabled():
+        raise RuntimeError(f"rerun logging is disabled (RERUN=off?), so {path} cannot be written")
+    with _atomic_path(path) as tmp:
+        rec.save(tmp, default_blueprint=_blueprint(run, points, load, motion))
+        try:
+            times = rr.TimeColumn("sim_time", duration=run.time)
+            rec.log("scene", rr.TextDocument(to_toml(run.scene), media_type=rr.MediaType.TEXT), static=True)
+            rec.log("plate", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+            rec.log("plate/centerline", rr.LineStrips3D.from_fields(colors=[[60, 60, 70]], radii=[0.0005]),
+                    static=True)
+            rec.send_columns("plate/centerline", indexes=[times], columns=rr.LineStrips3D.columns(strips=points))
+            rec.log("plate/rft", rr.Arrows3D.from_fields(colors=[[230, 80, 20]], radii=[0.0006]), static=True)
+            rec.log("plate/rft", rr.AnyValues(arrow_scale_m_per_N=arrow_scale,
+                                              note=f"arrow length = RFT force x {arrow_scale:.4g} m/N"),
+                    static=True)
+            rec.send_columns("plate/rft", indexes=[times], columns=rr.Arrows3D.columns(
+                origins=midpoints.reshape(-1, 3), vectors=arrow_scale * run.rft_force.reshape(-1, 3),
+            ).partition([n] * count))
+            for i in range(n):
+                _send_scalars(rec, f"angles/segment/seg{i + 1}", f"segment {i + 1} (deg)", times,
+                              np.degrees(run.segment_angle[:, i]))
+                _send_scalars(rec, f"angles/hinge/hinge{i + 1}", f"hinge {i + 1} (deg)", times,
+                              np.degrees(run.hinge_angle[:, i]))
+            _send_scalars(rec, *load, times, run.drive_force)
+            _send_scalars(rec, *motion, times, motion_values)
+        finally:
+            # Closes the file sink, so the footer is written (or the file released before it is removed).
+            rec.disconnect()

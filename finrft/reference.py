@@ -1,0 +1,152 @@
+"""An independent solution of the plate's equations of motion, without MuJoCo.
+
+The plate is written in absolute segment angles phi_k and integrated with scipy at tight tolerance. The equations
+come from the principle of virtual work, derived by hand: with segment midpoints
+``r_i = P(t) + sum_j c_ij l e(phi_j)`` (c_ij = 1 for j < i, 1/2 for j = i), P the rod's tip,
+
+    sum_j A_kj phi''_j = Q_k - sum_i m_i c_ik l e_perp(phi_k) . (P'' - sum_j c_ij l e(phi_j) phi'_j^2)
+    A_kj = I_k delta_kj + l^2 cos(phi_k - phi_j) sum_i m_i c_ik c_ij
+    Q_k  = sum_i F_i . c_ik l e_perp(phi_k) + tau_k - tau_(k+1)
+
+with F_i the RFT force (the same law as `finrft.rft`) and tau_k the torque of hinge k on segment k. A reversal
+of the drive changes P' at once; the segments then take the impulse ``A dphi' = -sum_i m_i c_ik l e_perp . dP'``.
+It serves as the test oracle for the MuJoCo model (hinged plates; the origami stop as the penalty spring).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from . import rft
+from .drive import Drive
+from .models import initial_heading
+from .scene import Scene
+
+
+@dataclass(frozen=True)
+class Solution:
+    time: np.ndarray           # (T,) s
+    segment_angle: np.ndarray  # (T, N) rad, change of absolute orientation since t = 0
+    hinge_angle: np.ndarray    # (T, N) rad
+    drive_force: np.ndarray    # (T,) N along +y (drag) or N m about +z (rotate), applied by the drive
+
+
+def _e(phi):
+    return np.stack([np.cos(phi), np.sin(phi), np.zeros_like(phi)], axis=-1)
+
+
+def _e_perp(phi):
+    return np.stack([-np.sin(phi), np.cos(phi), np.zeros_like(phi)], axis=-1)
+
+
+class _Chain:
+    def __init__(self, scene: Scene, drive: Drive) -> None:
+        p = scene.plate
+        if p.kind == "rigid":
+            raise ValueError("the reference solves hinged plates; a rigid plate has no dynamics of its own")
+        if p.kind == "origami" and p.stop != "penalty":
+            raise ValueError("the reference models the origami stop as the penalty spring (plate.stop = 'penalty')")
+        n = p.segments
+        self.n, self.l, self.drive, self.p = n, p.segment_length, drive, p
+        self.c = np.tril(np.ones((n, n)), -1) + 0.5 * np.eye(n)      # c[i, j]
+        self.m = np.full(n, p.segment_mass)
+        self.inertia = np.full(n, p.segment_inertia)
+        self.mcc = np.einsum("i,ik,ij->kj", self.m, self.c, self.c)  # sum_i m_i c_ik c_ij
+        self.mc = self.m[:, None] * self.c                            # m_i c_ik
+        self.law = rft.force_law(scene.rft)
+        self.penalty = p.kind == "origami"
+        self.heading = initial_heading(drive.kind, drive.attack_deg)
+
+    def rod(self, t: float, omega_sign: float):
+        """Rod angle psi, tip velocity and tip acceleration at t (constant speed within a stroke)."""
+        d, L = self.drive, self.p.rod_length
+        if d.kind == "drag":
+            return self.heading, np.array([0.0, omega_sign * d.speed, 0.0]), np.zeros(3)
+        psi = self.heading + d.position(t)
+        w = omega_sign * d.speed
+        return psi, L * w * _e_perp(psi), -L * w * w * _e(psi)
+
+    def hinge_torque(self, phi, dphi, psi, dpsi):
+        q = np.diff(np.r_[psi, phi])
+        dq = np.diff(np.r_[dpsi, dphi])
+        deflection = q - self.p.springref
+        tau = -self.p.stiffness * deflection - self.p.damping * dq
+        if self.penalty:
+            tau -= self.p.stop_stiffness * (deflection + np.abs(deflection)) * deflection
+        return tau
+
+    def accelerations(self, t: float, phi, dphi, sign: float):
+        psi, v0, a0 = self.rod(t, sign)
+        dpsi = sign * self.drive.speed if self.drive.kind == "rotate" else 0.0
+        e, ep = _e(phi), _e_perp(phi)
+        velocity = v0 + self.l * np.einsum("ij,j,jk->ik", self.c, dphi, ep)
+        force = self.law(velocity, e, ep)
+        tau = self.hinge_torque(phi, dphi, psi, dpsi)
+        q_gen = self.l * np.einsum("ik,ia,ka->k", self.c, force, ep) + tau - np.r_[tau[1:], 0.0]
+        centripetal = self.l * np.einsum("ij,j,ja->ia", self.c, dphi ** 2, e)   # sum_j c_ij l e_j phi'_j^2
+        q_gen -= self.l * np.einsum("ik,ka,ia->k", self.mc, ep, a0[None, :] - centripetal)
+        a = self.l ** 2 * self.mcc * np.cos(phi[:, None] - phi[None, :]) + np.diag(self.inertia)
+        ddphi = np.linalg.solve(a, q_gen)
+        accel = a0 + self.l * np.einsum("ij,ja->ia", self.c, ddphi[:, None] * ep - dphi[:, None] ** 2 * e)
+        return ddphi, force, accel, psi
+
+    def drive_load(self, t, phi, dphi, sign):
+        """What the drive applies: along +y (drag), or the torque about the base (rotate)."""
+        ddphi, force, accel, psi = self.accelerations(t, phi, dphi, sign)
+        net = self.m[:, None] * accel - force        # force each segment needs from the chain
+        if self.drive.kind == "drag":
+            return net[:, 1].sum()
+        p = self.p
+        origin = self.l * np.einsum("ij,ja->ia", self.c, _e(phi)) + p.rod_length * _e(psi)
+        torque = np.cross(origin, net)[:, 2].sum() + (self.inertia * ddphi).sum()
+        return torque  # the rod itself turns at constant speed: no torque for its own inertia
+
+    def reversal(self, phi, psi, jump: np.ndarray):
+        ep = _e_perp(phi)
+        a = self.l ** 2 * self.mcc * np.cos(phi[:, None] - phi[None, :]) + np.diag(self.inertia)
+        rhs = -self.l * np.einsum("ik,ka,a->k", self.mc, ep, jump)
+        return np.linalg.solve(a, rhs)
+
+
+def solve(scene: Scene, drive: Drive, times: np.ndarray, *, rtol: float = 1e-10, atol: float = 1e-12) -> Solution:
+    """Integrate the plate test stroke by stroke (Radau) and sample it at ``times`` (s, increasing)."""
+    chain = _Chain(scene, drive)
+    n, ts = chain.n, drive.stroke_time
+    phi = np.full(n, chain.heading)
+    # At t = 0 the plate moves rigidly with the drive: hinge rates are zero.
+    dphi = np.full(n, drive.speed if drive.kind == "rotate" else 0.0)
+    times = np.asarray(times, dtype=float)
+    states = np.zeros((len(times), 2 * n))
+    signs = np.zeros(len(times))
+    for k in range(drive.strokes):
+        sign = 1.0 if k % 2 == 0 else -1.0
+        last = k == drive.strokes - 1
+        # A run's last sample may overshoot the nominal end by part of a step; the last stroke carries on.
+        t0, t1 = k * ts, max((k + 1) * ts, times[-1]) if last else (k + 1) * ts
+        if k:
+            psi, v_new, _ = chain.rod(t0, sign)
+            _, v_old, _ = chain.rod(t0, -sign)
+            dphi = dphi + chain.reversal(phi, psi, v_new - v_old)
+        pick = (times >= t0 - 1e-12) & ((times <= t1) if last else (times < t1 - 1e-12))
+
+        def rhs(t, y, sign=sign):
+            return np.r_[y[n:], chain.accelerations(t, y[:n], y[n:], sign)[0]]
+
+        # Sample the stroke's own times and its end, from which the next stroke starts.
+        wanted = np.clip(times[pick], t0, t1)
+        t_eval = np.unique(np.r_[wanted, t1])
+        sol = solve_ivp(rhs, (t0, t1), np.r_[phi, dphi], method="Radau", rtol=rtol, atol=atol, t_eval=t_eval)
+        if not sol.success:
+            raise RuntimeError(f"reference integration failed in stroke {k}: {sol.message}")
+        states[pick] = sol.y[:, np.searchsorted(t_eval, wanted)].T
+        signs[pick] = sign
+        phi, dphi = sol.y[:n, -1], sol.y[n:, -1]
+    phi_t = states[:, :n]
+    rotation = np.array([drive.position(t) for t in times]) if drive.kind == "rotate" else np.zeros(len(times))
+    psi_t = chain.heading + rotation
+    hinge = np.diff(np.c_[psi_t, phi_t], axis=1)
+    load = np.array([chain.drive_load(t, y[:n], y[n:], s) for t, y, s in zip(times, states, signs)])
+    return Solution(times, phi_t - chain.heading, hinge, load)

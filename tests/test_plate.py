@@ -1,0 +1,128 @@
+"""Plate tests on MuJoCo against closed forms, force balances, symmetry and convergence in dt."""
+
+import numpy as np
+import pytest
+from scipy.optimize import brentq
+
+from finrft.drive import Drive
+from finrft.simulate import SimulationUnstable, simulate
+
+
+@pytest.mark.parametrize("attack_deg", [90.0, 60.0, 30.0, 0.0])
+def test_rigid_drag_is_the_sum_of_the_segment_law(paper, attack_deg):
+    # A rigid plate at angle of attack theta: every segment sees the same v, so the drive must supply
+    # N (f_perp sin^2 theta + f_par cos^2 theta) tanh(v / v_reg) along +y, at every instant.
+    scene = paper.replace(**{"plate.kind": "rigid"})
+    drive = Drive(speed=0.03, stroke=0.03, attack_deg=attack_deg)
+    run = simulate(scene, drive)
+    theta, r = np.radians(attack_deg), scene.rft
+    expected = scene.plate.segments * (r.f_perp * np.sin(theta) ** 2 + r.f_par * np.cos(theta) ** 2) \
+        * np.tanh(drive.speed / r.v_reg)
+    np.testing.assert_allclose(run.drive_force, expected, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(run.rft_force.sum(axis=1)[:, 1], -expected, rtol=1e-9, atol=1e-12)
+    assert np.all(run.segment_angle == 0.0)
+
+
+def test_rigid_rotation_torque_closed_form(paper):
+    # Turning about the base at omega, segment i (midpoint radius r_i) moves normal to itself at omega r_i.
+    scene = paper.replace(**{"plate.kind": "rigid"})
+    drive = Drive(kind="rotate", speed=1.0, stroke=0.5)
+    run = simulate(scene, drive)
+    p, r = scene.plate, scene.rft
+    radius = p.rod_length + (np.arange(p.segments) + 0.5) * p.segment_length
+    expected = np.sum(r.f_perp * np.tanh(drive.speed * radius / r.v_reg) * radius)
+    np.testing.assert_allclose(run.drive_force, expected, rtol=1e-9)
+    np.testing.assert_allclose(run.segment_angle[:, 0], run.displacement, atol=1e-12)
+
+
+@pytest.mark.parametrize("kind", ["origami", "soft"])
+def test_drive_reaction_balances_rft_in_steady_state(responsive, kind):
+    # Once the plate's shape has settled, nothing accelerates: the drive holds exactly the summed RFT force.
+    run = simulate(responsive.replace(**{"plate.kind": kind}), Drive(stroke=0.15))
+    late = run.time > 0.8 * run.time[-1]
+    np.testing.assert_allclose(run.drive_force[late], -run.rft_force[late].sum(axis=1)[:, 1], rtol=1e-4)
+
+
+def test_single_hinge_settles_where_spring_balances_rft(paper):
+    # One segment on a soft hinge dragged along +y at 90 deg: at rest in its own frame the RFT torque about the
+    # hinge is -(l/2) f_perp cos(q) (the tangential part passes through the hinge), so k q = -(l/2) f_perp cos q.
+    scene = paper.replace(**{"plate.kind": "soft", "plate.segments": 1, "plate.stiffness": 0.05,
+                             "plate.damping": 0.01, "plate.segment_inertia": 1e-3, "sim.dt": 2.5e-4})
+    run = simulate(scene, Drive(stroke=0.15))
+    p, r = scene.plate, scene.rft
+    q_eq = brentq(lambda q: p.stiffness * q + 0.5 * p.segment_length * r.f_perp * np.cos(q), -np.pi / 2, 0.0)
+    assert np.degrees(run.hinge_angle[-1, 0]) == pytest.approx(np.degrees(q_eq), abs=1e-3)
+    assert -40.0 < np.degrees(q_eq) < -10.0  # a real bend, not a trivial case
+
+
+@pytest.fixture(scope="module")
+def loops(responsive):
+    """Two back-and-forth cycles of each plate kind."""
+    drive = Drive(speed=0.03, stroke=0.2, cycles=2)
+    return {kind: simulate(responsive.replace(**{"plate.kind": kind}), drive)
+            for kind in ("rigid", "soft", "origami")}
+
+
+def _stroke_force(run, stroke, part=(0.0, 1.0)):
+    """Mean drive force over a fraction of one stroke."""
+    ts = run.drive.stroke_time
+    lo, hi = (stroke + part[0]) * ts, (stroke + part[1]) * ts
+    pick = (run.time > lo + 1e-9) & (run.time < hi - 1e-9)
+    return run.drive_force[pick].mean()
+
+
+def test_soft_loop_is_symmetric_origami_is_not(loops):
+    rigid, soft, origami = loops["rigid"], loops["soft"], loops["origami"]
+    stroke_impulse = abs(rigid.stroke_impulse[0])
+    # Rigid and soft: the second cycle's power and recovery strokes mirror each other.
+    for run in (rigid, soft):
+        assert abs(run.cycle_table()[1]["net_impulse_Ns"]) < 2e-3 * stroke_impulse
+        assert _stroke_force(run, 3) == pytest.approx(-_stroke_force(run, 2), rel=2e-3)
+    # Origami: a net thrust of more than a quarter of a stroke's impulse, toward +y (against the power stroke).
+    assert origami.cycle_table()[1]["net_impulse_Ns"] > 0.25 * stroke_impulse
+    # Once flat against its stop, the origami plate is the rigid plate. Its recovery starts from flat, as the
+    # soft plate's first stroke does, and follows it: well below the rigid plate's force.
+    assert _stroke_force(origami, 3, (0.5, 1.0)) == pytest.approx(_stroke_force(rigid, 3, (0.5, 1.0)), rel=2e-3)
+    assert _stroke_force(origami, 2, (0.0, 0.3)) == pytest.approx(_stroke_force(soft, 0, (0.0, 0.3)), rel=0.02)
+    assert _stroke_force(origami, 2, (0.0, 0.3)) < 0.7 * _stroke_force(rigid, 2, (0.0, 0.3))
+
+
+def test_limit_stop_holds(loops):
+    # The stated penetration of the limit stop: below 0.02 deg while the power stroke presses the plate into it.
+    origami = loops["origami"]
+    assert np.degrees(origami.hinge_angle.max()) < 0.02
+    assert np.degrees(origami.hinge_angle.min()) < -20.0  # and it did bend the other way
+
+
+def test_penalty_stop_settles_at_its_static_balance(responsive):
+    # Pressed flat in the power stroke, hinge j carries the RFT torque of the segments beyond it,
+    # tau_j = f_perp l sum_(i >= j) (i - j + 1/2), against k q + 2 k_stop q^2 (the penalty's q + |q| term).
+    scene = responsive.replace(**{"plate.stop": "penalty"})
+    run = simulate(scene, Drive(stroke=0.2, cycles=1))
+    p, r = scene.plate, scene.rft
+    n = p.segments
+    tau = [r.f_perp * p.segment_length * sum(i - j + 0.5 for i in range(j, n)) for j in range(n)]
+    static = [brentq(lambda q, t=t: p.stiffness * q + 2 * p.stop_stiffness * q * q - t, 0.0, 1.0) for t in tau]
+    np.testing.assert_allclose(run.hinge_angle[-1], static, rtol=0.01)
+    assert np.all(run.hinge_angle.max(axis=0) < 3 * np.array(static))  # the impact overshoots, boundedly
+
+
+def test_results_converge_in_dt(paper, responsive):
+    # Halving dt changes the paper drag's final angles by less than 0.01 deg, and the responsive origami
+    # cycle's power-stroke force by less than 0.2 %.
+    coarse = simulate(paper, Drive())
+    fine = simulate(paper.replace(**{"sim.dt": paper.sim.dt / 2}), Drive())
+    assert np.degrees(np.abs(coarse.segment_angle[-1] - fine.segment_angle[-1])).max() < 0.01
+    drive = Drive(stroke=0.08, cycles=1)
+    coarse = simulate(responsive, drive)
+    fine = simulate(responsive.replace(**{"sim.dt": responsive.sim.dt / 2}), drive)
+    assert _stroke_force(coarse, 1) == pytest.approx(_stroke_force(fine, 1), rel=2e-3)
+
+
+def test_instability_stops_loudly(paper):
+    # Physical inertia, a stiff penalty stop integrated explicitly and a large step: this must blow up, and
+    # the error must say when and what to change instead of returning a reset state.
+    scene = paper.replace(**{"plate.segment_inertia": 2.6e-7, "plate.rod_inertia": 4e-8, "plate.damping": 0.0,
+                             "sim.integrator": "euler", "sim.dt": 1e-3})
+    with pytest.raises(SimulationUnstable, match=r"unstable at t = .* reduce sim.dt"):
+        simulate(scene, Drive(cycles=1))

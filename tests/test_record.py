@@ -1,0 +1,191 @@
+import json
+import tomllib
+import warnings
+
+import h5py
+import mujoco
+import numpy as np
+import pyarrow as pa
+import pytest
+import rerun as rr
+from rerun.chunk import RrdReader
+
+from finrft import record
+from finrft.drive import Drive
+from finrft.models import build_plate
+from finrft.scene import preset, to_toml
+from finrft.simulate import Run, simulate
+
+DRIVES = {
+    "drag": Drive(stroke=0.02),
+    "rotate": Drive(kind="rotate", speed=1.0, stroke=0.3),
+    "drag_oblique": Drive(stroke=0.02, attack_deg=60.0),
+}
+
+
+@pytest.fixture(scope="module")
+def runs() -> dict[str, Run]:
+    scene = preset("paper").replace(**{"sim.dt": 1e-3})
+    return {name: simulate(scene, drive) for name, drive in DRIVES.items()}
+
+
+def _chunks(path, *, blueprint=False):
+    # An unfinalised file (no footer) only warns; make that a failure.
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        reader = RrdReader(path)
+        store = reader.blueprints()[0] if blueprint else None
+        return list(reader.stream(store=store))
+
+
+def _temporal(chunks, entity, component):
+    """(times in s, values as a list per row) of one component, ordered by sim_time."""
+    times, values = [], []
+    for chunk in chunks:
+        if chunk.entity_path == entity and not chunk.is_static:
+            batch = chunk.to_record_batch()
+            if component in batch.schema.names:
+                times.append(batch.column("sim_time").cast(pa.int64()).to_numpy() * 1e-9)
+                values += batch.column(component).to_pylist()
+    times = np.concatenate(times)
+    order = np.argsort(times, kind="stable")
+    return times[order], [values[i] for i in order]
+
+
+def _static(chunks, entity, component):
+    for chunk in chunks:
+        batch = chunk.to_record_batch()
+        if chunk.entity_path == entity and chunk.is_static and component in batch.schema.names:
+            return batch.column(component).to_pylist()[-1]
+    raise KeyError(f"{entity}:{component}")
+
+
+@pytest.mark.parametrize("name", ["drag", "rotate"])
+def test_h5_holds_the_run(runs, name, tmp_path):
+    run = runs[name]
+    path = tmp_path / "run.h5"
+    record.write_h5(run, path, extra_attrs={"label": "test"})
+    drag = name == "drag"
+    expected = {
+        "time": (run.time, "s"),
+        "displacement" if drag else "rotation": (run.displacement, "m" if drag else "rad"),
+        "segment_angle": (run.segment_angle, "rad"),
+        "hinge_angle": (run.hinge_angle, "rad"),
+        "drive_force" if drag else "drive_torque": (run.drive_force, "N" if drag else "N m"),
+        "rft_force": (run.rft_force, "N"),
+        "stroke_impulse": (run.stroke_impulse, "N s" if drag else "N m s"),
+    }
+    with h5py.File(path, "r") as f:
+        assert set(f) == set(expected)
+        for key, (data, unit) in expected.items():
+            np.testing.assert_array_equal(f[key][()], data, err_msg=key)
+            assert f[key].attrs["units"] == unit
+            assert f[key].attrs["description"]
+            if key not in ("time", "stroke_impulse"):
+                assert f[key].dims[0][0] == f["time"]
+        assert f["rft_force"].attrs["frame"] == "world"
+        attrs = dict(f.attrs)
+    assert attrs["schema"] == "finrft.run/1"
+    assert tomllib.loads(attrs["scene_toml"]) == run.scene.to_dict()
+    assert json.loads(attrs["scene_json"]) == run.scene.to_dict()
+    assert json.loads(attrs["drive_json"])["kind"] == run.drive.kind
+    assert json.loads(attrs["summary_json"])["steps"] == run.steps
+    assert attrs["mujoco_version"] == mujoco.__version__
+    assert attrs["numpy_version"] == np.__version__
+    assert attrs["finrft_version"] and attrs["created_utc"] and "+y" in attrs["sign_convention"]
+    assert attrs["label"] == "test"
+    assert [p.name for p in tmp_path.iterdir()] == ["run.h5"]
+
+
+def test_extra_attrs_cannot_replace_the_schema(runs, tmp_path):
+    with pytest.raises(ValueError, match="schema"):
+        record.write_h5(runs["drag"], tmp_path / "run.h5", extra_attrs={"schema": "other"})
+    assert not any(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("name", ["drag", "rotate"])
+def test_rrd_matches_the_h5_file(runs, name, tmp_path):
+    run = runs[name]
+    record.write_h5(run, tmp_path / "run.h5")
+    record.write_rrd(run, tmp_path / "run.rrd")
+    chunks = _chunks(tmp_path / "run.rrd")
+    with h5py.File(tmp_path / "run.h5", "r") as f:
+        time, segment, hinge = f["time"][()], f["segment_angle"][()], f["hinge_angle"][()]
+        load = f["drive_force" if name == "drag" else "drive_torque"][()]
+    for i in range(run.scene.plate.segments):
+        for entity, angles in ((f"/angles/segment/seg{i + 1}", segment), (f"/angles/hinge/hinge{i + 1}", hinge)):
+            t, values = _temporal(chunks, entity, "Scalars:scalars")
+            np.testing.assert_allclose(t, time, rtol=0, atol=1e-9)
+            np.testing.assert_array_equal(np.concatenate(values), np.degrees(angles[:, i]), err_msg=entity)
+            assert "(deg)" in _static(chunks, entity, "SeriesLines:names")[0]
+    load_entity = "/drive/force" if name == "drag" else "/drive/torque"
+    np.testing.assert_array_equal(np.concatenate(_temporal(chunks, load_entity, "Scalars:scalars")[1]), load)
+    motion = "/drive/displacement" if name == "drag" else "/drive/rotation"
+    expected = 1e3 * run.displacement if name == "drag" else np.degrees(run.displacement)
+    np.testing.assert_allclose(np.concatenate(_temporal(chunks, motion, "Scalars:scalars")[1]), expected)
+    assert _static(chunks, "/scene", "TextDocument:text")[0] == to_toml(run.scene)
+
+    reader = RrdReader(tmp_path / "run.rrd")
+    assert [s.application_id for s in reader.recordings()] == ["finrft"]
+    assert [s.application_id for s in reader.blueprints()] == ["finrft"]
+    views = {}
+    for chunk in _chunks(tmp_path / "run.rrd", blueprint=True):
+        batch = chunk.to_record_batch()
+        if "ViewBlueprint:class_identifier" in batch.schema.names:
+            views[batch.column("ViewBlueprint:display_name").to_pylist()[-1][0]] = (
+                batch.column("ViewBlueprint:class_identifier").to_pylist()[-1][0])
+    assert views["Plate (top view, 1 cm grid)"] == "3D"
+    assert views["Segment angles (deg)"] == views["Hinge angles (deg)"] == "TimeSeries"
+    assert [p.name for p in sorted(tmp_path.iterdir())] == ["run.h5", "run.rrd"]
+
+
+@pytest.mark.parametrize("name", list(DRIVES))
+def test_rrd_plate_follows_the_mujoco_model(runs, name, tmp_path):
+    """The drawn plate must coincide with MuJoCo's own kinematics of the recorded joint positions."""
+    run = runs[name]
+    record.write_rrd(run, tmp_path / "run.rrd")
+    chunks = _chunks(tmp_path / "run.rrd")
+    _, strips = _temporal(chunks, "/plate/centerline", "LineStrips3D:strips")
+    _, origins = _temporal(chunks, "/plate/rft", "Arrows3D:origins")
+    _, vectors = _temporal(chunks, "/plate/rft", "Arrows3D:vectors")
+    scale = _static(chunks, "/plate/rft", "arrow_scale_m_per_N")[0]
+    strips, origins, vectors = np.array(strips)[:, 0], np.array(origins), np.array(vectors)
+
+    plate = build_plate(run.scene, run.drive.kind, run.drive.attack_deg)
+    m, d = plate.model, mujoco.MjData(plate.model)
+    for k in range(0, len(run.time), 10):
+        d.qpos[plate.drive_qpos] = run.displacement[k]
+        d.qpos[plate.hinge_qpos] = run.hinge_angle[k]
+        mujoco.mj_kinematics(m, d)
+        np.testing.assert_allclose(origins[k], d.site_xpos[plate.seg_site], atol=1e-7)
+        np.testing.assert_allclose(strips[k, 1:-1], d.xpos[plate.seg_body], atol=1e-7)
+    peak = np.max(np.linalg.norm(run.rft_force, axis=-1))
+    assert scale == pytest.approx(run.scene.plate.segment_length / peak)
+    np.testing.assert_allclose(vectors, scale * run.rft_force, rtol=1e-6, atol=1e-9)
+
+
+def test_failed_h5_write_leaves_no_file(runs, tmp_path, monkeypatch):
+    def fail(scene):
+        raise RuntimeError("disk full")
+
+    # The scene is serialised after the datasets are written: a failure half-way through the file.
+    monkeypatch.setattr(record, "to_toml", fail)
+    with pytest.raises(RuntimeError, match="disk full"):
+        record.write_h5(runs["drag"], tmp_path / "run.h5")
+    assert not any(tmp_path.iterdir())
+
+
+def test_failed_rrd_write_leaves_no_file(runs, tmp_path, monkeypatch):
+    send_columns = rr.RecordingStream.send_columns
+    calls = []
+
+    def fail_on_second(self, *args, **kwargs):
+        calls.append(args)
+        if len(calls) == 2:
+            raise RuntimeError("disk full")
+        send_columns(self, *args, **kwargs)
+
+    monkeypatch.setattr(rr.RecordingStream, "send_columns", fail_on_second)
+    with pytest.raises(RuntimeError, match="disk full"):
+        record.write_rrd(runs["drag"], tmp_path / "run.rrd")
+    assert not any(tmp_path.iterdir())

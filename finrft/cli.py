@@ -10,6 +10,7 @@ import json
 import math
 import os
 import sys
+import warnings
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
@@ -52,6 +53,9 @@ def _add_common(p: argparse.ArgumentParser) -> None:
                    help="built-in scene used when no --scene is given (default: %(default)s)")
     g.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scene key in SI units, e.g. --set plate.segment_inertia=0.001 (repeatable)")
+    g.add_argument("--backend", choices=("native", "python"),
+                   help="where the RFT force is computed (overrides sim.backend; default native, the C plugin, "
+                        "falling back to python when it cannot be loaded)")
     g.add_argument("--cycles", type=_number("cycles", minimum=1, inclusive=True, integer=True), metavar="N",
                    help="back-and-forth cycles of the triangle wave (the paper used 5; the first is reported "
                         "separately); without it, a single stroke out")
@@ -97,6 +101,18 @@ def build_parser() -> argparse.ArgumentParser:
                        help="preset to print (default: %(default)s)")
     scene.add_argument("--scene", metavar="FILE.toml", help="resolve this file instead of a preset")
     scene.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a key (SI)")
+
+    bench = sub.add_parser("bench", help="benchmarks, measured as ratios in one run on this machine")
+    kinds = bench.add_subparsers(dest="bench", required=True, parser_class=_Parser)
+    backends = kinds.add_parser("backends", help="Python callback vs native plugin vs bare MuJoCo, and batch",
+                                description="Time the paper plate drag (200 mm at 30 mm/s) with each backend "
+                                "against bare mj_step of the same model, and the throughput of a batch of drags "
+                                "on all cores against one core.")
+    backends.add_argument("--batch", type=_number("simulations", minimum=1, inclusive=True, integer=True),
+                          default=64, help="simulations in the batch (default: %(default)s)")
+    backends.add_argument("--workers", type=_number("processes", minimum=1, inclusive=True, integer=True),
+                          help="worker processes (default: all cores)")
+    backends.add_argument("--json", action="store_true", help="print the figures as JSON on the last line")
     return parser
 
 
@@ -104,6 +120,8 @@ def _resolve_scene(args: argparse.Namespace) -> scenes.Scene:
     overrides = dict(scenes.parse_override(item) for item in args.set)
     if getattr(args, "plate", None):
         overrides["plate.kind"] = args.plate
+    if getattr(args, "backend", None):
+        overrides["sim.backend"] = args.backend
     name = getattr(args, "preset", None) or args.dump
     return scenes.load_scene(args.scene, preset_name=name, overrides=overrides)
 
@@ -180,12 +198,28 @@ def _run_test(args: argparse.Namespace) -> int:
     return 0
 
 
+def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    print(f"finrft: warning: {message}", file=sys.stderr)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
+    with warnings.catch_warnings():
+        warnings.showwarning = _one_line_warning
+        return _main(parser, argv)
+
+
+def _main(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> int:
     try:
         args = parser.parse_args(argv)
         if args.command == "scene":
             print(scenes.to_toml(_resolve_scene(args)), end="")
+            return 0
+        if args.command == "bench":
+            from . import bench
+            figures = bench.backends(batch_size=args.batch, workers=args.workers)
+            if args.json:
+                print(json.dumps(figures))
             return 0
         return _run_test(args)
     except (UsageError, scenes.SceneError) as exc:

@@ -51,10 +51,16 @@ class Drive:
         """Which stroke time t belongs to (0, 1, ...); even strokes go out (+), odd ones come back (-)."""
         return min(int(t / self.stroke_time + 1e-9), self.strokes - 1)
 
+    def stroke_velocity(self, k: int) -> float:
+        return self.speed if k % 2 == 0 else -self.speed
+
+    def stroke_start(self, k: int) -> float:
+        """Position at which stroke k starts: 0 for outward strokes, ``stroke`` for return strokes."""
+        return 0.0 if k % 2 == 0 else self.stroke
+
     def velocity(self, t: float) -> float:
-        return self.speed if self.stroke_index(t) % 2 == 0 else -self.speed
+        return self.stroke_velocity(self.stroke_index(t))
 
     def position(self, t: float) -> float:
         k = self.stroke_index(t)
-        into = t - k * self.stroke_time
-        return self.speed * into if k % 2 == 0 else self.stroke - self.speed * into
+        return self.stroke_start(k) + self.stroke_velocity(k) * (t - k * self.stroke_time)

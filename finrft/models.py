@@ -6,13 +6,16 @@ segment count and sizes, masses and inertias, hinge spring/damper/stop, and the 
 
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass
 from importlib import resources
+from typing import Iterator
 
 import mujoco
 import numpy as np
 
-from .scene import Scene
+from . import native, rft
+from .scene import Scene, SceneError
 
 INTEGRATORS = {
     "euler": mujoco.mjtIntegrator.mjINT_EULER,
@@ -33,15 +36,27 @@ class PlateModel:
     """A compiled plate model and the indices the simulation needs."""
 
     model: mujoco.MjModel
+    backend: str               # "native" (the RFT plugin is bound to the segments) or "python"
     drive: str                 # "drag" or "rotate"
     drive_dof: int
     drive_qpos: int
     armature: float            # the drive's armature (kg or kg m^2)
-    hinge_qpos: np.ndarray     # (H,) qpos address of each hinge, H = segments - 1 + 1 or 0 when rigid
+    hinge_qpos: np.ndarray     # (H,) qpos address of each hinge: H = segments, or 0 for a rigid plate
     hinge_dof: np.ndarray      # (H,)
     seg_body: np.ndarray       # (N,) body that carries each segment
     seg_site: np.ndarray       # (N,) site at each segment's midpoint
     initial_angle: float       # the plate's orientation at t = 0 (rad, about z)
+
+
+@contextlib.contextmanager
+def captured_warnings(messages: list[str]) -> Iterator[None]:
+    """Collect MuJoCo's warnings, which would otherwise go to stderr, so that an error can quote them."""
+    previous = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(messages.append)
+    try:
+        yield
+    finally:
+        mujoco.set_mju_user_warning(previous)
 
 
 def mjcf_path(name: str = "plate.xml"):
@@ -58,9 +73,23 @@ def initial_heading(drive: str, attack_deg: float) -> float:
     return float(np.radians(90.0 - attack_deg)) if drive == "drag" else 0.0
 
 
-def plate_spec(scene: Scene, drive: str = "drag", attack_deg: float = 90.0) -> mujoco.MjSpec:
+def plugin_config(scene: Scene) -> dict[str, str]:
+    """The native plugin's config for a scene: the same law and penalty stop as the Python coupling."""
+    r, p = scene.rft, scene.plate
+    config = {"law": r.law, "f_perp": repr(r.f_perp), "f_par": repr(r.f_par), "v_reg": repr(r.v_reg),
+              "stop_stiffness": repr(p.stop_stiffness if p.kind == "origami" and p.stop == "penalty" else 0.0)}
+    if r.law == "table":
+        table = rft.read_table(r.table)
+        config["table"] = " ".join(repr(float(x)) for row in zip(table.attack_deg, table.f_perp, table.f_par)
+                                   for x in row)
+    return config
+
+
+def plate_spec(scene: Scene, drive: str = "drag", attack_deg: float = 90.0,
+               backend: str = "python") -> mujoco.MjSpec:
     """The plate's MjSpec for a scene: drive ``drag`` (base slides along +y, the plate at angle of attack
-    ``attack_deg`` to the motion) or ``rotate`` (the rod turns about z through its base)."""
+    ``attack_deg`` to the motion) or ``rotate`` (the rod turns about z through its base); with backend
+    ``native`` the RFT plugin is bound to the segments."""
     if drive not in DRIVES:
         raise ValueError(f"drive must be one of {DRIVES}, got {drive!r}")
     p, sim = scene.plate, scene.sim
@@ -97,6 +126,7 @@ def plate_spec(scene: Scene, drive: str = "drag", attack_deg: float = 90.0) -> m
         hinge.limited = mujoco.mjtLimited.mjLIMITED_FALSE
 
     half = p.segment_length / 2
+    segment_bodies = []
     if p.kind == "rigid":
         plate = rod.add_body(name="plate", pos=[p.rod_length, 0, 0])
         centres = [half + i * p.segment_length for i in range(p.segments)]
@@ -107,6 +137,7 @@ def plate_spec(scene: Scene, drive: str = "drag", attack_deg: float = 90.0) -> m
         for i, c in enumerate(centres, start=1):
             plate.add_geom(spec.find_default("segment"), name=f"seg{i}", pos=[c, 0, 0])
             plate.add_site(name=f"seg{i}", pos=[c, 0, 0])
+        segment_bodies.append(plate)
     else:
         parent, pos = rod, [p.rod_length, 0, 0]
         for i in range(1, p.segments + 1):
@@ -115,7 +146,17 @@ def plate_spec(scene: Scene, drive: str = "drag", attack_deg: float = 90.0) -> m
             body.add_joint(spec.find_default("hinge"), name=f"hinge{i}")
             body.add_geom(spec.find_default("segment"), name=f"seg{i}", pos=[half, 0, 0])
             body.add_site(name=f"seg{i}", pos=[half, 0, 0])
+            segment_bodies.append(body)
             parent, pos = body, [p.segment_length, 0, 0]
+
+    if backend == "native":
+        spec.activate_plugin(native.PLUGIN)
+        sand = spec.add_plugin(name="sand", plugin_name=native.PLUGIN, active=True)
+        sand.config = plugin_config(scene)
+        for body in segment_bodies:
+            body.plugin = sand
+            body.plugin.name = "sand"
+            body.plugin.active = True
 
     # Everything the drive moves, seen from the drive: total mass (slide) or inertia about the base (hinge).
     lumps = [(p.rod_mass, p.rod_inertia, p.rod_length / 2)] + [
@@ -128,14 +169,22 @@ def plate_spec(scene: Scene, drive: str = "drag", attack_deg: float = 90.0) -> m
 
 def build_plate(scene: Scene, drive: str = "drag", attack_deg: float = 90.0) -> PlateModel:
     """Compile the plate model for a scene and collect its indices."""
-    spec = plate_spec(scene, drive, attack_deg)
-    model = spec.compile()
+    backend = native.resolve_backend(scene.sim.backend)
+    spec = plate_spec(scene, drive, attack_deg, backend)
+    try:
+        with captured_warnings([]):
+            model = spec.compile()
+    except ValueError as exc:  # e.g. the plugin's init rejecting its config: quote its line, which names the key
+        lines = str(exc).strip().splitlines()
+        reason = next((line for line in lines if line.startswith(native.PLUGIN)), lines[0])
+        raise SceneError(f"MuJoCo rejected the model: {reason}") from None
     n = scene.plate.segments
     drive_id = model.joint("drive").id
     hinge_ids = [model.joint(f"hinge{i}").id for i in range(1, n + 1)] if scene.plate.kind != "rigid" else []
     sites = np.array([model.site(f"seg{i}").id for i in range(1, n + 1)])
     return PlateModel(
         model=model,
+        backend=backend,
         drive=drive,
         drive_dof=int(model.jnt_dofadr[drive_id]),
         drive_qpos=int(model.jnt_qposadr[drive_id]),

@@ -31,9 +31,9 @@ TABLE_COLUMNS = ("attack_deg", "f_perp_N", "f_par_N")
 
 @dataclass(frozen=True)
 class ForceTable:
-    """F_perp(theta) and F_par(theta) per segment, sampled at increasing angles of attack (radians, 0 to pi/2)."""
+    """F_perp(theta) and F_par(theta) per segment, sampled at increasing angles of attack (degrees, 0 to 90)."""
 
-    attack: np.ndarray
+    attack_deg: np.ndarray
     f_perp: np.ndarray
     f_par: np.ndarray
 
@@ -59,8 +59,9 @@ def table_force(v: np.ndarray, x_axis: np.ndarray, y_axis: np.ndarray, table: Fo
     """The tabulated law: magnitudes interpolated linearly in the angle of attack; (N, 3) newtons."""
     ramp, vx, vy = _components(v, x_axis, y_axis, v_reg)
     attack = np.arctan2(np.abs(vy), np.abs(vx))
-    perp = np.interp(attack, table.attack, table.f_perp)
-    par = np.interp(attack, table.attack, table.f_par)
+    samples = np.radians(table.attack_deg)
+    perp = np.interp(attack, samples, table.f_perp)
+    par = np.interp(attack, samples, table.f_par)
     return -ramp[..., None] * ((perp * np.sign(vy))[..., None] * y_axis + (par * np.sign(vx))[..., None] * x_axis)
 
 
@@ -81,7 +82,7 @@ def read_table(path: str | Path) -> ForceTable:
     attack = data[:, 0]
     if not np.all(np.isfinite(data)) or np.any(np.diff(attack) <= 0) or attack[0] > 0 or attack[-1] < 90:
         raise SceneError(f"RFT table {path}: attack_deg must increase and cover 0 to 90 degrees, values finite")
-    return ForceTable(np.radians(attack), data[:, 1].copy(), data[:, 2].copy())
+    return ForceTable(attack.copy(), data[:, 1].copy(), data[:, 2].copy())
 
 
 def write_table(path: str | Path, table: ForceTable) -> None:
@@ -89,14 +90,15 @@ def write_table(path: str | Path, table: ForceTable) -> None:
     with Path(path).open("w", newline="") as handle:
         writer = csv.writer(handle)
         writer.writerow(TABLE_COLUMNS)
-        for row in zip(np.degrees(table.attack), table.f_perp, table.f_par):
-            writer.writerow([f"{x:.12g}" for x in row])
+        for row in zip(table.attack_deg, table.f_perp, table.f_par):
+            writer.writerow([repr(float(x)) for x in row])
 
 
 def paper_table(f_perp: float, f_par: float, samples: int = 91) -> ForceTable:
     """The paper law written as a table (F_perp = f_perp sin theta, F_par = f_par cos theta)."""
-    attack = np.linspace(0.0, np.pi / 2, samples)
-    return ForceTable(attack, f_perp * np.sin(attack), f_par * np.cos(attack))
+    attack_deg = np.linspace(0.0, 90.0, samples)
+    attack = np.radians(attack_deg)
+    return ForceTable(attack_deg, f_perp * np.sin(attack), f_par * np.cos(attack))
 
 
 def force_law(params: RFT):

@@ -63,7 +63,8 @@ class Sim:
     integrator: str = _f("implicitfast", "", "MuJoCo integrator",
                          choices=("euler", "implicitfast", "implicit", "rk4"))
     dt: float = _f(1.0e-4, "s", "time step", minimum=0.0)
-    backend: str = _f("python", "", "where the RFT force is computed", choices=("python",))
+    backend: str = _f("native", "", "where the RFT force is computed: the C plugin, or a Python callback "
+                      "(native falls back to python when the plugin is unavailable)", choices=("native", "python"))
     record_dt: float = _f(0.005, "s", "interval between recorded samples (rounded to whole steps)", minimum=0.0)
 
 

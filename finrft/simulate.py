@@ -8,17 +8,16 @@ impulse that an ideal kinematic constraint would give them (computed with the pl
 
 from __future__ import annotations
 
-import contextlib
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Iterator
+from typing import Any, Callable
 
 import mujoco
 import numpy as np
 
-from .coupling import PythonCoupling, installed
+from .coupling import PythonCoupling, SegmentForces, installed
 from .drive import Drive
-from .models import PlateModel, build_plate
+from .models import PlateModel, build_plate, captured_warnings
 from .scene import Scene
 
 _BAD_STATE = (mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL)
@@ -41,7 +40,7 @@ class Run:
     drive_force: np.ndarray        # (T,) N or N m that the drive applies to the plate along +y / about +z
     rft_force: np.ndarray          # (T, N, 3) N, RFT force on each segment, world frame
     stroke_impulse: np.ndarray     # (strokes,) integral of the drive force over each stroke (N s or N m s)
-    peak_drive_force: float        # max |drive force| over every step
+    peak_drive_force: float        # max |drive force| over the recorded samples
     steps: int
     wall_s: float
     backend: str = "python"
@@ -115,73 +114,77 @@ def _unstable(scene: Scene, t: float, messages: list[str]) -> SimulationUnstable
         f"implicitfast")
 
 
-@contextlib.contextmanager
-def _captured_warnings(messages: list[str]) -> Iterator[None]:
-    """Collect MuJoCo's warnings (they would go to stderr) so that a failure can quote them."""
-    previous = mujoco.get_mju_user_warning()
-    mujoco.set_mju_user_warning(messages.append)
-    try:
-        yield
-    finally:
-        mujoco.set_mju_user_warning(previous)
+def _events(drive: Drive, dt: float, record_dt: float) -> tuple[int, np.ndarray, np.ndarray]:
+    """Step count, the steps at which a stroke starts, and the steps recorded (always the first and last)."""
+    steps = max(1, round(drive.duration / dt))
+    starts = np.array([round(k * drive.stroke_time / dt) for k in range(drive.strokes)])
+    every = max(1, round(record_dt / dt))
+    samples = np.unique(np.r_[np.arange(0, steps, every), steps])
+    return steps, starts, samples
 
 
 def simulate(scene: Scene, drive: Drive, *, progress: Callable[[float], None] | None = None) -> Run:
-    """Simulate one plate test; raises SimulationUnstable rather than return a diverged run."""
+    """Simulate one plate test; raises SimulationUnstable rather than return a diverged run.
+
+    MuJoCo steps in chunks between recorded samples and stroke ends. Between reversals the drive's armature holds
+    its speed (it drifts by ~1e-9 of itself per stroke), so the drive's impulse over a stroke is exactly
+    -armature times the change of its velocity; the drive force itself is recorded at the samples.
+    """
     start = time.perf_counter()
     plate = build_plate(scene, drive.kind, drive.attack_deg)
     m = plate.model
     d = mujoco.MjData(m)
-    coupling = PythonCoupling(plate, scene)
+    forces = SegmentForces(plate, scene)
+    callback = PythonCoupling(plate, scene) if plate.backend == "python" else None
     dt = scene.sim.dt
-    steps = max(1, round(drive.duration / dt))
-    times = np.arange(steps + 1) * dt
-    position = np.array([drive.position(t) for t in times])
-    velocity = np.array([drive.velocity(t) for t in times])
-    stroke = np.array([drive.stroke_index(t + 0.5 * dt) for t in times])
-    every = max(1, round(scene.sim.record_dt / dt))
-    samples = np.unique(np.r_[np.arange(0, steps, every), steps])
-    is_sample = np.zeros(steps + 1, dtype=bool)
-    is_sample[samples] = True
+    steps, starts, samples = _events(drive, dt, scene.sim.record_dt)
+    events = np.union1d(samples, starts)
+    stroke_of = np.searchsorted(starts, events, side="right") - 1
 
     n = scene.plate.segments
+    rec_x = np.zeros(len(samples))
     rec_q = np.zeros((len(samples), n))
     rec_f = np.zeros(len(samples))
-    rec_rft = np.zeros((len(samples), n, 3))
-    force = np.zeros(steps)
+    rec_v = np.zeros((len(samples), n, 3))
+    rec_frame = np.zeros((len(samples), n, 3, 3))
+    impulse = np.zeros(drive.strokes)
     b, bq, arm = plate.drive_dof, plate.drive_qpos, plate.armature
     hinges = plate.hinge_qpos
     counts = d.warning.number
-    w0, w1, w2 = (int(w) for w in _BAD_STATE)
+    bad = [int(w) for w in _BAD_STATE]
     messages: list[str] = []
 
-    d.qvel[b] = velocity[0]
+    d.qvel[b] = drive.stroke_velocity(0)
+    stroke_velocity = d.qvel[b]
     sample = 0
-    with installed(coupling), _captured_warnings(messages):
-        for step in range(steps + 1):
-            if step and velocity[step] != velocity[step - 1]:
-                _impulse_on_reversal(plate, m, d, velocity[step] - velocity[step - 1])
-            d.qpos[bq], d.qvel[b] = position[step], velocity[step]
-            if is_sample[step]:
+    with installed(callback), captured_warnings(messages):
+        for i, step in enumerate(events):
+            k = stroke_of[i]
+            if step == starts[k] and k > 0:
+                impulse[k - 1] = -arm * (d.qvel[b] - stroke_velocity)
+                d.qpos[bq] = drive.stroke_start(k)
+                _impulse_on_reversal(plate, m, d, drive.stroke_velocity(k) - d.qvel[b])
+                stroke_velocity = d.qvel[b]
+            if sample < len(samples) and step == samples[sample]:
                 mujoco.mj_forward(m, d)
+                rec_x[sample] = d.qpos[bq]
                 rec_q[sample, :len(hinges)] = d.qpos[hinges]
                 rec_f[sample] = -arm * d.qacc[b]
-                rec_rft[sample] = coupling.force
+                forces.kinematics(m, d, rec_v[sample], rec_frame[sample])
                 sample += 1
                 if progress is not None:
                     progress(step / steps)
             if step == steps:
                 break
-            mujoco.mj_step(m, d)
-            if counts[w0] or counts[w1] or counts[w2]:
-                raise _unstable(scene, times[step], messages)
-            force[step] = -arm * d.qacc[b]
+            mujoco.mj_step(m, d, int(events[i + 1] - step))
+            if any(counts[w] for w in bad):
+                raise _unstable(scene, d.time, messages)
+    impulse[-1] = -arm * (d.qvel[b] - stroke_velocity)
 
-    impulse = np.bincount(stroke[:-1], weights=force * dt, minlength=drive.strokes)
     segment_angle = np.cumsum(rec_q, axis=1)
     if drive.kind == "rotate":
-        segment_angle += position[samples][:, None]
-    return Run(scene=scene, drive=drive, time=times[samples], displacement=position[samples],
-               segment_angle=segment_angle, hinge_angle=rec_q, drive_force=rec_f, rft_force=rec_rft,
-               stroke_impulse=impulse, peak_drive_force=float(np.max(np.abs(force))), steps=steps,
-               wall_s=time.perf_counter() - start)
+        segment_angle += rec_x[:, None]
+    return Run(scene=scene, drive=drive, time=samples * dt, displacement=rec_x, segment_angle=segment_angle,
+               hinge_angle=rec_q, drive_force=rec_f, rft_force=forces.evaluate(rec_v, rec_frame), stroke_impulse=impulse,
+               peak_drive_force=float(np.max(np.abs(rec_f))), steps=steps, wall_s=time.perf_counter() - start,
+               backend=plate.backend)

@@ -60,8 +60,8 @@ def test_table_round_trip_and_bad_tables(tmp_path):
     path = tmp_path / "forces.csv"
     rft.write_table(path, table)
     back = rft.read_table(path)
-    np.testing.assert_allclose(back.f_perp, table.f_perp, rtol=1e-11)
-    np.testing.assert_allclose(back.attack, table.attack, rtol=1e-11)
+    np.testing.assert_array_equal(back.f_perp, table.f_perp)
+    np.testing.assert_array_equal(back.attack_deg, table.attack_deg)
 
     (tmp_path / "cols.csv").write_text("angle,a,b\n0,1,2\n90,1,2\n")
     (tmp_path / "short.csv").write_text("attack_deg,f_perp_N,f_par_N\n0,0,1\n45,1,1\n")

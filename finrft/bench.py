@@ -1,0 +1,70 @@
+"""Benchmarks, measured as ratios within one run on this machine (never as timed tests)."""
+
+from __future__ import annotations
+
+import platform
+import time
+from datetime import date
+from typing import Any, Callable
+
+import mujoco
+import numpy as np
+
+from . import batch, models
+from .drive import Drive
+from .scene import Scene, preset
+from .simulate import simulate
+
+
+def _best(fn: Callable[[], Any], repeat: int) -> float:
+    times = []
+    for _ in range(repeat):
+        start = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - start)
+    return min(times)
+
+
+def backends(scene: Scene | None = None, *, batch_size: int = 64, workers: int | None = None,
+             repeat: int = 3, log: Callable[[str], None] = print) -> dict[str, Any]:
+    """The paper plate drag (200 mm at 30 mm/s) with each backend, against bare MuJoCo stepping of the same
+    model without RFT, and the batch throughput of ``batch_size`` drags on all cores against one core."""
+    scene = scene or preset("paper")
+    drive = Drive(speed=0.03, stroke=0.2)
+    workers = workers or batch.default_workers()
+    out: dict[str, Any] = {"date": date.today().isoformat(), "machine": f"{platform.machine()}, "
+                           f"{batch.default_workers()} cores, {platform.python_implementation()} "
+                           f"{platform.python_version()}", "mujoco": mujoco.__version__, "dt": scene.sim.dt}
+    steps = simulate(scene, drive).steps
+    out["steps"] = steps
+    for backend in ("python", "native"):
+        wall = _best(lambda: simulate(scene.replace(**{"sim.backend": backend}), drive), repeat)
+        out[f"{backend}_wall_s"], out[f"{backend}_steps_per_s"] = wall, steps / wall
+        log(f"{backend:>6} backend: {wall * 1e3:8.1f} ms per drag, {steps / wall:10.0f} steps/s")
+
+    bare = models.build_plate(scene.replace(**{"sim.backend": "python"})).model
+
+    def bare_loop() -> None:
+        d = mujoco.MjData(bare)
+        for _ in range(steps):
+            mujoco.mj_step(bare, d)
+    wall = _best(bare_loop, repeat)
+    out["bare_wall_s"], out["bare_steps_per_s"] = wall, steps / wall
+    log(f"  bare mj_step, same model without RFT: {wall * 1e3:8.1f} ms, {steps / wall:10.0f} steps/s")
+    out["native_over_python"] = out["python_wall_s"] / out["native_wall_s"]
+    out["native_over_bare"] = out["native_wall_s"] / out["bare_wall_s"]
+    log(f"native is {out['native_over_python']:.1f}x faster than the Python callback (target >= 10x) and costs "
+        f"{out['native_over_bare']:.2f}x bare mj_step (target <= 2x)")
+
+    rng = np.random.default_rng(0)
+    jobs = [(scene.replace(**{"plate.damping": float(b)}), drive) for b in rng.uniform(0.5, 2.5, batch_size)]
+    serial = _best(lambda: batch.run_many(jobs, workers=1), 1)
+    with batch.local_executor(workers) as pool:
+        batch.run_many(jobs[:workers], executor=pool)  # start the workers before timing
+        parallel = _best(lambda: batch.run_many(jobs, executor=pool), 1)
+    total = steps * batch_size
+    out.update(batch_size=batch_size, workers=workers, batch_serial_steps_per_s=total / serial,
+               batch_parallel_steps_per_s=total / parallel, batch_speedup=serial / parallel)
+    log(f"batch of {batch_size} drags: {total / serial:10.0f} steps/s on 1 core, {total / parallel:10.0f} steps/s "
+        f"on {workers} workers: {serial / parallel:.2f}x (target >= 1.6x on 2 cores)")
+    return out

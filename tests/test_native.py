@@ -87,3 +87,13 @@ def test_batch_equals_single_runs(paper):
         for field in ("time", "segment_angle", "hinge_angle", "drive_force", "rft_force", "stroke_impulse"):
             np.testing.assert_array_equal(getattr(a, field), getattr(b, field))
     assert not np.allclose(many[0].segment_angle, many[2].segment_angle)  # the jobs did differ
+
+
+def test_unavailable_plugin_falls_back_once(monkeypatch, paper):
+    monkeypatch.setitem(native._status, "loaded", False)
+    monkeypatch.setitem(native._status, "error", "library not built")
+    monkeypatch.setitem(native._status, "warned", False)
+    with pytest.warns(RuntimeWarning, match="library not built") as record:
+        runs = [simulate(paper, Drive(stroke=0.01)) for _ in range(2)]
+    assert len(record) == 1
+    assert all(run.backend == "python" for run in runs)

@@ -49,7 +49,7 @@ def _add_common(p: argparse.ArgumentParser) -> None:
                    help="plate kind (overrides plate.kind): origami = one-sided stop, soft = compliant both ways, "
                         "rigid = one body")
     g.add_argument("--scene", metavar="FILE.toml", help="scene file in SI units (default: the built-in preset)")
-    g.add_argument("--preset", default="paper", choices=scenes.PRESETS,
+    g.add_argument("--preset", default="paper", choices=scenes.PRESETS[scenes.Scene],
                    help="built-in scene used when no --scene is given (default: %(default)s)")
     g.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scene key in SI units, e.g. --set plate.segment_inertia=0.001 (repeatable)")
@@ -97,7 +97,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     scene = sub.add_parser("scene", help="print a resolved scene as TOML",
                            description="Print the full resolved scene (SI units) as TOML, to copy and edit.")
-    scene.add_argument("--dump", metavar="NAME", default="paper", choices=scenes.PRESETS,
+    scene.add_argument("--dump", metavar="NAME", default="paper", choices=scenes.PRESETS[scenes.Scene],
                        help="preset to print (default: %(default)s)")
     scene.add_argument("--scene", metavar="FILE.toml", help="resolve this file instead of a preset")
     scene.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a key (SI)")

@@ -12,25 +12,24 @@ MuJoCo's callback is process-global; `installed` sets it for the duration of a r
 from __future__ import annotations
 
 import contextlib
-from typing import Callable, Iterator
+from typing import Callable, Iterator, Sequence
 
 import mujoco
 import numpy as np
 
 from . import rft
-from .models import PlateModel
-from .scene import Scene
+from .models import ForceGroup
 
 Callback = Callable[[mujoco.MjModel, mujoco.MjData], None]
 
 
 class SegmentForces:
-    """The RFT force on each segment (N, 3), world frame, for MuJoCo's current kinematics."""
+    """The RFT force on each segment of a force group (N, 3), world frame, for MuJoCo's current kinematics."""
 
-    def __init__(self, plate: PlateModel, scene: Scene) -> None:
-        self.law = rft.force_law(scene.rft)
-        self.sites = plate.seg_site
-        self.bodies = plate.seg_body
+    def __init__(self, group: ForceGroup) -> None:
+        self.law = rft.force_law(group.rft)
+        self.sites = group.sites
+        self.bodies = group.bodies
         n = len(self.sites)
         self.force = np.zeros((n, 3))
         self._twist = np.zeros(6)
@@ -55,25 +54,23 @@ class SegmentForces:
 
 
 class PythonCoupling:
-    """The ``python`` backend: RFT on each segment's midpoint site and the origami penalty stop."""
+    """The ``python`` backend: each group's RFT on its midpoint sites, and its hinges' penalty stop (deflection
+    from the spring's rest angle, as in the native plugin)."""
 
-    def __init__(self, plate: PlateModel, scene: Scene) -> None:
-        self.forces = SegmentForces(plate, scene)
-        penalty = scene.plate.kind == "origami" and scene.plate.stop == "penalty"
-        self.stop_qpos = plate.hinge_qpos if penalty else np.zeros(0, dtype=int)
-        self.stop_dof = plate.hinge_dof if penalty else np.zeros(0, dtype=int)
-        self.springref = scene.plate.springref
-        self.stop_stiffness = scene.plate.stop_stiffness
+    def __init__(self, groups: Sequence[ForceGroup]) -> None:
+        self.groups = [(SegmentForces(g), g) for g in groups]
         self._torque = np.zeros(3)
 
     def __call__(self, m: mujoco.MjModel, d: mujoco.MjData) -> None:
-        force = self.forces(m, d)
-        for i, site in enumerate(self.forces.sites):
-            mujoco.mj_applyFT(m, d, force[i], self._torque, d.site_xpos[site], int(self.forces.bodies[i]),
-                              d.qfrc_passive)
-        if len(self.stop_dof):
-            deflection = d.qpos[self.stop_qpos] - self.springref
-            d.qfrc_passive[self.stop_dof] -= self.stop_stiffness * (deflection + np.abs(deflection)) * deflection
+        for forces, group in self.groups:
+            force = forces(m, d)
+            for i, site in enumerate(group.sites):
+                mujoco.mj_applyFT(m, d, force[i], self._torque, d.site_xpos[site], int(group.bodies[i]),
+                                  d.qfrc_passive)
+            if group.stop_stiffness > 0 and len(group.hinge_dof):
+                deflection = d.qpos[group.hinge_qpos] - m.qpos_spring[group.hinge_qpos]
+                d.qfrc_passive[group.hinge_dof] -= group.stop_stiffness * (deflection + np.abs(deflection)) \
+                    * deflection
 
 
 @contextlib.contextmanager

@@ -15,7 +15,7 @@ import mujoco
 import numpy as np
 
 from . import native, rft
-from .scene import Scene, SceneError
+from .scene import RFT, Chain, Scene, SceneError, Sim
 
 INTEGRATORS = {
     "euler": mujoco.mjtIntegrator.mjINT_EULER,
@@ -29,6 +29,20 @@ DRIVES = ("drag", "rotate")
 ARMATURE_RATIO = 1e10
 # A stiff limit: impedance 0.9999 (MuJoCo's maximum) and the shortest time constant MuJoCo accepts, 2 dt.
 LIMIT_IMPEDANCE = (0.9999, 0.9999, 0.001, 0.5, 2.0)
+
+
+@dataclass(frozen=True)
+class ForceGroup:
+    """Segments that share one RFT law (one plugin instance in the native backend), and the hinges on the same
+    bodies that carry the penalty stop (when stop_stiffness > 0)."""
+
+    name: str
+    rft: RFT
+    sites: np.ndarray          # (N,) midpoint site of each segment
+    bodies: np.ndarray         # (N,) body that carries each segment
+    stop_stiffness: float
+    hinge_qpos: np.ndarray     # hinges on the group's bodies
+    hinge_dof: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -46,6 +60,7 @@ class PlateModel:
     seg_body: np.ndarray       # (N,) body that carries each segment
     seg_site: np.ndarray       # (N,) site at each segment's midpoint
     initial_angle: float       # the plate's orientation at t = 0 (rad, about z)
+    groups: tuple[ForceGroup, ...]
 
 
 @contextlib.contextmanager
@@ -73,16 +88,102 @@ def initial_heading(drive: str, attack_deg: float) -> float:
     return float(np.radians(90.0 - attack_deg)) if drive == "drag" else 0.0
 
 
-def plugin_config(scene: Scene) -> dict[str, str]:
-    """The native plugin's config for a scene: the same law and penalty stop as the Python coupling."""
-    r, p = scene.rft, scene.plate
-    config = {"law": r.law, "f_perp": repr(r.f_perp), "f_par": repr(r.f_par), "v_reg": repr(r.v_reg),
-              "stop_stiffness": repr(p.stop_stiffness if p.kind == "origami" and p.stop == "penalty" else 0.0)}
-    if r.law == "table":
-        table = rft.read_table(r.table)
+def plugin_config(law: RFT, stop_stiffness: float) -> dict[str, str]:
+    """The native plugin's config for one force group: the same law and penalty stop as the Python coupling."""
+    config = {"law": law.law, "f_perp": repr(law.f_perp), "f_par": repr(law.f_par), "v_reg": repr(law.v_reg),
+              "stop_stiffness": repr(stop_stiffness)}
+    if law.law == "table":
+        table = rft.read_table(law.table)
         config["table"] = " ".join(repr(float(x)) for row in zip(table.attack_deg, table.f_perp, table.f_par)
                                    for x in row)
     return config
+
+
+def penalty_stiffness(chain: Chain) -> float:
+    return chain.stop_stiffness if chain.kind == "origami" and chain.stop == "penalty" else 0.0
+
+
+def _configure_chain(spec: mujoco.MjSpec, chain: Chain, dt: float) -> None:
+    """Apply a chain's hinge and segment parameters to the file's ``hinge`` and ``segment`` default classes."""
+    seg_geom = spec.find_default("segment").geom
+    seg_geom.size = [chain.segment_length / 2, seg_geom.size[1], seg_geom.size[2]]
+    hinge = spec.find_default("hinge").joint
+    hinge.stiffness = [chain.stiffness, 0, 0]
+    hinge.springref = chain.springref
+    hinge.damping = [chain.damping, 0, 0]
+    if chain.kind == "origami" and chain.stop == "limit":
+        hinge.range = [-np.pi, chain.springref]
+        hinge.solref_limit = [2 * dt, 1.0]
+        hinge.solimp_limit = list(LIMIT_IMPEDANCE)
+    else:
+        hinge.limited = mujoco.mjtLimited.mjLIMITED_FALSE
+
+
+def _add_chain(spec: mujoco.MjSpec, parent: mujoco.MjsBody, chain: Chain, offset: float,
+               prefix: str = "") -> list[mujoco.MjsBody]:
+    """Segments ``{prefix}seg{i}`` in series from ``offset`` along the parent's x axis, on hinges
+    ``{prefix}hinge{i}``; a rigid chain is one body ``{prefix}plate`` carrying every segment."""
+    half = chain.segment_length / 2
+    segment = spec.find_default("segment")
+    if chain.kind == "rigid":
+        body = parent.add_body(name=f"{prefix}plate", pos=[offset, 0, 0])
+        centres = [half + i * chain.segment_length for i in range(chain.segments)]
+        com = float(np.mean(centres))
+        body.mass, body.ipos = chain.segments * chain.segment_mass, [com, 0, 0]
+        body.inertia = [sum(chain.segment_inertia + chain.segment_mass * (c - com) ** 2 for c in centres)] * 3
+        for i, c in enumerate(centres, start=1):
+            body.add_geom(segment, name=f"{prefix}seg{i}", pos=[c, 0, 0])
+            body.add_site(name=f"{prefix}seg{i}", pos=[c, 0, 0])
+        return [body]
+    bodies, pos = [], [offset, 0, 0]
+    for i in range(1, chain.segments + 1):
+        body = parent.add_body(name=f"{prefix}seg{i}", pos=pos)
+        body.mass, body.ipos, body.inertia = chain.segment_mass, [half, 0, 0], [chain.segment_inertia] * 3
+        body.add_joint(spec.find_default("hinge"), name=f"{prefix}hinge{i}")
+        body.add_geom(segment, name=f"{prefix}seg{i}", pos=[half, 0, 0])
+        body.add_site(name=f"{prefix}seg{i}", pos=[half, 0, 0])
+        bodies.append(body)
+        parent, pos = body, [chain.segment_length, 0, 0]
+    return bodies
+
+
+def _bind(spec: mujoco.MjSpec, name: str, law: RFT, stop_stiffness: float, bodies: list[mujoco.MjsBody]) -> None:
+    """Bind a native plugin instance carrying one force group's law to its bodies."""
+    spec.activate_plugin(native.PLUGIN)
+    instance = spec.add_plugin(name=name, plugin_name=native.PLUGIN, active=True)
+    instance.config = plugin_config(law, stop_stiffness)
+    for body in bodies:
+        body.plugin = instance
+        body.plugin.name = name
+        body.plugin.active = True
+
+
+def _new_spec(file: str, sim: Sim) -> mujoco.MjSpec:
+    spec = mujoco.MjSpec.from_file(str(mjcf_path(file)))
+    spec.option.timestep = sim.dt
+    spec.option.integrator = INTEGRATORS[sim.integrator]
+    return spec
+
+
+def _compile(spec: mujoco.MjSpec) -> mujoco.MjModel:
+    try:
+        with captured_warnings([]):
+            return spec.compile()
+    except ValueError as exc:  # e.g. the plugin's init rejecting its config: quote its line, which names the key
+        lines = str(exc).strip().splitlines()
+        reason = next((line for line in lines if line.startswith(native.PLUGIN)), lines[0])
+        raise SceneError(f"MuJoCo rejected the model: {reason}") from None
+
+
+def _group(model: mujoco.MjModel, name: str, law: RFT, stop_stiffness: float, body_names: list[str]) -> ForceGroup:
+    """A force group of a compiled model: every site on the named bodies, and their hinges."""
+    ids = [model.body(b).id for b in body_names]
+    sites = np.array([s for s in range(model.nsite) if model.site_bodyid[s] in ids], dtype=int)
+    hinges = [j for j in range(model.njnt) if model.jnt_bodyid[j] in ids
+              and model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE]
+    return ForceGroup(name, law, sites, model.site_bodyid[sites].copy(), stop_stiffness,
+                      np.array([model.jnt_qposadr[j] for j in hinges], dtype=int),
+                      np.array([model.jnt_dofadr[j] for j in hinges], dtype=int))
 
 
 def plate_spec(scene: Scene, drive: str = "drag", attack_deg: float = 90.0,
@@ -92,11 +193,8 @@ def plate_spec(scene: Scene, drive: str = "drag", attack_deg: float = 90.0,
     ``native`` the RFT plugin is bound to the segments."""
     if drive not in DRIVES:
         raise ValueError(f"drive must be one of {DRIVES}, got {drive!r}")
-    p, sim = scene.plate, scene.sim
-    spec = mujoco.MjSpec.from_file(str(mjcf_path()))
-    spec.option.timestep = sim.dt
-    spec.option.integrator = INTEGRATORS[sim.integrator]
-
+    p = scene.plate
+    spec = _new_spec("plate.xml", scene.sim)
     rod = spec.body("rod")
     spec.delete(spec.body("seg1"))
     rod.mass, rod.ipos = p.rod_mass, [p.rod_length / 2, 0, 0]
@@ -111,52 +209,10 @@ def plate_spec(scene: Scene, drive: str = "drag", attack_deg: float = 90.0,
     else:
         joint.type = mujoco.mjtJoint.mjJNT_HINGE
         joint.axis = [0, 0, 1]
-
-    seg_geom = spec.find_default("segment").geom
-    seg_geom.size = [p.segment_length / 2, seg_geom.size[1], seg_geom.size[2]]
-    hinge = spec.find_default("hinge").joint
-    hinge.stiffness = [p.stiffness, 0, 0]
-    hinge.springref = p.springref
-    hinge.damping = [p.damping, 0, 0]
-    if p.kind == "origami" and p.stop == "limit":
-        hinge.range = [-np.pi, p.springref]
-        hinge.solref_limit = [2 * sim.dt, 1.0]
-        hinge.solimp_limit = list(LIMIT_IMPEDANCE)
-    else:
-        hinge.limited = mujoco.mjtLimited.mjLIMITED_FALSE
-
-    half = p.segment_length / 2
-    segment_bodies = []
-    if p.kind == "rigid":
-        plate = rod.add_body(name="plate", pos=[p.rod_length, 0, 0])
-        centres = [half + i * p.segment_length for i in range(p.segments)]
-        mass = p.segments * p.segment_mass
-        com = float(np.mean(centres))
-        inertia = sum(p.segment_inertia + p.segment_mass * (c - com) ** 2 for c in centres)
-        plate.mass, plate.ipos, plate.inertia = mass, [com, 0, 0], [inertia] * 3
-        for i, c in enumerate(centres, start=1):
-            plate.add_geom(spec.find_default("segment"), name=f"seg{i}", pos=[c, 0, 0])
-            plate.add_site(name=f"seg{i}", pos=[c, 0, 0])
-        segment_bodies.append(plate)
-    else:
-        parent, pos = rod, [p.rod_length, 0, 0]
-        for i in range(1, p.segments + 1):
-            body = parent.add_body(name=f"seg{i}", pos=pos)
-            body.mass, body.ipos, body.inertia = p.segment_mass, [half, 0, 0], [p.segment_inertia] * 3
-            body.add_joint(spec.find_default("hinge"), name=f"hinge{i}")
-            body.add_geom(spec.find_default("segment"), name=f"seg{i}", pos=[half, 0, 0])
-            body.add_site(name=f"seg{i}", pos=[half, 0, 0])
-            segment_bodies.append(body)
-            parent, pos = body, [p.segment_length, 0, 0]
-
+    _configure_chain(spec, p, scene.sim.dt)
+    segments = _add_chain(spec, rod, p, p.rod_length)
     if backend == "native":
-        spec.activate_plugin(native.PLUGIN)
-        sand = spec.add_plugin(name="sand", plugin_name=native.PLUGIN, active=True)
-        sand.config = plugin_config(scene)
-        for body in segment_bodies:
-            body.plugin = sand
-            body.plugin.name = "sand"
-            body.plugin.active = True
+        _bind(spec, "sand", scene.rft, penalty_stiffness(p), segments)
 
     # Everything the drive moves, seen from the drive: total mass (slide) or inertia about the base (hinge).
     lumps = [(p.rod_mass, p.rod_inertia, p.rod_length / 2)] + [
@@ -170,18 +226,12 @@ def plate_spec(scene: Scene, drive: str = "drag", attack_deg: float = 90.0,
 def build_plate(scene: Scene, drive: str = "drag", attack_deg: float = 90.0) -> PlateModel:
     """Compile the plate model for a scene and collect its indices."""
     backend = native.resolve_backend(scene.sim.backend)
-    spec = plate_spec(scene, drive, attack_deg, backend)
-    try:
-        with captured_warnings([]):
-            model = spec.compile()
-    except ValueError as exc:  # e.g. the plugin's init rejecting its config: quote its line, which names the key
-        lines = str(exc).strip().splitlines()
-        reason = next((line for line in lines if line.startswith(native.PLUGIN)), lines[0])
-        raise SceneError(f"MuJoCo rejected the model: {reason}") from None
-    n = scene.plate.segments
+    model = _compile(plate_spec(scene, drive, attack_deg, backend))
+    p = scene.plate
+    bodies = ["plate"] if p.kind == "rigid" else [f"seg{i}" for i in range(1, p.segments + 1)]
+    group = _group(model, "sand", scene.rft, penalty_stiffness(p), bodies)
     drive_id = model.joint("drive").id
-    hinge_ids = [model.joint(f"hinge{i}").id for i in range(1, n + 1)] if scene.plate.kind != "rigid" else []
-    sites = np.array([model.site(f"seg{i}").id for i in range(1, n + 1)])
+    hinge_ids = [model.joint(f"hinge{i}").id for i in range(1, p.segments + 1)] if p.kind != "rigid" else []
     return PlateModel(
         model=model,
         backend=backend,
@@ -191,7 +241,8 @@ def build_plate(scene: Scene, drive: str = "drag", attack_deg: float = 90.0) -> 
         armature=float(model.dof_armature[model.jnt_dofadr[drive_id]]),
         hinge_qpos=np.array([model.jnt_qposadr[j] for j in hinge_ids], dtype=int),
         hinge_dof=np.array([model.jnt_dofadr[j] for j in hinge_ids], dtype=int),
-        seg_body=model.site_bodyid[sites].copy(),
-        seg_site=sites,
+        seg_body=group.bodies,
+        seg_site=group.sites,
         initial_angle=initial_heading(drive, attack_deg),
+        groups=(group,),
     )

@@ -1,7 +1,8 @@
 """The scene schema: every physical and numerical parameter of a simulation, in SI units.
 
-A scene is a TOML file with the sections ``[plate]``, ``[rft]`` and ``[sim]``. This module is the one place
-where keys, types, units, allowed values and defaults are declared; everything else reads a validated `Scene`.
+A plate scene is a TOML file with the sections ``[plate]``, ``[rft]`` and ``[sim]``; a robot scene has
+``[robot]``, ``[body]``, ``[arm]``, ``[fin]``, ``[rft]``, ``[gait]`` and ``[sim]``. This module is the one place
+where keys, types, units, allowed values and defaults are declared; everything else reads a validated scene.
 """
 
 from __future__ import annotations
@@ -27,7 +28,9 @@ def _f(default: Any, unit: str, doc: str, *, choices: tuple[str, ...] = (), mini
 
 
 @dataclass(frozen=True)
-class Plate:
+class Chain:
+    """Rigid segments in series on compliant hinges: the plate, or a robot's fin."""
+
     kind: str = _f("origami", "", "origami: one-sided stop; soft: compliant both ways; rigid: one body",
                    choices=("origami", "soft", "rigid"))
     segments: int = _f(3, "", "number of rigid segments in series", minimum=1, exclusive=False)
@@ -35,10 +38,6 @@ class Plate:
     segment_mass: float = _f(0.00289, "kg", "mass of one segment, at its midpoint", minimum=0.0)
     segment_inertia: float = _f(2.6e-7, "kg m^2", "rotational inertia of a segment about z through its centre",
                                 minimum=0.0)
-    rod_length: float = _f(0.007, "m", "extension rod from the driven base point to the first hinge", minimum=0.0)
-    rod_mass: float = _f(0.010, "kg", "mass of the extension rod, at its midpoint", minimum=0.0)
-    rod_inertia: float = _f(4.1e-8, "kg m^2", "rotational inertia of the rod about z through its centre",
-                            minimum=0.0)
     stiffness: float = _f(0.209, "N m/rad", "hinge spring stiffness k", minimum=0.0, exclusive=False)
     springref: float = _f(0.0, "rad", "hinge rest angle; the origami stop sits here")
     damping: float = _f(1.43, "N m s/rad", "hinge damping b", minimum=0.0, exclusive=False)
@@ -46,6 +45,14 @@ class Plate:
                    choices=("limit", "penalty"))
     stop_stiffness: float = _f(1.0e4, "N m/rad", "penalty stop: torque -(k_stop (d + |d|)) d for hinge deflection d",
                                minimum=0.0)
+
+
+@dataclass(frozen=True)
+class Plate(Chain):
+    rod_length: float = _f(0.007, "m", "extension rod from the driven base point to the first hinge", minimum=0.0)
+    rod_mass: float = _f(0.010, "kg", "mass of the extension rod, at its midpoint", minimum=0.0)
+    rod_inertia: float = _f(4.1e-8, "kg m^2", "rotational inertia of the rod about z through its centre",
+                            minimum=0.0)
 
 
 @dataclass(frozen=True)
@@ -69,36 +76,131 @@ class Sim:
 
 
 @dataclass(frozen=True)
-class Scene:
+class Robot:
+    model: str = _f("half", "", "full: body and both arms; half: body and the right arm, with half the body's mass "
+                    "and drag (the paper's shortcut for symmetric gaits)", choices=("half", "full"))
+    servo: str = _f("prescribed", "", "prescribed: the arm follows the gait exactly; position: a stiff servo "
+                    "tracks it", choices=("prescribed", "position"))
+    servo_kp: float = _f(50.0, "N m/rad", "position servo stiffness (servo = position); critically damped",
+                         minimum=0.0)
+
+
+@dataclass(frozen=True)
+class Body:
+    mass: float = _f(0.309, "kg", "mass of the whole robot's body (the half model carries half)", minimum=0.0)
+    drag: float = _f(2.4612, "N", "body drag of the whole robot (the half model carries half)", minimum=0.0,
+                     exclusive=False)
+    drag_law: str = _f("velocity", "", "velocity: rate-independent, against the body's velocity (tanh below "
+                       "v_reg); stroke: constant, against the body's motion in the current stroke",
+                       choices=("velocity", "stroke"))
+    v_reg: float = _f(0.001, "m/s", "regularisation speed of the velocity body drag", minimum=0.0)
+
+
+@dataclass(frozen=True)
+class Arm:
+    length: float = _f(0.065, "m", "arm length L_a, pivot to the fin's first hinge", minimum=0.0)
+    pivot: float = _f(0.0275, "m", "distance of the arm's pivot from the body's axis", minimum=0.0,
+                      exclusive=False)
+    mass_base: float = _f(0.001158, "kg", "arm mass at zero length (servo horn)", minimum=0.0, exclusive=False)
+    linear_density: float = _f(0.1445, "kg/m", "arm mass per length", minimum=0.0, exclusive=False)
+    inertia: float = _f(1e-6, "kg m^2", "arm inertia about z through its centre", minimum=0.0)
+    f_perp_base: float = _f(2.0, "N", "arm RFT normal coefficient: f_perp_base + f_perp_per_length * length")
+    f_perp_per_length: float = _f(17.94, "N/m", "arm RFT normal coefficient per arm length")
+    f_par: float = _f(-0.3, "N", "arm RFT tangential coefficient")
+
+
+@dataclass(frozen=True)
+class Gait:
+    theta1: float = _f(1.0471975511965976, "rad", "arm angle at the end of the recovery stroke (0 = sideways, "
+                       "+90 deg = forward)")
+    theta2: float = _f(-1.5707963267948966, "rad", "arm angle at the end of the power stroke; the gait starts here")
+    omega: float = _f(1.1519173063162575, "rad/s", "arm angular speed", minimum=0.0)
+
+
+class _Sections:
+    def to_dict(self) -> dict[str, dict[str, Any]]:
+        return dataclasses.asdict(self)
+
+    def replace(self, **updates: Any):
+        """A copy with dotted keys changed, e.g. ``scene.replace(**{"plate.kind": "soft"})``; validated."""
+        data = self.to_dict()
+        for key, value in updates.items():
+            section, name = split_key(type(self), key)
+            data[section][name] = value
+        return scene_from_dict(data, type(self))
+
+
+@dataclass(frozen=True)
+class Scene(_Sections):
+    """A plate test: the plate, the RFT law on its segments, and the numerics."""
+
     plate: Plate = field(default_factory=Plate)
     rft: RFT = field(default_factory=RFT)
     sim: Sim = field(default_factory=Sim)
 
-    def to_dict(self) -> dict[str, dict[str, Any]]:
-        return dataclasses.asdict(self)
-
-    def replace(self, **updates: Any) -> "Scene":
-        """A copy with dotted keys changed, e.g. ``scene.replace(**{"plate.kind": "soft"})``; validated."""
-        data = self.to_dict()
-        for key, value in updates.items():
-            section, name = _split_key(key)
-            data[section][name] = value
-        return scene_from_dict(data)
+    def __post_init__(self) -> None:
+        _check_table(self.rft)
 
 
-SECTIONS: dict[str, type] = {"plate": Plate, "rft": RFT, "sim": Sim}
-PRESETS = ("paper",)
+@dataclass(frozen=True)
+class RobotScene(_Sections):
+    """The two-fin robot: body, arms, fins, the RFT law on the fin segments, the gait and the numerics."""
+
+    robot: Robot = field(default_factory=Robot)
+    body: Body = field(default_factory=Body)
+    arm: Arm = field(default_factory=Arm)
+    fin: Chain = field(default_factory=lambda: Chain(segments=3, segment_length=0.02, segment_mass=0.00795,
+                                                     segment_inertia=2.65e-7, stiffness=0.5879, damping=0.4399,
+                                                     stop_stiffness=100.0))
+    rft: RFT = field(default_factory=lambda: RFT(f_perp=6.779, f_par=-1.0))
+    gait: Gait = field(default_factory=Gait)
+    sim: Sim = field(default_factory=Sim)
+
+    def __post_init__(self) -> None:
+        _check_table(self.rft)
+        g = self.gait
+        for key in ("theta1", "theta2"):
+            if abs(getattr(g, key)) > math.pi / 2 + 1e-12:
+                raise SceneError(f"gait.{key} = {math.degrees(getattr(g, key)):g} deg is outside the servo's range "
+                                 f"-90..90 deg")
+        if g.theta1 <= g.theta2:
+            raise SceneError(f"gait.theta1 ({math.degrees(g.theta1):g} deg) must be greater than gait.theta2 "
+                             f"({math.degrees(g.theta2):g} deg)")
 
 
-def _split_key(key: str) -> tuple[str, str]:
+def _check_table(r: RFT) -> None:
+    if r.law == "table" and not r.table:
+        raise SceneError("rft.law = 'table' needs rft.table, the path of a CSV with attack_deg, f_perp_N, f_par_N")
+
+
+PRESETS: dict[type, tuple[str, ...]] = {Scene: ("paper",), RobotScene: ("paper", "physical")}
+_PRESET_PREFIX = {Scene: "plate", RobotScene: "robot"}
+
+
+def sections(cls: type) -> dict[str, type]:
+    """A scene class's sections and their types, in order."""
+    hints = {"Plate": Plate, "RFT": RFT, "Sim": Sim, "Robot": Robot, "Body": Body, "Arm": Arm, "Chain": Chain,
+             "Gait": Gait}
+    return {f.name: hints[f.type] if isinstance(f.type, str) else f.type for f in dataclasses.fields(cls)}
+
+
+def split_key(cls: type, key: str) -> tuple[str, str]:
+    """``"plate.kind"`` -> ("plate", "kind"), or SceneError naming what exists."""
+    known = sections(cls)
     section, _, name = key.partition(".")
-    if section not in SECTIONS or not name:
+    if section not in known or not name:
         raise SceneError(f"unknown scene key '{key}': keys look like SECTION.NAME with SECTION one of "
-                         f"{', '.join(SECTIONS)}")
-    names = [f.name for f in dataclasses.fields(SECTIONS[section])]
+                         f"{', '.join(known)}")
+    names = [f.name for f in dataclasses.fields(known[section])]
     if name not in names:
         raise SceneError(f"unknown scene key '{key}': [{section}] has {', '.join(names)}")
     return section, name
+
+
+def field_of(cls: type, key: str) -> dataclasses.Field:
+    """The schema entry of a dotted key (its type, unit, bounds)."""
+    section, name = split_key(cls, key)
+    return next(f for f in dataclasses.fields(sections(cls)[section]) if f.name == name)
 
 
 def _check(section: str, f: dataclasses.Field, value: Any) -> Any:
@@ -123,26 +225,27 @@ def _check(section: str, f: dataclasses.Field, value: Any) -> Any:
     return value
 
 
-def scene_from_dict(data: Mapping[str, Any]) -> Scene:
-    """Validate a nested mapping (as read from TOML) into a Scene; missing keys take the schema defaults."""
+def scene_from_dict(data: Mapping[str, Any], cls: type = Scene):
+    """Validate a nested mapping (as read from TOML) into a scene of class ``cls``; missing keys take the
+    schema's defaults."""
     if not isinstance(data, Mapping):
         raise SceneError("a scene must be a table of sections")
+    known = sections(cls)
     for section in data:
-        if section not in SECTIONS:
-            raise SceneError(f"unknown scene section [{section}]: use {', '.join(SECTIONS)}")
+        if section not in known:
+            raise SceneError(f"unknown scene section [{section}]: use {', '.join(known)}")
+    defaults = cls()
     parts = {}
-    for section, cls in SECTIONS.items():
+    for section, section_cls in known.items():
         given = data.get(section, {})
         if not isinstance(given, Mapping):
             raise SceneError(f"[{section}] must be a table")
         for name in given:
-            _split_key(f"{section}.{name}")
-        values = {f.name: _check(section, f, given[f.name]) for f in dataclasses.fields(cls) if f.name in given}
-        parts[section] = cls(**values)
-    scene = Scene(**parts)
-    if scene.rft.law == "table" and not scene.rft.table:
-        raise SceneError("rft.law = 'table' needs rft.table, the path of a CSV with attack_deg, f_perp_N, f_par_N")
-    return scene
+            split_key(cls, f"{section}.{name}")
+        values = {f.name: _check(section, f, given[f.name])
+                  for f in dataclasses.fields(section_cls) if f.name in given}
+        parts[section] = dataclasses.replace(getattr(defaults, section), **values)
+    return cls(**parts)
 
 
 def _read_toml(text: str, origin: str) -> dict[str, Any]:
@@ -152,22 +255,22 @@ def _read_toml(text: str, origin: str) -> dict[str, Any]:
         raise SceneError(f"{origin}: malformed TOML: {exc}") from None
 
 
-def preset(name: str) -> Scene:
+def preset(name: str, cls: type = Scene):
     """A built-in scene by name (see PRESETS)."""
-    if name not in PRESETS:
-        raise SceneError(f"unknown preset '{name}': use one of {', '.join(PRESETS)}")
-    text = (resources.files("finrft") / "presets" / f"{name}.toml").read_text()
-    return scene_from_dict(_read_toml(text, f"preset {name}"))
+    if name not in PRESETS[cls]:
+        raise SceneError(f"unknown preset '{name}': use one of {', '.join(PRESETS[cls])}")
+    text = (resources.files("finrft") / "presets" / f"{_PRESET_PREFIX[cls]}-{name}.toml").read_text()
+    return scene_from_dict(_read_toml(text, f"preset {name}"), cls)
 
 
 def load_scene(path: str | Path | None = None, *, preset_name: str = "paper",
-               overrides: Mapping[str, Any] | None = None) -> Scene:
+               overrides: Mapping[str, Any] | None = None, cls: type = Scene):
     """A scene from a TOML file (or the named preset when no file is given), with dotted-key overrides applied.
 
     A relative ``rft.table`` path in a file is taken relative to that file.
     """
     if path is None:
-        scene = preset(preset_name)
+        scene = preset(preset_name, cls)
     else:
         path = Path(path)
         try:
@@ -178,17 +281,17 @@ def load_scene(path: str | Path | None = None, *, preset_name: str = "paper",
         table = data.get("rft", {}).get("table") if isinstance(data.get("rft"), dict) else None
         if isinstance(table, str) and table and not Path(table).is_absolute():
             data["rft"]["table"] = str(path.parent / table)
-        scene = scene_from_dict(data)
+        scene = scene_from_dict(data, cls)
     return scene.replace(**dict(overrides or {}))
 
 
-def parse_override(text: str) -> tuple[str, Any]:
+def parse_override(text: str, cls: type = Scene) -> tuple[str, Any]:
     """``plate.stiffness=0.3`` -> ("plate.stiffness", 0.3); the value is read as TOML, else as a bare string."""
     key, sep, raw = text.partition("=")
     key = key.strip()
     if not sep or not key:
         raise SceneError(f"--set expects KEY=VALUE, got '{text}'")
-    _split_key(key)
+    split_key(cls, key)
     raw = raw.strip()
     try:
         value = tomllib.loads(f"v = {raw}")["v"]
@@ -197,10 +300,10 @@ def parse_override(text: str) -> tuple[str, Any]:
     return key, value
 
 
-def to_toml(scene: Scene) -> str:
+def to_toml(scene: Any) -> str:
     """The full resolved scene as TOML, with units as comments, so a user can copy and edit it."""
     lines = ["# finrft scene: SI units throughout"]
-    for section, cls in SECTIONS.items():
+    for section, cls in sections(type(scene)).items():
         lines += ["", f"[{section}]"]
         values = getattr(scene, section)
         for f in dataclasses.fields(cls):

@@ -134,8 +134,8 @@ def simulate(scene: Scene, drive: Drive, *, progress: Callable[[float], None] | 
     plate = build_plate(scene, drive.kind, drive.attack_deg)
     m = plate.model
     d = mujoco.MjData(m)
-    forces = SegmentForces(plate, scene)
-    callback = PythonCoupling(plate, scene) if plate.backend == "python" else None
+    forces = SegmentForces(plate.groups[0])
+    callback = PythonCoupling(plate.groups) if plate.backend == "python" else None
     dt = scene.sim.dt
     steps, starts, samples = _events(drive, dt, scene.sim.record_dt)
     events = np.union1d(samples, starts)

@@ -70,7 +70,7 @@ def test_plugin_is_thread_safe_in_rollout(paper):
 ])
 def test_plugin_rejects_bad_config(paper, monkeypatch, capsys, key, value, named):
     good = models.plugin_config
-    monkeypatch.setattr(models, "plugin_config", lambda scene: {**good(scene), key: value})
+    monkeypatch.setattr(models, "plugin_config", lambda *args: {**good(*args), key: value})
     with pytest.raises(SceneError, match=named):
         models.build_plate(paper)
     assert main(["drag", "--distance", "5"]) == 2

@@ -22,6 +22,7 @@ class Drive:
     stroke: float = 0.2           # m (drag) or rad (rotate): length of one stroke
     cycles: int | None = None     # None: a single stroke out
     attack_deg: float = 90.0      # drag only: angle between the plate and the motion at t = 0
+    start: float = 0.0            # position at t = 0 (m or rad)
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
@@ -55,8 +56,8 @@ class Drive:
         return self.speed if k % 2 == 0 else -self.speed
 
     def stroke_start(self, k: int) -> float:
-        """Position at which stroke k starts: 0 for outward strokes, ``stroke`` for return strokes."""
-        return 0.0 if k % 2 == 0 else self.stroke
+        """Position at which stroke k starts: ``start`` for outward strokes, ``start + stroke`` for return ones."""
+        return self.start if k % 2 == 0 else self.start + self.stroke
 
     def velocity(self, t: float) -> float:
         return self.stroke_velocity(self.stroke_index(t))

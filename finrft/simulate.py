@@ -10,14 +10,14 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 import mujoco
 import numpy as np
 
 from .coupling import PythonCoupling, SegmentForces, installed
 from .drive import Drive
-from .models import PlateModel, build_plate, captured_warnings
+from .models import build_plate, captured_warnings
 from .scene import Scene
 
 _BAD_STATE = (mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL)
@@ -94,19 +94,51 @@ class Run:
         return out
 
 
-def _impulse_on_reversal(plate: PlateModel, m: mujoco.MjModel, d: mujoco.MjData, jump: float) -> None:
-    """Change the drive's velocity by ``jump`` as an ideal constraint would: M0 dq = e_b lambda, dq_b = jump,
-    with M0 the mass matrix without the drive's artificial armature."""
-    mujoco.mj_forward(m, d)
-    mass = np.zeros((m.nv, m.nv))
-    mujoco.mj_fullM(m, d, mass)
-    b = plate.drive_dof
-    mass[b, b] -= plate.armature
-    column = np.linalg.solve(mass, np.eye(m.nv)[b])
-    d.qvel[:] += column * (jump / column[b])
+class Prescribed:
+    """Joints that follow a `Drive` exactly: a very large armature holds their speed within a stroke, and at
+    each reversal the rest of the system takes the impulse an ideal kinematic constraint would give it.
+
+    The drive's impulse over a stroke is exactly -armature times the change of its velocity (summed over the
+    joints), and its instantaneous force or torque is -armature * qacc.
+    """
+
+    def __init__(self, dofs: Sequence[int], qpos: Sequence[int], armature: float, drive: Drive) -> None:
+        self.dofs, self.qpos, self.armature, self.drive = list(dofs), list(qpos), armature, drive
+        self.impulse = np.zeros(drive.strokes)
+        self._stroke_velocity = np.zeros(len(self.dofs))
+        self._stroke = 0
+
+    def start_stroke(self, m: mujoco.MjModel, d: mujoco.MjData, k: int) -> None:
+        if k:
+            self._close(d)
+            d.qpos[self.qpos] = self.drive.stroke_start(k)
+            self._reverse(m, d, self.drive.stroke_velocity(k) - d.qvel[self.dofs])
+        else:
+            d.qvel[self.dofs] = self.drive.stroke_velocity(0)
+        self._stroke, self._stroke_velocity = k, d.qvel[self.dofs].copy()
+
+    def finish(self, d: mujoco.MjData) -> None:
+        self._close(d)
+
+    def load(self, d: mujoco.MjData) -> np.ndarray:
+        """What each joint's drive applies now (after mj_forward): N or N m."""
+        return -self.armature * d.qacc[self.dofs]
+
+    def _close(self, d: mujoco.MjData) -> None:
+        self.impulse[self._stroke] = -self.armature * np.sum(d.qvel[self.dofs] - self._stroke_velocity)
+
+    def _reverse(self, m: mujoco.MjModel, d: mujoco.MjData, jump: np.ndarray) -> None:
+        """Velocity jumps ``jump`` on the driven joints: M0 dq = E mu with E^T dq = jump, where M0 is the mass
+        matrix without the artificial armature."""
+        mujoco.mj_forward(m, d)
+        mass = np.zeros((m.nv, m.nv))
+        mujoco.mj_fullM(m, d, mass)
+        mass[self.dofs, self.dofs] -= self.armature
+        columns = np.linalg.solve(mass, np.eye(m.nv)[:, self.dofs])
+        d.qvel[:] += columns @ np.linalg.solve(columns[self.dofs], jump)
 
 
-def _unstable(scene: Scene, t: float, messages: list[str]) -> SimulationUnstable:
+def unstable(scene: Any, t: float, messages: list[str]) -> SimulationUnstable:
     what = messages[0].rstrip(".") if messages else "NaN, Inf or huge value in the state"
     return SimulationUnstable(
         f"simulation went unstable at t = {t:.4g} s ({what}) with integrator {scene.sim.integrator}, "
@@ -114,8 +146,8 @@ def _unstable(scene: Scene, t: float, messages: list[str]) -> SimulationUnstable
         f"implicitfast")
 
 
-def _events(drive: Drive, dt: float, record_dt: float) -> tuple[int, np.ndarray, np.ndarray]:
-    """Step count, the steps at which a stroke starts, and the steps recorded (always the first and last)."""
+def schedule(drive: Drive, dt: float, record_dt: float) -> tuple[int, np.ndarray, np.ndarray]:
+    """Step count, the steps at which each stroke starts, and the steps recorded (always the first and last)."""
     steps = max(1, round(drive.duration / dt))
     starts = np.array([round(k * drive.stroke_time / dt) for k in range(drive.strokes)])
     every = max(1, round(record_dt / dt))
@@ -123,13 +155,37 @@ def _events(drive: Drive, dt: float, record_dt: float) -> tuple[int, np.ndarray,
     return steps, starts, samples
 
 
-def simulate(scene: Scene, drive: Drive, *, progress: Callable[[float], None] | None = None) -> Run:
-    """Simulate one plate test; raises SimulationUnstable rather than return a diverged run.
+def step_through(m: mujoco.MjModel, d: mujoco.MjData, scene: Any, steps: int, starts: np.ndarray,
+                 samples: np.ndarray, on_stroke: Callable[[int], None], on_sample: Callable[[int], None],
+                 progress: Callable[[float], None] | None = None) -> None:
+    """Step a model through a run: ``on_stroke(k)`` as stroke k starts, ``on_sample(i)`` (after mj_forward) at
+    recorded step ``samples[i]``; MuJoCo steps in chunks in between. Stops loudly if the state blows up."""
+    events = np.union1d(samples, starts)
+    stroke_of = np.searchsorted(starts, events, side="right") - 1
+    counts = d.warning.number
+    bad = [int(w) for w in _BAD_STATE]
+    messages: list[str] = []
+    sample = 0
+    with captured_warnings(messages):
+        for i, step in enumerate(events):
+            k = stroke_of[i]
+            if step == starts[k]:
+                on_stroke(k)
+            if sample < len(samples) and step == samples[sample]:
+                mujoco.mj_forward(m, d)
+                on_sample(sample)
+                sample += 1
+                if progress is not None:
+                    progress(step / steps)
+            if step == steps:
+                return
+            mujoco.mj_step(m, d, int(events[i + 1] - step))
+            if any(counts[w] for w in bad):
+                raise unstable(scene, d.time, messages)
 
-    MuJoCo steps in chunks between recorded samples and stroke ends. Between reversals the drive's armature holds
-    its speed (it drifts by ~1e-9 of itself per stroke), so the drive's impulse over a stroke is exactly
-    -armature times the change of its velocity; the drive force itself is recorded at the samples.
-    """
+
+def simulate(scene: Scene, drive: Drive, *, progress: Callable[[float], None] | None = None) -> Run:
+    """Simulate one plate test; raises SimulationUnstable rather than return a diverged run."""
     start = time.perf_counter()
     plate = build_plate(scene, drive.kind, drive.attack_deg)
     m = plate.model
@@ -137,9 +193,8 @@ def simulate(scene: Scene, drive: Drive, *, progress: Callable[[float], None] | 
     forces = SegmentForces(plate.groups[0])
     callback = PythonCoupling(plate.groups) if plate.backend == "python" else None
     dt = scene.sim.dt
-    steps, starts, samples = _events(drive, dt, scene.sim.record_dt)
-    events = np.union1d(samples, starts)
-    stroke_of = np.searchsorted(starts, events, side="right") - 1
+    steps, starts, samples = schedule(drive, dt, scene.sim.record_dt)
+    base = Prescribed([plate.drive_dof], [plate.drive_qpos], plate.armature, drive)
 
     n = scene.plate.segments
     rec_x = np.zeros(len(samples))
@@ -147,44 +202,22 @@ def simulate(scene: Scene, drive: Drive, *, progress: Callable[[float], None] | 
     rec_f = np.zeros(len(samples))
     rec_v = np.zeros((len(samples), n, 3))
     rec_frame = np.zeros((len(samples), n, 3, 3))
-    impulse = np.zeros(drive.strokes)
-    b, bq, arm = plate.drive_dof, plate.drive_qpos, plate.armature
     hinges = plate.hinge_qpos
-    counts = d.warning.number
-    bad = [int(w) for w in _BAD_STATE]
-    messages: list[str] = []
 
-    d.qvel[b] = drive.stroke_velocity(0)
-    stroke_velocity = d.qvel[b]
-    sample = 0
-    with installed(callback), captured_warnings(messages):
-        for i, step in enumerate(events):
-            k = stroke_of[i]
-            if step == starts[k] and k > 0:
-                impulse[k - 1] = -arm * (d.qvel[b] - stroke_velocity)
-                d.qpos[bq] = drive.stroke_start(k)
-                _impulse_on_reversal(plate, m, d, drive.stroke_velocity(k) - d.qvel[b])
-                stroke_velocity = d.qvel[b]
-            if sample < len(samples) and step == samples[sample]:
-                mujoco.mj_forward(m, d)
-                rec_x[sample] = d.qpos[bq]
-                rec_q[sample, :len(hinges)] = d.qpos[hinges]
-                rec_f[sample] = -arm * d.qacc[b]
-                forces.kinematics(m, d, rec_v[sample], rec_frame[sample])
-                sample += 1
-                if progress is not None:
-                    progress(step / steps)
-            if step == steps:
-                break
-            mujoco.mj_step(m, d, int(events[i + 1] - step))
-            if any(counts[w] for w in bad):
-                raise _unstable(scene, d.time, messages)
-    impulse[-1] = -arm * (d.qvel[b] - stroke_velocity)
+    def record(i: int) -> None:
+        rec_x[i] = d.qpos[plate.drive_qpos]
+        rec_q[i, :len(hinges)] = d.qpos[hinges]
+        rec_f[i] = base.load(d)[0]
+        forces.kinematics(m, d, rec_v[i], rec_frame[i])
+
+    with installed(callback):
+        step_through(m, d, scene, steps, starts, samples, lambda k: base.start_stroke(m, d, k), record, progress)
+    base.finish(d)
 
     segment_angle = np.cumsum(rec_q, axis=1)
     if drive.kind == "rotate":
         segment_angle += rec_x[:, None]
     return Run(scene=scene, drive=drive, time=samples * dt, displacement=rec_x, segment_angle=segment_angle,
-               hinge_angle=rec_q, drive_force=rec_f, rft_force=forces.evaluate(rec_v, rec_frame), stroke_impulse=impulse,
-               peak_drive_force=float(np.max(np.abs(rec_f))), steps=steps, wall_s=time.perf_counter() - start,
-               backend=plate.backend)
+               hinge_angle=rec_q, drive_force=rec_f, rft_force=forces.evaluate(rec_v, rec_frame),
+               stroke_impulse=base.impulse, peak_drive_force=float(np.max(np.abs(rec_f))), steps=steps,
+               wall_s=time.perf_counter() - start, backend=plate.backend)

@@ -15,7 +15,7 @@ import mujoco
 import numpy as np
 
 from . import native, rft
-from .scene import RFT, Chain, Scene, SceneError, Sim
+from .scene import RFT, Chain, RobotScene, Scene, SceneError, Sim
 
 INTEGRATORS = {
     "euler": mujoco.mjtIntegrator.mjINT_EULER,
@@ -245,4 +245,119 @@ def build_plate(scene: Scene, drive: str = "drag", attack_deg: float = 90.0) -> 
         seg_site=group.sites,
         initial_angle=initial_heading(drive, attack_deg),
         groups=(group,),
+    )
+
+
+@dataclass(frozen=True)
+class RobotModel:
+    """A compiled robot model and the indices the simulation needs."""
+
+    model: mujoco.MjModel
+    backend: str
+    sides: tuple[str, ...]     # ("r",) for the half robot, ("r", "l") for the full one
+    travel_qpos: int           # the body's slide along +y
+    travel_dof: int
+    body: int
+    servo_qpos: np.ndarray     # (S,) per side
+    servo_dof: np.ndarray
+    armature: float            # prescribed servos: their armature; 0 with position servos
+    actuators: np.ndarray      # position servos' actuator ids (empty when prescribed)
+    fin_hinge_qpos: np.ndarray  # (S, H) fin hinges per side (H = 0 for a rigid fin)
+    fin_sites: np.ndarray      # (S, N) fin segment midpoints per side
+    groups: tuple[ForceGroup, ...]
+
+
+def arm_law(scene: RobotScene) -> RFT:
+    """The arm's RFT law: the paper law with a normal coefficient that grows with the arm's length."""
+    a = scene.arm
+    return RFT(law="paper", f_perp=a.f_perp_base + a.f_perp_per_length * a.length, f_par=a.f_par,
+               v_reg=scene.rft.v_reg)
+
+
+def body_share(scene: RobotScene) -> float:
+    """The share of the body's mass and drag a model carries: all of it, or half for the half robot."""
+    return 0.5 if scene.robot.model == "half" else 1.0
+
+
+def body_law(scene: RobotScene) -> RFT:
+    """The velocity body drag as an isotropic RFT law: F = -tanh(|v|/v_reg) drag v/|v|."""
+    drag = body_share(scene) * scene.body.drag
+    return RFT(law="paper", f_perp=drag, f_par=drag, v_reg=scene.body.v_reg)
+
+
+def robot_spec(scene: RobotScene, backend: str = "python") -> mujoco.MjSpec:
+    """The robot's MjSpec for a scene (see mjcf/robot.xml)."""
+    spec = _new_spec("robot.xml", scene.sim)
+    r, a, fin = scene.robot, scene.arm, scene.fin
+    sides = ("r",) if r.model == "half" else ("r", "l")
+    if r.model == "half":
+        spec.delete(spec.body("l_arm"))
+    body = spec.body("body")
+    body.mass = body_share(scene) * scene.body.mass
+    _configure_chain(spec, fin, scene.sim.dt)
+    arm_mass = a.mass_base + a.linear_density * a.length
+    # What a servo turns, about its pivot: the arm and the fin laid straight out.
+    moved = a.inertia + arm_mass * (a.length / 2) ** 2 + sum(
+        fin.segment_inertia + fin.segment_mass * (a.length + (i + 0.5) * fin.segment_length) ** 2
+        for i in range(fin.segments))
+    arms, segments = [], []
+    for side in sides:
+        arm = spec.body(f"{side}_arm")
+        spec.delete(spec.body(f"{side}_seg1"))
+        arm.pos = [a.pivot if side == "r" else -a.pivot, 0, 0]
+        arm.mass, arm.ipos, arm.inertia = arm_mass, [a.length / 2, 0, 0], [a.inertia] * 3
+        spec.geom(f"{side}_arm").fromto = [0, 0, 0, a.length, 0, 0]
+        spec.site(f"{side}_arm").pos = [a.length / 2, 0, 0]
+        segments += _add_chain(spec, arm, fin, a.length, prefix=f"{side}_")
+        arms.append(arm)
+        servo = spec.joint(f"{side}_servo")
+        if r.servo == "prescribed":
+            servo.armature = ARMATURE_RATIO * moved
+        else:
+            servo.armature = 0.0
+            actuator = spec.add_actuator(name=f"{side}_servo", target=f"{side}_servo",
+                                         trntype=mujoco.mjtTrn.mjTRN_JOINT)
+            actuator.set_to_intvelocity(kp=r.servo_kp, dampratio=1.0)
+            actuator.actlimited = mujoco.mjtLimited.mjLIMITED_TRUE
+            actuator.actrange = [scene.gait.theta2, scene.gait.theta1]
+    if backend == "native":
+        _bind(spec, "fin_sand", scene.rft, penalty_stiffness(fin), segments)
+        _bind(spec, "arm_sand", arm_law(scene), 0.0, arms)
+        if scene.body.drag_law == "velocity":
+            _bind(spec, "body_sand", body_law(scene), 0.0, [body])
+    spec.modelname = f"finrft robot ({r.model}, {fin.kind} fins)"
+    return spec
+
+
+def build_robot(scene: RobotScene) -> RobotModel:
+    """Compile the robot model for a scene and collect its indices."""
+    backend = native.resolve_backend(scene.sim.backend)
+    model = _compile(robot_spec(scene, backend))
+    fin = scene.fin
+    sides = ("r",) if scene.robot.model == "half" else ("r", "l")
+    fin_bodies = {s: [f"{s}_plate"] if fin.kind == "rigid" else [f"{s}_seg{i}" for i in range(1, fin.segments + 1)]
+                  for s in sides}
+    groups = [_group(model, "fin_sand", scene.rft, penalty_stiffness(fin), sum(fin_bodies.values(), [])),
+              _group(model, "arm_sand", arm_law(scene), 0.0, [f"{s}_arm" for s in sides])]
+    if scene.body.drag_law == "velocity":
+        groups.append(_group(model, "body_sand", body_law(scene), 0.0, ["body"]))
+    travel = model.joint("travel")
+    servos = [model.joint(f"{s}_servo") for s in sides]
+    hinges = [[model.joint(f"{s}_hinge{i}").qposadr[0] for i in range(1, fin.segments + 1)]
+              if fin.kind != "rigid" else [] for s in sides]
+    prescribed = scene.robot.servo == "prescribed"
+    return RobotModel(
+        model=model,
+        backend=backend,
+        sides=sides,
+        travel_qpos=int(travel.qposadr[0]),
+        travel_dof=int(travel.dofadr[0]),
+        body=model.body("body").id,
+        servo_qpos=np.array([j.qposadr[0] for j in servos], dtype=int),
+        servo_dof=np.array([j.dofadr[0] for j in servos], dtype=int),
+        armature=float(model.dof_armature[servos[0].dofadr[0]]) if prescribed else 0.0,
+        actuators=np.array([] if prescribed else [model.actuator(f"{s}_servo").id for s in sides], dtype=int),
+        fin_hinge_qpos=np.array(hinges, dtype=int).reshape(len(sides), -1),
+        fin_sites=np.array([[model.site(f"{s}_seg{i}").id for i in range(1, fin.segments + 1)] for s in sides]),
+        groups=tuple(groups),
     )

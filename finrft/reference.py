@@ -150,3 +150,123 @@ def solve(scene: Scene, drive: Drive, times: np.ndarray, *, rtol: float = 1e-10,
     hinge = np.diff(np.c_[psi_t, phi_t], axis=1)
     load = np.array([chain.drive_load(t, y[:n], y[n:], s) for t, y, s in zip(times, states, signs)])
     return Solution(times, phi_t - chain.heading, hinge, load)
+
+
+@dataclass(frozen=True)
+class RobotSolution:
+    time: np.ndarray           # (T,) s
+    body_y: np.ndarray         # (T,) m
+    hinge_angle: np.ndarray    # (T, N) rad, right fin
+    stroke_y: np.ndarray       # (strokes + 1,) m, body position at each stroke start and at the end
+
+
+class _HalfRobot:
+    """The half robot in coordinates (y, phi_1..phi_N): body slide and absolute fin angles; the arm angle psi(t)
+    is prescribed. Point masses j (body, arm centre, segment midpoints) at r_j(q, psi), with J_j = dr_j/dq and
+    w_j = dr_j/dpsi:  M q'' = Q - sum_j m_j J_j^T (J_j' q' + w_j' psi'),  M = sum_j m_j J_j^T J_j + diag(I)."""
+
+    def __init__(self, scene, drive: Drive) -> None:
+        from .models import arm_law, body_law, body_share  # the laws a scene implies, shared with the model
+        f, a = scene.fin, scene.arm
+        if scene.robot.model != "half" or scene.robot.servo != "prescribed":
+            raise ValueError("the reference solves the half robot with a prescribed servo")
+        if f.kind == "origami" and f.stop != "penalty":
+            raise ValueError("the reference models the origami stop as the penalty spring (fin.stop = 'penalty')")
+        self.scene, self.drive, self.n, self.l, self.L = scene, drive, f.segments, f.segment_length, a.length
+        self.c = np.tril(np.ones((self.n, self.n)), -1) + 0.5 * np.eye(self.n)
+        self.m_body = body_share(scene) * scene.body.mass
+        self.m_arm = a.mass_base + a.linear_density * a.length
+        self.m_seg = f.segment_mass
+        self.inertia = np.full(self.n, f.segment_inertia)
+        self.fin_law = rft.force_law(scene.rft)
+        self.arm_law = rft.force_law(arm_law(scene))
+        self.body_law = rft.force_law(body_law(scene))
+        self.stroke_drag = body_share(scene) * scene.body.drag
+        self.rigid = f.kind == "rigid"
+        self.penalty = f.stop_stiffness if f.kind == "origami" else 0.0
+
+    def kinematics(self, phi, psi):
+        """J (points x 3 x (N+1)), w (points x 3) for body, arm centre and each segment midpoint."""
+        n, l, L = self.n, self.l, self.L
+        y_hat = np.array([0.0, 1.0, 0.0])
+        J = np.zeros((n + 2, 3, n + 1))
+        J[:, :, 0] = y_hat
+        w = np.zeros((n + 2, 3))
+        w[1] = 0.5 * L * _e_perp(psi)
+        w[2:] = L * _e_perp(psi)
+        J[2:, :, 1:] = l * np.einsum("ij,ja->iaj", self.c, _e_perp(phi))
+        return J, w
+
+    def accelerations(self, t, y, sign):
+        n, l, L = self.n, self.l, self.L
+        phi, dy, dphi = y[1:n + 1], y[n + 1], y[n + 2:]
+        psi = self.drive.position(t)
+        dpsi = sign * self.drive.speed
+        J, w = self.kinematics(phi, psi)
+        qd = np.r_[dy, dphi]
+        vel = J @ qd + w * dpsi
+        mass = np.r_[self.m_body, self.m_arm, np.full(n, self.m_seg)]
+        # J' q' + w' psi': centripetal terms of the arm (psi'^2) and of the segments (phi_j'^2)
+        bias = np.zeros((n + 2, 3))
+        bias[1] = -0.5 * L * _e(psi) * dpsi ** 2
+        bias[2:] = -L * _e(psi) * dpsi ** 2 - l * np.einsum("ij,j,ja->ia", self.c, dphi ** 2, _e(phi))
+        force = np.zeros((n + 2, 3))
+        force[1] = self.arm_law(vel[1:2], _e(np.array([psi])), _e_perp(np.array([psi])))[0]
+        force[2:] = self.fin_law(vel[2:], _e(phi), _e_perp(phi))
+        if self.scene.body.drag_law == "velocity":
+            force[0] = self.body_law(vel[0:1], np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))[0]
+        else:
+            force[0, 1] = -sign * self.stroke_drag
+        q = np.diff(np.r_[psi, phi])
+        dq = np.diff(np.r_[dpsi, dphi])
+        f = self.scene.fin
+        tau = -f.stiffness * (q - f.springref) - f.damping * dq
+        if self.penalty:
+            deflection = q - f.springref
+            tau -= self.penalty * (deflection + np.abs(deflection)) * deflection
+        gen = np.einsum("jak,ja->k", J, force - mass[:, None] * bias)
+        gen[1:] += tau - np.r_[tau[1:], 0.0]
+        M = np.einsum("j,jak,jal->kl", mass, J, J)
+        M[1:, 1:] += np.diag(self.inertia)
+        return np.linalg.solve(M, gen), M, J, w, mass
+
+    def reversal(self, y, t, jump):
+        _, M, J, w, mass = self.accelerations(t, y, 1.0)
+        return np.linalg.solve(M, -np.einsum("j,jak,ja->k", mass, J, w * jump))
+
+
+def solve_robot(scene, cycles: int, times: np.ndarray, *, rtol: float = 1e-9, atol: float = 1e-12) -> RobotSolution:
+    """Integrate the half robot's flap cycles with Radau; the same start and reversals as finrft.swim."""
+    from .swim import gait_drive
+    drive = gait_drive(scene, cycles)
+    robot = _HalfRobot(scene, drive)
+    n, ts = robot.n, drive.stroke_time
+    if robot.rigid:
+        raise ValueError("the reference solves hinged fins")
+    state = np.r_[0.0, np.full(n, drive.start), 0.0, np.zeros(n)]
+    times = np.asarray(times, dtype=float)
+    states = np.zeros((len(times), len(state)))
+    stroke_y = np.zeros(drive.strokes + 1)
+    for k in range(drive.strokes):
+        sign = 1.0 if k % 2 == 0 else -1.0
+        last = k == drive.strokes - 1
+        t0, t1 = k * ts, max((k + 1) * ts, times[-1]) if last else (k + 1) * ts
+        if k:
+            state[n + 1:] += robot.reversal(state, t0, 2 * sign * drive.speed)
+        stroke_y[k] = state[0]
+        pick = (times >= t0 - 1e-12) & ((times <= t1) if last else (times < t1 - 1e-12))
+
+        def rhs(t, y, sign=sign):
+            return np.r_[y[n + 1:], robot.accelerations(t, y, sign)[0]]
+
+        wanted = np.clip(times[pick], t0, t1)
+        t_eval = np.unique(np.r_[wanted, t1])
+        sol = solve_ivp(rhs, (t0, t1), state, method="Radau", rtol=rtol, atol=atol, t_eval=t_eval)
+        if not sol.success:
+            raise RuntimeError(f"reference integration failed in stroke {k}: {sol.message}")
+        states[pick] = sol.y[:, np.searchsorted(t_eval, wanted)].T
+        state = sol.y[:, -1].copy()
+    stroke_y[-1] = state[0]
+    psi = np.array([drive.position(t) for t in times])
+    hinge = np.diff(np.c_[psi, states[:, 1:n + 1]], axis=1)
+    return RobotSolution(times, states[:, 0], hinge, stroke_y)

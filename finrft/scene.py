@@ -72,6 +72,9 @@ class Sim:
     dt: float = _f(1.0e-4, "s", "time step", minimum=0.0)
     backend: str = _f("native", "", "where the RFT force is computed: the C plugin, or a Python callback "
                       "(native falls back to python when the plugin is unavailable)", choices=("native", "python"))
+    method: str = _f("explicit", "", "explicit: MuJoCo's step, the RFT force as it is; implicit: implicitfast "
+                     "with the RFT velocity Jacobian (stable at large steps on light segments)",
+                     choices=("explicit", "implicit"))
     record_dt: float = _f(0.005, "s", "interval between recorded samples (rounded to whole steps)", minimum=0.0)
 
 
@@ -105,7 +108,7 @@ class Arm:
     linear_density: float = _f(0.1445, "kg/m", "arm mass per length", minimum=0.0, exclusive=False)
     inertia: float = _f(1e-6, "kg m^2", "arm inertia about z through its centre", minimum=0.0)
     f_perp_base: float = _f(2.0, "N", "arm RFT normal coefficient: f_perp_base + f_perp_per_length * length")
-    f_perp_per_length: float = _f(17.94, "N/m", "arm RFT normal coefficient per arm length")
+    f_perp_per_length: float = _f(17940.0, "N/m", "arm RFT normal coefficient per arm length")
     f_par: float = _f(-0.3, "N", "arm RFT tangential coefficient")
 
 
@@ -130,6 +133,12 @@ class _Sections:
         return scene_from_dict(data, type(self))
 
 
+def _check_sim(sim: Sim) -> None:
+    if sim.method == "implicit" and sim.integrator != "implicitfast":
+        raise SceneError(f"sim.method = 'implicit' extends MuJoCo's implicitfast integrator: set sim.integrator = "
+                         f"'implicitfast' (got {sim.integrator!r}) or use sim.method = 'explicit'")
+
+
 @dataclass(frozen=True)
 class Scene(_Sections):
     """A plate test: the plate, the RFT law on its segments, and the numerics."""
@@ -140,6 +149,7 @@ class Scene(_Sections):
 
     def __post_init__(self) -> None:
         _check_table(self.rft)
+        _check_sim(self.sim)
 
 
 @dataclass(frozen=True)
@@ -158,6 +168,7 @@ class RobotScene(_Sections):
 
     def __post_init__(self) -> None:
         _check_table(self.rft)
+        _check_sim(self.sim)
         g = self.gait
         for key in ("theta1", "theta2"):
             if abs(getattr(g, key)) > math.pi / 2 + 1e-12:

@@ -17,6 +17,7 @@ import numpy as np
 
 from .coupling import PythonCoupling, SegmentForces, installed
 from .drive import Drive
+from .integrate import Stepper, stepper
 from .models import build_plate, captured_warnings
 from .scene import Scene
 
@@ -139,7 +140,7 @@ class Prescribed:
 
 
 def unstable(scene: Any, t: float, messages: list[str]) -> SimulationUnstable:
-    what = messages[0].rstrip(".") if messages else "NaN, Inf or huge value in the state"
+    what = messages[0].rstrip(".") if messages else "the velocity became NaN or Inf"
     return SimulationUnstable(
         f"simulation went unstable at t = {t:.4g} s ({what}) with integrator {scene.sim.integrator}, "
         f"dt = {scene.sim.dt:g} s: reduce sim.dt, raise the inertias or rft.v_reg, or use sim.integrator = "
@@ -155,11 +156,11 @@ def schedule(drive: Drive, dt: float, record_dt: float) -> tuple[int, np.ndarray
     return steps, starts, samples
 
 
-def step_through(m: mujoco.MjModel, d: mujoco.MjData, scene: Any, steps: int, starts: np.ndarray,
-                 samples: np.ndarray, on_stroke: Callable[[int], None], on_sample: Callable[[int], None],
-                 progress: Callable[[float], None] | None = None) -> None:
+def step_through(m: mujoco.MjModel, d: mujoco.MjData, scene: Any, advance: Stepper, steps: int,
+                 starts: np.ndarray, samples: np.ndarray, on_stroke: Callable[[int], None],
+                 on_sample: Callable[[int], None], progress: Callable[[float], None] | None = None) -> None:
     """Step a model through a run: ``on_stroke(k)`` as stroke k starts, ``on_sample(i)`` (after mj_forward) at
-    recorded step ``samples[i]``; MuJoCo steps in chunks in between. Stops loudly if the state blows up."""
+    recorded step ``samples[i]``; ``advance`` steps in chunks in between. Stops loudly if the state blows up."""
     events = np.union1d(samples, starts)
     stroke_of = np.searchsorted(starts, events, side="right") - 1
     counts = d.warning.number
@@ -179,8 +180,7 @@ def step_through(m: mujoco.MjModel, d: mujoco.MjData, scene: Any, steps: int, st
                     progress(step / steps)
             if step == steps:
                 return
-            mujoco.mj_step(m, d, int(events[i + 1] - step))
-            if any(counts[w] for w in bad):
+            if advance(d, int(events[i + 1] - step)) or any(counts[w] for w in bad):
                 raise unstable(scene, d.time, messages)
 
 
@@ -210,8 +210,10 @@ def simulate(scene: Scene, drive: Drive, *, progress: Callable[[float], None] | 
         rec_f[i] = base.load(d)[0]
         forces.kinematics(m, d, rec_v[i], rec_frame[i])
 
+    advance = stepper(m, scene.sim.method, plate.backend, plate.groups)
     with installed(callback):
-        step_through(m, d, scene, steps, starts, samples, lambda k: base.start_stroke(m, d, k), record, progress)
+        step_through(m, d, scene, advance, steps, starts, samples, lambda k: base.start_stroke(m, d, k), record,
+                     progress)
     base.finish(d)
 
     segment_angle = np.cumsum(rec_q, axis=1)

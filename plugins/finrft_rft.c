@@ -13,6 +13,9 @@
 //   stop_stiffness >= 0, N m/rad: penalty stop torque -k_stop (q + |q|) q on each hinge deflection q
 //
 // No static state: everything lives in the per-mjData struct, so instances and threads never share memory.
+//
+// The library also exports finrft_implicit_step, the "implicit" method: MuJoCo's implicitfast step with the
+// RFT force's velocity Jacobian added to the damping matrix, which MuJoCo cannot see in a plugin force.
 
 #include <math.h>
 #include <stdint.h>
@@ -246,6 +249,135 @@ static void rft_compute(const mjModel* m, mjData* d, int instance, int capabilit
       d->qfrc_passive[p->hinge_dof[h]] -= p->stop_stiffness * (q + fabs(q)) * q;
     }
   }
+}
+
+// ---------------------------------------------------------------------------------------------------------
+// The "implicit" method: a linearly implicit step, (M - dt D) qacc' = M qacc, with D the joint damping, the
+// velocity derivative of affine actuator bias (position servos) and the RFT velocity Jacobian
+// sum_i J_i^T dF_i/dv J_i over every segment of every finrft.rft instance. The RFT Jacobian comes from central
+// differences of the same law, so both laws need no derivative of their own. Then, as MuJoCo's implicitfast:
+// activations, qvel += dt qacc', positions, time.
+
+// dF/dv (3 x 3, row-major) of one segment at velocity v, by central differences.
+static void segment_jacobian(const RFTData* p, const mjtNum v[3], const mjtNum x[3], const mjtNum y[3],
+                             mjtNum jac[9]) {
+  mjtNum h = 1e-6 * (sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]) + p->v_reg);
+  for (int k = 0; k < 3; k++) {
+    mjtNum up[3] = {v[0], v[1], v[2]}, down[3] = {v[0], v[1], v[2]}, fu[3], fd[3];
+    up[k] += h;
+    down[k] -= h;
+    segment_force(p, up, x, y, fu);
+    segment_force(p, down, x, y, fd);
+    for (int r = 0; r < 3; r++) jac[3 * r + k] = (fu[r] - fd[r]) / (2 * h);
+  }
+}
+
+// Solve a dense n x n system in place by Gaussian elimination with partial pivoting; 0 on success.
+static int solve_dense(mjtNum* a, mjtNum* b, int n) {
+  for (int c = 0; c < n; c++) {
+    int pivot = c;
+    for (int r = c + 1; r < n; r++) if (fabs(a[r * n + c]) > fabs(a[pivot * n + c])) pivot = r;
+    if (a[pivot * n + c] == 0) return -1;
+    if (pivot != c) {
+      for (int k = 0; k < n; k++) {
+        mjtNum t = a[c * n + k]; a[c * n + k] = a[pivot * n + k]; a[pivot * n + k] = t;
+      }
+      mjtNum t = b[c]; b[c] = b[pivot]; b[pivot] = t;
+    }
+    for (int r = c + 1; r < n; r++) {
+      mjtNum f = a[r * n + c] / a[c * n + c];
+      if (f == 0) continue;
+      for (int k = c; k < n; k++) a[r * n + k] -= f * a[c * n + k];
+      b[r] -= f * b[c];
+    }
+  }
+  for (int r = n - 1; r >= 0; r--) {
+    for (int k = r + 1; k < n; k++) b[r] -= a[r * n + k] * b[k];
+    b[r] /= a[r * n + r];
+  }
+  return 0;
+}
+
+// Add -dt * J^T C J of every RFT segment to the dense matrix h (nv x nv).
+static void add_rft_jacobian(const mjModel* m, mjData* d, int slot, mjtNum* h, mjtNum* jacp, mjtNum dt) {
+  int nv = m->nv;
+  mjtNum twist[6], x[3], y[3], c[9], cj[3];
+  for (int inst = 0; inst < m->nplugin; inst++) {
+    if (m->plugin[inst] != slot) continue;
+    const RFTData* p = (const RFTData*)d->plugin_data[inst];
+    if (!p) continue;
+    for (int i = 0; i < p->nseg; i++) {
+      int s = p->site[i];
+      const mjtNum* R = d->site_xmat + 9 * s;
+      mj_objectVelocity(m, d, mjOBJ_SITE, s, twist, 0);
+      x[0] = R[0]; x[1] = R[3]; x[2] = R[6];
+      y[0] = R[1]; y[1] = R[4]; y[2] = R[7];
+      segment_jacobian(p, twist + 3, x, y, c);
+      mj_jacSite(m, d, jacp, NULL, s);
+      for (int col = 0; col < nv; col++) {
+        for (int r = 0; r < 3; r++) cj[r] = c[3 * r] * jacp[col] + c[3 * r + 1] * jacp[nv + col] +
+                                            c[3 * r + 2] * jacp[2 * nv + col];
+        for (int row = 0; row < nv; row++) {
+          h[row * nv + col] -= dt * (jacp[row] * cj[0] + jacp[nv + row] * cj[1] + jacp[2 * nv + row] * cj[2]);
+        }
+      }
+    }
+  }
+}
+
+// Advance nstep steps with the implicit method; returns 0, or the 1-based step at which the state stopped
+// being finite (the caller reports it; nothing further is integrated).
+#if defined(_WIN32)
+__declspec(dllexport)
+#else
+__attribute__((visibility("default")))
+#endif
+int finrft_implicit_step(const mjModel* m, mjData* d, int nstep) {
+  int nv = m->nv, slot = -1;
+  mjp_getPlugin("finrft.rft", &slot);
+  mjtNum dt = m->opt.timestep;
+  mjtNum* h = (mjtNum*)malloc((size_t)nv * nv * sizeof(mjtNum));
+  mjtNum* rhs = (mjtNum*)malloc(nv * sizeof(mjtNum));
+  mjtNum* jacp = (mjtNum*)malloc(3 * (size_t)nv * sizeof(mjtNum));
+  int failed = (!h || !rhs || !jacp) ? 1 : 0;
+  for (int step = 0; step < nstep && !failed; step++) {
+    mj_forward(m, d);
+    mj_mulM(m, d, rhs, d->qacc);
+    mj_fullM(m, d, h);
+    for (int i = 0; i < nv; i++) h[i * nv + i] += dt * m->dof_damping[i];
+    for (int a = 0; a < m->nu; a++) {
+      if (m->actuator_trntype[a] != mjTRN_JOINT || m->actuator_biastype[a] != mjBIAS_AFFINE) continue;
+      int dof = m->jnt_dofadr[m->actuator_trnid[2 * a]];
+      mjtNum gear = m->actuator_gear[6 * a];
+      h[dof * nv + dof] -= dt * gear * gear * m->actuator_biasprm[mjNBIAS * a + 2];
+    }
+    if (slot >= 0) add_rft_jacobian(m, d, slot, h, jacp, dt);
+    if (solve_dense(h, rhs, nv)) {
+      failed = step + 1;
+      break;
+    }
+    for (int a = 0; a < m->nu; a++) {
+      int adr = m->actuator_actadr[a];
+      if (adr < 0) continue;
+      for (int j = adr; j < adr + m->actuator_actnum[a]; j++) {
+        d->act[j] += dt * d->act_dot[j];
+        if (m->actuator_actlimited[a]) {
+          d->act[j] = mju_clip(d->act[j], m->actuator_actrange[2 * a], m->actuator_actrange[2 * a + 1]);
+        }
+      }
+    }
+    for (int i = 0; i < nv; i++) {
+      d->qvel[i] += dt * rhs[i];
+      if (!isfinite(d->qvel[i])) failed = step + 1;
+    }
+    mju_copy(d->qacc_warmstart, d->qacc, nv);
+    mj_integratePos(m, d->qpos, d->qvel, dt);
+    d->time += dt;
+  }
+  free(h);
+  free(rhs);
+  free(jacp);
+  return failed;
 }
 
 mjPLUGIN_LIB_INIT(finrft_rft) {

@@ -1,0 +1,102 @@
+"""Time stepping, ``sim.method``:
+
+- ``explicit``: MuJoCo's own step. The RFT force enters as it is, so light segments under a rate-independent
+  law need dt < 2 m v_reg / F or they chatter (MuJoCo's implicit integrators cannot see a plugin's derivative).
+- ``implicit``: a linearly implicit step, MuJoCo's implicitfast with the RFT force's velocity Jacobian added:
+  (M - dt D) qacc' = M qacc, D = joint damping + affine actuator bias + sum_i J_i^T dF_i/dv J_i, then
+  activations, qvel += dt qacc', positions and time as MuJoCo advances them. dF/dv comes from central
+  differences of the same law. Native (plugins/finrft_rft.c, finrft_implicit_step) or numpy, the same formulas.
+
+A stepper advances ``n`` steps and returns 0, or the 1-based step at which the state stopped being finite.
+"""
+
+from __future__ import annotations
+
+import ctypes
+from typing import Callable, Sequence
+
+import mujoco
+import numpy as np
+
+from . import native, rft
+from .models import ForceGroup
+
+Stepper = Callable[[mujoco.MjData, int], int]
+
+
+def _native_step() -> Callable[[int, int, int], int]:
+    library = ctypes.CDLL(str(native.library_path()))
+    function = library.finrft_implicit_step
+    function.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int]
+    function.restype = ctypes.c_int
+    return function
+
+
+def stepper(m: mujoco.MjModel, method: str, backend: str, groups: Sequence[ForceGroup]) -> Stepper:
+    """The step function for a model: MuJoCo's step, or the implicit method (native or numpy)."""
+    if method == "explicit":
+        def explicit(d: mujoco.MjData, n: int) -> int:
+            mujoco.mj_step(m, d, n)
+            return 0
+        return explicit
+    if backend == "native":
+        step = _native_step()
+        return lambda d, n: step(m._address, d._address, n)
+    return PythonImplicit(m, groups)
+
+
+class PythonImplicit:
+    """The implicit method in numpy: the twin of finrft_implicit_step, used with the python backend."""
+
+    def __init__(self, m: mujoco.MjModel, groups: Sequence[ForceGroup]) -> None:
+        self.m = m
+        self.laws = [(rft.force_law(g.rft), g) for g in groups]
+        self.damping = np.diag(m.dof_damping)
+        servo = [a for a in range(m.nu) if m.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT
+                 and m.actuator_biastype[a] == mujoco.mjtBias.mjBIAS_AFFINE]
+        for a in servo:
+            dof = m.jnt_dofadr[m.actuator_trnid[a, 0]]
+            self.damping[dof, dof] -= m.actuator_gear[a, 0] ** 2 * m.actuator_biasprm[a, 2]
+        self._mass = np.zeros((m.nv, m.nv))
+        self._rhs = np.zeros(m.nv)
+        self._jacp = np.zeros((3, m.nv))
+        self._twist = np.zeros(6)
+
+    def jacobian(self, d: mujoco.MjData) -> np.ndarray:
+        """sum_i J_i^T dF_i/dv J_i over every segment (nv x nv)."""
+        m, total = self.m, np.zeros((self.m.nv, self.m.nv))
+        for law, group in self.laws:
+            for site in group.sites:
+                mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_SITE, site, self._twist, 0)
+                v = self._twist[3:]
+                frame = d.site_xmat[site].reshape(3, 3)
+                h = 1e-6 * (np.sqrt(v @ v) + group.rft.v_reg)
+                probes = np.concatenate([v + h * np.eye(3), v - h * np.eye(3)])
+                force = law(probes, np.tile(frame[:, 0], (6, 1)), np.tile(frame[:, 1], (6, 1)))
+                slope = ((force[:3] - force[3:]) / (2 * h)).T     # dF/dv, row = force component
+                mujoco.mj_jacSite(m, d, self._jacp, None, site)
+                total += self._jacp.T @ slope @ self._jacp
+        return total
+
+    def __call__(self, d: mujoco.MjData, n: int) -> int:
+        m, dt = self.m, self.m.opt.timestep
+        for step in range(n):
+            mujoco.mj_forward(m, d)
+            mujoco.mj_mulM(m, d, self._rhs, d.qacc)
+            mujoco.mj_fullM(m, d, self._mass)
+            qacc = np.linalg.solve(self._mass + dt * self.damping - dt * self.jacobian(d), self._rhs)
+            for a in range(m.nu):
+                adr = m.actuator_actadr[a]
+                if adr < 0:
+                    continue
+                span = slice(adr, adr + m.actuator_actnum[a])
+                d.act[span] += dt * d.act_dot[span]
+                if m.actuator_actlimited[a]:
+                    d.act[span] = np.clip(d.act[span], *m.actuator_actrange[a])
+            d.qvel[:] += dt * qacc
+            if not np.all(np.isfinite(d.qvel)):
+                return step + 1
+            d.qacc_warmstart[:] = d.qacc
+            mujoco.mj_integratePos(m, d.qpos, d.qvel, dt)
+            d.time += dt
+        return 0

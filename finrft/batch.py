@@ -10,13 +10,15 @@ from __future__ import annotations
 import multiprocessing
 import os
 from concurrent.futures import Executor, ProcessPoolExecutor
-from typing import Callable, Sequence
+from typing import Callable, Sequence, TypeVar
 
 from .drive import Drive
 from .scene import Scene
 from .simulate import Run, simulate
 
 Job = tuple[Scene, Drive]
+T = TypeVar("T")
+R = TypeVar("R")
 
 
 def _run(job: Job) -> Run:
@@ -33,32 +35,35 @@ def local_executor(workers: int | None = None) -> ProcessPoolExecutor:
                                mp_context=multiprocessing.get_context("spawn"))
 
 
-def run_many(jobs: Sequence[Job], *, workers: int | None = None, executor: Executor | None = None,
-             progress: Callable[[int, int], None] | None = None) -> list[Run]:
-    """Simulate every (scene, drive) job and return the runs in order.
+def map_jobs(fn: Callable[[T], R], jobs: Sequence[T], *, workers: int | None = None,
+             executor: Executor | None = None, progress: Callable[[int, int], None] | None = None) -> list[R]:
+    """``[fn(job) for job in jobs]`` on all cores, in order; ``fn`` must be a module-level function.
 
-    ``executor``: any concurrent.futures executor to reuse across calls (e.g. one `local_executor` for all
-    generations of an optimisation); without it a local pool of ``workers`` processes (default: all cores) is
-    made for this call, or the jobs run in this process when ``workers`` is 1.
+    ``executor``: any concurrent.futures executor to reuse across calls (one `local_executor` for all
+    generations of an optimisation, or a Dask client's executor); without it a local pool of ``workers``
+    processes (default: all cores) is made for this call, or the jobs run in this process when ``workers`` is 1.
     """
     jobs = list(jobs)
+    results: list[R] = []
     if executor is None and (workers == 1 or len(jobs) <= 1):
-        runs = []
-        for i, job in enumerate(jobs):
-            runs.append(_run(job))
+        for job in jobs:
+            results.append(fn(job))
             if progress is not None:
-                progress(i + 1, len(jobs))
-        return runs
+                progress(len(results), len(jobs))
+        return results
     own = executor is None
     pool = local_executor(workers) if own else executor
     try:
-        futures = [pool.submit(_run, job) for job in jobs]
-        runs = []
-        for i, future in enumerate(futures):
-            runs.append(future.result())
+        for future in [pool.submit(fn, job) for job in jobs]:
+            results.append(future.result())
             if progress is not None:
-                progress(i + 1, len(jobs))
-        return runs
+                progress(len(results), len(jobs))
+        return results
     finally:
         if own:
             pool.shutdown()
+
+
+def run_many(jobs: Sequence[Job], **options) -> list[Run]:
+    """Simulate every (scene, drive) job and return the runs in order (options as `map_jobs`)."""
+    return map_jobs(_run, jobs, **options)

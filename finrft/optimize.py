@@ -1,0 +1,217 @@
+"""Gait and design optimisation of the robot with CMA-ES (pycma).
+
+The search runs over any robot scene keys, each between bounds, in coordinates normalised to [0, 1] (positive
+quantities whose bounds span more than a decade are searched in log space). The objective is the paper's:
+minimise 1 - eta over one flap cycle; a gait that cannot be simulated scores 2 (worse than any real gait).
+
+Every evaluation is appended to an HDF5 log after each generation, with the optimiser's pickled state, so an
+interrupted run resumes bit for bit. Same seed, same result: the objective is deterministic and pycma's own
+random state is the only randomness.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import pickle
+import time
+import warnings
+from concurrent.futures import Executor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import h5py
+import numpy as np
+
+from . import batch
+from .scene import RobotScene, SceneError, field_of, to_toml
+from .simulate import SimulationUnstable
+from .swim import swim
+
+SCHEMA = "finrft.optimize/1"
+FAILED = 2.0
+
+
+@dataclass(frozen=True)
+class Variable:
+    """One searched scene key, between bounds in the key's SI unit."""
+
+    key: str
+    low: float
+    high: float
+
+    @property
+    def log(self) -> bool:
+        return self.low > 0 and self.high / self.low > 10
+
+    def to_unit(self, value: float) -> float:
+        if self.log:
+            return math.log(value / self.low) / math.log(self.high / self.low)
+        return (value - self.low) / (self.high - self.low)
+
+    def from_unit(self, u: float) -> float:
+        if self.log:
+            return self.low * (self.high / self.low) ** u
+        return self.low + u * (self.high - self.low)
+
+
+# The paper's search: theta1 in [0, 90] deg, theta2 in [-90, 0] deg, arm length in [60, 85] mm.
+DEFAULT_VARIABLES = (Variable("gait.theta1", 0.0, math.pi / 2), Variable("gait.theta2", -math.pi / 2, 0.0),
+                     Variable("arm.length", 0.060, 0.085))
+# The paper's start, (50 deg, -50 deg, 75 mm).
+PAPER_START = {"gait.theta1": math.radians(50), "gait.theta2": math.radians(-50), "arm.length": 0.075}
+
+
+def check_variables(scene: RobotScene, variables: Sequence[Variable]) -> None:
+    """Bounds must be ordered and inside the schema's limits; keys must be numeric scene keys."""
+    if not variables:
+        raise SceneError("at least one variable must be searched")
+    seen = set()
+    for v in variables:
+        f = field_of(RobotScene, v.key)
+        if f.type not in ("float", float):
+            raise SceneError(f"{v.key} is not a number and cannot be searched")
+        if v.key in seen:
+            raise SceneError(f"{v.key} is listed twice")
+        seen.add(v.key)
+        if not (math.isfinite(v.low) and math.isfinite(v.high)) or v.low >= v.high:
+            raise SceneError(f"bounds of {v.key}: lower ({v.low:g}) must be below upper ({v.high:g})")
+        scene.replace(**{v.key: v.low})
+        scene.replace(**{v.key: v.high})
+
+
+def evaluate(scene: RobotScene) -> dict[str, float]:
+    """One gait evaluation: one flap cycle from rest, eta and the distances; failures are marked, not raised."""
+    try:
+        summary = swim(scene, 1).summary()
+    except (SimulationUnstable, SceneError) as exc:
+        return {"eta": float("nan"), "D1_mm": float("nan"), "D2_mm": float("nan"), "error": str(exc)}
+    return {"eta": summary["eta"], "D1_mm": summary["D1_mm"], "D2_mm": summary["D2_mm"], "error": ""}
+
+
+def _cost(result: dict[str, float]) -> float:
+    eta = result["eta"]
+    return FAILED if not math.isfinite(eta) else 1.0 - eta
+
+
+@dataclass
+class Result:
+    variables: tuple[Variable, ...]
+    best: dict[str, float]         # scene key -> value (SI)
+    eta: float
+    evaluations: int
+    generations: int
+    wall_s: float
+    stop: dict[str, Any]
+    best_per_generation: list[float]
+
+
+def _log_new(path: Path, scene: RobotScene, variables: Sequence[Variable], seed: int, budget: int) -> None:
+    d = len(variables)
+    with h5py.File(path, "w") as f:
+        f.attrs.update(schema=SCHEMA, scene_toml=to_toml(scene), seed=seed, budget=budget,
+                       variables=json.dumps([[v.key, v.low, v.high] for v in variables]),
+                       objective="1 - eta over one flap cycle from rest (failed gaits: 2)")
+        for name, shape, unit in (("x", (0, d), "SI, one column per variable"), ("cost", (0,), "1"),
+                                  ("eta", (0,), "1"), ("D1", (0,), "m"), ("D2", (0,), "m"),
+                                  ("generation", (0,), "")):
+            ds = f.create_dataset(name, shape=shape, maxshape=(None, *shape[1:]), dtype="f8" if name != "generation"
+                                  else "i8", chunks=True)
+            ds.attrs["units"] = unit
+        f.create_dataset("es_state", data=np.zeros(0, dtype=np.uint8))
+
+
+def _log_append(path: Path, generation: int, x: np.ndarray, results: list[dict], costs: list[float],
+                es: Any) -> None:
+    with h5py.File(path, "a") as f:
+        n = f["cost"].shape[0]
+        rows = {"x": x, "cost": np.array(costs), "eta": np.array([r["eta"] for r in results]),
+                "D1": np.array([r["D1_mm"] for r in results]) / 1e3,
+                "D2": np.array([r["D2_mm"] for r in results]) / 1e3,
+                "generation": np.full(len(costs), generation)}
+        for name, data in rows.items():
+            f[name].resize(n + len(costs), axis=0)
+            f[name][n:] = data
+        del f["es_state"]
+        f.create_dataset("es_state", data=np.frombuffer(pickle.dumps(es), dtype=np.uint8))
+
+
+def read_log(path: str | Path) -> dict[str, Any]:
+    """A log's contents; SceneError when the file is not a finrft optimisation log."""
+    try:
+        with h5py.File(path, "r") as f:
+            if f.attrs.get("schema") != SCHEMA:
+                raise SceneError(f"{path} is not a finrft optimisation log")
+            out = {name: f[name][()] for name in ("x", "cost", "eta", "generation")}
+            out["variables"] = [Variable(k, lo, hi) for k, lo, hi in json.loads(f.attrs["variables"])]
+            out.update(seed=int(f.attrs["seed"]), budget=int(f.attrs["budget"]), scene_toml=f.attrs["scene_toml"])
+            state = f["es_state"][()].tobytes()  # the pickled CMAEvolutionStrategy
+            out["es"] = pickle.loads(state) if state else None
+            return out
+    except (OSError, KeyError, ValueError, pickle.UnpicklingError, EOFError) as exc:
+        raise SceneError(f"cannot resume from {path}: {exc}") from None
+
+
+def optimize(scene: RobotScene, *, variables: Sequence[Variable] = DEFAULT_VARIABLES, budget: int = 300,
+             seed: int = 1, log: str | Path | None = None, resume: bool = False, executor: Executor | None = None,
+             workers: int | None = None, on_generation: Callable[[int, np.ndarray, list[dict], Any], None] | None
+             = None) -> Result:
+    """Maximise eta over ``variables`` with CMA-ES; ``log`` (HDF5) records every evaluation, and with
+    ``resume`` the run continues from the state stored in it."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=".*matplotlib.*")
+        import cma
+    variables = tuple(variables)
+    check_variables(scene, variables)
+    if budget < 1:
+        raise SceneError(f"the budget must be at least 1 evaluation, got {budget}")
+    path = Path(log) if log is not None else None
+    start_time = time.perf_counter()
+    history: list[float] = []
+    if resume:
+        if path is None:
+            raise SceneError("resuming needs the log to resume from")
+        state = read_log(path)
+        if [(v.key, v.low, v.high) for v in state["variables"]] != [(v.key, v.low, v.high) for v in variables]:
+            raise SceneError(f"{path} searched other variables: {[v.key for v in state['variables']]}")
+        es = state["es"]
+        if es is None:
+            raise SceneError(f"{path} holds no optimiser state yet: start a new run instead")
+        generation = int(state["generation"].max()) + 1 if len(state["generation"]) else 0
+        for g in range(generation):
+            history.append(float(1 - state["cost"][state["generation"] == g].min()))
+    else:
+        x0 = [v.to_unit(PAPER_START.get(v.key, v.from_unit(0.5))) for v in variables]
+        options = {"bounds": [0.0, 1.0], "seed": seed, "maxfevals": budget, "verbose": -9, "verb_log": 0,
+                   "verb_disp": 0}
+        es = cma.CMAEvolutionStrategy(x0, 0.25, options)
+        generation = 0
+        if path is not None:
+            _log_new(path, scene, variables, seed, budget)
+
+    own = executor is None and workers != 1
+    pool = batch.local_executor(workers) if own else executor
+    try:
+        while not es.stop():
+            unit = es.ask()
+            values = np.array([[v.from_unit(u) for v, u in zip(variables, x)] for x in unit])
+            scenes = [scene.replace(**{v.key: float(x) for v, x in zip(variables, row)}) for row in values]
+            results = batch.map_jobs(evaluate, scenes, executor=pool, workers=1 if pool is None else None)
+            costs = [_cost(r) for r in results]
+            es.tell(unit, costs)
+            history.append(1 - min(costs))
+            if path is not None:
+                _log_append(path, generation, values, results, costs, es)
+            if on_generation is not None:
+                on_generation(generation, values, results, es)
+            generation += 1
+    finally:
+        if own:
+            pool.shutdown()
+    best_unit = es.result.xbest
+    best = {v.key: v.from_unit(float(u)) for v, u in zip(variables, best_unit)}
+    return Result(variables=variables, best=best, eta=1 - float(es.result.fbest), evaluations=es.result.evaluations,
+                  generations=generation, wall_s=time.perf_counter() - start_time, stop=dict(es.stop()),
+                  best_per_generation=history)
+

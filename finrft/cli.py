@@ -10,6 +10,7 @@ import json
 import math
 import os
 import sys
+import tomllib
 import warnings
 from pathlib import Path
 from typing import Any, Callable, Sequence
@@ -66,6 +67,21 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     o.add_argument("--quiet", action="store_true", help="no progress or summary text, only files and --json")
 
 
+def _add_robot(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("robot scene")
+    g.add_argument("--preset", default="paper", choices=scenes.PRESETS[scenes.RobotScene],
+                   help="built-in robot scene when no --scene is given: paper = the authors' model and quirks, "
+                        "physical = real inertias, limit stops, drag against the body's velocity (default: "
+                        "%(default)s)")
+    g.add_argument("--scene", metavar="FILE.toml", help="robot scene file in SI units")
+    g.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a scene key in SI units, e.g. --set fin.stiffness=0.4 (repeatable)")
+    g.add_argument("--fin", choices=("origami", "soft", "rigid"), help="fin kind (overrides fin.kind)")
+    g.add_argument("--model", choices=("full", "half"), help="full robot, or its right half with half the body's "
+                   "mass and drag (overrides robot.model)")
+    g.add_argument("--backend", choices=("native", "python"), help="where the RFT force is computed")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="finrft", description="Compliant fins in granular media: resistive force theory (RFT) "
                      "on MuJoCo. Command-line flags use the paper's units (mm, mm/s, degrees); scene files and "
@@ -102,6 +118,61 @@ def build_parser() -> argparse.ArgumentParser:
     scene.add_argument("--scene", metavar="FILE.toml", help="resolve this file instead of a preset")
     scene.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a key (SI)")
 
+    swim = sub.add_parser("swim", help="the two-fin robot swimming: flap cycles and the swimming efficiency",
+                          description="Simulate the robot's flap cycles from rest, the arm at theta2: recovery "
+                          "stroke up to theta1, power stroke back. Reports eta = (D1 - D2) / D1 with D1 the distance "
+                          "forward in the power stroke and D2 the distance back in the recovery stroke.")
+    swim.add_argument("--theta1", type=_number("degrees", minimum=-math.inf), metavar="DEG",
+                      help="arm angle at the end of the recovery stroke, degrees in -90..90 (0 sideways, 90 "
+                           "forward; default: the scene's, 60 in the presets)")
+    swim.add_argument("--theta2", type=_number("degrees", minimum=-math.inf), metavar="DEG",
+                      help="arm angle at the end of the power stroke, degrees (default: the scene's, -90)")
+    swim.add_argument("--arm-length", type=_number("mm"), metavar="MM",
+                      help="arm length L_a in mm (default: the scene's, 65)")
+    swim.add_argument("--omega", type=_number("deg/s"), metavar="DEG_S",
+                      help="arm angular speed in degrees/s (default: the scene's, 66)")
+    swim.add_argument("--cycles", type=_number("cycles", minimum=1, inclusive=True, integer=True), default=1,
+                      metavar="N", help="flap cycles (default: %(default)s); figures are the last cycle's")
+    _add_robot(swim)
+    swim.add_argument("--out", metavar="FILE.h5", help="write the time series and the resolved scene (SI units)")
+    swim.add_argument("--rrd", metavar="FILE.rrd", help="write a rerun recording; open it with 'rerun FILE.rrd'")
+    swim.add_argument("--json", action="store_true", help="print a JSON summary as the last line of stdout")
+
+    optimize = sub.add_parser("optimize", help="optimise the gait with CMA-ES",
+                              description="Maximise the swimming efficiency eta over one flap cycle with CMA-ES "
+                              "(pycma): by default over theta1 in [0, 90] deg, theta2 in [-90, 0] deg and the arm "
+                              "length in [60, 85] mm. Every evaluation is logged to HDF5 after each generation.")
+    optimize.add_argument("--budget", type=_number("evaluations", minimum=1, inclusive=True, integer=True),
+                          default=300, metavar="EVALS", help="evaluations (default: %(default)s; CMA-ES finishes "
+                          "the generation it is in)")
+    optimize.add_argument("--seed", type=_number("", minimum=1, inclusive=True, integer=True), default=1,
+                          metavar="S", help="random seed, >= 1; the same seed gives the same result (default: "
+                          "%(default)s)")
+    optimize.add_argument("--bounds", action="append", default=[], metavar="KEY=LOW:HIGH",
+                          help="search a scene key between bounds, in SI or with a unit suffix deg or mm, e.g. "
+                               "gait.theta1=10:80deg, gait.omega=0.5:2, fin.stiffness=0.1:2 (repeatable; "
+                               "replaces the default bounds of that key)")
+    optimize.add_argument("--workers", type=_number("processes", minimum=1, inclusive=True, integer=True),
+                          help="local worker processes (default: all cores)")
+    optimize.add_argument("--executor", choices=("local", "dask"), default="local",
+                          help="where evaluations run: local processes, or a Dask cluster (needs finrft[cluster])")
+    optimize.add_argument("--address", metavar="tcp://HOST:PORT", help="Dask scheduler address (--executor dask)")
+    optimize.add_argument("--out", metavar="LOG.h5", help="new HDF5 log of every evaluation (never overwritten)")
+    optimize.add_argument("--resume", metavar="LOG.h5", help="continue the run logged in LOG.h5, appending to it")
+    optimize.add_argument("--rrd", metavar="FILE.rrd", help="rerun recording: best eta per generation, the "
+                          "population, and the best gait's motion")
+    optimize.add_argument("--json", action="store_true", help="print the result as JSON on the last line")
+    _add_robot(optimize)
+
+    table = sub.add_parser("table", help="the paper's Table I: six gaits, eta next to the paper's",
+                           description="Evaluate the six gaits of the paper's Table I (one flap cycle each) and "
+                           "print eta, the authors' script measure |net|/D1, D1, D2 and the net speed next to the "
+                           "paper's eta_sim and eta_exp, as a Markdown table.")
+    table.add_argument("--workers", type=_number("processes", minimum=1, inclusive=True, integer=True),
+                       help="worker processes (default: all cores)")
+    table.add_argument("--json", action="store_true", help="print the rows as JSON on the last line")
+    _add_robot(table)
+
     bench = sub.add_parser("bench", help="benchmarks, measured as ratios in one run on this machine")
     kinds = bench.add_subparsers(dest="bench", required=True, parser_class=_Parser)
     backends = kinds.add_parser("backends", help="Python callback vs native plugin vs bare MuJoCo, and batch",
@@ -124,6 +195,18 @@ def _resolve_scene(args: argparse.Namespace) -> scenes.Scene:
         overrides["sim.backend"] = args.backend
     name = getattr(args, "preset", None) or args.dump
     return scenes.load_scene(args.scene, preset_name=name, overrides=overrides)
+
+
+def _resolve_robot(args: argparse.Namespace) -> scenes.RobotScene:
+    overrides = dict(scenes.parse_override(item, scenes.RobotScene) for item in args.set)
+    for flag, key in (("fin", "fin.kind"), ("model", "robot.model"), ("backend", "sim.backend")):
+        if getattr(args, flag, None):
+            overrides[key] = getattr(args, flag)
+    for flag, key, scale in (("theta1", "gait.theta1", math.pi / 180), ("theta2", "gait.theta2", math.pi / 180),
+                             ("arm_length", "arm.length", 1e-3), ("omega", "gait.omega", math.pi / 180)):
+        if getattr(args, flag, None) is not None:
+            overrides[key] = getattr(args, flag) * scale
+    return scenes.load_scene(args.scene, preset_name=args.preset, overrides=overrides, cls=scenes.RobotScene)
 
 
 def _check_output(path: str | None, suffix: str, flag: str) -> None:
@@ -198,6 +281,135 @@ def _run_test(args: argparse.Namespace) -> int:
     return 0
 
 
+def _json(value: Any) -> str:
+    return json.dumps(value, default=lambda x: x.tolist() if isinstance(x, np.ndarray) else float(x))
+
+
+def _swim(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
+    from . import swim as swimming
+    _check_output(args.out, ".h5", "--out")
+    _check_output(args.rrd, ".rrd", "--rrd")
+    run = swimming.swim(scene, args.cycles)
+    summary = run.summary()
+    if args.out or args.rrd:
+        from . import record
+        if args.out:
+            record.write_swim_h5(run, args.out)
+        if args.rrd:
+            record.write_swim_rrd(run, args.rrd)
+    print(f"{scene.robot.model} robot, {scene.fin.kind} fin, theta1 {summary['theta1_deg']:g} deg, theta2 "
+          f"{summary['theta2_deg']:g} deg, arm {summary['arm_length_mm']:g} mm, omega {summary['omega_deg_s']:g} "
+          f"deg/s: {run.steps} steps ({scene.sim.method}, dt {scene.sim.dt:g} s, {run.backend}) in {run.wall_s:.2f} s")
+    for i, row in enumerate(run.cycle_table(), start=1):
+        print(f"cycle {i}: eta {100 * row['eta']:+.2f} %, forward D1 {row['D1_mm']:.2f} mm, back D2 "
+              f"{row['D2_mm']:.2f} mm, net {row['net_mm']:+.2f} mm ({row['net_speed_mm_s']:+.3f} mm/s)")
+    if args.json:
+        print(_json(summary))
+    return 0
+
+
+def _table(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
+    from . import batch, swim as swimming
+    runs = batch.map_jobs(swimming._swim_one, swimming.table_scenes(scene), workers=args.workers)
+    rows = swimming.table_rows(runs)
+    print(swimming.table_markdown(rows))
+    if args.json:
+        print(_json(rows))
+    return 0
+
+
+def _parse_bounds(items: list[str]) -> dict[str, tuple[float, float]]:
+    bounds = {}
+    for item in items:
+        key, sep, span = item.partition("=")
+        low, sep2, high = span.partition(":")
+        if not sep or not sep2:
+            raise UsageError(f"--bounds expects KEY=LOW:HIGH, got '{item}'")
+        scale = 1.0
+        for suffix, factor in (("deg", math.pi / 180), ("mm", 1e-3)):
+            if high.strip().endswith(suffix):
+                scale, low, high = factor, low.strip().removesuffix(suffix), high.strip().removesuffix(suffix)
+        try:
+            bounds[key.strip()] = (float(low) * scale, float(high) * scale)
+        except ValueError:
+            raise UsageError(f"--bounds {item}: bounds must be numbers") from None
+    return bounds
+
+
+def _optimize(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
+    from . import optimize as opt
+    if args.out and args.resume:
+        raise UsageError("give either --out (a new log) or --resume (an existing one), not both")
+    if args.out and Path(args.out).exists():
+        raise UsageError(f"--out {args.out} exists: continue it with --resume {args.out}, or choose a new file")
+    _check_output(args.out, ".h5", "--out")
+    _check_output(args.rrd, ".rrd", "--rrd")
+    if args.resume and not Path(args.resume).is_file():
+        raise UsageError(f"--resume {args.resume}: no such file")
+    variables = {v.key: v for v in opt.DEFAULT_VARIABLES}
+    if args.resume:
+        logged = opt.read_log(args.resume)
+        variables = {v.key: v for v in logged["variables"]}
+        scene = scenes.scene_from_dict(tomllib.loads(logged["scene_toml"]), scenes.RobotScene)
+    for key, (low, high) in _parse_bounds(args.bounds).items():
+        variables[key] = opt.Variable(key, low, high)
+    executor = None
+    if args.executor == "dask":
+        executor = _dask_executor(args.address)
+    elif args.address:
+        raise UsageError("--address goes with --executor dask")
+    generations: list[tuple[np.ndarray, np.ndarray]] = []
+    show = sys.stderr.isatty()
+
+    def on_generation(g: int, values: np.ndarray, results: list[dict], es: Any) -> None:
+        etas = np.array([r["eta"] for r in results])
+        generations.append((_display_units(list(variables), values), etas))
+        if show:
+            best = np.nanmax([1 - c for c in es.fit.fit]) if len(es.fit.fit) else float("nan")
+            print(f"\rgeneration {g + 1}: {es.countevals}/{args.budget} evaluations, best eta this generation "
+                  f"{100 * best:.2f} %", end="", file=sys.stderr, flush=True)
+
+    result = opt.optimize(scene, variables=list(variables.values()), budget=args.budget, seed=args.seed,
+                          log=args.resume or args.out, resume=bool(args.resume), executor=executor,
+                          workers=args.workers, on_generation=on_generation)
+    if show:
+        print(file=sys.stderr)
+    best_scene = scene.replace(**result.best)
+    if args.rrd:
+        from . import record, swim as swimming
+        record.write_optimization_rrd(args.rrd, generations, list(variables), swimming.swim(best_scene, 1))
+    g = best_scene.gait
+    summary = {"theta1_deg": math.degrees(g.theta1), "theta2_deg": math.degrees(g.theta2),
+               "arm_length_mm": 1e3 * best_scene.arm.length, "eta": result.eta, "best": result.best,
+               "evaluations": result.evaluations, "generations": result.generations, "wall_s": result.wall_s,
+               "seed": args.seed, "stop": {k: str(v) for k, v in result.stop.items()}}
+    print(f"best eta {100 * result.eta:.2f} % at theta1 {summary['theta1_deg']:.1f} deg, theta2 "
+          f"{summary['theta2_deg']:.1f} deg, arm {summary['arm_length_mm']:.1f} mm after {result.evaluations} "
+          f"evaluations in {result.wall_s:.1f} s")
+    if args.json:
+        print(_json(summary))
+    return 0
+
+
+def _display_units(keys: list[str], values: np.ndarray) -> np.ndarray:
+    """Searched values in the CLI's units: angles in degrees, lengths in mm."""
+    scale = [180 / math.pi if "theta" in k or "omega" in k else 1e3 if k.endswith("length") else 1.0 for k in keys]
+    return values * np.array(scale)
+
+
+def _dask_executor(address: str | None):
+    if not address:
+        raise UsageError("--executor dask needs --address tcp://HOST:PORT")
+    try:
+        from dask.distributed import Client
+    except ImportError:
+        raise UsageError("--executor dask needs Dask: pip install 'finrft[cluster]'") from None
+    try:
+        return Client(address, timeout="3s").get_executor()
+    except (OSError, TimeoutError) as exc:
+        raise UsageError(f"cannot reach the Dask scheduler at {address}: {exc}") from None
+
+
 def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
     print(f"finrft: warning: {message}", file=sys.stderr)
 
@@ -215,6 +427,8 @@ def _main(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> int:
         if args.command == "scene":
             print(scenes.to_toml(_resolve_scene(args)), end="")
             return 0
+        if args.command in ("swim", "optimize", "table"):
+            return {"swim": _swim, "optimize": _optimize, "table": _table}[args.command](args, _resolve_robot(args))
         if args.command == "bench":
             from . import bench
             figures = bench.backends(batch_size=args.batch, workers=args.workers)

@@ -25,6 +25,7 @@ import rerun.blueprint as rrb
 from .models import initial_heading
 from .scene import to_toml
 from .simulate import Run
+from .swim import SwimRun
 
 SCHEMA = "finrft.run/1"
 SIGN_CONVENTION = (
@@ -64,6 +65,33 @@ def _motion(run: Run) -> tuple[str, str, str, str]:
     return "rotation", "rad", "drive_torque", "N m"
 
 
+def _provenance(scene: Any, summary: dict[str, Any]) -> dict[str, str]:
+    """What every result file stores about how it was made."""
+    return {"scene_toml": to_toml(scene), "scene_json": json.dumps(scene.to_dict()),
+            "summary_json": json.dumps(summary), "finrft_version": _finrft_version(),
+            "mujoco_version": mujoco.__version__, "numpy_version": np.__version__,
+            "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds")}
+
+
+def _write_series(path: str | Path, time: np.ndarray, series: list[tuple[str, np.ndarray, str, str]],
+                  attrs: dict[str, Any], dataset_attrs: dict[str, dict[str, str]] | None = None) -> None:
+    """An HDF5 file of time series (name, data, SI unit, description) on the dimension scale ``time``, written
+    atomically, with root attributes and any further attributes per dataset."""
+    with _atomic_path(path) as tmp, h5py.File(tmp, "w", track_order=True) as f:
+        t = f.create_dataset("time", data=time)
+        t.attrs.update(units="s", description="simulated time of each sample")
+        t.make_scale("time")
+        for name, data, unit, description in series:
+            big = data.ndim > 1
+            ds = f.create_dataset(name, data=data, chunks=True if big else None,
+                                  compression="gzip" if big else None, shuffle=big)
+            ds.attrs.update(units=unit, description=description, **(dataset_attrs or {}).get(name, {}))
+            if len(data) == len(time):
+                ds.dims[0].label = "time"
+                ds.dims[0].attach_scale(t)
+        f.attrs.update(attrs)
+
+
 def write_h5(run: Run, path: str | Path, *, extra_attrs: dict[str, Any] | None = None) -> None:
     """Write a run to HDF5: time series at the root with SI ``units`` attributes, the scene, drive and summary as
     root attributes. ``extra_attrs`` are added to the root attributes."""
@@ -72,7 +100,6 @@ def write_h5(run: Run, path: str | Path, *, extra_attrs: dict[str, Any] | None =
     if clash:
         raise ValueError(f"extra_attrs may not replace {', '.join(clash)}")
     position, position_unit, load, load_unit = _motion(run)
-    impulse_unit = "N s" if run.drive.kind == "drag" else "N m s"
     series = [
         (position, run.displacement, position_unit,
          "base displacement along +y" if run.drive.kind == "drag" else "rod rotation about +z"),
@@ -80,36 +107,12 @@ def write_h5(run: Run, path: str | Path, *, extra_attrs: dict[str, Any] | None =
         ("hinge_angle", run.hinge_angle, "rad", "hinge angles, segment i relative to the body before it"),
         (load, run.drive_force, load_unit, "force (torque) the drive applies to the plate"),
         ("rft_force", run.rft_force, "N", "resistive force of the medium on each segment, at its midpoint"),
+        ("stroke_impulse", run.stroke_impulse, "N s" if run.drive.kind == "drag" else "N m s",
+         "integral of the drive load over each stroke"),
     ]
-    with _atomic_path(path) as tmp, h5py.File(tmp, "w", track_order=True) as f:
-        t = f.create_dataset("time", data=run.time)
-        t.attrs.update(units="s", description="simulated time of each sample")
-        t.make_scale("time")
-        for name, data, unit, description in series:
-            big = data.ndim > 1
-            ds = f.create_dataset(name, data=data, chunks=True if big else None,
-                                  compression="gzip" if big else None, shuffle=big)
-            ds.attrs.update(units=unit, description=description)
-            ds.dims[0].label = "time"
-            ds.dims[0].attach_scale(t)
-            if big:
-                ds.dims[1].label = "segment"
-        f["rft_force"].attrs["frame"] = "world"
-        impulse = f.create_dataset("stroke_impulse", data=run.stroke_impulse)
-        impulse.attrs.update(units=impulse_unit, description="integral of the drive load over each stroke")
-        f.attrs.update(
-            schema=SCHEMA,
-            scene_toml=to_toml(run.scene),
-            scene_json=json.dumps(run.scene.to_dict()),
-            drive_json=json.dumps(dataclasses.asdict(run.drive)),
-            summary_json=json.dumps(run.summary()),
-            finrft_version=_finrft_version(),
-            mujoco_version=mujoco.__version__,
-            numpy_version=np.__version__,
-            created_utc=datetime.now(timezone.utc).isoformat(timespec="seconds"),
-            sign_convention=SIGN_CONVENTION,
-        )
-        f.attrs.update(extra)
+    attrs = {"schema": SCHEMA, **_provenance(run.scene, run.summary()),
+             "drive_json": json.dumps(dataclasses.asdict(run.drive)), "sign_convention": SIGN_CONVENTION, **extra}
+    _write_series(path, run.time, series, attrs, {"rft_force": {"frame": "world"}})
 
 
 def plate_points(run: Run) -> np.ndarray:
@@ -204,4 +207,118 @@ def write_rrd(run: Run, path: str | Path) -> None:
             _send_scalars(rec, *motion, times, motion_values)
         finally:
             # Closes the file sink, so the footer is written (or the file released before it is removed).
+            rec.disconnect()
+
+
+SWIM_SCHEMA = "finrft.swim/1"
+SWIM_SIGN_CONVENTION = (
+    "Forward is +y, along the body's slide. The right arm's angle is 0 pointing sideways (+x) and +90 deg pointing "
+    "forward; fin hinge angles are negative when the fin folds. The servo torque is what the servo applies to its "
+    "arm about +z.")
+
+
+def write_swim_h5(run: SwimRun, path: str | Path) -> None:
+    """Write a swim to HDF5: time series of the body, the right arm and fin and the servo, SI units."""
+    series = [
+        ("body_y", run.body_y, "m", "body position along the travel axis (+y forward)"),
+        ("arm_angle", run.arm_angle, "rad", "right arm angle (0 sideways, +pi/2 forward)"),
+        ("hinge_angle", run.hinge_angle, "rad", "right fin hinge angles"),
+        ("servo_torque", run.servo_torque, "N m", "torque the right servo applies to its arm"),
+        ("stroke_y", run.stroke_y, "m", "body position at the start of each stroke, and at the end"),
+    ]
+    attrs = {"schema": SWIM_SCHEMA, **_provenance(run.scene, run.summary()), "cycles": run.cycles,
+             "sign_convention": SWIM_SIGN_CONVENTION}
+    _write_series(path, run.time, series, attrs)
+
+
+def robot_points(run: SwimRun) -> np.ndarray:
+    """The right arm and fin's centre line, (T, N + 2, 3) m: pivot, arm tip (first hinge), hinges, fin tip."""
+    a, f = run.scene.arm, run.scene.fin
+    count = len(run.time)
+    pivot = np.zeros((count, 3))
+    pivot[:, 0], pivot[:, 1] = a.pivot, run.body_y
+    angles = np.column_stack([run.arm_angle, run.arm_angle[:, None] + np.cumsum(run.hinge_angle, axis=1)])
+    lengths = np.r_[a.length, np.full(f.segments, f.segment_length)]
+    steps = np.zeros((count, f.segments + 1, 3))
+    steps[..., 0] = lengths * np.cos(angles)
+    steps[..., 1] = lengths * np.sin(angles)
+    return np.concatenate([pivot[:, None], pivot[:, None] + np.cumsum(steps, axis=1)], axis=1)
+
+
+def _stream(path: Path, blueprint: rrb.Blueprint) -> rr.RecordingStream:
+    rec = rr.RecordingStream("finrft", recording_id=uuid.uuid4())
+    if not rec.is_enabled():
+        raise RuntimeError(f"rerun logging is disabled (RERUN=off?), so {path} cannot be written")
+    rec.save(path, default_blueprint=blueprint)
+    return rec
+
+
+def _log_swim(rec: rr.RecordingStream, run: SwimRun, prefix: str = "") -> None:
+    """The robot's right half over time (body as a box outline, arm and fin as a line) and its time series."""
+    times = rr.TimeColumn("sim_time", duration=run.time)
+    points = robot_points(run)
+    half_width, half_length = run.scene.arm.pivot, 0.0375
+    corners = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1], [-1, -1]]) * [half_width, half_length]
+    outline = np.zeros((len(run.time), 5, 3))
+    outline[..., :2] = corners
+    outline[..., 1] += run.body_y[:, None]
+    rec.log(f"{prefix}robot", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+    rec.log(f"{prefix}robot/body", rr.LineStrips3D.from_fields(colors=[[90, 110, 160]], radii=[0.0008]),
+            static=True)
+    rec.send_columns(f"{prefix}robot/body", indexes=[times], columns=rr.LineStrips3D.columns(strips=outline))
+    rec.log(f"{prefix}robot/fin", rr.LineStrips3D.from_fields(colors=[[60, 60, 70]], radii=[0.0008]), static=True)
+    rec.send_columns(f"{prefix}robot/fin", indexes=[times], columns=rr.LineStrips3D.columns(strips=points))
+    _send_scalars(rec, f"{prefix}motion/body_y", "body y (mm)", times, 1e3 * run.body_y)
+    _send_scalars(rec, f"{prefix}motion/arm", "arm angle (deg)", times, np.degrees(run.arm_angle))
+    for i in range(run.hinge_angle.shape[1]):
+        _send_scalars(rec, f"{prefix}hinges/hinge{i + 1}", f"hinge {i + 1} (deg)", times,
+                      np.degrees(run.hinge_angle[:, i]))
+    _send_scalars(rec, f"{prefix}servo/torque", "servo torque (N m)", times, run.servo_torque)
+
+
+def _swim_views(prefix: str = "") -> list:
+    top = rrb.Spatial3DView(name="Robot (top view)", origin=f"{prefix}robot",
+                            eye_controls=rrb.EyeControls3D(position=[0.0, 0.0, 0.6], look_target=[0.0, 0.0, 0.0],
+                                                           eye_up=[0.0, 1.0, 0.0]),
+                            line_grid=rrb.LineGrid3D(spacing=0.01))
+    return [top, rrb.Vertical(rrb.TimeSeriesView(name="Body position (mm)", origin=f"{prefix}motion/body_y"),
+                              rrb.TimeSeriesView(name="Arm angle (deg)", origin=f"{prefix}motion/arm"),
+                              rrb.TimeSeriesView(name="Fin hinges (deg)", origin=f"{prefix}hinges"),
+                              rrb.TimeSeriesView(name="Servo torque (N m)", origin=f"{prefix}servo"))]
+
+
+def write_swim_rrd(run: SwimRun, path: str | Path) -> None:
+    """Write a swim as a rerun recording: the robot from above and time series, on the timeline ``sim_time``."""
+    with _atomic_path(path) as tmp:
+        rec = _stream(tmp, rrb.Blueprint(rrb.Horizontal(*_swim_views(), column_shares=[3, 2])))
+        try:
+            rec.log("scene", rr.TextDocument(to_toml(run.scene), media_type=rr.MediaType.TEXT), static=True)
+            _log_swim(rec, run)
+        finally:
+            rec.disconnect()
+
+
+def write_optimization_rrd(path: str | Path, generations: list[tuple[np.ndarray, np.ndarray]],
+                           names: list[str], best: SwimRun) -> None:
+    """An optimisation as a rerun recording: best eta per generation, the population in the searched variables
+    (the first three, in the CLI's units) per generation, and the best gait's motion."""
+    with _atomic_path(path) as tmp:
+        views = rrb.Vertical(rrb.TimeSeriesView(name="Best eta per generation (%)", origin="optimization/best_eta"),
+                             rrb.Spatial3DView(name="Population: " + ", ".join(names[:3]),
+                                               origin="optimization/population"))
+        rec = _stream(tmp, rrb.Blueprint(rrb.Horizontal(views, *_swim_views("best/"), column_shares=[2, 2, 1])))
+        try:
+            best_so_far = -np.inf
+            for g, (values, etas) in enumerate(generations):
+                rec.set_time("generation", sequence=g)
+                finite = etas[np.isfinite(etas)]
+                best_so_far = max(best_so_far, float(finite.max()) if len(finite) else -np.inf)
+                if np.isfinite(best_so_far):
+                    rec.log("optimization/best_eta", rr.Scalars(100 * best_so_far))
+                cloud = np.zeros((len(values), 3))
+                cloud[:, :min(3, values.shape[1])] = values[:, :3]
+                rec.log("optimization/population", rr.Points3D(cloud, radii=0.5,
+                                                               colors=[[230, 80, 20]] * len(values)))
+            _log_swim(rec, best, prefix="best/")
+        finally:
             rec.disconnect()

@@ -130,3 +130,50 @@ def swim(scene: RobotScene, cycles: int = 1, *, progress: Callable[[float], None
     return SwimRun(scene=scene, cycles=cycles, time=samples * scene.sim.dt, body_y=rec["y"], arm_angle=rec["arm"],
                    hinge_angle=rec["hinge"], servo_torque=rec["torque"], stroke_y=stroke_y, steps=steps,
                    wall_s=time.perf_counter() - start, backend=robot.backend)
+
+
+# The paper's Table I: (name, theta1 deg, theta2 deg, L_a mm, fin, eta_exp %, eta_sim %, net speed mm/s exp).
+PAPER_TABLE = (
+    ("Optimized", 60, -90, 65, "origami", 8.61, 8.95, 1.69),
+    ("Symmetry 1", 30, -30, 65, "origami", 1.22, 0.06, 0.48),
+    ("Symmetry 2", 30, -30, 75, "origami", 1.08, 0.05, 0.59),
+    ("Asymmetry 1", 90, 0, 65, "origami", 3.12, 3.71, 0.34),
+    ("Asymmetry 2", 90, 0, 75, "origami", 3.57, 3.65, 0.43),
+    ("Rigid fin", 60, -90, 65, "rigid", 0.11, 1.02, 0.02),
+)
+
+
+def table_scenes(scene: RobotScene) -> list[RobotScene]:
+    """The scene of each gait of the paper's Table I."""
+    return [scene.replace(**{"gait.theta1": np.radians(t1), "gait.theta2": np.radians(t2),
+                             "arm.length": la / 1000, "fin.kind": fin})
+            for _, t1, t2, la, fin, *_ in PAPER_TABLE]
+
+
+def table_rows(runs: list[SwimRun]) -> list[dict[str, Any]]:
+    """Table I rows: finrft's eta (the paper's definition), the authors' script measure |net| / D1, the
+    distances and the net speed, beside the paper's figures."""
+    rows = []
+    for (name, t1, t2, la, fin, eta_exp, eta_sim, speed_exp), run in zip(PAPER_TABLE, runs):
+        s = run.summary()
+        rows.append({"gait": name, "theta1_deg": t1, "theta2_deg": t2, "arm_length_mm": la, "fin": fin,
+                     "eta": s["eta"], "eta_script": abs(s["net_mm"]) / s["D1_mm"], "D1_mm": s["D1_mm"],
+                     "D2_mm": s["D2_mm"], "net_speed_mm_s": s["net_speed_mm_s"], "paper_eta_sim": eta_sim / 100,
+                     "paper_eta_exp": eta_exp / 100, "paper_net_speed_exp_mm_s": speed_exp})
+    return rows
+
+
+def table_markdown(rows: list[dict[str, Any]]) -> str:
+    lines = ["| gait | Θ1 ° | Θ2 ° | L_a mm | fin | η % | \\|net\\|/D1 % | paper η_sim % | paper η_exp % | D1 mm | "
+             "D2 mm | net speed mm/s | paper speed mm/s |",
+             "|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for r in rows:
+        lines.append(f"| {r['gait']} | {r['theta1_deg']} | {r['theta2_deg']} | {r['arm_length_mm']} | {r['fin']} | "
+                     f"{100 * r['eta']:.2f} | {100 * r['eta_script']:.2f} | {100 * r['paper_eta_sim']:.2f} | "
+                     f"{100 * r['paper_eta_exp']:.2f} | {r['D1_mm']:.1f} | {r['D2_mm']:.1f} | "
+                     f"{r['net_speed_mm_s']:.2f} | {r['paper_net_speed_exp_mm_s']:.2f} |")
+    return "\n".join(lines)
+
+
+def _swim_one(scene: RobotScene) -> SwimRun:
+    return swim(scene, 1)

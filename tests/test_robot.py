@@ -1,0 +1,141 @@
+"""The two-fin robot: against an independent solution, symmetry of half and full models, the paper's Table I
+pattern, the optimiser's reproducibility and resumption, and bad input."""
+
+import json
+
+import h5py
+import numpy as np
+import pytest
+
+from finrft import reference
+from finrft.cli import main
+from finrft.optimize import Variable, optimize, read_log
+from finrft.scene import RobotScene, SceneError, preset
+from finrft.swim import swim
+
+
+@pytest.fixture(scope="module")
+def paper() -> RobotScene:
+    return preset("paper", RobotScene)
+
+
+@pytest.fixture(scope="module")
+def quick(paper) -> RobotScene:
+    """The paper preset at a coarser step: for tests that compare two runs at the same step."""
+    return paper.replace(**{"sim.dt": 1e-4})
+
+
+def test_paper_preset_matches_reference(paper):
+    run = swim(paper, 1)
+    ref = reference.solve_robot(paper, 1, run.time)
+    assert 1e3 * np.abs(run.body_y - ref.body_y).max() < 0.05           # mm, of ~250 mm strokes
+    assert np.degrees(np.abs(run.hinge_angle - ref.hinge_angle)).max() < 0.01
+    np.testing.assert_allclose(run.stroke_y, ref.stroke_y, atol=5e-5)
+    assert np.degrees(run.hinge_angle.min()) < -30  # the fin folded in the recovery stroke
+
+
+@pytest.mark.parametrize("drag_law", ["stroke", "velocity"])
+def test_half_model_equals_full_model_for_a_symmetric_gait(quick, drag_law):
+    # The full robot has both arms and the whole body; the half model half the body's mass and drag.
+    scene = quick.replace(**{"body.drag_law": drag_law})
+    half, full = swim(scene, 1), swim(scene.replace(**{"robot.model": "full"}), 1)
+    np.testing.assert_allclose(full.body_y, half.body_y, atol=1e-12)
+    np.testing.assert_allclose(full.hinge_angle, half.hinge_angle, atol=1e-11)
+    assert abs(half.summary()["D1_mm"]) > 10.0
+
+
+def test_backends_agree_on_the_robot(quick):
+    scene = quick.replace(**{"sim.dt": 2e-4})
+    native, python = swim(scene, 1), swim(scene.replace(**{"sim.backend": "python"}), 1)
+    assert native.backend == "native" and python.backend == "python"
+    np.testing.assert_allclose(native.body_y, python.body_y, atol=1e-9)
+    np.testing.assert_allclose(native.hinge_angle, python.hinge_angle, atol=1e-9)
+
+
+def test_position_servo_tracks_the_gait(paper):
+    scene = preset("physical", RobotScene).replace(**{"robot.servo": "position", "robot.servo_kp": 200.0})
+    run = swim(scene, 1)
+    g = scene.gait
+    assert run.arm_angle.max() == pytest.approx(g.theta1, abs=np.radians(3))
+    assert run.arm_angle[-1] == pytest.approx(g.theta2, abs=np.radians(3))
+    assert np.abs(run.servo_torque).max() > 0
+
+
+def test_paper_table_pattern(capsys):
+    assert main(["table", "--json"]) == 0
+    rows = {r["gait"]: r for r in json.loads(capsys.readouterr().out.strip().splitlines()[-1])}
+    script = {name: r["eta_script"] for name, r in rows.items()}
+    # The authors' optimisation measured |net| / D1; on it the paper's pattern holds.
+    assert abs(script["Optimized"] - rows["Optimized"]["paper_eta_sim"]) < 0.03
+    assert script["Optimized"] > 2 * max(script["Asymmetry 1"], script["Asymmetry 2"])
+    assert max(script["Symmetry 1"], script["Symmetry 2"]) < 0.002
+    assert script["Rigid fin"] < 0.3 * script["Optimized"]
+
+
+def test_optimizer_is_reproducible_and_resumes(quick, tmp_path):
+    variables = [Variable("gait.theta1", 0.5, 1.5), Variable("gait.theta2", -1.5, -0.5)]
+    scene = quick.replace(**{"sim.dt": 4e-4})
+    first = optimize(scene, variables=variables, budget=12, seed=7, log=tmp_path / "a.h5", workers=1)
+    again = optimize(scene, variables=variables, budget=12, seed=7, workers=2)
+    assert first.best == again.best and first.eta == again.eta
+    other = optimize(scene, variables=variables, budget=12, seed=8, workers=1)
+    assert other.best != first.best
+
+    class Interrupt(Exception):
+        pass
+
+    def interrupt(generation, *_):
+        if generation == 0:
+            raise Interrupt
+
+    with pytest.raises(Interrupt):
+        optimize(scene, variables=variables, budget=12, seed=7, log=tmp_path / "b.h5", workers=1,
+                 on_generation=interrupt)
+    resumed = optimize(scene, variables=variables, budget=12, seed=7, log=tmp_path / "b.h5", resume=True, workers=1)
+    assert resumed.best == first.best and resumed.evaluations == first.evaluations
+    log = read_log(tmp_path / "b.h5")
+    assert len(log["cost"]) == first.evaluations
+    with h5py.File(tmp_path / "a.h5") as f:
+        np.testing.assert_array_equal(f["x"][()], log["x"])
+
+
+def test_dask_executor_gives_the_local_result(quick):
+    distributed = pytest.importorskip("dask.distributed")
+    variables = [Variable("gait.theta1", 0.5, 1.5)]
+    scene = quick.replace(**{"sim.dt": 4e-4})
+    local = optimize(scene, variables=variables, budget=6, seed=3, workers=1)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, host="127.0.0.1", dashboard_address=None,
+                                  processes=True) as cluster, distributed.Client(cluster) as client:
+        remote = optimize(scene, variables=variables, budget=6, seed=3, executor=client.get_executor())
+    assert remote.best == local.best and remote.eta == local.eta
+
+
+@pytest.mark.parametrize("argv,named", [
+    (["swim", "--theta1", "95"], "servo's range"),
+    (["swim", "--theta1", "-10", "--theta2", "0"], "must be greater"),
+    (["swim", "--omega", "0"], "--omega"),
+    (["swim", "--arm-length", "-65"], "--arm-length"),
+    (["optimize", "--budget", "0"], "--budget"),
+    (["optimize", "--bounds", "gait.theta1=80:10deg"], "lower"),
+    (["optimize", "--bounds", "body.colour=1:2"], "body.colour"),
+    (["optimize", "--executor", "dask", "--address", "tcp://127.0.0.1:9"], "127.0.0.1:9"),
+])
+def test_robot_bad_input(capsys, argv, named):
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert named in err and len(err.strip().splitlines()) == 1
+
+
+def test_optimize_never_overwrites_and_rejects_foreign_logs(tmp_path, capsys):
+    log = tmp_path / "log.h5"
+    log.write_bytes(b"precious")
+    assert main(["optimize", "--out", str(log)]) == 2
+    assert log.read_bytes() == b"precious"
+    assert main(["optimize", "--resume", str(log)]) == 2
+    with h5py.File(tmp_path / "foreign.h5", "w") as f:
+        f["x"] = [1, 2]
+    assert main(["optimize", "--resume", str(tmp_path / "foreign.h5")]) == 2
+    err = capsys.readouterr().err
+    assert "exists" in err and "not a finrft optimisation log" in err
+    with pytest.raises(SceneError):
+        read_log(log)

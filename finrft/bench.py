@@ -12,8 +12,10 @@ import numpy as np
 
 from . import batch, models
 from .drive import Drive
-from .scene import Scene, preset
+from .optimize import optimize
+from .scene import RobotScene, Scene, preset
 from .simulate import simulate
+from .swim import swim
 
 
 def _best(fn: Callable[[], Any], repeat: int) -> float:
@@ -67,4 +69,25 @@ def backends(scene: Scene | None = None, *, batch_size: int = 64, workers: int |
                batch_parallel_steps_per_s=total / parallel, batch_speedup=serial / parallel)
     log(f"batch of {batch_size} drags: {total / serial:10.0f} steps/s on 1 core, {total / parallel:10.0f} steps/s "
         f"on {workers} workers: {serial / parallel:.2f}x (target >= 1.6x on 2 cores)")
+    return out
+
+
+def robot(scene: RobotScene | None = None, *, budget: int = 300, workers: int | None = None, repeat: int = 3,
+          log: Callable[[str], None] = print) -> dict[str, Any]:
+    """One gait evaluation (one flap cycle) and a full CMA-ES optimisation of ``budget`` evaluations."""
+    scene = scene or preset("paper", RobotScene)
+    workers = workers or batch.default_workers()
+    out: dict[str, Any] = {"date": date.today().isoformat(), "machine": f"{platform.machine()}, "
+                           f"{batch.default_workers()} cores", "mujoco": mujoco.__version__, "dt": scene.sim.dt,
+                           "method": scene.sim.method}
+    run = swim(scene, 1)
+    wall = _best(lambda: swim(scene, 1), repeat)
+    out.update(gait_steps=run.steps, gait_wall_s=wall, gait_us_per_step=1e6 * wall / run.steps)
+    log(f"one gait evaluation ({scene.sim.method}, dt {scene.sim.dt:g} s, {run.steps} steps): {wall * 1e3:.1f} ms "
+        f"(target <= 20 ms; the authors' model ~15 s)")
+    result = optimize(scene, budget=budget, seed=1, workers=workers)
+    out.update(optimize_budget=budget, optimize_evaluations=result.evaluations, optimize_wall_s=result.wall_s,
+               optimize_eta=1 - result.cost, best=result.best, workers=workers)
+    log(f"optimize, budget {budget} ({result.evaluations} evaluations) on {workers} workers: {result.wall_s:.1f} s "
+        f"(target <= 60 s), best eta {100 * (1 - result.cost):.2f} %")
     return out

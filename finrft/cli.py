@@ -184,6 +184,16 @@ def build_parser() -> argparse.ArgumentParser:
     backends.add_argument("--workers", type=_number("processes", minimum=1, inclusive=True, integer=True),
                           help="worker processes (default: all cores)")
     backends.add_argument("--json", action="store_true", help="print the figures as JSON on the last line")
+    robot = kinds.add_parser("robot", help="one gait evaluation and a full optimisation",
+                             description="Time one gait evaluation (one flap cycle) and a CMA-ES optimisation of "
+                             "--budget evaluations on all cores, for a robot preset.")
+    robot.add_argument("--preset", default="paper", choices=scenes.PRESETS[scenes.RobotScene],
+                       help="robot preset (default: %(default)s)")
+    robot.add_argument("--budget", type=_number("evaluations", minimum=1, inclusive=True, integer=True),
+                       default=300, help="optimisation budget (default: %(default)s)")
+    robot.add_argument("--workers", type=_number("processes", minimum=1, inclusive=True, integer=True),
+                       help="worker processes (default: all cores)")
+    robot.add_argument("--json", action="store_true", help="print the figures as JSON on the last line")
     return parser
 
 
@@ -350,7 +360,7 @@ def _optimize(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
     if args.resume:
         logged = opt.read_log(args.resume)
         variables = {v.key: v for v in logged["variables"]}
-        scene = scenes.scene_from_dict(tomllib.loads(logged["scene_toml"]), scenes.RobotScene)
+        scene = scenes.scene_from_dict(tomllib.loads(logged["attrs"]["scene_toml"]), scenes.RobotScene)
     for key, (low, high) in _parse_bounds(args.bounds).items():
         variables[key] = opt.Variable(key, low, high)
     executor = None
@@ -361,9 +371,8 @@ def _optimize(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
     generations: list[tuple[np.ndarray, np.ndarray]] = []
     show = sys.stderr.isatty()
 
-    def on_generation(g: int, values: np.ndarray, results: list[dict], es: Any) -> None:
-        etas = np.array([r["eta"] for r in results])
-        generations.append((_display_units(list(variables), values), etas))
+    def on_generation(g: int, values: np.ndarray, extras: dict[str, np.ndarray], es: Any) -> None:
+        generations.append((_display_units(list(variables), values), extras["eta"]))
         if show:
             best = np.nanmax([1 - c for c in es.fit.fit]) if len(es.fit.fit) else float("nan")
             print(f"\rgeneration {g + 1}: {es.countevals}/{args.budget} evaluations, best eta this generation "
@@ -379,11 +388,12 @@ def _optimize(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
         from . import record, swim as swimming
         record.write_optimization_rrd(args.rrd, generations, list(variables), swimming.swim(best_scene, 1))
     g = best_scene.gait
+    eta = 1 - result.cost
     summary = {"theta1_deg": math.degrees(g.theta1), "theta2_deg": math.degrees(g.theta2),
-               "arm_length_mm": 1e3 * best_scene.arm.length, "eta": result.eta, "best": result.best,
+               "arm_length_mm": 1e3 * best_scene.arm.length, "eta": eta, "best": result.best,
                "evaluations": result.evaluations, "generations": result.generations, "wall_s": result.wall_s,
                "seed": args.seed, "stop": {k: str(v) for k, v in result.stop.items()}}
-    print(f"best eta {100 * result.eta:.2f} % at theta1 {summary['theta1_deg']:.1f} deg, theta2 "
+    print(f"best eta {100 * eta:.2f} % at theta1 {summary['theta1_deg']:.1f} deg, theta2 "
           f"{summary['theta2_deg']:.1f} deg, arm {summary['arm_length_mm']:.1f} mm after {result.evaluations} "
           f"evaluations in {result.wall_s:.1f} s")
     if args.json:
@@ -431,7 +441,11 @@ def _main(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> int:
             return {"swim": _swim, "optimize": _optimize, "table": _table}[args.command](args, _resolve_robot(args))
         if args.command == "bench":
             from . import bench
-            figures = bench.backends(batch_size=args.batch, workers=args.workers)
+            if args.bench == "robot":
+                figures = bench.robot(scenes.preset(args.preset, scenes.RobotScene), budget=args.budget,
+                                      workers=args.workers)
+            else:
+                figures = bench.backends(batch_size=args.batch, workers=args.workers)
             if args.json:
                 print(json.dumps(figures))
             return 0

@@ -90,48 +90,43 @@ def evaluate(scene: RobotScene) -> dict[str, float]:
     return {"eta": summary["eta"], "D1_mm": summary["D1_mm"], "D2_mm": summary["D2_mm"], "error": ""}
 
 
-def _cost(result: dict[str, float]) -> float:
-    eta = result["eta"]
-    return FAILED if not math.isfinite(eta) else 1.0 - eta
-
-
 @dataclass
-class Result:
+class Search:
+    """The outcome of a CMA-ES search."""
+
     variables: tuple[Variable, ...]
     best: dict[str, float]         # scene key -> value (SI)
-    eta: float
+    cost: float
     evaluations: int
     generations: int
     wall_s: float
     stop: dict[str, Any]
-    best_per_generation: list[float]
+    best_cost_per_generation: list[float]
 
 
-def _log_new(path: Path, scene: RobotScene, variables: Sequence[Variable], seed: int, budget: int) -> None:
-    d = len(variables)
+# evaluate(values (population x variables, SI)) -> (costs, extra per-evaluation columns to log)
+Evaluate = Callable[[np.ndarray], tuple[list[float], dict[str, np.ndarray]]]
+
+
+def _log_new(path: Path, variables: Sequence[Variable], attrs: dict[str, Any],
+             columns: dict[str, tuple[str, int]]) -> None:
     with h5py.File(path, "w") as f:
-        f.attrs.update(schema=SCHEMA, scene_toml=to_toml(scene), seed=seed, budget=budget,
-                       variables=json.dumps([[v.key, v.low, v.high] for v in variables]),
-                       objective="1 - eta over one flap cycle from rest (failed gaits: 2)")
-        for name, shape, unit in (("x", (0, d), "SI, one column per variable"), ("cost", (0,), "1"),
-                                  ("eta", (0,), "1"), ("D1", (0,), "m"), ("D2", (0,), "m"),
-                                  ("generation", (0,), "")):
-            ds = f.create_dataset(name, shape=shape, maxshape=(None, *shape[1:]), dtype="f8" if name != "generation"
-                                  else "i8", chunks=True)
+        f.attrs.update(schema=SCHEMA, variables=json.dumps([[v.key, v.low, v.high] for v in variables]), **attrs)
+        specs = {"x": ("SI, one column per variable", len(variables)), "cost": ("1", 0), "generation": ("", 0),
+                 **columns}
+        for name, (unit, width) in specs.items():
+            shape = (0, width) if width else (0,)
+            ds = f.create_dataset(name, shape=shape, maxshape=(None, *shape[1:]),
+                                  dtype="i8" if name == "generation" else "f8", chunks=True)
             ds.attrs["units"] = unit
         f.create_dataset("es_state", data=np.zeros(0, dtype=np.uint8))
 
 
-def _log_append(path: Path, generation: int, x: np.ndarray, results: list[dict], costs: list[float],
-                es: Any) -> None:
+def _log_append(path: Path, generation: int, rows: dict[str, np.ndarray], es: Any) -> None:
     with h5py.File(path, "a") as f:
-        n = f["cost"].shape[0]
-        rows = {"x": x, "cost": np.array(costs), "eta": np.array([r["eta"] for r in results]),
-                "D1": np.array([r["D1_mm"] for r in results]) / 1e3,
-                "D2": np.array([r["D2_mm"] for r in results]) / 1e3,
-                "generation": np.full(len(costs), generation)}
-        for name, data in rows.items():
-            f[name].resize(n + len(costs), axis=0)
+        n, count = f["cost"].shape[0], len(rows["cost"])
+        for name, data in {**rows, "generation": np.full(count, generation)}.items():
+            f[name].resize(n + count, axis=0)
             f[name][n:] = data
         del f["es_state"]
         f.create_dataset("es_state", data=np.frombuffer(pickle.dumps(es), dtype=np.uint8))
@@ -143,9 +138,9 @@ def read_log(path: str | Path) -> dict[str, Any]:
         with h5py.File(path, "r") as f:
             if f.attrs.get("schema") != SCHEMA:
                 raise SceneError(f"{path} is not a finrft optimisation log")
-            out = {name: f[name][()] for name in ("x", "cost", "eta", "generation")}
+            out = {name: f[name][()] for name in f if name != "es_state"}
             out["variables"] = [Variable(k, lo, hi) for k, lo, hi in json.loads(f.attrs["variables"])]
-            out.update(seed=int(f.attrs["seed"]), budget=int(f.attrs["budget"]), scene_toml=f.attrs["scene_toml"])
+            out["attrs"] = dict(f.attrs)
             state = f["es_state"][()].tobytes()  # the pickled CMAEvolutionStrategy
             out["es"] = pickle.loads(state) if state else None
             return out
@@ -153,17 +148,17 @@ def read_log(path: str | Path) -> dict[str, Any]:
         raise SceneError(f"cannot resume from {path}: {exc}") from None
 
 
-def optimize(scene: RobotScene, *, variables: Sequence[Variable] = DEFAULT_VARIABLES, budget: int = 300,
-             seed: int = 1, log: str | Path | None = None, resume: bool = False, executor: Executor | None = None,
-             workers: int | None = None, on_generation: Callable[[int, np.ndarray, list[dict], Any], None] | None
-             = None) -> Result:
-    """Maximise eta over ``variables`` with CMA-ES; ``log`` (HDF5) records every evaluation, and with
-    ``resume`` the run continues from the state stored in it."""
+def cmaes(evaluate: Evaluate, variables: Sequence[Variable], *, budget: int, seed: int,
+          start: dict[str, float] | None = None, log: str | Path | None = None, resume: bool = False,
+          log_attrs: dict[str, Any] | None = None, columns: dict[str, tuple[str, int]] | None = None,
+          on_generation: Callable[[int, np.ndarray, dict[str, np.ndarray], Any], None] | None = None) -> Search:
+    """Minimise a population cost over ``variables`` with CMA-ES (normalised to [0, 1], sigma0 = 0.25, from
+    ``start`` or the middle of the bounds). ``log`` (HDF5) records every evaluation with ``columns``
+    (name -> (unit, width; 0 for one value)) and the optimiser's state; ``resume`` continues from it."""
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message=".*matplotlib.*")
         import cma
     variables = tuple(variables)
-    check_variables(scene, variables)
     if budget < 1:
         raise SceneError(f"the budget must be at least 1 evaluation, got {budget}")
     path = Path(log) if log is not None else None
@@ -179,39 +174,57 @@ def optimize(scene: RobotScene, *, variables: Sequence[Variable] = DEFAULT_VARIA
         if es is None:
             raise SceneError(f"{path} holds no optimiser state yet: start a new run instead")
         generation = int(state["generation"].max()) + 1 if len(state["generation"]) else 0
-        for g in range(generation):
-            history.append(float(1 - state["cost"][state["generation"] == g].min()))
+        history = [float(state["cost"][state["generation"] == g].min()) for g in range(generation)]
     else:
-        x0 = [v.to_unit(PAPER_START.get(v.key, v.from_unit(0.5))) for v in variables]
+        x0 = [v.to_unit((start or {}).get(v.key, v.from_unit(0.5))) for v in variables]
         options = {"bounds": [0.0, 1.0], "seed": seed, "maxfevals": budget, "verbose": -9, "verb_log": 0,
                    "verb_disp": 0}
+        if len(variables) == 1:
+            # pycma 4.5 fails in one dimension when it caps the step size to the bound range
+            options["maxstd_boundrange"] = math.inf
         es = cma.CMAEvolutionStrategy(x0, 0.25, options)
         generation = 0
         if path is not None:
-            _log_new(path, scene, variables, seed, budget)
+            _log_new(path, variables, {"seed": seed, "budget": budget, **(log_attrs or {})}, columns or {})
+    while not es.stop():
+        unit = es.ask()
+        values = np.array([[v.from_unit(u) for v, u in zip(variables, x)] for x in unit])
+        costs, extras = evaluate(values)
+        es.tell(unit, list(costs))
+        history.append(float(min(costs)))
+        if path is not None:
+            _log_append(path, generation, {"x": values, "cost": np.asarray(costs), **extras}, es)
+        if on_generation is not None:
+            on_generation(generation, values, extras, es)
+        generation += 1
+    best = {v.key: v.from_unit(float(u)) for v, u in zip(variables, es.result.xbest)}
+    return Search(variables=variables, best=best, cost=float(es.result.fbest), evaluations=es.result.evaluations,
+                  generations=generation, wall_s=time.perf_counter() - start_time, stop=dict(es.stop()),
+                  best_cost_per_generation=history)
+
+
+def optimize(scene: RobotScene, *, variables: Sequence[Variable] = DEFAULT_VARIABLES, budget: int = 300,
+             seed: int = 1, log: str | Path | None = None, resume: bool = False, executor: Executor | None = None,
+             workers: int | None = None,
+             on_generation: Callable[[int, np.ndarray, dict[str, np.ndarray], Any], None] | None = None) -> Search:
+    """Maximise the robot's eta over ``variables`` with CMA-ES, minimising 1 - eta (failed gaits: 2)."""
+    check_variables(scene, variables)
+
+    def population(values: np.ndarray) -> tuple[list[float], dict[str, np.ndarray]]:
+        scenes = [scene.replace(**{v.key: float(x) for v, x in zip(variables, row)}) for row in values]
+        results = batch.map_jobs(evaluate, scenes, executor=pool, workers=1 if pool is None else None)
+        etas = np.array([r["eta"] for r in results])
+        return [FAILED if not math.isfinite(e) else 1.0 - e for e in etas], {
+            "eta": etas, "D1": np.array([r["D1_mm"] for r in results]) / 1e3,
+            "D2": np.array([r["D2_mm"] for r in results]) / 1e3}
 
     own = executor is None and workers != 1
     pool = batch.local_executor(workers) if own else executor
     try:
-        while not es.stop():
-            unit = es.ask()
-            values = np.array([[v.from_unit(u) for v, u in zip(variables, x)] for x in unit])
-            scenes = [scene.replace(**{v.key: float(x) for v, x in zip(variables, row)}) for row in values]
-            results = batch.map_jobs(evaluate, scenes, executor=pool, workers=1 if pool is None else None)
-            costs = [_cost(r) for r in results]
-            es.tell(unit, costs)
-            history.append(1 - min(costs))
-            if path is not None:
-                _log_append(path, generation, values, results, costs, es)
-            if on_generation is not None:
-                on_generation(generation, values, results, es)
-            generation += 1
+        return cmaes(population, variables, budget=budget, seed=seed, start=PAPER_START, log=log, resume=resume,
+                     log_attrs={"scene_toml": to_toml(scene), "objective": "1 - eta over one flap cycle from rest "
+                                "(failed gaits: 2)"}, columns={"eta": ("1", 0), "D1": ("m", 0), "D2": ("m", 0)},
+                     on_generation=on_generation)
     finally:
         if own:
             pool.shutdown()
-    best_unit = es.result.xbest
-    best = {v.key: v.from_unit(float(u)) for v, u in zip(variables, best_unit)}
-    return Result(variables=variables, best=best, eta=1 - float(es.result.fbest), evaluations=es.result.evaluations,
-                  generations=generation, wall_s=time.perf_counter() - start_time, stop=dict(es.stop()),
-                  best_per_generation=history)
-

@@ -77,7 +77,7 @@ def test_optimizer_is_reproducible_and_resumes(quick, tmp_path):
     scene = quick.replace(**{"sim.dt": 4e-4})
     first = optimize(scene, variables=variables, budget=12, seed=7, log=tmp_path / "a.h5", workers=1)
     again = optimize(scene, variables=variables, budget=12, seed=7, workers=2)
-    assert first.best == again.best and first.eta == again.eta
+    assert first.best == again.best and first.cost == again.cost
     other = optimize(scene, variables=variables, budget=12, seed=8, workers=1)
     assert other.best != first.best
 
@@ -107,7 +107,7 @@ def test_dask_executor_gives_the_local_result(quick):
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, host="127.0.0.1", dashboard_address=None,
                                   processes=True) as cluster, distributed.Client(cluster) as client:
         remote = optimize(scene, variables=variables, budget=6, seed=3, executor=client.get_executor())
-    assert remote.best == local.best and remote.eta == local.eta
+    assert remote.best == local.best and remote.cost == local.cost
 
 
 @pytest.mark.parametrize("argv,named", [

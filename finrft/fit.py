@@ -1,0 +1,283 @@
+"""Parameter identification: fit a plate scene to measured segment angles, and RFT coefficients to rigid-plate
+forces.
+
+Drag data (``shared/data/plate_drag`` style CSV): columns ``time_s``, ``displacement_mm``, ``segment1_deg`` ...,
+the absolute orientation change of each segment during a drag from flat at constant speed. For each file the plate
+is dragged at the file's speed over its duration and its segment angles are compared at the file's times; the
+objective is the paper's E: the mean over files of the mean squared error (deg^2) over segments and times.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from . import batch
+from .drive import Drive
+from .optimize import Search, Variable, cmaes
+from .rft import ForceTable
+from .scene import RFT, Scene, SceneError, field_of, split_key, to_toml
+from .simulate import Run, SimulationUnstable, simulate
+
+# Short names for the paper's parameters, and default bounds (SI).
+ALIASES = {"b": "plate.damping", "k": "plate.stiffness", "f_perp": "rft.f_perp", "f_par": "rft.f_par"}
+DEFAULT_BOUNDS = {"plate.damping": (0.01, 100.0), "plate.stiffness": (0.01, 100.0), "rft.f_perp": (0.1, 100.0),
+                  "rft.f_par": (-2.0, 2.0)}
+FAILED = 1e6  # deg^2: worse than any plate that moved at all
+
+
+@dataclass(frozen=True)
+class DragData:
+    """One measured drag: times (s), the base speed (m/s) and the segments' angles (deg, T x N)."""
+
+    path: str
+    time: np.ndarray
+    speed: float
+    angles: np.ndarray
+
+    @property
+    def name(self) -> str:
+        return Path(self.path).stem
+
+    @property
+    def displacement(self) -> np.ndarray:
+        return self.speed * self.time
+
+
+def read_drag(path: str | Path) -> DragData:
+    """Read and check a drag data file; SceneError naming the file and line on any problem."""
+    path = Path(path)
+    try:
+        lines = path.read_text().splitlines()
+    except OSError as exc:
+        raise SceneError(f"cannot read data file {path}: {exc.strerror}") from None
+    body = [(n, line) for n, line in enumerate(lines, start=1) if line.strip() and not line.startswith("#")]
+    if not body:
+        raise SceneError(f"{path}: no data")
+    header_line, header = body[0][0], next(csv.reader([body[0][1]]))
+    angle_columns = sorted((c for c in header if c.startswith("segment") and c.endswith("_deg")),
+                           key=lambda c: int(c[len("segment"):-len("_deg")] or 0))
+    if "time_s" not in header or "displacement_mm" not in header or not angle_columns:
+        raise SceneError(f"{path}:{header_line}: columns must include time_s, displacement_mm and segment1_deg ...")
+    rows = []
+    for n, line in body[1:]:
+        values = next(csv.reader([line]))
+        if len(values) != len(header):
+            raise SceneError(f"{path}:{n}: expected {len(header)} values, got {len(values)}")
+        try:
+            row = dict(zip(header, (float(v) for v in values)))
+        except ValueError:
+            raise SceneError(f"{path}:{n}: every value must be a number") from None
+        if not all(math.isfinite(v) for v in row.values()):
+            raise SceneError(f"{path}:{n}: NaN or infinite value")
+        rows.append((n, row))
+    if len(rows) < 2:
+        raise SceneError(f"{path}: needs at least two samples")
+    time = np.array([r["time_s"] for _, r in rows])
+    for (n, _), step in zip(rows[1:], np.diff(time)):
+        if step <= 0:
+            raise SceneError(f"{path}:{n}: time_s must increase")
+    displacement = np.array([r["displacement_mm"] for _, r in rows]) / 1e3
+    speed = float(np.polyfit(time, displacement, 1)[0])
+    if speed <= 0:
+        raise SceneError(f"{path}: displacement_mm must grow with time (a drag along +y)")
+    angles = np.array([[r[c] for c in angle_columns] for _, r in rows])
+    return DragData(str(path), time - time[0], speed, angles)
+
+
+def resolve_params(names: Sequence[str], bounds: dict[str, tuple[float, float]] | None = None) -> list[Variable]:
+    """Fitted parameters from names (aliases b, k, f_perp, f_par, or any numeric plate-scene key) and bounds."""
+    variables = []
+    for name in names:
+        key = ALIASES.get(name, name)
+        split_key(Scene, key)
+        if field_of(Scene, key).type not in ("float", float):
+            raise SceneError(f"{key} is not a number and cannot be fitted")
+        low, high = (bounds or {}).get(key, DEFAULT_BOUNDS.get(key, (None, None)))
+        if low is None:
+            raise SceneError(f"{key} has no default bounds: give them with --bounds {key}=LOW:HIGH")
+        if not low < high:
+            raise SceneError(f"bounds of {key}: lower ({low:g}) must be below upper ({high:g})")
+        variables.append(Variable(key, low, high))
+    return variables
+
+
+def drag_for(data: DragData) -> Drive:
+    return Drive(speed=data.speed, stroke=data.speed * data.time[-1])
+
+
+def simulated_angles(scene: Scene, data: DragData) -> np.ndarray:
+    """The scene's segment angles (deg) at the data's times."""
+    run = simulate(scene, drag_for(data))
+    return np.column_stack([np.interp(data.time, run.time, np.degrees(run.segment_angle[:, i]))
+                            for i in range(data.angles.shape[1])])
+
+
+def mse(scene: Scene, data: DragData) -> float:
+    """Mean squared error (deg^2) over segments and times; FAILED when the scene cannot be simulated."""
+    try:
+        return float(np.mean((simulated_angles(scene, data) - data.angles) ** 2))
+    except (SimulationUnstable, SceneError):
+        return FAILED
+
+
+def _mse_job(job: tuple[Scene, DragData]) -> float:
+    return mse(*job)
+
+
+@dataclass
+class Fit:
+    search: Search
+    scene: Scene                   # the scene with the fitted values
+    rmse_deg: dict[str, float]     # per fitted file
+    validate_rmse_deg: dict[str, float]
+
+
+def fit(scene: Scene, data: Sequence[DragData], variables: Sequence[Variable], *, budget: int = 300, seed: int = 1,
+        validate: Sequence[DragData] = (), log: str | Path | None = None, workers: int | None = None,
+        on_generation: Callable[..., None] | None = None) -> Fit:
+    """Fit ``variables`` of a plate scene to drag data with CMA-ES, starting from the scene's own values."""
+    if scene.plate.segments != data[0].angles.shape[1]:
+        raise SceneError(f"{data[0].path} has {data[0].angles.shape[1]} segments, the scene "
+                         f"{scene.plate.segments}")
+    for v in variables:
+        scene.replace(**{v.key: v.low})
+        scene.replace(**{v.key: v.high})
+    start = {}
+    for v in variables:
+        section, name = split_key(Scene, v.key)
+        start[v.key] = min(max(getattr(getattr(scene, section), name), v.low), v.high)
+
+    def population(values: np.ndarray) -> tuple[list[float], dict[str, np.ndarray]]:
+        scenes = [scene.replace(**{v.key: float(x) for v, x in zip(variables, row)}) for row in values]
+        jobs = [(s, d) for s in scenes for d in data]
+        errors = np.array(batch.map_jobs(_mse_job, jobs, executor=pool, workers=1 if pool is None else None))
+        errors = errors.reshape(len(scenes), len(data))
+        return list(errors.mean(axis=1)), {"rmse": np.sqrt(errors)}
+
+    own = workers != 1
+    pool = batch.local_executor(workers) if own else None
+    try:
+        search = cmaes(population, variables, budget=budget, seed=seed, start=start, log=log,
+                       log_attrs={"scene_toml": to_toml(scene), "objective": "mean over files of the mean squared "
+                                  "segment-angle error (deg^2)", "data": [d.path for d in data]},
+                       columns={"rmse": ("deg", len(data))}, on_generation=on_generation)
+    finally:
+        if own:
+            pool.shutdown()
+    fitted = scene.replace(**search.best)
+    return Fit(search, fitted, {d.name: math.sqrt(mse(fitted, d)) for d in data},
+               {d.name: math.sqrt(mse(fitted, d)) for d in validate})
+
+
+def plot(fitted: Scene, files: Sequence[tuple[DragData, str]], path: str | Path) -> None:
+    """Simulated against measured segment angles over displacement, one panel per file, RMSE in the legend."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, axes = plt.subplots(1, len(files), figsize=(5 * len(files), 4), squeeze=False, sharey=True)
+    for ax, (data, role) in zip(axes[0], files):
+        sim = simulated_angles(fitted, data)
+        rmse = math.sqrt(float(np.mean((sim - data.angles) ** 2)))
+        x = 1e3 * data.displacement
+        for i in range(data.angles.shape[1]):
+            line, = ax.plot(x, data.angles[:, i], label=f"segment {i + 1} measured")
+            ax.plot(x, sim[:, i], "--", color=line.get_color(), label=f"segment {i + 1} simulated")
+        ax.set_title(f"{data.name} ({1e3 * data.speed:.0f} mm/s, {role}): RMSE {rmse:.2f} deg")
+        ax.set_xlabel("displacement (mm)")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+    axes[0, 0].set_ylabel("segment angle (deg)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=150)
+    plt.close(fig)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# RFT identification from rigid-plate drags
+
+FORCE_COLUMNS = ("attack_deg", "force_normal_N", "force_tangential_N")
+
+
+def plate_forces(run: Run) -> dict[str, float]:
+    """The medium's steady force on a rigid plate, decomposed along the plate's normal (the +y side at 90 deg
+    attack) and its axis: the mean over the second half of the run, the first being any start-up."""
+    heading = math.radians(90.0 - run.drive.attack_deg)
+    axis, normal = np.array([math.cos(heading), math.sin(heading), 0.0]), np.array([-math.sin(heading),
+                                                                                    math.cos(heading), 0.0])
+    late = run.time >= 0.5 * run.time[-1]
+    total = run.rft_force[late].sum(axis=1).mean(axis=0)
+    return {"attack_deg": run.drive.attack_deg, "force_normal_N": float(total @ normal),
+            "force_tangential_N": float(total @ axis)}
+
+
+def append_forces(path: str | Path, row: dict[str, float]) -> None:
+    """Add a row to a forces CSV, writing its header first when the file is new."""
+    path = Path(path)
+    new = not path.exists() or path.stat().st_size == 0
+    with path.open("a", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=FORCE_COLUMNS)
+        if new:
+            writer.writeheader()
+        writer.writerow({k: repr(float(row[k])) for k in FORCE_COLUMNS})
+
+
+def read_forces(path: str | Path) -> np.ndarray:
+    """(rows, 3): attack (deg), normal and tangential force (N); SceneError naming the file and line."""
+    path = Path(path)
+    try:
+        with path.open(newline="") as handle:
+            reader = csv.DictReader(line for line in handle if not line.startswith("#"))
+            if reader.fieldnames is None or any(c not in reader.fieldnames for c in FORCE_COLUMNS):
+                raise SceneError(f"{path}: columns must include {', '.join(FORCE_COLUMNS)}")
+            rows = []
+            for n, row in enumerate(reader, start=2):
+                try:
+                    values = [float(row[c]) for c in FORCE_COLUMNS]
+                except (TypeError, ValueError):
+                    raise SceneError(f"{path}:{n}: every value must be a number") from None
+                if not all(math.isfinite(v) for v in values) or not 0 <= values[0] <= 90:
+                    raise SceneError(f"{path}:{n}: values must be finite, attack_deg within 0..90")
+                rows.append(values)
+    except OSError as exc:
+        raise SceneError(f"cannot read forces file {path}: {exc.strerror}") from None
+    if not rows:
+        raise SceneError(f"{path}: no data")
+    return np.array(rows)
+
+
+def identify_rft(forces: np.ndarray, segments: int, v_reg: float, speed: float) -> tuple[RFT, ForceTable]:
+    """RFT from a rigid plate of N segments dragged at attack theta, where each law gives the totals
+    normal = -N ramp F_perp(theta) and tangential = -N ramp F_par(theta), ramp = tanh(speed / v_reg):
+    the paper law's f_perp, f_par by least squares (F_perp = f_perp sin theta, F_par = f_par cos theta), and the
+    table law at the measured angles, held at its end values out to 0 and 90 degrees."""
+    scale = segments * math.tanh(speed / v_reg)
+    order = np.argsort(forces[:, 0])
+    deg, perp, par = forces[order, 0], -forces[order, 1] / scale, -forces[order, 2] / scale
+    sin, cos = np.sin(np.radians(deg)), np.cos(np.radians(deg))
+    f_perp = float(perp @ sin / (sin @ sin)) if sin @ sin > 0 else 0.0
+    f_par = float(par @ cos / (cos @ cos)) if cos @ cos > 0 else 0.0
+    if deg[0] > 0:
+        deg, perp, par = np.r_[0.0, deg], np.r_[perp[0], perp], np.r_[par[0], par]
+    if deg[-1] < 90:
+        deg, perp, par = np.r_[deg, 90.0], np.r_[perp, perp[-1]], np.r_[par, par[-1]]
+    return RFT(law="paper", f_perp=f_perp, f_par=f_par, v_reg=v_reg), ForceTable(deg, perp, par)
+
+
+def rft_fragment(law: RFT, table_csv: str) -> str:
+    """A scene fragment with the identified paper-law coefficients (and the table, as a commented option)."""
+    return (f"# RFT identified from rigid-plate drags (finrft fit-rft)\n[rft]\nlaw = \"paper\"\n"
+            f"f_perp = {law.f_perp!r}  # [N] per segment\nf_par = {law.f_par!r}  # [N] per segment\n"
+            f"v_reg = {law.v_reg!r}  # [m/s]\n# or the tabulated law:\n# law = \"table\"\n"
+            f"# table = \"{table_csv}\"\n")
+
+
+def fit_summary(result: Fit) -> dict[str, Any]:
+    return {"params": result.search.best, "rmse_deg": result.rmse_deg, "validate_rmse_deg": result.validate_rmse_deg,
+            "evaluations": result.search.evaluations, "wall_s": result.search.wall_s,
+            "mse_deg2": result.search.cost}

@@ -65,6 +65,8 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     o.add_argument("--rrd", metavar="FILE.rrd", help="write a rerun recording; open it with 'rerun FILE.rrd'")
     o.add_argument("--json", action="store_true", help="print a JSON summary as the last line of stdout (SI units)")
     o.add_argument("--quiet", action="store_true", help="no progress or summary text, only files and --json")
+    o.add_argument("--forces-csv", metavar="FILE.csv", help="append the steady force on the plate (normal and "
+                   "tangential, N) at this angle of attack to a CSV, for finrft fit-rft (drag only)")
 
 
 def _add_robot(p: argparse.ArgumentParser) -> None:
@@ -173,6 +175,57 @@ def build_parser() -> argparse.ArgumentParser:
     table.add_argument("--json", action="store_true", help="print the rows as JSON on the last line")
     _add_robot(table)
 
+    fitp = sub.add_parser("fit", help="fit plate-scene parameters to measured segment angles (CMA-ES)",
+                          description="Fit plate-scene parameters so that simulated segment angles match measured "
+                          "ones: each data file is a drag from flat at its own speed (columns time_s, "
+                          "displacement_mm, segment1_deg ...); the objective is the mean over files of the mean "
+                          "squared error (deg^2), as the paper's E(b).")
+    fitp.add_argument("--data", nargs="+", required=True, metavar="FILE.csv", help="drag data to fit")
+    fitp.add_argument("--validate", nargs="+", default=[], metavar="FILE.csv",
+                      help="drag data to check the fit on, not fitted")
+    fitp.add_argument("--params", default="b", metavar="NAMES",
+                      help="comma-separated parameters: b (plate.damping), k (plate.stiffness), f_perp, f_par, or "
+                           "any numeric plate-scene key (default: %(default)s, the paper's procedure)")
+    fitp.add_argument("--bounds", action="append", default=[], metavar="KEY=LOW:HIGH",
+                      help="bounds of a fitted key in SI (defaults: b 0.01:100, k 0.01:100, f_perp 0.1:100, "
+                           "f_par -2:2); positive bounds over more than a decade are searched in log space")
+    fitp.add_argument("--budget", type=_number("evaluations", minimum=1, inclusive=True, integer=True),
+                      default=300, metavar="N", help="evaluations (default: %(default)s)")
+    fitp.add_argument("--seed", type=_number("", minimum=1, inclusive=True, integer=True), default=1, metavar="S",
+                      help="random seed, >= 1 (default: %(default)s)")
+    fitp.add_argument("--workers", type=_number("processes", minimum=1, inclusive=True, integer=True),
+                      help="worker processes (default: all cores)")
+    fitp.add_argument("--write-scene", metavar="OUT.toml", help="write the fitted scene (finrft drag --scene OUT.toml)")
+    fitp.add_argument("--plot", metavar="OUT.png", help="simulated against measured angles for every file")
+    fitp.add_argument("--out", metavar="LOG.h5", help="HDF5 log of every evaluation (never overwritten)")
+    fitp.add_argument("--rrd", metavar="FILE.rrd", help="rerun recording of the fitted drag of the first file")
+    fitp.add_argument("--json", action="store_true", help="print the result as JSON on the last line")
+    g = fitp.add_argument_group("scene")
+    g.add_argument("--scene", metavar="FILE.toml", help="plate scene file in SI units (default: the preset)")
+    g.add_argument("--preset", default="paper", choices=scenes.PRESETS[scenes.Scene],
+                   help="built-in scene when no --scene is given (default: %(default)s)")
+    g.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a scene key (SI)")
+    g.add_argument("--backend", choices=("native", "python"), help="where the RFT force is computed")
+
+    fitrft = sub.add_parser("fit-rft", help="identify RFT coefficients from rigid-plate forces",
+                            description="Identify the paper law's f_perp and f_par (least squares) and the table "
+                            "law's F_perp(theta), F_par(theta) from the steady forces on a rigid plate dragged at "
+                            "several angles of attack (columns attack_deg, force_normal_N, force_tangential_N, as "
+                            "written by finrft drag --plate rigid --forces-csv). Writes a scene fragment and the "
+                            "table CSV.")
+    fitrft.add_argument("--data", required=True, metavar="FORCES.csv", help="forces per angle of attack")
+    fitrft.add_argument("--speed", type=_number("mm/s"), default=30.0, metavar="MM_S",
+                        help="drag speed of the measurements in mm/s (default: %(default)s)")
+    fitrft.add_argument("--out", metavar="FRAGMENT.toml", help="write the [rft] scene fragment here "
+                        "(default: print it)")
+    fitrft.add_argument("--table", metavar="TABLE.csv", help="write the table law here (default: beside --out)")
+    fitrft.add_argument("--json", action="store_true", help="print the coefficients as JSON on the last line")
+    g = fitrft.add_argument_group("scene")
+    g.add_argument("--scene", metavar="FILE.toml", help="plate scene of the measurements (segments, v_reg)")
+    g.add_argument("--preset", default="paper", choices=scenes.PRESETS[scenes.Scene],
+                   help="built-in scene when no --scene is given (default: %(default)s)")
+    g.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a scene key (SI)")
+
     bench = sub.add_parser("bench", help="benchmarks, measured as ratios in one run on this machine")
     kinds = bench.add_subparsers(dest="bench", required=True, parser_class=_Parser)
     backends = kinds.add_parser("backends", help="Python callback vs native plugin vs bare MuJoCo, and batch",
@@ -273,7 +326,14 @@ def _run_test(args: argparse.Namespace) -> int:
     _check_output(args.out, ".h5", "--out")
     _check_output(args.rrd, ".rrd", "--rrd")
     drive = _drive(args)
+    if args.forces_csv:
+        if args.command != "drag" or scene.plate.kind != "rigid":
+            raise UsageError("--forces-csv needs a drag of a rigid plate (--plate rigid)")
+        _check_output(args.forces_csv, ".csv", "--forces-csv")
     run = simulate(scene, drive, progress=_progress(not args.quiet and sys.stderr.isatty()))
+    if args.forces_csv:
+        from .fit import append_forces, plate_forces
+        append_forces(args.forces_csv, plate_forces(run))
     summary = run.summary()
     if args.out or args.rrd:
         from . import record  # h5py and rerun load only when a file is asked for
@@ -325,6 +385,70 @@ def _table(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
     print(swimming.table_markdown(rows))
     if args.json:
         print(_json(rows))
+    return 0
+
+
+def _fit(args: argparse.Namespace) -> int:
+    from . import fit as fitting
+    scene = _resolve_scene(args)
+    for path, suffix, flag in ((args.write_scene, ".toml", "--write-scene"), (args.plot, ".png", "--plot"),
+                               (args.out, ".h5", "--out"), (args.rrd, ".rrd", "--rrd")):
+        _check_output(path, suffix, flag)
+    if args.out and Path(args.out).exists():
+        raise UsageError(f"--out {args.out} exists: choose a new file")
+    data = [fitting.read_drag(p) for p in args.data]
+    validate = [fitting.read_drag(p) for p in args.validate]
+    names = [n.strip() for n in args.params.split(",") if n.strip()]
+    variables = fitting.resolve_params(names, _parse_bounds(args.bounds))
+    show = sys.stderr.isatty()
+
+    def on_generation(g: int, values: np.ndarray, extras: dict[str, np.ndarray], es: Any) -> None:
+        if show:
+            print(f"\rgeneration {g + 1}: {es.countevals}/{args.budget} evaluations, best RMSE "
+                  f"{np.sqrt(es.best.f):.2f} deg", end="", file=sys.stderr, flush=True)
+
+    result = fitting.fit(scene, data, variables, budget=args.budget, seed=args.seed, validate=validate,
+                         log=args.out, workers=args.workers, on_generation=on_generation)
+    if show:
+        print(file=sys.stderr)
+    if args.write_scene:
+        Path(args.write_scene).write_text(scenes.to_toml(result.scene))
+    if args.plot:
+        fitting.plot(result.scene, [(d, "fitted") for d in data] + [(d, "validation") for d in validate], args.plot)
+    if args.rrd:
+        from . import record
+        record.write_rrd(simulate(result.scene, fitting.drag_for(data[0])), args.rrd)
+    for key, value in result.search.best.items():
+        print(f"{key} = {value:.6g}")
+    for label, table in (("fitted", result.rmse_deg), ("validation", result.validate_rmse_deg)):
+        for name, rmse in table.items():
+            print(f"RMSE {name} ({label}): {rmse:.2f} deg")
+    print(f"{result.search.evaluations} evaluations in {result.search.wall_s:.1f} s")
+    if args.json:
+        print(_json(fitting.fit_summary(result)))
+    return 0
+
+
+def _fit_rft(args: argparse.Namespace) -> int:
+    from . import fit as fitting
+    from .rft import write_table
+    scene = _resolve_scene(args)
+    _check_output(args.out, ".toml", "--out")
+    forces = fitting.read_forces(args.data)
+    law, table = fitting.identify_rft(forces, scene.plate.segments, scene.rft.v_reg, args.speed / 1000)
+    table_path = args.table or (str(Path(args.out).with_suffix(".csv")) if args.out else None)
+    if table_path:
+        _check_output(table_path, ".csv", "--table")
+        write_table(table_path, table)
+    fragment = fitting.rft_fragment(law, Path(table_path).name if table_path else "TABLE.csv")
+    if args.out:
+        Path(args.out).write_text(fragment)
+        print(f"wrote {args.out}" + (f" and {table_path}" if table_path else ""))
+    else:
+        print(fragment, end="")
+    if args.json:
+        print(_json({"f_perp": law.f_perp, "f_par": law.f_par, "v_reg": law.v_reg,
+                     "table": {"attack_deg": table.attack_deg, "f_perp_N": table.f_perp, "f_par_N": table.f_par}}))
     return 0
 
 
@@ -437,6 +561,10 @@ def _main(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> int:
         if args.command == "scene":
             print(scenes.to_toml(_resolve_scene(args)), end="")
             return 0
+        if args.command == "fit":
+            return _fit(args)
+        if args.command == "fit-rft":
+            return _fit_rft(args)
         if args.command in ("swim", "optimize", "table"):
             return {"swim": _swim, "optimize": _optimize, "table": _table}[args.command](args, _resolve_robot(args))
         if args.command == "bench":

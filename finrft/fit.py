@@ -90,6 +90,25 @@ def read_drag(path: str | Path) -> DragData:
     return DragData(str(path), time - time[0], speed, angles)
 
 
+def write_drag(path: str | Path, data: DragData, comment: str = "") -> None:
+    """Write drag data in the format `read_drag` reads (e.g. a simulated drag, to test a fit)."""
+    n = data.angles.shape[1]
+    lines = [f"# {comment}"] if comment else []
+    lines.append(",".join(["time_s", "displacement_mm", *[f"segment{i + 1}_deg" for i in range(n)]]))
+    for t, x, row in zip(data.time, 1e3 * data.displacement, data.angles):
+        lines.append(",".join(repr(float(v)) for v in (t, x, *row)))
+    Path(path).write_text("\n".join(lines) + "\n")
+
+
+def simulated_drag(scene: Scene, speed: float, distance: float, rate: float = 30.0) -> DragData:
+    """A drag of ``scene`` from flat, sampled like the measurements (``rate`` Hz)."""
+    run = simulate(scene, Drive(speed=speed, stroke=distance))
+    time = np.arange(0.0, distance / speed + 1e-9, 1.0 / rate)
+    angles = np.column_stack([np.interp(time, run.time, np.degrees(run.segment_angle[:, i]))
+                              for i in range(scene.plate.segments)])
+    return DragData(f"simulated_v{1e3 * speed:g}", time, speed, angles)
+
+
 def resolve_params(names: Sequence[str], bounds: dict[str, tuple[float, float]] | None = None) -> list[Variable]:
     """Fitted parameters from names (aliases b, k, f_perp, f_par, or any numeric plate-scene key) and bounds."""
     variables = []

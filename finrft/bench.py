@@ -91,3 +91,23 @@ def robot(scene: RobotScene | None = None, *, budget: int = 300, workers: int | 
     log(f"optimize, budget {budget} ({result.evaluations} evaluations) on {workers} workers: {result.wall_s:.1f} s "
         f"(target <= 60 s), best eta {100 * (1 - result.cost):.2f} %")
     return out
+
+
+def fit_speed(paths: list[str] | None = None, *, budget: int = 300, workers: int | None = None,
+              log: Callable[[str], None] = print) -> dict[str, Any]:
+    """A 4-parameter fit (k, b, f_perp, f_par) of the paper plate over three drag files with ``budget``
+    evaluations: the given files, or the model's own drags at 10, 30 and 50 mm/s over 200 mm."""
+    from . import fit as fitting
+    scene = preset("paper")
+    data = [fitting.read_drag(p) for p in paths] if paths else [
+        fitting.simulated_drag(scene.replace(**{"plate.damping": 0.8}), v, 0.2) for v in (0.01, 0.03, 0.05)]
+    workers = workers or batch.default_workers()
+    result = fitting.fit(scene, data, fitting.resolve_params(["k", "b", "f_perp", "f_par"]), budget=budget, seed=1,
+                         workers=workers)
+    out = {"date": date.today().isoformat(), "files": [d.name for d in data], "budget": budget,
+           "evaluations": result.search.evaluations, "wall_s": result.search.wall_s, "workers": workers,
+           "rmse_deg": result.rmse_deg}
+    log(f"4-parameter fit over {len(data)} files, budget {budget} ({result.search.evaluations} evaluations) on "
+        f"{workers} workers: {result.search.wall_s:.1f} s (target <= 30 s); RMSE "
+        + ", ".join(f"{k} {v:.2f} deg" for k, v in result.rmse_deg.items()))
+    return out

@@ -247,6 +247,16 @@ def build_parser() -> argparse.ArgumentParser:
     robot.add_argument("--workers", type=_number("processes", minimum=1, inclusive=True, integer=True),
                        help="worker processes (default: all cores)")
     robot.add_argument("--json", action="store_true", help="print the figures as JSON on the last line")
+    fitb = kinds.add_parser("fit", help="a 4-parameter plate fit over three drag files",
+                            description="Time a fit of k, b, f_perp and f_par of the paper plate over three drag "
+                            "files with --budget evaluations on all cores.")
+    fitb.add_argument("--data", nargs="+", metavar="FILE.csv", help="drag data (default: the model's own drags "
+                      "at 10, 30 and 50 mm/s)")
+    fitb.add_argument("--budget", type=_number("evaluations", minimum=1, inclusive=True, integer=True),
+                      default=300, help="evaluations (default: %(default)s)")
+    fitb.add_argument("--workers", type=_number("processes", minimum=1, inclusive=True, integer=True),
+                      help="worker processes (default: all cores)")
+    fitb.add_argument("--json", action="store_true", help="print the figures as JSON on the last line")
     return parser
 
 
@@ -569,7 +579,9 @@ def _main(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> int:
             return {"swim": _swim, "optimize": _optimize, "table": _table}[args.command](args, _resolve_robot(args))
         if args.command == "bench":
             from . import bench
-            if args.bench == "robot":
+            if args.bench == "fit":
+                figures = bench.fit_speed(args.data, budget=args.budget, workers=args.workers)
+            elif args.bench == "robot":
                 figures = bench.robot(scenes.preset(args.preset, scenes.RobotScene), budget=args.budget,
                                       workers=args.workers)
             else:

@@ -30,6 +30,7 @@ class SegmentForces:
         self.law = rft.force_law(group.rft)
         self.sites = group.sites
         self.bodies = group.bodies
+        self.roots = None  # the bodies' root bodies, known once a model is seen
         n = len(self.sites)
         self.force = np.zeros((n, 3))
         self._twist = np.zeros(6)
@@ -46,6 +47,22 @@ class SegmentForces:
     def evaluate(self, velocity: np.ndarray, frames: np.ndarray) -> np.ndarray:
         """The law on recorded inputs of any leading shape (..., 3) and (..., 3, 3)."""
         return self.law(velocity, frames[..., :, 0], frames[..., :, 1])
+
+    def snapshot(self, m: mujoco.MjModel, d: mujoco.MjData, cvel: np.ndarray, offset: np.ndarray,
+                 frames: np.ndarray) -> None:
+        """Store, cheaply, what `recorded` needs: the bodies' com-based velocities (N, 6), each midpoint's
+        offset from its tree's centre of mass (N, 3) and the site frames (N, 3, 3)."""
+        if self.roots is None:
+            self.roots = m.body_rootid[self.bodies]
+        cvel[:] = d.cvel[self.bodies]
+        offset[:] = d.site_xpos[self.sites] - d.subtree_com[self.roots]
+        frames[:] = d.site_xmat[self.sites].reshape(-1, 3, 3)
+
+    def recorded(self, cvel: np.ndarray, offset: np.ndarray, frames: np.ndarray) -> np.ndarray:
+        """The forces of stored snapshots, all at once: midpoint velocity v = v_com + w x offset, as
+        mj_objectVelocity computes it."""
+        velocity = cvel[..., 3:] + np.cross(cvel[..., :3], offset)
+        return self.evaluate(velocity, frames)
 
     def __call__(self, m: mujoco.MjModel, d: mujoco.MjData) -> np.ndarray:
         self.kinematics(m, d, self._velocity, self._frames)

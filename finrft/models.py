@@ -27,8 +27,10 @@ DRIVES = ("drag", "rotate")
 # The drive's armature, relative to what it drives: large enough that the RFT load changes the prescribed
 # speed by ~1e-10 per step, small enough that the mass matrix keeps full precision in double.
 ARMATURE_RATIO = 1e10
-# A stiff limit: impedance 0.9999 (MuJoCo's maximum) and the shortest time constant MuJoCo accepts, 2 dt.
+# A stiff limit: impedance 0.9999 (MuJoCo's maximum) and a time constant of 1 ms (MuJoCo needs >= 2 dt). A fixed
+# time constant keeps the stop the same when dt changes, so results converge in dt.
 LIMIT_IMPEDANCE = (0.9999, 0.9999, 0.001, 0.5, 2.0)
+LIMIT_TIMECONST = 1e-3
 
 
 @dataclass(frozen=True)
@@ -113,7 +115,7 @@ def _configure_chain(spec: mujoco.MjSpec, chain: Chain, dt: float) -> None:
     hinge.damping = [chain.damping, 0, 0]
     if chain.kind == "origami" and chain.stop == "limit":
         hinge.range = [-np.pi, chain.springref]
-        hinge.solref_limit = [2 * dt, 1.0]
+        hinge.solref_limit = [max(LIMIT_TIMECONST, 2 * dt), 1.0]
         hinge.solimp_limit = list(LIMIT_IMPEDANCE)
     else:
         hinge.limited = mujoco.mjtLimited.mjLIMITED_FALSE

@@ -75,7 +75,7 @@ class Sim:
     method: str = _f("explicit", "", "explicit: MuJoCo's step, the RFT force as it is; implicit: implicitfast "
                      "with the RFT velocity Jacobian (stable at large steps on light segments)",
                      choices=("explicit", "implicit"))
-    record_dt: float = _f(0.005, "s", "interval between recorded samples (rounded to whole steps)", minimum=0.0)
+    record_dt: float = _f(0.02, "s", "interval between recorded samples (rounded to whole steps)", minimum=0.0)
 
 
 @dataclass(frozen=True)

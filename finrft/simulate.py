@@ -200,7 +200,8 @@ def simulate(scene: Scene, drive: Drive, *, progress: Callable[[float], None] | 
     rec_x = np.zeros(len(samples))
     rec_q = np.zeros((len(samples), n))
     rec_f = np.zeros(len(samples))
-    rec_v = np.zeros((len(samples), n, 3))
+    rec_cvel = np.zeros((len(samples), n, 6))
+    rec_offset = np.zeros((len(samples), n, 3))
     rec_frame = np.zeros((len(samples), n, 3, 3))
     hinges = plate.hinge_qpos
 
@@ -208,7 +209,7 @@ def simulate(scene: Scene, drive: Drive, *, progress: Callable[[float], None] | 
         rec_x[i] = d.qpos[plate.drive_qpos]
         rec_q[i, :len(hinges)] = d.qpos[hinges]
         rec_f[i] = base.load(d)[0]
-        forces.kinematics(m, d, rec_v[i], rec_frame[i])
+        forces.snapshot(m, d, rec_cvel[i], rec_offset[i], rec_frame[i])
 
     advance = stepper(m, scene.sim.method, plate.backend, plate.groups)
     with installed(callback):
@@ -220,6 +221,6 @@ def simulate(scene: Scene, drive: Drive, *, progress: Callable[[float], None] | 
     if drive.kind == "rotate":
         segment_angle += rec_x[:, None]
     return Run(scene=scene, drive=drive, time=samples * dt, displacement=rec_x, segment_angle=segment_angle,
-               hinge_angle=rec_q, drive_force=rec_f, rft_force=forces.evaluate(rec_v, rec_frame),
+               hinge_angle=rec_q, drive_force=rec_f, rft_force=forces.recorded(rec_cvel, rec_offset, rec_frame),
                stroke_impulse=base.impulse, peak_drive_force=float(np.max(np.abs(rec_f))), steps=steps,
                wall_s=time.perf_counter() - start, backend=plate.backend)

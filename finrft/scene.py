@@ -94,7 +94,8 @@ class Body:
     drag: float = _f(2.4612, "N", "body drag of the whole robot (the half model carries half)", minimum=0.0,
                      exclusive=False)
     drag_law: str = _f("velocity", "", "velocity: rate-independent, against the body's velocity (tanh below "
-                       "v_reg); stroke: constant, against the body's motion in the current stroke",
+                       "v_reg); stroke: the paper's shortcut, a constant force against the fin's sweep in the current "
+                       "stroke",
                        choices=("velocity", "stroke"))
     v_reg: float = _f(0.001, "m/s", "regularisation speed of the velocity body drag", minimum=0.0)
 

@@ -229,18 +229,25 @@ static void segment_force(const RFTData* p, const mjtNum v[3], const mjtNum x[3]
   for (int k = 0; k < 3; k++) force[k] = -ramp * (cy * y[k] + cx * x[k]);
 }
 
+// A segment's midpoint velocity (world frame) and its axis x and normal y: the law's inputs.
+static void site_state(const mjModel* m, const mjData* d, int s, mjtNum v[3], mjtNum x[3], mjtNum y[3]) {
+  mjtNum twist[6];
+  const mjtNum* R = d->site_xmat + 9 * s;
+  mj_objectVelocity(m, d, mjOBJ_SITE, s, twist, 0);
+  v[0] = twist[3]; v[1] = twist[4]; v[2] = twist[5];
+  x[0] = R[0]; x[1] = R[3]; x[2] = R[6];
+  y[0] = R[1]; y[1] = R[4]; y[2] = R[7];
+}
+
 static void rft_compute(const mjModel* m, mjData* d, int instance, int capability_bit) {
   if (!(capability_bit & mjPLUGIN_PASSIVE)) return;
   const RFTData* p = (const RFTData*)d->plugin_data[instance];
   if (!p) return;
-  mjtNum twist[6], x[3], y[3], force[3], torque[3] = {0, 0, 0};
+  mjtNum v[3], x[3], y[3], force[3], torque[3] = {0, 0, 0};
   for (int i = 0; i < p->nseg; i++) {
     int s = p->site[i];
-    const mjtNum* R = d->site_xmat + 9 * s;
-    mj_objectVelocity(m, d, mjOBJ_SITE, s, twist, 0);
-    x[0] = R[0]; x[1] = R[3]; x[2] = R[6];
-    y[0] = R[1]; y[1] = R[4]; y[2] = R[7];
-    segment_force(p, twist + 3, x, y, force);
+    site_state(m, d, s, v, x, y);
+    segment_force(p, v, x, y, force);
     mj_applyFT(m, d, force, torque, d->site_xpos + 3 * s, p->body[i], d->qfrc_passive);
   }
   if (p->stop_stiffness > 0) {
@@ -301,18 +308,15 @@ static int solve_dense(mjtNum* a, mjtNum* b, int n) {
 // Add -dt * J^T C J of every RFT segment to the dense matrix h (nv x nv).
 static void add_rft_jacobian(const mjModel* m, mjData* d, int slot, mjtNum* h, mjtNum* jacp, mjtNum dt) {
   int nv = m->nv;
-  mjtNum twist[6], x[3], y[3], c[9], cj[3];
+  mjtNum v[3], x[3], y[3], c[9], cj[3];
   for (int inst = 0; inst < m->nplugin; inst++) {
     if (m->plugin[inst] != slot) continue;
     const RFTData* p = (const RFTData*)d->plugin_data[inst];
     if (!p) continue;
     for (int i = 0; i < p->nseg; i++) {
       int s = p->site[i];
-      const mjtNum* R = d->site_xmat + 9 * s;
-      mj_objectVelocity(m, d, mjOBJ_SITE, s, twist, 0);
-      x[0] = R[0]; x[1] = R[3]; x[2] = R[6];
-      y[0] = R[1]; y[1] = R[4]; y[2] = R[7];
-      segment_jacobian(p, twist + 3, x, y, c);
+      site_state(m, d, s, v, x, y);
+      segment_jacobian(p, v, x, y, c);
       mj_jacSite(m, d, jacp, NULL, s);
       for (int col = 0; col < nv; col++) {
         for (int r = 0; r < 3; r++) cj[r] = c[3 * r] * jacp[col] + c[3 * r + 1] * jacp[nv + col] +

@@ -59,10 +59,7 @@ class PlateModel:
     armature: float            # the drive's armature (kg or kg m^2)
     hinge_qpos: np.ndarray     # (H,) qpos address of each hinge: H = segments, or 0 for a rigid plate
     hinge_dof: np.ndarray      # (H,)
-    seg_body: np.ndarray       # (N,) body that carries each segment
-    seg_site: np.ndarray       # (N,) site at each segment's midpoint
-    initial_angle: float       # the plate's orientation at t = 0 (rad, about z)
-    groups: tuple[ForceGroup, ...]
+    groups: tuple[ForceGroup, ...]  # the segments' RFT (one group)
 
 
 @contextlib.contextmanager
@@ -243,9 +240,6 @@ def build_plate(scene: Scene, drive: str = "drag", attack_deg: float = 90.0) -> 
         armature=float(model.dof_armature[model.jnt_dofadr[drive_id]]),
         hinge_qpos=np.array([model.jnt_qposadr[j] for j in hinge_ids], dtype=int),
         hinge_dof=np.array([model.jnt_dofadr[j] for j in hinge_ids], dtype=int),
-        seg_body=group.bodies,
-        seg_site=group.sites,
-        initial_angle=initial_heading(drive, attack_deg),
         groups=(group,),
     )
 

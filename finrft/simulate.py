@@ -9,7 +9,7 @@ impulse that an ideal kinematic constraint would give them (computed with the pl
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Callable, Sequence
 
 import mujoco
@@ -45,7 +45,6 @@ class Run:
     steps: int
     wall_s: float
     backend: str = "python"
-    extra: dict[str, Any] = field(default_factory=dict)
 
     @property
     def quantity(self) -> str:

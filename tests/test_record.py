@@ -157,8 +157,8 @@ def test_rrd_plate_follows_the_mujoco_model(runs, name, tmp_path):
         d.qpos[plate.drive_qpos] = run.displacement[k]
         d.qpos[plate.hinge_qpos] = run.hinge_angle[k]
         mujoco.mj_kinematics(m, d)
-        np.testing.assert_allclose(origins[k], d.site_xpos[plate.seg_site], atol=1e-7)
-        np.testing.assert_allclose(strips[k, 1:-1], d.xpos[plate.seg_body], atol=1e-7)
+        np.testing.assert_allclose(origins[k], d.site_xpos[plate.groups[0].sites], atol=1e-7)
+        np.testing.assert_allclose(strips[k, 1:-1], d.xpos[plate.groups[0].bodies], atol=1e-7)
     peak = np.max(np.linalg.norm(run.rft_force, axis=-1))
     assert scale == pytest.approx(run.scene.plate.segment_length / peak)
     np.testing.assert_allclose(vectors, scale * run.rft_force, rtol=1e-6, atol=1e-9)

@@ -189,3 +189,23 @@ def test_failed_rrd_write_leaves_no_file(runs, tmp_path, monkeypatch):
     with pytest.raises(RuntimeError, match="disk full"):
         record.write_rrd(runs["drag"], tmp_path / "run.rrd")
     assert not any(tmp_path.iterdir())
+
+
+def test_swim_recording_matches_its_hdf5(tmp_path):
+    from finrft.scene import RobotScene
+    from finrft.swim import swim
+
+    run = swim(preset("physical", RobotScene).replace(**{"sim.dt": 4e-4}), 1)
+    h5, rrd = tmp_path / "swim.h5", tmp_path / "swim.rrd"
+    record.write_swim_h5(run, h5)
+    record.write_swim_rrd(run, rrd)
+    chunks = _chunks(rrd)
+    with h5py.File(h5) as f:
+        time, hinges, body = f["time"][()], f["hinge_angle"][()], f["body_y"][()]
+    for i in range(hinges.shape[1]):
+        t, values = _temporal(chunks, f"/hinges/hinge{i + 1}", "Scalars:scalars")
+        np.testing.assert_allclose(t, time, atol=1e-9)
+        np.testing.assert_allclose(np.ravel(values), np.degrees(hinges[:, i]), rtol=1e-12, atol=1e-12)
+    t, values = _temporal(chunks, "/motion/body_y", "Scalars:scalars")
+    np.testing.assert_allclose(np.ravel(values), 1e3 * body, rtol=1e-12, atol=1e-12)
+    assert _chunks(rrd, blueprint=True)

@@ -226,6 +226,20 @@ def build_parser() -> argparse.ArgumentParser:
                    help="built-in scene when no --scene is given (default: %(default)s)")
     g.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a scene key (SI)")
 
+    report = sub.add_parser("report", help="regenerate the paper's figures and table (Markdown, PNG, rerun)",
+                            description="Write DIR/report.md with the paper's results regenerated: drag and rotate "
+                            "forces, effective flapping, model against the plate-drag measurements, the robot's "
+                            "Table I, optimisation and trajectories, and how long each part took; plus rerun "
+                            "recordings.")
+    report.add_argument("--out", default="report", metavar="DIR", help="output folder (default: %(default)s)")
+    report.add_argument("--quick", action="store_true", help="a smaller version: fewer cycles and evaluations")
+    report.add_argument("--preset", default="paper", choices=scenes.PRESETS[scenes.Scene],
+                        help="plate scene fitted to the measurements (default: %(default)s)")
+    report.add_argument("--data", default="../shared/data/plate_drag", metavar="DIR",
+                        help="folder of plate-drag measurements (default: %(default)s)")
+    report.add_argument("--workers", type=_number("processes", minimum=1, inclusive=True, integer=True),
+                        help="worker processes (default: all cores)")
+
     bench = sub.add_parser("bench", help="benchmarks, measured as ratios in one run on this machine")
     kinds = bench.add_subparsers(dest="bench", required=True, parser_class=_Parser)
     backends = kinds.add_parser("backends", help="Python callback vs native plugin vs bare MuJoCo, and batch",
@@ -570,6 +584,12 @@ def _main(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> int:
         args = parser.parse_args(argv)
         if args.command == "scene":
             print(scenes.to_toml(_resolve_scene(args)), end="")
+            return 0
+        if args.command == "report":
+            from .report import write_report
+            path = write_report(args.out, quick=args.quick, workers=args.workers, data_dir=args.data,
+                                plate=scenes.preset(args.preset))
+            print(f"wrote {path}")
             return 0
         if args.command == "fit":
             return _fit(args)

@@ -74,6 +74,9 @@ def forces(out: Path, quick: bool, workers: int | None) -> str:
                         ls="-" if k % 2 == 0 else "--",
                         label=f"{kind}, {'recovery' if k % 2 == 0 else 'power'}" if k in (2, 3) else None)
         ax.axhline(0, color="grey", lw=0.5)
+        # The origami plate's stops take short impacts as it snaps flat: keep the steady loads readable.
+        steady = 1.5 * np.abs(runs[(test, "rigid")].drive_force).max()
+        ax.set_ylim(-steady, steady)
         ax.set_xlabel("displacement (mm)" if test == "drag" else "rotation (deg)")
         ax.set_ylabel("drive force (N)" if test == "drag" else "drive torque (N m)")
         ax.set_title(f"{test}: cycles 2-{cycles} of {cycles}")
@@ -84,7 +87,9 @@ def forces(out: Path, quick: bool, workers: int | None) -> str:
     plt.close(fig)
     origami = runs[("drag", "origami")].cycle_table()[-1]
     rigid = runs[("drag", "rigid")].cycle_table()[-1]
-    return (f"![drive force and torque](forces.png)\n\nThe drive force over the last cycle: rigid plate "
+    return (f"![drive force and torque](forces.png)\n\nThe axes stop at 1.5 x the rigid plate's load: the origami "
+            f"plate's hinges slam into their stops as it snaps flat, single-sample impacts beyond that. "
+            f"The drive force over the last cycle: rigid plate "
             f"{rigid['mean_power_force_N']:+.2f} N in the power stroke, origami {origami['mean_power_force_N']:+.2f} N "
             f"(power) and {origami['mean_recovery_force_N']:+.2f} N (recovery); net impulse per cycle "
             f"{origami['net_impulse_Ns']:+.2f} N s for the origami plate, {rigid['net_impulse_Ns']:+.2f} N s for the "
@@ -196,12 +201,17 @@ def robot(out: Path, quick: bool, workers: int | None) -> str:
     if quick:
         scene = scene.replace(**{"sim.dt": 1e-4})
     cycles = 1 if quick else 3
-    runs = batch.map_jobs(_swim_cycles, [(s, cycles) for s in table_scenes(scene)], workers=workers)
-    rows = table_rows(runs)
+    gaits = table_scenes(scene)
+    # Table I is the first cycle from rest, as the paper simulated it; the trajectories go on for more.
+    first = batch.map_jobs(_swim_cycles, [(s, 1) for s in gaits], workers=workers)
+    rows = table_rows(first)
+    runs = batch.map_jobs(_swim_cycles, [(s, cycles) for s in gaits], workers=workers) if cycles > 1 else first
     generations = []
     search = optimize(scene, budget=12 if quick else 300, seed=1, workers=workers,
                       on_generation=lambda g, values, extras, es: generations.append((values, extras["eta"])))
     best = swim(scene.replace(**search.best), 1)
+    # The optimiser exploits discretisation error: re-evaluate its optimum with a four times smaller step.
+    finer = swim(scene.replace(**{**search.best, "sim.dt": scene.sim.dt / 4}), 1).summary()["eta"]
     record.write_swim_rrd(best, out / "robot_optimum.rrd")
     record.write_optimization_rrd(out / "optimization.rrd",
                                   [(np.c_[np.degrees(v[:, :2]), 1e3 * v[:, 2:]], e) for v, e in generations],
@@ -211,8 +221,9 @@ def robot(out: Path, quick: bool, workers: int | None) -> str:
     trace = 100 * (1 - np.minimum.accumulate(search.best_cost_per_generation))
     axes[0].plot(np.arange(1, len(trace) + 1), trace, "o-")
     g = scene.replace(**search.best).gait
-    axes[0].set_title(f"best eta {trace[-1]:.2f} % at theta1 {math.degrees(g.theta1):.1f} deg, theta2 "
-                      f"{math.degrees(g.theta2):.1f} deg, L_a {1e3 * search.best['arm.length']:.1f} mm", fontsize=9)
+    axes[0].set_title(f"best eta {trace[-1]:.2f} % (at dt / 4: {100 * finer:.2f} %) at theta1 "
+                      f"{math.degrees(g.theta1):.1f} deg, theta2 {math.degrees(g.theta2):.1f} deg, L_a "
+                      f"{1e3 * search.best['arm.length']:.1f} mm", fontsize=9)
     axes[0].set_xlabel("generation")
     axes[0].set_ylabel("best eta so far (%)")
     axes[0].grid(alpha=0.3)
@@ -226,9 +237,10 @@ def robot(out: Path, quick: bool, workers: int | None) -> str:
     fig.tight_layout()
     fig.savefig(out / "robot.png", dpi=150)
     plt.close(fig)
-    return (f"Paper preset (implicit method, dt {scene.sim.dt:g} s), last cycle of {cycles}:\n\n"
+    return (f"Paper preset (implicit method, dt {scene.sim.dt:g} s), one flap cycle from rest:\n\n"
             f"{table_markdown(rows)}\n\n![optimisation and trajectories](robot.png)\n\n"
-            f"CMA-ES: {search.evaluations} evaluations in {search.wall_s:.1f} s. Recordings: "
+            f"CMA-ES: {search.evaluations} evaluations in {search.wall_s:.1f} s; its optimum, eta "
+            f"{100 * (1 - search.cost):.2f} %, is {100 * finer:.2f} % when re-evaluated with dt / 4. Recordings: "
             f"`robot_optimum.rrd`, `optimization.rrd`. See the README's robot section for why eta is negative on "
             f"the paper's definition and for the optimiser's sensitivity to dt.")
 

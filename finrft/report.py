@@ -87,9 +87,10 @@ def forces(out: Path, quick: bool, workers: int | None) -> str:
     plt.close(fig)
     origami = runs[("drag", "origami")].cycle_table()[-1]
     rigid = runs[("drag", "rigid")].cycle_table()[-1]
-    return (f"![drive force and torque](forces.png)\n\nThe axes stop at 1.5 x the rigid plate's load: the origami "
-            f"plate's hinges slam into their stops as it snaps flat, single-sample impacts beyond that. "
-            f"The drive force over the last cycle: rigid plate "
+    return (f"![drive force and torque](forces.png)\n\nThe axes stop at 1.5 x the rigid plate's load. Beyond "
+            f"them: the origami plate's hinges slamming into their stops as it snaps flat (drag), and, in rotation, "
+            f"the plate chattering against its stops through the rest of the power stroke, a limit of the explicit "
+            f"RFT coupling at this step. The drive force over the last cycle: rigid plate "
             f"{rigid['mean_power_force_N']:+.2f} N in the power stroke, origami {origami['mean_power_force_N']:+.2f} N "
             f"(power) and {origami['mean_recovery_force_N']:+.2f} N (recovery); net impulse per cycle "
             f"{origami['net_impulse_Ns']:+.2f} N s for the origami plate, {rigid['net_impulse_Ns']:+.2f} N s for the "

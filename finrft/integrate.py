@@ -7,7 +7,11 @@
   activations, qvel += dt qacc', positions and time as MuJoCo advances them. dF/dv comes from central
   differences of the same law. Native (plugins/finrft_rft.c, finrft_implicit_step) or numpy, the same formulas.
 
-A stepper advances ``n`` steps and returns 0, or the 1-based step at which the state stopped being finite.
+- ``adaptive``: implicit steps whose size follows a step-doubling error estimate: one step of h and two of h/2
+  must agree to ``sim.tolerance`` (max over qpos and qvel of |difference| / (1e-3 + |value|)), never above
+  ``sim.max_step``; ``sim.dt`` is then only the time grid of reversals and recorded samples.
+
+A stepper advances ``n`` steps of ``sim.dt`` and returns 0, or nonzero when the state stopped being finite.
 """
 
 from __future__ import annotations
@@ -20,29 +24,80 @@ import numpy as np
 
 from . import native, rft
 from .models import ForceGroup
+from .scene import Sim
 
 Stepper = Callable[[mujoco.MjData, int], int]
 
 
-def _native_step() -> Callable[[int, int, int], int]:
-    library = ctypes.CDLL(str(native.library_path()))
-    function = library.finrft_implicit_step
-    function.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int]
+def _native(name: str, *argtypes) -> Callable[..., int]:
+    function = getattr(ctypes.CDLL(str(native.library_path())), name)
+    function.argtypes = [ctypes.c_void_p, ctypes.c_void_p, *argtypes]
     function.restype = ctypes.c_int
     return function
 
 
-def stepper(m: mujoco.MjModel, method: str, backend: str, groups: Sequence[ForceGroup]) -> Stepper:
-    """The step function for a model: MuJoCo's step, or the implicit method (native or numpy)."""
-    if method == "explicit":
+def stepper(m: mujoco.MjModel, sim: Sim, backend: str, groups: Sequence[ForceGroup]) -> Stepper:
+    """The step function for a model: MuJoCo's step, or the implicit or adaptive method (native or numpy)."""
+    if sim.method == "explicit":
         def explicit(d: mujoco.MjData, n: int) -> int:
             mujoco.mj_step(m, d, n)
             return 0
         return explicit
-    if backend == "native":
-        step = _native_step()
-        return lambda d, n: step(m._address, d._address, n)
-    return PythonImplicit(m, groups)
+    if sim.method == "implicit":
+        if backend == "native":
+            step = _native("finrft_implicit_step", ctypes.c_int)
+            return lambda d, n: step(m._address, d._address, n)
+        implicit = PythonImplicit(m, groups)
+        return lambda d, n: implicit.steps(d, n, m.opt.timestep)
+    return Adaptive(m, sim, backend, groups)
+
+
+class Adaptive:
+    """The adaptive method; the step size carries over from one call to the next."""
+
+    def __init__(self, m: mujoco.MjModel, sim: Sim, backend: str, groups: Sequence[ForceGroup]) -> None:
+        self.m, self.max_step, self.tolerance, self.h = m, sim.max_step, sim.tolerance, sim.dt
+        if backend == "native":
+            self._native = _native("finrft_adaptive_advance", ctypes.c_double, ctypes.c_double, ctypes.c_double,
+                                   ctypes.POINTER(ctypes.c_double))
+        else:
+            self._implicit = PythonImplicit(m, groups)
+            self._spec = mujoco.mjtState.mjSTATE_INTEGRATION
+            size = mujoco.mj_stateSize(m, self._spec)
+            self._start, self._full, self._halves = np.zeros(size), np.zeros(size), np.zeros(size)
+
+    def __call__(self, d: mujoco.MjData, n: int) -> int:
+        duration = n * self.m.opt.timestep
+        if hasattr(self, "_native"):
+            h = ctypes.c_double(self.h)
+            failed = self._native(self.m._address, d._address, duration, self.max_step, self.tolerance,
+                                  ctypes.byref(h))
+            self.h = h.value
+            return failed
+        return self._python(d, duration)
+
+    def _python(self, d: mujoco.MjData, duration: float) -> int:
+        m, spec, end = self.m, self._spec, d.time + duration
+        span = slice(1, 1 + m.nq + m.nv)  # qpos and qvel in the integration state, after time
+        while d.time < end - 1e-12:
+            step = min(self.h, self.max_step, end - d.time)
+            mujoco.mj_getState(m, d, self._start, spec)
+            failed = self._implicit.steps(d, 1, step)
+            mujoco.mj_getState(m, d, self._full, spec)
+            mujoco.mj_setState(m, d, self._start, spec)
+            failed = failed or self._implicit.steps(d, 2, step / 2)
+            mujoco.mj_getState(m, d, self._halves, spec)
+            error = np.max(np.abs(self._full[span] - self._halves[span]) / (1e-3 + np.abs(self._halves[span])))
+            if failed or not np.isfinite(error):
+                return 1
+            if error <= self.tolerance:
+                self.h = min(self.max_step, step * min(2.0, 0.9 * np.sqrt(self.tolerance / max(error, 1e-300))))
+            else:
+                mujoco.mj_setState(m, d, self._start, spec)
+                self.h = step * max(0.2, 0.9 * np.sqrt(self.tolerance / error))
+                if self.h < 1e-9:
+                    return 1
+        return 0
 
 
 class PythonImplicit:
@@ -78,8 +133,8 @@ class PythonImplicit:
                 total += self._jacp.T @ slope @ self._jacp
         return total
 
-    def __call__(self, d: mujoco.MjData, n: int) -> int:
-        m, dt = self.m, self.m.opt.timestep
+    def steps(self, d: mujoco.MjData, n: int, dt: float) -> int:
+        m = self.m
         for step in range(n):
             mujoco.mj_forward(m, d)
             mujoco.mj_mulM(m, d, self._rhs, d.qacc)

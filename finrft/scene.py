@@ -73,8 +73,11 @@ class Sim:
     backend: str = _f("native", "", "where the RFT force is computed: the C plugin, or a Python callback "
                       "(native falls back to python when the plugin is unavailable)", choices=("native", "python"))
     method: str = _f("explicit", "", "explicit: MuJoCo's step, the RFT force as it is; implicit: implicitfast "
-                     "with the RFT velocity Jacobian (stable at large steps on light segments)",
-                     choices=("explicit", "implicit"))
+                     "with the RFT velocity Jacobian (stable at large steps on light segments); adaptive: implicit "
+                     "steps sized by an error estimate (dt is then the grid of reversals and samples)",
+                     choices=("explicit", "implicit", "adaptive"))
+    max_step: float = _f(1e-3, "s", "adaptive method: largest step", minimum=0.0)
+    tolerance: float = _f(1e-4, "", "adaptive method: error per step, relative (absolute below 1e-3)", minimum=0.0)
     record_dt: float = _f(0.02, "s", "interval between recorded samples (rounded to whole steps)", minimum=0.0)
 
 
@@ -135,9 +138,9 @@ class _Sections:
 
 
 def _check_sim(sim: Sim) -> None:
-    if sim.method == "implicit" and sim.integrator != "implicitfast":
-        raise SceneError(f"sim.method = 'implicit' extends MuJoCo's implicitfast integrator: set sim.integrator = "
-                         f"'implicitfast' (got {sim.integrator!r}) or use sim.method = 'explicit'")
+    if sim.method != "explicit" and sim.integrator != "implicitfast":
+        raise SceneError(f"sim.method = {sim.method!r} extends MuJoCo's implicitfast integrator: set "
+                         f"sim.integrator = 'implicitfast' (got {sim.integrator!r}) or use sim.method = 'explicit'")
 
 
 @dataclass(frozen=True)

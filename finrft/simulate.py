@@ -210,7 +210,7 @@ def simulate(scene: Scene, drive: Drive, *, progress: Callable[[float], None] | 
         rec_f[i] = base.load(d)[0]
         forces.snapshot(m, d, rec_cvel[i], rec_offset[i], rec_frame[i])
 
-    advance = stepper(m, scene.sim.method, plate.backend, plate.groups)
+    advance = stepper(m, scene.sim, plate.backend, plate.groups)
     with installed(callback):
         step_through(m, d, scene, advance, steps, starts, samples, lambda k: base.start_stroke(m, d, k), record,
                      progress)

@@ -123,7 +123,7 @@ def swim(scene: RobotScene, cycles: int = 1, *, progress: Callable[[float], None
         rec["hinge"][i, :len(hinges)] = d.qpos[hinges]
         rec["torque"][i] = servos.load(d)[0] if prescribed else d.actuator_force[robot.actuators[0]]
 
-    advance = stepper(m, scene.sim.method, robot.backend, robot.groups)
+    advance = stepper(m, scene.sim, robot.backend, robot.groups)
     with installed(callback):
         step_through(m, d, scene, advance, steps, starts, samples, on_stroke, on_sample, progress)
     stroke_y[-1] = d.qpos[robot.travel_qpos]

@@ -14,8 +14,9 @@
 //
 // No static state: everything lives in the per-mjData struct, so instances and threads never share memory.
 //
-// The library also exports finrft_implicit_step, the "implicit" method: MuJoCo's implicitfast step with the
-// RFT force's velocity Jacobian added to the damping matrix, which MuJoCo cannot see in a plugin force.
+// The library also exports the "implicit" method, finrft_implicit_step: MuJoCo's implicitfast step with the RFT
+// force's velocity Jacobian added to the damping matrix, which MuJoCo cannot see in a plugin force; and the
+// "adaptive" method, finrft_adaptive_advance: implicit steps whose size follows a step-doubling error estimate.
 
 #include <math.h>
 #include <stdint.h>
@@ -329,17 +330,16 @@ static void add_rft_jacobian(const mjModel* m, mjData* d, int slot, mjtNum* h, m
   }
 }
 
-// Advance nstep steps with the implicit method; returns 0, or the 1-based step at which the state stopped
-// being finite (the caller reports it; nothing further is integrated).
 #if defined(_WIN32)
-__declspec(dllexport)
+#define FINRFT_EXPORT __declspec(dllexport)
 #else
-__attribute__((visibility("default")))
+#define FINRFT_EXPORT __attribute__((visibility("default")))
 #endif
-int finrft_implicit_step(const mjModel* m, mjData* d, int nstep) {
+
+// nstep implicit steps of size dt; returns 0, or the 1-based step at which the state stopped being finite.
+static int implicit_steps(const mjModel* m, mjData* d, int nstep, mjtNum dt) {
   int nv = m->nv, slot = -1;
   mjp_getPlugin("finrft.rft", &slot);
-  mjtNum dt = m->opt.timestep;
   mjtNum* h = (mjtNum*)malloc((size_t)nv * nv * sizeof(mjtNum));
   mjtNum* rhs = (mjtNum*)malloc(nv * sizeof(mjtNum));
   mjtNum* jacp = (mjtNum*)malloc(3 * (size_t)nv * sizeof(mjtNum));
@@ -381,6 +381,54 @@ int finrft_implicit_step(const mjModel* m, mjData* d, int nstep) {
   free(h);
   free(rhs);
   free(jacp);
+  return failed;
+}
+
+// The implicit method: nstep steps of the model's time step.
+FINRFT_EXPORT int finrft_implicit_step(const mjModel* m, mjData* d, int nstep) {
+  return implicit_steps(m, d, nstep, m->opt.timestep);
+}
+
+// The adaptive method: implicit steps over `duration` seconds, each accepted when one step of h and two of h/2
+// agree to `tol` (max over qpos, qvel of |difference| / (1e-3 + |value|)); the two half steps are kept. The step
+// grows or shrinks by 0.9 sqrt(tol / error) (within 0.2x..2x), never above hmax; *h carries it between calls.
+// Returns 0, or 1 when the state stops being finite or the step falls below 1e-9 s.
+FINRFT_EXPORT int finrft_adaptive_advance(const mjModel* m, mjData* d, mjtNum duration, mjtNum hmax, mjtNum tol,
+                                          mjtNum* h) {
+  const int spec = mjSTATE_INTEGRATION;
+  int size = mj_stateSize(m, spec);
+  mjtNum* start = (mjtNum*)malloc(size * sizeof(mjtNum));
+  mjtNum* full = (mjtNum*)malloc(size * sizeof(mjtNum));
+  mjtNum* halves = (mjtNum*)malloc(size * sizeof(mjtNum));
+  int failed = (!start || !full || !halves) ? 1 : 0;
+  mjtNum end = d->time + duration;
+  // the slice of the integration state holding qpos and qvel (after time)
+  int first = 1, count = m->nq + m->nv;
+  while (!failed && d->time < end - 1e-12) {
+    mjtNum step = mju_min(mju_min(*h, hmax), end - d->time);
+    mj_getState(m, d, start, spec);
+    failed = implicit_steps(m, d, 1, step);
+    mj_getState(m, d, full, spec);
+    mj_setState(m, d, start, spec);
+    failed = failed || implicit_steps(m, d, 2, step / 2);
+    mj_getState(m, d, halves, spec);
+    mjtNum error = 0;
+    for (int i = first; i < first + count; i++) {
+      error = mju_max(error, fabs(full[i] - halves[i]) / (1e-3 + fabs(halves[i])));
+    }
+    if (failed || !isfinite(error)) {
+      failed = 1;
+    } else if (error <= tol) {
+      *h = mju_min(hmax, step * mju_min(2.0, 0.9 * sqrt(tol / mju_max(error, 1e-300))));
+    } else {
+      mj_setState(m, d, start, spec);
+      *h = step * mju_max(0.2, 0.9 * sqrt(tol / error));
+      if (*h < 1e-9) failed = 1;
+    }
+  }
+  free(start);
+  free(full);
+  free(halves);
   return failed;
 }
 

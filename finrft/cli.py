@@ -69,6 +69,20 @@ def _add_common(p: argparse.ArgumentParser) -> None:
                    "tangential, N) at this angle of attack to a CSV, for finrft fit-rft (drag only)")
 
 
+def _add_plate_scene(p: argparse.ArgumentParser):
+    g = p.add_argument_group("scene")
+    g.add_argument("--scene", metavar="FILE.toml", help="plate scene file in SI units (default: the preset)")
+    g.add_argument("--preset", default="paper", choices=scenes.PRESETS[scenes.Scene],
+                   help="built-in scene when no --scene is given (default: %(default)s)")
+    g.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a scene key (SI)")
+    return g
+
+
+def _add_workers(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--workers", type=_number("processes", minimum=1, inclusive=True, integer=True),
+                   help="worker processes (default: all cores)")
+
+
 def _add_robot(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("robot scene")
     g.add_argument("--preset", default="paper", choices=scenes.PRESETS[scenes.RobotScene],
@@ -154,8 +168,7 @@ def build_parser() -> argparse.ArgumentParser:
                           help="search a scene key between bounds, in SI or with a unit suffix deg or mm, e.g. "
                                "gait.theta1=10:80deg, gait.omega=0.5:2, fin.stiffness=0.1:2 (repeatable; "
                                "replaces the default bounds of that key)")
-    optimize.add_argument("--workers", type=_number("processes", minimum=1, inclusive=True, integer=True),
-                          help="local worker processes (default: all cores)")
+    _add_workers(optimize)
     optimize.add_argument("--executor", choices=("local", "dask"), default="local",
                           help="where evaluations run: local processes, or a Dask cluster (needs finrft[cluster])")
     optimize.add_argument("--address", metavar="tcp://HOST:PORT", help="Dask scheduler address (--executor dask)")
@@ -170,8 +183,7 @@ def build_parser() -> argparse.ArgumentParser:
                            description="Evaluate the six gaits of the paper's Table I (one flap cycle each) and "
                            "print eta, the authors' script measure |net|/D1, D1, D2 and the net speed next to the "
                            "paper's eta_sim and eta_exp, as a Markdown table.")
-    table.add_argument("--workers", type=_number("processes", minimum=1, inclusive=True, integer=True),
-                       help="worker processes (default: all cores)")
+    _add_workers(table)
     table.add_argument("--json", action="store_true", help="print the rows as JSON on the last line")
     _add_robot(table)
 
@@ -193,19 +205,14 @@ def build_parser() -> argparse.ArgumentParser:
                       default=300, metavar="N", help="evaluations (default: %(default)s)")
     fitp.add_argument("--seed", type=_number("", minimum=1, inclusive=True, integer=True), default=1, metavar="S",
                       help="random seed, >= 1 (default: %(default)s)")
-    fitp.add_argument("--workers", type=_number("processes", minimum=1, inclusive=True, integer=True),
-                      help="worker processes (default: all cores)")
+    _add_workers(fitp)
     fitp.add_argument("--write-scene", metavar="OUT.toml", help="write the fitted scene (finrft drag --scene OUT.toml)")
     fitp.add_argument("--plot", metavar="OUT.png", help="simulated against measured angles for every file")
     fitp.add_argument("--out", metavar="LOG.h5", help="HDF5 log of every evaluation (never overwritten)")
     fitp.add_argument("--rrd", metavar="FILE.rrd", help="rerun recording of the fitted drag of the first file")
     fitp.add_argument("--json", action="store_true", help="print the result as JSON on the last line")
-    g = fitp.add_argument_group("scene")
-    g.add_argument("--scene", metavar="FILE.toml", help="plate scene file in SI units (default: the preset)")
-    g.add_argument("--preset", default="paper", choices=scenes.PRESETS[scenes.Scene],
-                   help="built-in scene when no --scene is given (default: %(default)s)")
-    g.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a scene key (SI)")
-    g.add_argument("--backend", choices=("native", "python"), help="where the RFT force is computed")
+    _add_plate_scene(fitp).add_argument("--backend", choices=("native", "python"),
+                                        help="where the RFT force is computed")
 
     fitrft = sub.add_parser("fit-rft", help="identify RFT coefficients from rigid-plate forces",
                             description="Identify the paper law's f_perp and f_par (least squares) and the table "
@@ -220,11 +227,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "(default: print it)")
     fitrft.add_argument("--table", metavar="TABLE.csv", help="write the table law here (default: beside --out)")
     fitrft.add_argument("--json", action="store_true", help="print the coefficients as JSON on the last line")
-    g = fitrft.add_argument_group("scene")
-    g.add_argument("--scene", metavar="FILE.toml", help="plate scene of the measurements (segments, v_reg)")
-    g.add_argument("--preset", default="paper", choices=scenes.PRESETS[scenes.Scene],
-                   help="built-in scene when no --scene is given (default: %(default)s)")
-    g.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a scene key (SI)")
+    _add_plate_scene(fitrft)
 
     report = sub.add_parser("report", help="regenerate the paper's figures and table (Markdown, PNG, rerun)",
                             description="Write DIR/report.md with the paper's results regenerated: drag and rotate "
@@ -237,8 +240,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="plate scene fitted to the measurements (default: %(default)s)")
     report.add_argument("--data", default="../shared/data/plate_drag", metavar="DIR",
                         help="folder of plate-drag measurements (default: %(default)s)")
-    report.add_argument("--workers", type=_number("processes", minimum=1, inclusive=True, integer=True),
-                        help="worker processes (default: all cores)")
+    _add_workers(report)
 
     bench = sub.add_parser("bench", help="benchmarks, measured as ratios in one run on this machine")
     kinds = bench.add_subparsers(dest="bench", required=True, parser_class=_Parser)
@@ -248,8 +250,7 @@ def build_parser() -> argparse.ArgumentParser:
                                 "on all cores against one core.")
     backends.add_argument("--batch", type=_number("simulations", minimum=1, inclusive=True, integer=True),
                           default=64, help="simulations in the batch (default: %(default)s)")
-    backends.add_argument("--workers", type=_number("processes", minimum=1, inclusive=True, integer=True),
-                          help="worker processes (default: all cores)")
+    _add_workers(backends)
     backends.add_argument("--json", action="store_true", help="print the figures as JSON on the last line")
     robot = kinds.add_parser("robot", help="one gait evaluation and a full optimisation",
                              description="Time one gait evaluation (one flap cycle) and a CMA-ES optimisation of "
@@ -258,8 +259,7 @@ def build_parser() -> argparse.ArgumentParser:
                        help="robot preset (default: %(default)s)")
     robot.add_argument("--budget", type=_number("evaluations", minimum=1, inclusive=True, integer=True),
                        default=300, help="optimisation budget (default: %(default)s)")
-    robot.add_argument("--workers", type=_number("processes", minimum=1, inclusive=True, integer=True),
-                       help="worker processes (default: all cores)")
+    _add_workers(robot)
     robot.add_argument("--json", action="store_true", help="print the figures as JSON on the last line")
     fitb = kinds.add_parser("fit", help="a 4-parameter plate fit over three drag files",
                             description="Time a fit of k, b, f_perp and f_par of the paper plate over three drag "
@@ -268,8 +268,7 @@ def build_parser() -> argparse.ArgumentParser:
                       "at 10, 30 and 50 mm/s)")
     fitb.add_argument("--budget", type=_number("evaluations", minimum=1, inclusive=True, integer=True),
                       default=300, help="evaluations (default: %(default)s)")
-    fitb.add_argument("--workers", type=_number("processes", minimum=1, inclusive=True, integer=True),
-                      help="worker processes (default: all cores)")
+    _add_workers(fitb)
     fitb.add_argument("--json", action="store_true", help="print the figures as JSON on the last line")
     return parser
 

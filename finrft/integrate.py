@@ -11,7 +11,8 @@
   must agree to ``sim.tolerance`` (max over qpos and qvel of |difference| / (1e-3 + |value|)), never above
   ``sim.max_step``; ``sim.dt`` is then only the time grid of reversals and recorded samples.
 
-A stepper advances ``n`` steps of ``sim.dt`` and returns 0, or nonzero when the state stopped being finite.
+A stepper advances ``n`` steps of ``sim.dt`` and returns 0, nonzero when the state stopped being finite, or
+STEP_TOO_SMALL when the adaptive step fell below 1e-9 s.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from .models import ForceGroup
 from .scene import Sim
 
 Stepper = Callable[[mujoco.MjData, int], int]
+STEP_TOO_SMALL = 2  # the native library's code too
 
 
 def _native(name: str, *argtypes) -> Callable[..., int]:
@@ -96,7 +98,7 @@ class Adaptive:
                 mujoco.mj_setState(m, d, self._start, spec)
                 self.h = step * max(0.2, 0.9 * np.sqrt(self.tolerance / error))
                 if self.h < 1e-9:
-                    return 1
+                    return STEP_TOO_SMALL
         return 0
 
 

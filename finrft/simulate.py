@@ -17,7 +17,7 @@ import numpy as np
 
 from .coupling import PythonCoupling, SegmentForces, installed
 from .drive import Drive
-from .integrate import Stepper, stepper
+from .integrate import STEP_TOO_SMALL, Stepper, stepper
 from .models import build_plate, captured_warnings
 from .scene import Scene
 
@@ -138,12 +138,17 @@ class Prescribed:
         d.qvel[:] += columns @ np.linalg.solve(columns[self.dofs], jump)
 
 
-def unstable(scene: Any, t: float, messages: list[str]) -> SimulationUnstable:
+def unstable(scene: Any, t: float, messages: list[str], code: int = 1) -> SimulationUnstable:
+    sim = scene.sim
+    if code == STEP_TOO_SMALL:
+        return SimulationUnstable(
+            f"the adaptive step fell below 1e-9 s at t = {t:.4g} s (tolerance {sim.tolerance:g}): raise "
+            f"sim.tolerance or rft.v_reg, or use sim.method = 'implicit' with a small sim.dt")
     what = messages[0].rstrip(".") if messages else "the velocity became NaN or Inf"
-    return SimulationUnstable(
-        f"simulation went unstable at t = {t:.4g} s ({what}) with integrator {scene.sim.integrator}, "
-        f"dt = {scene.sim.dt:g} s: reduce sim.dt, raise the inertias or rft.v_reg, or use sim.integrator = "
-        f"implicitfast")
+    advice = ("reduce sim.dt, raise the inertias or rft.v_reg, or use sim.method = 'implicit'"
+              if sim.method == "explicit" else "reduce sim.dt (or sim.max_step), or raise rft.v_reg")
+    return SimulationUnstable(f"simulation went unstable at t = {t:.4g} s ({what}) with method {sim.method}, "
+                              f"integrator {sim.integrator}, dt = {sim.dt:g} s: {advice}")
 
 
 def schedule(drive: Drive, dt: float, record_dt: float) -> tuple[int, np.ndarray, np.ndarray]:
@@ -179,8 +184,9 @@ def step_through(m: mujoco.MjModel, d: mujoco.MjData, scene: Any, advance: Stepp
                     progress(step / steps)
             if step == steps:
                 return
-            if advance(d, int(events[i + 1] - step)) or any(counts[w] for w in bad):
-                raise unstable(scene, d.time, messages)
+            code = advance(d, int(events[i + 1] - step))
+            if code or any(counts[w] for w in bad):
+                raise unstable(scene, d.time, messages, code or 1)
 
 
 def simulate(scene: Scene, drive: Drive, *, progress: Callable[[float], None] | None = None) -> Run:

@@ -392,7 +392,7 @@ FINRFT_EXPORT int finrft_implicit_step(const mjModel* m, mjData* d, int nstep) {
 // The adaptive method: implicit steps over `duration` seconds, each accepted when one step of h and two of h/2
 // agree to `tol` (max over qpos, qvel of |difference| / (1e-3 + |value|)); the two half steps are kept. The step
 // grows or shrinks by 0.9 sqrt(tol / error) (within 0.2x..2x), never above hmax; *h carries it between calls.
-// Returns 0, or 1 when the state stops being finite or the step falls below 1e-9 s.
+// Returns 0, 1 when the state stops being finite, or 2 when the step falls below 1e-9 s.
 FINRFT_EXPORT int finrft_adaptive_advance(const mjModel* m, mjData* d, mjtNum duration, mjtNum hmax, mjtNum tol,
                                           mjtNum* h) {
   const int spec = mjSTATE_INTEGRATION;
@@ -423,7 +423,7 @@ FINRFT_EXPORT int finrft_adaptive_advance(const mjModel* m, mjData* d, mjtNum du
     } else {
       mj_setState(m, d, start, spec);
       *h = step * mju_max(0.2, 0.9 * sqrt(tol / error));
-      if (*h < 1e-9) failed = 1;
+      if (*h < 1e-9) failed = 2;
     }
   }
   free(start);

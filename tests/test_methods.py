@@ -51,3 +51,11 @@ def test_adaptive_error_falls_with_the_tolerance():
 def test_methods_need_implicitfast():
     with pytest.raises(SceneError, match="implicitfast"):
         preset("paper").replace(**{"sim.method": "adaptive", "sim.integrator": "rk4"})
+
+
+def test_adaptive_step_underflow_stops_loudly():
+    from finrft.simulate import SimulationUnstable
+    scene = preset("paper").replace(**{"sim.method": "adaptive", "sim.tolerance": 1e-6, "plate.stop": "limit",
+                                       "plate.segment_inertia": 2.6e-7, "plate.rod_inertia": 4e-8})
+    with pytest.raises(SimulationUnstable, match="fell below 1e-9 s at t = .* raise sim.tolerance"):
+        simulate(scene, Drive(cycles=1))

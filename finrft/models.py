@@ -259,6 +259,7 @@ class RobotModel:
     armature: float            # prescribed servos: their armature; 0 with position servos
     actuators: np.ndarray      # position servos' actuator ids (empty when prescribed)
     fin_hinge_qpos: np.ndarray  # (S, H) fin hinges per side (H = 0 for a rigid fin)
+    fin_hinge_dof: np.ndarray   # (S, H)
     fin_sites: np.ndarray      # (S, N) fin segment midpoints per side
     groups: tuple[ForceGroup, ...]
 
@@ -339,8 +340,8 @@ def build_robot(scene: RobotScene) -> RobotModel:
         groups.append(_group(model, "body_sand", body_law(scene), 0.0, ["body"]))
     travel = model.joint("travel")
     servos = [model.joint(f"{s}_servo") for s in sides]
-    hinges = [[model.joint(f"{s}_hinge{i}").qposadr[0] for i in range(1, fin.segments + 1)]
-              if fin.kind != "rigid" else [] for s in sides]
+    hinges = [[model.joint(f"{s}_hinge{i}") for i in range(1, fin.segments + 1)] if fin.kind != "rigid" else []
+              for s in sides]
     prescribed = scene.robot.servo == "prescribed"
     return RobotModel(
         model=model,
@@ -353,7 +354,8 @@ def build_robot(scene: RobotScene) -> RobotModel:
         servo_dof=np.array([j.dofadr[0] for j in servos], dtype=int),
         armature=float(model.dof_armature[servos[0].dofadr[0]]) if prescribed else 0.0,
         actuators=np.array([] if prescribed else [model.actuator(f"{s}_servo").id for s in sides], dtype=int),
-        fin_hinge_qpos=np.array(hinges, dtype=int).reshape(len(sides), -1),
+        fin_hinge_qpos=np.array([[j.qposadr[0] for j in side] for side in hinges], dtype=int).reshape(len(sides), -1),
+        fin_hinge_dof=np.array([[j.dofadr[0] for j in side] for side in hinges], dtype=int).reshape(len(sides), -1),
         fin_sites=np.array([[model.site(f"{s}_seg{i}").id for i in range(1, fin.segments + 1)] for s in sides]),
         groups=tuple(groups),
     )

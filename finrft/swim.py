@@ -98,8 +98,8 @@ def swim(scene: RobotScene, cycles: int = 1, *, progress: Callable[[float], None
     # in the world (its first hinge turns back at omega).
     d.qpos[robot.servo_qpos] = scene.gait.theta2
     d.qvel[robot.servo_dof] = scene.gait.omega
-    if robot.fin_hinge_qpos.shape[1]:
-        d.qvel[[m.jnt_dofadr[m.jnt_qposadr.tolist().index(q)] for q in robot.fin_hinge_qpos[:, 0]]] = -scene.gait.omega
+    if robot.fin_hinge_dof.shape[1]:
+        d.qvel[robot.fin_hinge_dof[:, 0]] = -scene.gait.omega
     if not prescribed:
         d.act[:] = scene.gait.theta2
     stroke_y = np.zeros(drive.strokes + 1)

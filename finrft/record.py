@@ -1,4 +1,5 @@
-"""File writers for one plate run: an HDF5 file for analysis and a rerun recording (.rrd) for viewing.
+"""File writers: HDF5 files for analysis and rerun recordings (.rrd) for viewing, of plate runs, swims and
+optimisations.
 
 Both writers go through a temporary file in the target's directory and `os.replace` it onto the target, so an
 interrupted or failed write never leaves a truncated file where a complete one is expected.

@@ -11,6 +11,7 @@ come from the principle of virtual work, derived by hand: with segment midpoints
 with F_i the RFT force (the same law as `finrft.rft`) and tau_k the torque of hinge k on segment k. A reversal
 of the drive changes P' at once; the segments then take the impulse ``A dphi' = -sum_i m_i c_ik l e_perp . dP'``.
 It serves as the test oracle for the MuJoCo model (hinged plates; the origami stop as the penalty spring).
+The half robot is solved the same way, in the body's slide and the fin's absolute angles (`solve_robot`).
 """
 
 from __future__ import annotations
@@ -22,8 +23,9 @@ from scipy.integrate import solve_ivp
 
 from . import rft
 from .drive import Drive
-from .models import initial_heading
+from .models import arm_law, body_law, body_share, initial_heading
 from .scene import Scene
+from .swim import gait_drive
 
 
 @dataclass(frozen=True)
@@ -166,7 +168,6 @@ class _HalfRobot:
     w_j = dr_j/dpsi:  M q'' = Q - sum_j m_j J_j^T (J_j' q' + w_j' psi'),  M = sum_j m_j J_j^T J_j + diag(I)."""
 
     def __init__(self, scene, drive: Drive) -> None:
-        from .models import arm_law, body_law, body_share  # the laws a scene implies, shared with the model
         f, a = scene.fin, scene.arm
         if scene.robot.model != "half" or scene.robot.servo != "prescribed":
             raise ValueError("the reference solves the half robot with a prescribed servo")
@@ -237,7 +238,6 @@ class _HalfRobot:
 
 def solve_robot(scene, cycles: int, times: np.ndarray, *, rtol: float = 1e-9, atol: float = 1e-12) -> RobotSolution:
     """Integrate the half robot's flap cycles with Radau; the same start and reversals as finrft.swim."""
-    from .swim import gait_drive
     drive = gait_drive(scene, cycles)
     robot = _HalfRobot(scene, drive)
     n, ts = robot.n, drive.stroke_time

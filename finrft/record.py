@@ -1,7 +1,7 @@
 """File writers: HDF5 files for analysis and rerun recordings (.rrd) for viewing, of plate runs, swims and
 optimisations.
 
-Both writers go through a temporary file in the target's directory and `os.replace` it onto the target, so an
+Every writer goes through a temporary file in the target's directory and `os.replace` it onto the target, so an
 interrupted or failed write never leaves a truncated file where a complete one is expected.
 """
 

@@ -129,8 +129,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     scene = sub.add_parser("scene", help="print a resolved scene as TOML",
                            description="Print the full resolved scene (SI units) as TOML, to copy and edit.")
-    scene.add_argument("--dump", metavar="NAME", default="paper", choices=scenes.PRESETS[scenes.Scene],
-                       help="preset to print (default: %(default)s)")
+    scene.add_argument("--dump", metavar="NAME", default="paper",
+                       help="preset to print: paper for plates; paper or physical with --robot (default: "
+                            "%(default)s)")
+    scene.add_argument("--robot", action="store_true", help="a robot scene instead of a plate scene")
     scene.add_argument("--scene", metavar="FILE.toml", help="resolve this file instead of a preset")
     scene.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a key (SI)")
 
@@ -279,8 +281,7 @@ def _resolve_scene(args: argparse.Namespace) -> scenes.Scene:
         overrides["plate.kind"] = args.plate
     if getattr(args, "backend", None):
         overrides["sim.backend"] = args.backend
-    name = getattr(args, "preset", None) or args.dump
-    return scenes.load_scene(args.scene, preset_name=name, overrides=overrides)
+    return scenes.load_scene(args.scene, preset_name=args.preset, overrides=overrides)
 
 
 def _resolve_robot(args: argparse.Namespace) -> scenes.RobotScene:
@@ -582,7 +583,10 @@ def _main(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> int:
     try:
         args = parser.parse_args(argv)
         if args.command == "scene":
-            print(scenes.to_toml(_resolve_scene(args)), end="")
+            kind = scenes.RobotScene if args.robot else scenes.Scene
+            overrides = dict(scenes.parse_override(item, kind) for item in args.set)
+            resolved = scenes.load_scene(args.scene, preset_name=args.dump, overrides=overrides, cls=kind)
+            print(scenes.to_toml(resolved), end="")
             return 0
         if args.command == "report":
             from .report import write_report

@@ -134,3 +134,9 @@ def test_table_law_from_a_scene_file_matches_the_paper_law(tmp_path, capsys):
 def test_python_dash_m_entry_point():
     done = subprocess.run([sys.executable, "-m", "finrft", "rotate", "--help"], capture_output=True, text=True)
     assert done.returncode == 0 and "degrees/s" in done.stdout
+
+
+def test_robot_scene_dump_round_trips(capsys):
+    from finrft.scene import RobotScene
+    assert main(["scene", "--robot", "--dump", "physical"]) == 0
+    assert tomllib.loads(capsys.readouterr().out) == preset("physical", RobotScene).to_dict()

@@ -9,7 +9,8 @@
 
 - ``adaptive``: implicit steps whose size follows a step-doubling error estimate: one step of h and two of h/2
   must agree to ``sim.tolerance`` (max over qpos and qvel of |difference| / (1e-3 + |value|)), never above
-  ``sim.max_step``; ``sim.dt`` is then only the time grid of reversals and recorded samples.
+  ``sim.max_step``; the accepted state is extrapolated, 2 (two halves) - (one step), which cancels the implicit
+  step's first-order error. ``sim.dt`` is then only the time grid of reversals and recorded samples.
 
 A stepper advances ``n`` steps of ``sim.dt`` and returns 0, nonzero when the state stopped being finite, or
 STEP_TOO_SMALL when the adaptive step fell below 1e-9 s.
@@ -93,6 +94,8 @@ class Adaptive:
             if failed or not np.isfinite(error):
                 return 1
             if error <= self.tolerance:
+                self._halves[span] += self._halves[span] - self._full[span]
+                mujoco.mj_setState(m, d, self._halves, spec)
                 self.h = min(self.max_step, step * min(2.0, 0.9 * np.sqrt(self.tolerance / max(error, 1e-300))))
             else:
                 mujoco.mj_setState(m, d, self._start, spec)

@@ -390,8 +390,9 @@ FINRFT_EXPORT int finrft_implicit_step(const mjModel* m, mjData* d, int nstep) {
 }
 
 // The adaptive method: implicit steps over `duration` seconds, each accepted when one step of h and two of h/2
-// agree to `tol` (max over qpos, qvel of |difference| / (1e-3 + |value|)); the two half steps are kept. The step
-// grows or shrinks by 0.9 sqrt(tol / error) (within 0.2x..2x), never above hmax; *h carries it between calls.
+// agree to `tol` (max over qpos, qvel of |difference| / (1e-3 + |value|)). The accepted positions and velocities
+// are extrapolated, 2 (two halves) - (one step), which cancels the first-order error of the implicit step. The
+// step grows or shrinks by 0.9 sqrt(tol / error) (within 0.2x..2x), never above hmax; *h carries it over calls.
 // Returns 0, 1 when the state stops being finite, or 2 when the step falls below 1e-9 s.
 FINRFT_EXPORT int finrft_adaptive_advance(const mjModel* m, mjData* d, mjtNum duration, mjtNum hmax, mjtNum tol,
                                           mjtNum* h) {
@@ -419,6 +420,8 @@ FINRFT_EXPORT int finrft_adaptive_advance(const mjModel* m, mjData* d, mjtNum du
     if (failed || !isfinite(error)) {
       failed = 1;
     } else if (error <= tol) {
+      for (int i = first; i < first + count; i++) halves[i] += halves[i] - full[i];
+      mj_setState(m, d, halves, spec);
       *h = mju_min(hmax, step * mju_min(2.0, 0.9 * sqrt(tol / mju_max(error, 1e-300))));
     } else {
       mj_setState(m, d, start, spec);

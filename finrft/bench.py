@@ -5,6 +5,7 @@ from __future__ import annotations
 import platform
 import time
 from datetime import date
+from pathlib import Path
 from typing import Any, Callable
 
 import mujoco
@@ -111,3 +112,121 @@ def fit_speed(paths: list[str] | None = None, *, budget: int = 300, workers: int
         f"{workers} workers: {result.search.wall_s:.1f} s (target <= 30 s); RMSE "
         + ", ".join(f"{k} {v:.2f} deg" for k, v in result.rmse_deg.items()))
     return out
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Speed against accuracy
+
+METHODS = (("explicit", "euler"), ("explicit", "implicitfast"), ("explicit", "implicit"), ("explicit", "rk4"),
+           ("implicit", "implicitfast"), ("adaptive", "implicitfast"))
+
+
+def _plate_scenes() -> dict[str, Scene]:
+    paper = preset("paper")
+    physical = paper.replace(**{"plate.segment_inertia": 0.00289 * 0.033 ** 2 / 12,
+                                "plate.rod_inertia": 0.010 * 0.007 ** 2 / 12, "plate.stop": "limit"})
+    return {"plate, paper inertia": paper, "plate, physical inertia": physical}
+
+
+def _label(method: str, integrator: str) -> str:
+    return f"{method} ({integrator})" if method == "explicit" else method
+
+
+def _trial(job: tuple[Scene, Drive, float]) -> dict[str, Any]:
+    """One setting of the study: its segment angles at 10 ms samples, wall time, or how it failed."""
+    from .simulate import SimulationUnstable
+    scene, drive, _ = job
+    try:
+        run = simulate(scene, drive)
+    except SimulationUnstable as exc:
+        return {"failure": "unstable", "detail": str(exc)}
+    angles = np.degrees(run.segment_angle)
+    if not np.all(np.isfinite(angles)):
+        return {"failure": "non-finite"}
+    return {"failure": "", "time": run.time, "angles": angles, "force": run.drive_force, "wall_s": run.wall_s}
+
+
+def accuracy(out: str | Path = "accuracy", *, quick: bool = False, workers: int | None = None,
+             log: Callable[[str], None] = print) -> dict[str, Any]:
+    """Error against wall time for every time-stepping method and step on the origami drag (one recovery and one
+    power stroke) with the paper's and with physical inertias. The reference is the implicit method at 2 µs (10 µs
+    with ``quick``), checked against itself at twice the step. A run fails when it goes unstable or non-finite, or
+    chatters: its drive force varies more than twice as much as the reference's (total variation)."""
+    import csv
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    drive = Drive(speed=0.03, stroke=0.05, cycles=1)
+    steps = [1e-4, 1e-3] if quick else [1e-5, 3e-5, 1e-4, 3e-4, 1e-3, 3e-3, 1e-2]
+    rows, summary = [], {}
+    for name, base in _plate_scenes().items():
+        base = base.replace(**{"sim.record_dt": 0.01})
+        ref_dt = 1e-5 if quick else 2e-6
+        ref, check = (_trial((base.replace(**{"sim.method": "implicit", "sim.dt": dt}), drive, dt))
+                      for dt in (ref_dt, 2 * ref_dt))
+        if ref["failure"] or check["failure"]:
+            raise RuntimeError(f"the reference of {name} failed: {ref.get('detail', ref['failure'])}")
+        self_error = float(np.abs(ref["angles"] - check["angles"]).max())
+        variation = np.abs(np.diff(ref["force"])).sum()
+        jobs = [(base.replace(**{"sim.method": method, "sim.integrator": integrator, "sim.dt": dt}), drive, dt)
+                for method, integrator in METHODS for dt in steps]
+        for (scene, _, dt), result in zip(jobs, batch.map_jobs(_trial, jobs, workers=workers)):
+            row = {"scene": name, "method": _label(scene.sim.method, scene.sim.integrator), "dt": dt,
+                   "failure": result["failure"], "angle_error_deg": float("nan"), "force_error_pct": float("nan"),
+                   "wall_s": result.get("wall_s", float("nan"))}
+            if not result["failure"]:
+                n = min(len(result["time"]), len(ref["time"]))
+                row["angle_error_deg"] = float(np.abs(result["angles"][:n] - ref["angles"][:n]).max())
+                row["force_error_pct"] = float(100 * np.abs(result["force"][:n] - ref["force"][:n]).max()
+                                               / np.abs(ref["force"]).max())
+                if np.abs(np.diff(result["force"])).sum() > 2 * variation:
+                    row["failure"] = "chatter"
+            rows.append(row)
+        ok = [r for r in rows if r["scene"] == name and not r["failure"]]
+        summary[name] = {limit: min((r for r in ok if r["angle_error_deg"] <= limit), key=lambda r: r["wall_s"],
+                                    default=None) for limit in (0.1, 1.0)}
+        summary[name]["reference"] = (ref_dt, self_error)
+    with (out / "accuracy.csv").open("w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    _accuracy_chart(rows, out / "accuracy.png")
+    lines = ["| scene | reference (implicit) | fastest within 0.1° | fastest within 1° |", "|---|---|---|---|"]
+    for name, best in summary.items():
+        cells = [f"{b['method']}, dt {b['dt']:g} s: {1e3 * b['wall_s']:.0f} ms, {b['angle_error_deg']:.3g}°"
+                 if b else "none" for b in (best[0.1], best[1.0])]
+        ref_dt, self_error = best["reference"]
+        lines.append(f"| {name} | dt {ref_dt:g} s, {self_error:.2g}° from dt {2 * ref_dt:g} s | {cells[0]} | "
+                     f"{cells[1]} |")
+    (out / "accuracy.md").write_text("\n".join(lines) + "\n")
+    log("\n".join(lines))
+    return {"rows": rows, "summary": summary}
+
+
+def _accuracy_chart(rows: list[dict[str, Any]], path: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    names = list(dict.fromkeys(r["scene"] for r in rows))
+    fig, axes = plt.subplots(1, len(names), figsize=(7 * len(names), 5), squeeze=False)
+    for ax, name in zip(axes[0], names):
+        mine = [r for r in rows if r["scene"] == name]
+        top = max([r["angle_error_deg"] for r in mine if not r["failure"]] + [1.0]) * 3
+        for method in dict.fromkeys(r["method"] for r in mine):
+            good = [r for r in mine if r["method"] == method and not r["failure"]]
+            bad = [r for r in mine if r["method"] == method and r["failure"]]
+            line, = ax.plot([r["wall_s"] for r in good], [max(r["angle_error_deg"], 1e-6) for r in good], "o-",
+                            label=method)
+            ax.plot([r["wall_s"] if np.isfinite(r["wall_s"]) else 1e-3 for r in bad], [top] * len(bad), "x",
+                    color=line.get_color(), ms=9)
+        ax.axhline(0.1, color="grey", ls=":", lw=0.8)
+        ax.axhline(1.0, color="grey", ls="--", lw=0.8)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("wall time per run (s)")
+        ax.set_ylabel("max segment-angle error (deg); x: failed (unstable, non-finite or chatter)")
+        ax.set_title(f"{name}: origami drag, 50 mm out and back")
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=150)
+    plt.close(fig)

@@ -264,7 +264,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_workers(robot)
     robot.add_argument("--json", action="store_true", help="print the figures as JSON on the last line")
     acc = kinds.add_parser("accuracy", help="speed against accuracy of every time-stepping method and step",
-                           description="Run the origami drag (50 mm out and back) with the paper's and with "
+                           description="Run the origami drag (45 mm out and back) with the paper's and with "
                            "physical inertias for every method (explicit with each MuJoCo integrator, implicit, "
                            "adaptive) and step (10 µs to 10 ms); write DIR/accuracy.csv, a chart of error against "
                            "wall time (accuracy.png) and a summary of the fastest setting within 0.1° and 1° "

@@ -12,9 +12,8 @@ def test_quick_accuracy_study(tmp_path, capsys):
     assert (out / "accuracy.png").stat().st_size > 20_000
     assert "fastest within 0.1°" in (out / "accuracy.md").read_text()
     result = {(r["scene"], r["method"], float(r["dt"])): r for r in rows}
-    # With the paper's 1 kg m^2 inertias MuJoCo's own step is fine at 1 ms ...
+    # With the paper's 1 kg m^2 inertias MuJoCo's own step is fine at 1 ms; with physical inertias RK4 blows up.
     paper = result[("plate, paper inertia", "explicit (implicitfast)", 1e-3)]
     assert paper["failure"] == "" and float(paper["angle_error_deg"]) < 0.01
-    # ... with physical inertias the explicit coupling chatters at 0.1 ms, the implicit method does not.
-    assert result[("plate, physical inertia", "explicit (implicitfast)", 1e-4)]["failure"] == "chatter"
-    assert result[("plate, physical inertia", "implicit", 1e-4)]["failure"] == ""
+    assert float(paper["force_error_pct"]) < 0.1
+    assert result[("plate, physical inertia", "explicit (rk4)", 1e-3)]["failure"] == "unstable"

@@ -1,9 +1,10 @@
 """Run a plate test (drag or rotate) on MuJoCo and collect its results.
 
-The drive joint carries a very large armature, so the RFT load cannot change its speed; each step starts from the
-exact prescribed position and velocity, and the force the drive must apply to hold that motion is read back as
-``-armature * qacc``. At a reversal of the triangle wave the base's velocity jumps; the hinges then receive the
-impulse that an ideal kinematic constraint would give them (computed with the plate's own mass matrix).
+The drive joint carries a very large armature, so the RFT load changes its speed by about 1e-9 of itself per
+stroke: the force the drive applies to hold the motion is ``-armature * qacc``, and its impulse over a stroke
+``-armature`` times the change of its velocity. At a reversal of the triangle wave the drive is put back on the
+exact profile and its velocity jumps; the rest of the plate receives the impulse an ideal kinematic constraint
+would give it (computed with the plate's own mass matrix). `step_through` and `Prescribed` serve the robot too.
 """
 
 from __future__ import annotations

@@ -380,7 +380,7 @@ def _run_test(args: argparse.Namespace) -> int:
             if path:
                 print(f"wrote {flag}: {path}")
     if args.json:
-        print(json.dumps(summary, default=lambda x: x.tolist() if isinstance(x, np.ndarray) else float(x)))
+        print(_json(summary))
     return 0
 
 
@@ -413,7 +413,7 @@ def _swim(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
 
 def _table(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
     from . import batch, swim as swimming
-    runs = batch.map_jobs(swimming._swim_one, swimming.table_scenes(scene), workers=args.workers)
+    runs = batch.map_jobs(swimming.swim_job, [(s, 1) for s in swimming.table_scenes(scene)], workers=args.workers)
     rows = swimming.table_rows(runs)
     print(swimming.table_markdown(rows))
     if args.json:
@@ -622,7 +622,7 @@ def _main(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> int:
             else:
                 figures = bench.backends(batch_size=args.batch, workers=args.workers)
             if args.json:
-                print(json.dumps(figures))
+                print(_json(figures))
             return 0
         return _run_test(args)
     except (UsageError, scenes.SceneError) as exc:

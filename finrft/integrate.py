@@ -60,6 +60,7 @@ class Adaptive:
 
     def __init__(self, m: mujoco.MjModel, sim: Sim, backend: str, groups: Sequence[ForceGroup]) -> None:
         self.m, self.max_step, self.tolerance, self.h = m, sim.max_step, sim.tolerance, sim.dt
+        self._native = None
         if backend == "native":
             self._native = _native("finrft_adaptive_advance", ctypes.c_double, ctypes.c_double, ctypes.c_double,
                                    ctypes.POINTER(ctypes.c_double))
@@ -71,7 +72,7 @@ class Adaptive:
 
     def __call__(self, d: mujoco.MjData, n: int) -> int:
         duration = n * self.m.opt.timestep
-        if hasattr(self, "_native"):
+        if self._native is not None:
             h = ctypes.c_double(self.h)
             failed = self._native(self.m._address, d._address, duration, self.max_step, self.tolerance,
                                   ctypes.byref(h))

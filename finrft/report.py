@@ -19,7 +19,7 @@ from .drive import Drive
 from .optimize import optimize
 from .scene import RobotScene, Scene, preset
 from .simulate import Run
-from .swim import PAPER_TABLE, swim, table_markdown, table_rows, table_scenes
+from .swim import PAPER_TABLE, swim, swim_job, table_markdown, table_rows, table_scenes
 
 COLORS = {"rigid": "black", "soft": "tab:blue", "origami": "tab:red"}
 KINDS = ("rigid", "soft", "origami")
@@ -204,9 +204,9 @@ def robot(out: Path, quick: bool, workers: int | None) -> str:
     cycles = 1 if quick else 3
     gaits = table_scenes(scene)
     # Table I is the first cycle from rest, as the paper simulated it; the trajectories go on for more.
-    first = batch.map_jobs(_swim_cycles, [(s, 1) for s in gaits], workers=workers)
+    first = batch.map_jobs(swim_job, [(s, 1) for s in gaits], workers=workers)
     rows = table_rows(first)
-    runs = batch.map_jobs(_swim_cycles, [(s, cycles) for s in gaits], workers=workers) if cycles > 1 else first
+    runs = batch.map_jobs(swim_job, [(s, cycles) for s in gaits], workers=workers) if cycles > 1 else first
     generations = []
     search = optimize(scene, budget=12 if quick else 300, seed=1, workers=workers,
                       on_generation=lambda g, values, extras, es: generations.append((values, extras["eta"])))
@@ -247,10 +247,6 @@ def robot(out: Path, quick: bool, workers: int | None) -> str:
             f"tighter tolerance. Recordings: "
             f"`robot_optimum.rrd`, `optimization.rrd`. See the README's robot section for why eta is negative on "
             f"the paper's definition and for the optimiser's sensitivity to dt.")
-
-
-def _swim_cycles(job: tuple[RobotScene, int]):
-    return swim(*job)
 
 
 def write_report(out: str | Path = "report", *, quick: bool = False, workers: int | None = None,

@@ -175,5 +175,6 @@ def table_markdown(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
-def _swim_one(scene: RobotScene) -> SwimRun:
-    return swim(scene, 1)
+def swim_job(job: tuple[RobotScene, int]) -> SwimRun:
+    """`swim` of a (scene, cycles) pair: the module-level function a process pool can send to its workers."""
+    return swim(*job)

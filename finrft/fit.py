@@ -102,11 +102,9 @@ def write_drag(path: str | Path, data: DragData, comment: str = "") -> None:
 
 def simulated_drag(scene: Scene, speed: float, distance: float, rate: float = 30.0) -> DragData:
     """A drag of ``scene`` from flat, sampled like the measurements (``rate`` Hz)."""
-    run = simulate(scene, Drive(speed=speed, stroke=distance))
     time = np.arange(0.0, distance / speed + 1e-9, 1.0 / rate)
-    angles = np.column_stack([np.interp(time, run.time, np.degrees(run.segment_angle[:, i]))
-                              for i in range(scene.plate.segments)])
-    return DragData(f"simulated_v{1e3 * speed:g}", time, speed, angles)
+    return DragData(f"simulated_v{1e3 * speed:g}", time, speed,
+                    _angles_at(simulate(scene, Drive(speed=speed, stroke=distance)), time))
 
 
 def resolve_params(names: Sequence[str], bounds: dict[str, tuple[float, float]] | None = None) -> list[Variable]:
@@ -132,9 +130,12 @@ def drag_for(data: DragData) -> Drive:
 
 def simulated_angles(scene: Scene, data: DragData) -> np.ndarray:
     """The scene's segment angles (deg) at the data's times."""
-    run = simulate(scene, drag_for(data))
-    return np.column_stack([np.interp(data.time, run.time, np.degrees(run.segment_angle[:, i]))
-                            for i in range(data.angles.shape[1])])
+    return _angles_at(simulate(scene, drag_for(data)), data.time)
+
+
+def _angles_at(run: Run, time: np.ndarray) -> np.ndarray:
+    """A run's segment angles (deg, T x N) interpolated at ``time``."""
+    return np.column_stack([np.interp(time, run.time, np.degrees(a)) for a in run.segment_angle.T])
 
 
 def mse(scene: Scene, data: DragData) -> float:

@@ -127,12 +127,17 @@ def plate_points(run: Run) -> np.ndarray:
         rod_angle = np.full(count, heading)
     else:
         rod_angle = heading + run.displacement
-    angles = np.column_stack([rod_angle, heading + run.segment_angle])
-    lengths = np.r_[p.rod_length, np.full(p.segments, p.segment_length)]
-    steps = np.zeros((count, p.segments + 1, 3))
+    return _centre_line(base, np.column_stack([rod_angle, heading + run.segment_angle]), p.rod_length, p)
+
+
+def _centre_line(start: np.ndarray, angles: np.ndarray, first: float, chain) -> np.ndarray:
+    """Points (T, N + 2, 3) of a rod of length ``first`` then a chain's segments, from ``start`` (T, 3), each at
+    its absolute angle about z (T, N + 1)."""
+    lengths = np.r_[first, np.full(chain.segments, chain.segment_length)]
+    steps = np.zeros((*angles.shape, 3))
     steps[..., 0] = lengths * np.cos(angles)
     steps[..., 1] = lengths * np.sin(angles)
-    return np.concatenate([base[:, None], base[:, None] + np.cumsum(steps, axis=1)], axis=1)
+    return np.concatenate([start[:, None], start[:, None] + np.cumsum(steps, axis=1)], axis=1)
 
 
 def _blueprint(run: Run, points: np.ndarray, load: tuple[str, str], motion: tuple[str, str]) -> rrb.Blueprint:
@@ -239,11 +244,7 @@ def robot_points(run: SwimRun) -> np.ndarray:
     pivot = np.zeros((count, 3))
     pivot[:, 0], pivot[:, 1] = a.pivot, run.body_y
     angles = np.column_stack([run.arm_angle, run.arm_angle[:, None] + np.cumsum(run.hinge_angle, axis=1)])
-    lengths = np.r_[a.length, np.full(f.segments, f.segment_length)]
-    steps = np.zeros((count, f.segments + 1, 3))
-    steps[..., 0] = lengths * np.cos(angles)
-    steps[..., 1] = lengths * np.sin(angles)
-    return np.concatenate([pivot[:, None], pivot[:, None] + np.cumsum(steps, axis=1)], axis=1)
+    return _centre_line(pivot, angles, a.length, f)
 
 
 def _stream(path: Path, blueprint: rrb.Blueprint) -> rr.RecordingStream:

@@ -7,10 +7,11 @@ imports MuJoCo; a result is the same, bit for bit, as the single run of the same
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing
 import os
 from concurrent.futures import Executor, ProcessPoolExecutor
-from typing import Callable, Sequence, TypeVar
+from typing import Callable, Iterator, Sequence, TypeVar
 
 from .drive import Drive
 from .scene import Scene
@@ -45,23 +46,27 @@ def map_jobs(fn: Callable[[T], R], jobs: Sequence[T], *, workers: int | None = N
     """
     jobs = list(jobs)
     results: list[R] = []
-    if executor is None and (workers == 1 or len(jobs) <= 1):
-        for job in jobs:
-            results.append(fn(job))
+    with pool_for(executor, 1 if len(jobs) <= 1 else workers) as pool:
+        pending = [pool.submit(fn, job) for job in jobs] if pool is not None else jobs
+        for item in pending:
+            results.append(item.result() if pool is not None else fn(item))
             if progress is not None:
                 progress(len(results), len(jobs))
-        return results
-    own = executor is None
-    pool = local_executor(workers) if own else executor
+    return results
+
+
+@contextlib.contextmanager
+def pool_for(executor: Executor | None = None, workers: int | None = None) -> Iterator[Executor | None]:
+    """The executor a block should use: the given one; None (run in this process) when ``workers`` is 1; else a
+    local pool of ``workers`` processes that the block owns and shuts down."""
+    if executor is not None or workers == 1:
+        yield executor
+        return
+    pool = local_executor(workers)
     try:
-        for future in [pool.submit(fn, job) for job in jobs]:
-            results.append(future.result())
-            if progress is not None:
-                progress(len(results), len(jobs))
-        return results
+        yield pool
     finally:
-        if own:
-            pool.shutdown()
+        pool.shutdown()
 
 
 def run_many(jobs: Sequence[Job], **options) -> list[Run]:

@@ -176,20 +176,15 @@ def fit(scene: Scene, data: Sequence[DragData], variables: Sequence[Variable], *
     def population(values: np.ndarray) -> tuple[list[float], dict[str, np.ndarray]]:
         scenes = [scene.replace(**{v.key: float(x) for v, x in zip(variables, row)}) for row in values]
         jobs = [(s, d) for s in scenes for d in data]
-        errors = np.array(batch.map_jobs(_mse_job, jobs, executor=pool, workers=1 if pool is None else None))
+        errors = np.array(batch.map_jobs(_mse_job, jobs, executor=pool, workers=1))
         errors = errors.reshape(len(scenes), len(data))
         return list(errors.mean(axis=1)), {"rmse": np.sqrt(errors)}
 
-    own = workers != 1
-    pool = batch.local_executor(workers) if own else None
-    try:
+    with batch.pool_for(workers=workers) as pool:
         search = cmaes(population, variables, budget=budget, seed=seed, start=start, log=log,
                        log_attrs={"scene_toml": to_toml(scene), "objective": "mean over files of the mean squared "
                                   "segment-angle error (deg^2)", "data": [d.path for d in data]},
                        columns={"rmse": ("deg", len(data))}, on_generation=on_generation)
-    finally:
-        if own:
-            pool.shutdown()
     fitted = scene.replace(**search.best)
     return Fit(search, fitted, {d.name: math.sqrt(mse(fitted, d)) for d in data},
                {d.name: math.sqrt(mse(fitted, d)) for d in validate})

@@ -217,7 +217,7 @@ def optimize(scene: RobotScene, *, variables: Sequence[Variable] = DEFAULT_VARIA
 
     def population(values: np.ndarray) -> tuple[list[float], dict[str, np.ndarray]]:
         scenes = [scene.replace(**{v.key: float(x) for v, x in zip(variables, row)}) for row in values]
-        results = batch.map_jobs(evaluate, scenes, executor=pool, workers=1 if pool is None else None)
+        results = batch.map_jobs(evaluate, scenes, executor=pool, workers=1)
         etas = np.array([r["eta"] for r in results])
         forward = np.array([r["D1_mm"] for r in results])
         usable = np.isfinite(etas) & (forward >= MIN_FORWARD_MM)
@@ -225,13 +225,8 @@ def optimize(scene: RobotScene, *, variables: Sequence[Variable] = DEFAULT_VARIA
             "eta": etas, "D1": np.array([r["D1_mm"] for r in results]) / 1e3,
             "D2": np.array([r["D2_mm"] for r in results]) / 1e3}
 
-    own = executor is None and workers != 1
-    pool = batch.local_executor(workers) if own else executor
-    try:
+    with batch.pool_for(executor, workers) as pool:
         return cmaes(population, variables, budget=budget, seed=seed, start=PAPER_START, log=log, resume=resume,
                      log_attrs={"scene_toml": to_toml(scene), "objective": "1 - eta over one flap cycle from rest "
-                                f"(failed gaits and power strokes under {MIN_FORWARD_MM} mm: 2)"}, columns={"eta": ("1", 0), "D1": ("m", 0), "D2": ("m", 0)},
-                     on_generation=on_generation)
-    finally:
-        if own:
-            pool.shutdown()
+                                f"(failed gaits and power strokes under {MIN_FORWARD_MM} mm: 2)"},
+                     columns={"eta": ("1", 0), "D1": ("m", 0), "D2": ("m", 0)}, on_generation=on_generation)

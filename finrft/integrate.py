@@ -6,14 +6,19 @@
   (M - dt D) qacc' = M qacc, D = joint damping + affine actuator bias + sum_i J_i^T dF_i/dv J_i, then
   activations, qvel += dt qacc', positions and time as MuJoCo advances them. dF/dv comes from central
   differences of the same law. Native (plugins/finrft_rft.c, finrft_implicit_step) or numpy, the same formulas.
+- ``newton``: backward Euler in the RFT force: the velocity change dv solves
+  (M - dt D') dv = dt (f(v) - F(v) + F(v + dv)), D' without the RFT term, f every force MuJoCo computed at v.
+  A rate-independent law is nearly a step function of the velocity's direction, so on light segments the
+  linearisation at v (the implicit step, Newton's first iterate) overshoots and chatters; Newton's method with a
+  backtracking line search on the residual converges to the root (|change| <= 1e-10 (1 + |qvel|)).
 
 - ``adaptive``: implicit steps whose size follows a step-doubling error estimate: one step of h and two of h/2
   must agree to ``sim.tolerance`` (max over qpos and qvel of |difference| / (1e-3 + |value|)), never above
   ``sim.max_step``; the accepted state is extrapolated, 2 (two halves) - (one step), which cancels the implicit
   step's first-order error. ``sim.dt`` is then only the time grid of reversals and recorded samples.
 
-A stepper advances ``n`` steps of ``sim.dt`` and returns 0, nonzero when the state stopped being finite, or
-STEP_TOO_SMALL when the adaptive step fell below 1e-9 s.
+A stepper advances ``n`` steps of ``sim.dt`` and returns 0, nonzero when the state stopped being finite,
+STEP_TOO_SMALL when the adaptive step fell below 1e-9 s, or NOT_CONVERGED when Newton's method did not.
 """
 
 from __future__ import annotations
@@ -29,7 +34,11 @@ from .models import ForceGroup
 from .scene import Sim
 
 Stepper = Callable[[mujoco.MjData, int], int]
-STEP_TOO_SMALL = 2  # the native library's code too
+STEP_TOO_SMALL = 2  # the native library's codes too
+NOT_CONVERGED = 3
+NEWTON_ITERATIONS = 50
+NEWTON_TOLERANCE = 1e-10
+NEWTON_HALVINGS = 10
 
 
 def _native(name: str, *argtypes) -> Callable[..., int]:
@@ -46,12 +55,13 @@ def stepper(m: mujoco.MjModel, sim: Sim, backend: str, groups: Sequence[ForceGro
             mujoco.mj_step(m, d, n)
             return 0
         return explicit
-    if sim.method == "implicit":
+    if sim.method in ("implicit", "newton"):
+        iterations = 1 if sim.method == "implicit" else NEWTON_ITERATIONS
         if backend == "native":
-            step = _native("finrft_implicit_step", ctypes.c_int)
-            return lambda d, n: step(m._address, d._address, n)
+            step = _native("finrft_implicit_step", ctypes.c_int, ctypes.c_int)
+            return lambda d, n: step(m._address, d._address, n, iterations)
         implicit = PythonImplicit(m, groups)
-        return lambda d, n: implicit.steps(d, n, m.opt.timestep)
+        return lambda d, n: implicit.steps(d, n, m.opt.timestep, iterations)
     return Adaptive(m, sim, backend, groups)
 
 
@@ -86,14 +96,14 @@ class Adaptive:
         while d.time < end - 1e-12:
             step = min(self.h, self.max_step, end - d.time)
             mujoco.mj_getState(m, d, self._start, spec)
-            failed = self._implicit.steps(d, 1, step)
+            failed = self._implicit.steps(d, 1, step, 1)
             mujoco.mj_getState(m, d, self._full, spec)
             mujoco.mj_setState(m, d, self._start, spec)
-            failed = failed or self._implicit.steps(d, 2, step / 2)
+            failed = failed or self._implicit.steps(d, 2, step / 2, 1)
             mujoco.mj_getState(m, d, self._halves, spec)
             error = np.max(np.abs(self._full[span] - self._halves[span]) / (1e-3 + np.abs(self._halves[span])))
             if failed or not np.isfinite(error):
-                return 1
+                return failed or 1
             if error <= self.tolerance:
                 self._halves[span] += self._halves[span] - self._full[span]
                 mujoco.mj_setState(m, d, self._halves, spec)
@@ -111,7 +121,7 @@ class PythonImplicit:
 
     def __init__(self, m: mujoco.MjModel, groups: Sequence[ForceGroup]) -> None:
         self.m = m
-        self.laws = [(rft.force_law(g.rft), g) for g in groups]
+        self.laws = [(rft.force_law(g.rft), g) for g in groups if len(g.sites)]
         self.damping = np.diag(m.dof_damping)
         servo = [a for a in range(m.nu) if m.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT
                  and m.actuator_biastype[a] == mujoco.mjtBias.mjBIAS_AFFINE]
@@ -120,44 +130,111 @@ class PythonImplicit:
             self.damping[dof, dof] -= m.actuator_gear[a, 0] ** 2 * m.actuator_biasprm[a, 2]
         self._mass = np.zeros((m.nv, m.nv))
         self._rhs = np.zeros(m.nv)
-        self._jacp = np.zeros((3, m.nv))
-        self._twist = np.zeros(6)
 
-    def jacobian(self, d: mujoco.MjData) -> np.ndarray:
-        """sum_i J_i^T dF_i/dv J_i over every segment (nv x nv)."""
-        m, total = self.m, np.zeros((self.m.nv, self.m.nv))
+    def _segments(self, d: mujoco.MjData) -> tuple[list, list]:
+        """Per force group: its law, v_reg, the site Jacobians (k, 3, nv) and the segments' axes and normals; and per
+        penalty stop: its stiffness, hinge dofs and their deflections from the rest angle now."""
+        segments, stops = [], []
         for law, group in self.laws:
-            for site in group.sites:
-                mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_SITE, site, self._twist, 0)
-                v = self._twist[3:]
-                frame = d.site_xmat[site].reshape(3, 3)
-                h = 1e-6 * (np.sqrt(v @ v) + group.rft.v_reg)
-                probes = np.concatenate([v + h * np.eye(3), v - h * np.eye(3)])
-                force = law(probes, np.tile(frame[:, 0], (6, 1)), np.tile(frame[:, 1], (6, 1)))
-                slope = ((force[:3] - force[3:]) / (2 * h)).T     # dF/dv, row = force component
-                mujoco.mj_jacSite(m, d, self._jacp, None, site)
-                total += self._jacp.T @ slope @ self._jacp
-        return total
+            jacp = np.zeros((len(group.sites), 3, self.m.nv))
+            for row, site in zip(jacp, group.sites):
+                mujoco.mj_jacSite(self.m, d, row, None, site)
+            frames = d.site_xmat[group.sites].reshape(-1, 3, 3)
+            segments.append((law, group.rft.v_reg, jacp, frames[:, :, 0], frames[:, :, 1]))
+            if group.stop_stiffness > 0:
+                deflection = d.qpos[group.hinge_qpos] - self.m.qpos_spring[group.hinge_qpos]
+                stops.append((group.stop_stiffness, group.hinge_dof, deflection))
+        return segments, stops
 
-    def steps(self, d: mujoco.MjData, n: int, dt: float) -> int:
+    @staticmethod
+    def _forces(forces: tuple[list, list], u: np.ndarray, ahead: float,
+                slope: bool) -> tuple[np.ndarray, np.ndarray | None]:
+        """At generalised velocity ``u``: the RFT force plus the penalty stops' torque at the deflection they
+        reach ``ahead`` seconds on at ``u``, and, with ``slope``, its derivative in ``u`` (the law's by central
+        differences)."""
+        segments, stops = forces
+        nv = len(u)
+        force, jacobian = np.zeros(nv), np.zeros((nv, nv)) if slope else None
+        for law, v_reg, jacp, x, y in segments:
+            v = jacp @ u
+            force += np.einsum("kin,ki->n", jacp, law(v, x, y))
+            if slope:
+                h = 1e-6 * (np.linalg.norm(v, axis=1) + v_reg)[:, None, None] * np.eye(3)  # (k, probe, 3)
+                up = law(v[:, None] + h, x[:, None], y[:, None])
+                down = law(v[:, None] - h, x[:, None], y[:, None])
+                dfdv = np.swapaxes((up - down) / (2 * h.sum(axis=2, keepdims=True)), 1, 2)  # (k, force, v)
+                jacobian += np.einsum("kin,kij,kjm->nm", jacp, dfdv, jacp)
+        for stiffness, dofs, deflection in stops:
+            q = deflection + ahead * u[dofs]
+            force[dofs] -= stiffness * (q + np.abs(q)) * q
+            if slope:
+                jacobian[dofs, dofs] -= 4 * stiffness * np.maximum(q, 0) * ahead
+        return force, jacobian
+
+    def velocity_change(self, d: mujoco.MjData, dt: float, iterations: int) -> np.ndarray | None:
+        """The step's velocity change (after mj_forward): the linearly implicit step in the RFT force when
+        ``iterations`` is 1; else the root of G with the penalty stops taken at the new positions too, by Newton's
+        method, or None if it does not converge."""
         m = self.m
-        for step in range(n):
-            mujoco.mj_forward(m, d)
-            mujoco.mj_mulM(m, d, self._rhs, d.qacc)
-            mujoco.mj_fullM(m, d, self._mass)
-            qacc = np.linalg.solve(self._mass + dt * self.damping - dt * self.jacobian(d), self._rhs)
-            for a in range(m.nu):
-                adr = m.actuator_actadr[a]
-                if adr < 0:
-                    continue
-                span = slice(adr, adr + m.actuator_actnum[a])
-                d.act[span] += dt * d.act_dot[span]
-                if m.actuator_actlimited[a]:
-                    d.act[span] = np.clip(d.act[span], *m.actuator_actrange[a])
-            d.qvel[:] += dt * qacc
-            if not np.all(np.isfinite(d.qvel)):
-                return step + 1
-            d.qacc_warmstart[:] = d.qacc
-            mujoco.mj_integratePos(m, d.qpos, d.qvel, dt)
-            d.time += dt
+        mujoco.mj_mulM(m, d, self._rhs, d.qacc)
+        mujoco.mj_fullM(m, d, self._mass)
+        matrix = self._mass + dt * self.damping
+        forces = self._segments(d)
+        qvel = d.qvel.copy()
+        ahead = dt if iterations > 1 else 0.0
+        other = self._rhs - self._forces(forces, qvel, 0.0, False)[0]
+        force, slope = self._forces(forces, qvel, ahead, True)
+
+        def residual(dv: np.ndarray) -> np.ndarray:
+            return matrix @ dv - dt * (other + self._forces(forces, qvel + dv, dt, False)[0])
+        dv = np.zeros(m.nv)
+        g = -dt * (other + force)
+        for _ in range(iterations):
+            step = np.linalg.solve(matrix - dt * slope, -g)
+            if iterations == 1:
+                return step
+            norm, alpha = np.linalg.norm(g), 1.0
+            while True:
+                trial = residual(dv + alpha * step)
+                if np.linalg.norm(trial) <= (1 - 1e-4 * alpha) * norm or alpha < 1e-6:
+                    break
+                alpha /= 2
+            dv, g = dv + alpha * step, trial
+            if np.abs(alpha * step).max() <= NEWTON_TOLERANCE * (1 + np.abs(qvel + dv).max()):
+                return dv
+            _, slope = self._forces(forces, qvel + dv, dt, True)
+        return None
+
+    def steps(self, d: mujoco.MjData, n: int, dt: float, iterations: int) -> int:
+        for _ in range(n):
+            failed = self.step(d, dt, iterations, 0)
+            if failed:
+                return failed
+        return 0
+
+    def step(self, d: mujoco.MjData, dt: float, iterations: int, halvings: int) -> int:
+        """One step of ``dt``; where Newton's method finds no root (forces that feed energy in, such as
+        f_par < 0, can leave the implicit equation without one near v) it halves the step, at most
+        NEWTON_HALVINGS times."""
+        m = self.m
+        mujoco.mj_forward(m, d)
+        dv = self.velocity_change(d, dt, iterations)
+        if dv is None:
+            if iterations == 1 or halvings == NEWTON_HALVINGS:
+                return NOT_CONVERGED
+            return self.step(d, dt / 2, iterations, halvings + 1) or self.step(d, dt / 2, iterations, halvings + 1)
+        for a in range(m.nu):
+            adr = m.actuator_actadr[a]
+            if adr < 0:
+                continue
+            span = slice(adr, adr + m.actuator_actnum[a])
+            d.act[span] += dt * d.act_dot[span]
+            if m.actuator_actlimited[a]:
+                d.act[span] = np.clip(d.act[span], *m.actuator_actrange[a])
+        d.qvel[:] += dv
+        if not np.all(np.isfinite(d.qvel)):
+            return 1
+        d.qacc_warmstart[:] = d.qacc
+        mujoco.mj_integratePos(m, d.qpos, d.qvel, dt)
+        d.time += dt
         return 0

@@ -73,9 +73,10 @@ class Sim:
     backend: str = _f("native", "", "where the RFT force is computed: the C plugin, or a Python callback "
                       "(native falls back to python when the plugin is unavailable)", choices=("native", "python"))
     method: str = _f("explicit", "", "explicit: MuJoCo's step, the RFT force as it is; implicit: implicitfast "
-                     "with the RFT velocity Jacobian (stable at large steps on light segments); adaptive: implicit "
-                     "steps sized by an error estimate (dt is then the grid of reversals and samples)",
-                     choices=("explicit", "implicit", "adaptive"))
+                     "with the RFT force linearised in velocity; newton: implicitfast with the RFT force at the new "
+                     "velocity, solved by Newton's method (stable and accurate at large steps on light segments); "
+                     "adaptive: implicit steps sized by an error estimate (dt is then the grid of reversals and samples)",
+                     choices=("explicit", "implicit", "newton", "adaptive"))
     max_step: float = _f(1e-3, "s", "adaptive method: largest step", minimum=0.0)
     tolerance: float = _f(1e-4, "", "adaptive method: error per step, relative (absolute below 1e-3)", minimum=0.0)
     record_dt: float = _f(0.02, "s", "interval between recorded samples (rounded to whole steps)", minimum=0.0)
@@ -188,7 +189,7 @@ def _check_table(r: RFT) -> None:
         raise SceneError("rft.law = 'table' needs rft.table, the path of a CSV with attack_deg, f_perp_N, f_par_N")
 
 
-PRESETS: dict[type, tuple[str, ...]] = {Scene: ("paper",), RobotScene: ("paper", "physical")}
+PRESETS: dict[type, tuple[str, ...]] = {Scene: ("paper", "physical"), RobotScene: ("paper", "physical")}
 _PRESET_PREFIX = {Scene: "plate", RobotScene: "robot"}
 
 

@@ -18,7 +18,7 @@ import numpy as np
 
 from .coupling import PythonCoupling, SegmentForces, installed
 from .drive import Drive
-from .integrate import STEP_TOO_SMALL, Stepper, stepper
+from .integrate import NOT_CONVERGED, STEP_TOO_SMALL, Stepper, stepper
 from .models import build_plate, captured_warnings
 from .scene import Scene
 
@@ -144,12 +144,23 @@ def unstable(scene: Any, t: float, messages: list[str], code: int = 1) -> Simula
     if code == STEP_TOO_SMALL:
         return SimulationUnstable(
             f"the adaptive step fell below 1e-9 s at t = {t:.4g} s (tolerance {sim.tolerance:g}): raise "
-            f"sim.tolerance or rft.v_reg, or use sim.method = 'implicit' with a small sim.dt")
+            f"sim.tolerance or rft.v_reg, or use sim.method = 'newton'")
+    if code == NOT_CONVERGED:
+        return SimulationUnstable(
+            f"Newton's method of the implicit step did not converge at t = {t:.4g} s (dt = {sim.dt:g} s): reduce "
+            f"sim.dt or raise rft.v_reg")
     what = messages[0].rstrip(".") if messages else "the velocity became NaN or Inf"
-    advice = ("reduce sim.dt, raise the inertias or rft.v_reg, or use sim.method = 'implicit'"
+    advice = ("reduce sim.dt, raise the inertias or rft.v_reg, or use sim.method = 'newton'"
               if sim.method == "explicit" else "reduce sim.dt (or sim.max_step), or raise rft.v_reg")
     return SimulationUnstable(f"simulation went unstable at t = {t:.4g} s ({what}) with method {sim.method}, "
                               f"integrator {sim.integrator}, dt = {sim.dt:g} s: {advice}")
+
+
+def chatter(scene: Any, t: float) -> SimulationUnstable:
+    sim = scene.sim
+    return SimulationUnstable(
+        f"the RFT force chatters at t = {t:.4g} s (it reverses every step: the segments overshoot) with method "
+        f"{sim.method}, dt = {sim.dt:g} s: use sim.method = 'newton', or reduce sim.dt")
 
 
 def schedule(drive: Drive, dt: float, record_dt: float) -> tuple[int, np.ndarray, np.ndarray]:
@@ -161,26 +172,49 @@ def schedule(drive: Drive, dt: float, record_dt: float) -> tuple[int, np.ndarray
     return steps, starts, samples
 
 
+# A recorded sample chatters when some watched dof's velocity, over the three steps before it, moves by more than
+# CHATTER_DV (rad/s or m/s) one way, back, and that way again: an overshoot every step (the RFT force reversing
+# each step), which no oscillation the steps resolve can do. CHATTER_SAMPLES such samples in a row stop the run.
+# Chatter swings a segment across the law's regularisation speed (v_reg ~ 1 mm/s at levers of centimetres:
+# ~0.1 rad/s); a hinge resting on a MuJoCo limit jitters by ~2e-3 rad/s, which is no chatter.
+CHATTER_DV = 1e-2
+CHATTER_SAMPLES = 3
+
+
 def step_through(m: mujoco.MjModel, d: mujoco.MjData, scene: Any, advance: Stepper, steps: int,
                  starts: np.ndarray, samples: np.ndarray, on_stroke: Callable[[int], None],
-                 on_sample: Callable[[int], None], progress: Callable[[float], None] | None = None) -> None:
+                 on_sample: Callable[[int], None], progress: Callable[[float], None] | None = None,
+                 watch: Sequence[int] = ()) -> None:
     """Step a model through a run: ``on_stroke(k)`` as stroke k starts, ``on_sample(i)`` (after mj_forward) at
-    recorded step ``samples[i]``; ``advance`` steps in chunks in between. Stops loudly if the state blows up."""
-    events = np.union1d(samples, starts)
+    recorded step ``samples[i]``; ``advance`` steps in chunks in between. Stops loudly if the state blows up, or
+    if the ``watch`` dofs chatter (fixed-step methods: the three steps before each sample are taken one by one)."""
+    probe = len(watch) > 0 and scene.sim.method != "adaptive"
+    probes = np.unique(np.concatenate([samples - 1, samples - 2, samples - 3])) if probe else np.array([], int)
+    events = np.union1d(np.union1d(samples, starts), probes[probes > 0])
     stroke_of = np.searchsorted(starts, events, side="right") - 1
     counts = d.warning.number
     bad = [int(w) for w in _BAD_STATE]
     messages: list[str] = []
-    sample = 0
+    history: dict[int, np.ndarray] = {}
+    sample, in_a_row = 0, 0
     with captured_warnings(messages):
         for i, step in enumerate(events):
             k = stroke_of[i]
             if step == starts[k]:
                 on_stroke(k)
+            if probe:
+                history[step] = d.qvel[watch].copy()
             if sample < len(samples) and step == samples[sample]:
                 mujoco.mj_forward(m, d)
                 on_sample(sample)
                 sample += 1
+                if probe and step - 3 in history and starts[k] <= step - 3:
+                    moves = np.diff([history[step - j] for j in (3, 2, 1, 0)], axis=0)
+                    flips = np.all(np.abs(moves) > CHATTER_DV, axis=0) & np.all(moves[1:] * moves[:-1] < 0, axis=0)
+                    in_a_row = in_a_row + 1 if flips.any() else 0
+                    if in_a_row == CHATTER_SAMPLES:
+                        raise chatter(scene, d.time)
+                history.clear()
                 if progress is not None:
                     progress(step / steps)
             if step == steps:
@@ -220,7 +254,7 @@ def simulate(scene: Scene, drive: Drive, *, progress: Callable[[float], None] | 
     advance = stepper(m, scene.sim, plate.backend, plate.groups)
     with installed(callback):
         step_through(m, d, scene, advance, steps, starts, samples, lambda k: base.start_stroke(m, d, k), record,
-                     progress)
+                     progress, plate.hinge_dof)
     base.finish(d)
 
     segment_angle = np.cumsum(rec_q, axis=1)

@@ -125,7 +125,8 @@ def swim(scene: RobotScene, cycles: int = 1, *, progress: Callable[[float], None
 
     advance = stepper(m, scene.sim, robot.backend, robot.groups)
     with installed(callback):
-        step_through(m, d, scene, advance, steps, starts, samples, on_stroke, on_sample, progress)
+        free = [robot.travel_dof, *robot.fin_hinge_dof.ravel(), *([] if prescribed else robot.servo_dof)]
+        step_through(m, d, scene, advance, steps, starts, samples, on_stroke, on_sample, progress, free)
     stroke_y[-1] = d.qpos[robot.travel_qpos]
     return SwimRun(scene=scene, cycles=cycles, time=samples * scene.sim.dt, body_y=rec["y"], arm_angle=rec["arm"],
                    hinge_angle=rec["hinge"], servo_torque=rec["torque"], stroke_y=stroke_y, steps=steps,

@@ -260,11 +260,15 @@ static void rft_compute(const mjModel* m, mjData* d, int instance, int capabilit
 }
 
 // ---------------------------------------------------------------------------------------------------------
-// The "implicit" method: a linearly implicit step, (M - dt D) qacc' = M qacc, with D the joint damping, the
-// velocity derivative of affine actuator bias (position servos) and the RFT velocity Jacobian
-// sum_i J_i^T dF_i/dv J_i over every segment of every finrft.rft instance. The RFT Jacobian comes from central
-// differences of the same law, so both laws need no derivative of their own. Then, as MuJoCo's implicitfast:
-// activations, qvel += dt qacc', positions, time.
+// The "implicit" method: backward Euler in the RFT force. MuJoCo's implicitfast step treats the joint damping D
+// (and the velocity derivative of affine actuator bias) implicitly; on top of that the RFT force is taken at the
+// new velocity: the velocity change dv solves
+//     G(dv) = (M - dt D) dv - dt (f(v) - F(v) + F(v + dv)) = 0,
+// f every force MuJoCo computed at v, F the RFT force summed over every segment of every finrft.rft instance,
+// F(u) = sum_i J_i^T F_i(J_i u). A rate-independent law is a near-discontinuity in velocity, so a linearisation
+// at v (the first Newton iterate) overshoots on light segments; Newton's method with a backtracking line search
+// on |G| converges to the root. dF_i/dv comes from central differences of the same law, so both laws need no
+// derivative of their own. Then, as MuJoCo's implicitfast: activations, qvel += dv, positions, time.
 
 // dF/dv (3 x 3, row-major) of one segment at velocity v, by central differences.
 static void segment_jacobian(const RFTData* p, const mjtNum v[3], const mjtNum x[3], const mjtNum y[3],
@@ -306,28 +310,157 @@ static int solve_dense(mjtNum* a, mjtNum* b, int n) {
   return 0;
 }
 
-// Add -dt * J^T C J of every RFT segment to the dense matrix h (nv x nv).
-static void add_rft_jacobian(const mjModel* m, mjData* d, int slot, mjtNum* h, mjtNum* jacp, mjtNum dt) {
-  int nv = m->nv;
-  mjtNum v[3], x[3], y[3], c[9], cj[3];
+// The forces the implicit methods take at the new velocity: every RFT segment of the model (its law, site
+// Jacobian and axes at the current positions) and every penalty stop (its hinge and deflection now).
+typedef struct {
+  int n, nv, nstop;
+  const RFTData** law;  // n
+  mjtNum* jacp;         // n x 3 x nv
+  mjtNum* axes;         // n x 6: x axis, then normal y
+  int* stop_dof;        // nstop
+  mjtNum* stop_k;       // nstop, N m/rad
+  mjtNum* stop_q;       // nstop, deflection from the rest angle
+} Segments;
+
+static int segments_alloc(const mjModel* m, const mjData* d, int slot, Segments* s) {
+  s->n = s->nstop = 0;
+  s->nv = m->nv;
   for (int inst = 0; inst < m->nplugin; inst++) {
-    if (m->plugin[inst] != slot) continue;
     const RFTData* p = (const RFTData*)d->plugin_data[inst];
-    if (!p) continue;
-    for (int i = 0; i < p->nseg; i++) {
-      int s = p->site[i];
-      site_state(m, d, s, v, x, y);
-      segment_jacobian(p, v, x, y, c);
-      mj_jacSite(m, d, jacp, NULL, s);
-      for (int col = 0; col < nv; col++) {
-        for (int r = 0; r < 3; r++) cj[r] = c[3 * r] * jacp[col] + c[3 * r + 1] * jacp[nv + col] +
-                                            c[3 * r + 2] * jacp[2 * nv + col];
-        for (int row = 0; row < nv; row++) {
-          h[row * nv + col] -= dt * (jacp[row] * cj[0] + jacp[nv + row] * cj[1] + jacp[2 * nv + row] * cj[2]);
-        }
+    if (m->plugin[inst] != slot || !p) continue;
+    s->n += p->nseg;
+    if (p->stop_stiffness > 0) s->nstop += p->nhinge;
+  }
+  s->law = (const RFTData**)malloc((s->n + 1) * sizeof(RFTData*));
+  s->jacp = (mjtNum*)malloc((3 * (size_t)s->n * m->nv + 1) * sizeof(mjtNum));
+  s->axes = (mjtNum*)malloc((6 * (size_t)s->n + 1) * sizeof(mjtNum));
+  s->stop_dof = (int*)malloc((s->nstop + 1) * sizeof(int));
+  s->stop_k = (mjtNum*)malloc((s->nstop + 1) * sizeof(mjtNum));
+  s->stop_q = (mjtNum*)malloc((s->nstop + 1) * sizeof(mjtNum));
+  return s->law && s->jacp && s->axes && s->stop_dof && s->stop_k && s->stop_q ? 0 : -1;
+}
+
+static void segments_free(Segments* s) {
+  free(s->law);
+  free(s->jacp);
+  free(s->axes);
+  free(s->stop_dof);
+  free(s->stop_k);
+  free(s->stop_q);
+}
+
+// Fill in the Jacobians, axes and deflections at the current positions (after mj_forward).
+static void segments_update(const mjModel* m, mjData* d, int slot, Segments* s) {
+  int i = 0, h = 0;
+  for (int inst = 0; inst < m->nplugin; inst++) {
+    const RFTData* p = (const RFTData*)d->plugin_data[inst];
+    if (m->plugin[inst] != slot || !p) continue;
+    for (int k = 0; k < p->nseg; k++, i++) {
+      mjtNum v[3];
+      s->law[i] = p;
+      site_state(m, d, p->site[k], v, s->axes + 6 * i, s->axes + 6 * i + 3);
+      mj_jacSite(m, d, s->jacp + 3 * (size_t)s->nv * i, NULL, p->site[k]);
+    }
+    for (int k = 0; p->stop_stiffness > 0 && k < p->nhinge; k++, h++) {
+      s->stop_dof[h] = p->hinge_dof[k];
+      s->stop_k[h] = p->stop_stiffness;
+      s->stop_q[h] = d->qpos[p->hinge_qpos[k]] - m->qpos_spring[p->hinge_qpos[k]];
+    }
+  }
+}
+
+// At generalised velocity u: the RFT force plus the penalty stops' torque at the deflection they reach after
+// `ahead` seconds at u (nv), and, when slope is not NULL, its derivative in u (nv x nv).
+static void segments_force(const Segments* s, const mjtNum* u, mjtNum ahead, mjtNum* force, mjtNum* slope) {
+  int nv = s->nv;
+  mju_zero(force, nv);
+  if (slope) mju_zero(slope, nv * nv);
+  for (int i = 0; i < s->n; i++) {
+    const mjtNum* jac = s->jacp + 3 * (size_t)nv * i;
+    const mjtNum *x = s->axes + 6 * i, *y = s->axes + 6 * i + 3;
+    mjtNum v[3], f[3], c[9], cj[3];
+    mju_mulMatVec(v, jac, u, 3, nv);
+    segment_force(s->law[i], v, x, y, f);
+    for (int col = 0; col < nv; col++) force[col] += jac[col] * f[0] + jac[nv + col] * f[1] + jac[2 * nv + col] * f[2];
+    if (!slope) continue;
+    segment_jacobian(s->law[i], v, x, y, c);
+    for (int col = 0; col < nv; col++) {
+      for (int r = 0; r < 3; r++) cj[r] = c[3 * r] * jac[col] + c[3 * r + 1] * jac[nv + col] + c[3 * r + 2] * jac[2 * nv + col];
+      for (int row = 0; row < nv; row++) {
+        slope[row * nv + col] += jac[row] * cj[0] + jac[nv + row] * cj[1] + jac[2 * nv + row] * cj[2];
       }
     }
   }
+  for (int h = 0; h < s->nstop; h++) {
+    int dof = s->stop_dof[h];
+    mjtNum q = s->stop_q[h] + ahead * u[dof];
+    force[dof] -= s->stop_k[h] * (q + fabs(q)) * q;
+    if (slope && q > 0) slope[dof * nv + dof] -= 4 * s->stop_k[h] * q * ahead;
+  }
+}
+
+#define NEWTON_TOLERANCE 1e-10
+#define NOT_CONVERGED 3
+
+// Workspace of the Newton solve, all of size nv or nv x nv.
+typedef struct {
+  mjtNum *matrix, *jacobian, *slope, *other, *force, *dv, *step, *g, *trial, *candidate, *u;
+} Newton;
+
+// G(dv) into out: matrix dv - dt (other + F(qvel + dv)), the stops dt ahead; returns |G|.
+static mjtNum newton_residual(const Segments* s, Newton* w, const mjtNum* qvel, const mjtNum* dv, mjtNum dt,
+                              mjtNum* out) {
+  int nv = s->nv;
+  for (int i = 0; i < nv; i++) w->u[i] = qvel[i] + dv[i];
+  segments_force(s, w->u, dt, w->force, NULL);
+  mju_mulMatVec(out, w->matrix, dv, nv, nv);
+  for (int i = 0; i < nv; i++) out[i] -= dt * (w->other[i] + w->force[i]);
+  return mju_norm(out, nv);
+}
+
+// The velocity change of one step into w->dv; rhs = M qacc at v. With iterations == 1 the linearly implicit step
+// in the RFT force (the first Newton iterate, no line search, stops as MuJoCo computed them); otherwise the root
+// of G, with the stops' torque taken at the new positions too, by Newton's method, or NOT_CONVERGED.
+static int newton_solve(const Segments* s, Newton* w, const mjtNum* qvel, const mjtNum* rhs, mjtNum dt,
+                        int iterations) {
+  int nv = s->nv;
+  mjtNum ahead = iterations > 1 ? dt : 0;
+  segments_force(s, qvel, 0, w->force, NULL);
+  for (int i = 0; i < nv; i++) w->other[i] = rhs[i] - w->force[i];
+  segments_force(s, qvel, ahead, w->force, w->slope);
+  for (int i = 0; i < nv; i++) {
+    w->dv[i] = 0;
+    w->g[i] = -dt * (w->other[i] + w->force[i]);
+  }
+  mjtNum norm = mju_norm(w->g, nv);
+  for (int it = 0; it < iterations; it++) {
+    for (int i = 0; i < nv * nv; i++) w->jacobian[i] = w->matrix[i] - dt * w->slope[i];
+    for (int i = 0; i < nv; i++) w->step[i] = -w->g[i];
+    if (solve_dense(w->jacobian, w->step, nv)) return NOT_CONVERGED;
+    if (iterations == 1) {
+      mju_copy(w->dv, w->step, nv);
+      return 0;
+    }
+    mjtNum alpha = 1, trial_norm;
+    for (;;) {
+      for (int i = 0; i < nv; i++) w->candidate[i] = w->dv[i] + alpha * w->step[i];
+      trial_norm = newton_residual(s, w, qvel, w->candidate, dt, w->trial);
+      if (trial_norm <= (1 - 1e-4 * alpha) * norm || alpha < 1e-6) break;
+      alpha /= 2;
+    }
+    mjtNum change = 0, scale = 0;
+    for (int i = 0; i < nv; i++) {
+      w->dv[i] += alpha * w->step[i];
+      w->g[i] = w->trial[i];
+      change = mju_max(change, fabs(alpha * w->step[i]));
+      scale = mju_max(scale, fabs(qvel[i] + w->dv[i]));
+    }
+    norm = trial_norm;
+    if (change <= NEWTON_TOLERANCE * (1 + scale)) return 0;
+    for (int i = 0; i < nv; i++) w->u[i] = qvel[i] + w->dv[i];
+    segments_force(s, w->u, dt, w->force, w->slope);
+  }
+  return NOT_CONVERGED;
 }
 
 #if defined(_WIN32)
@@ -336,64 +469,90 @@ static void add_rft_jacobian(const mjModel* m, mjData* d, int slot, mjtNum* h, m
 #define FINRFT_EXPORT __attribute__((visibility("default")))
 #endif
 
-// nstep implicit steps of size dt; returns 0, or the 1-based step at which the state stopped being finite.
-static int implicit_steps(const mjModel* m, mjData* d, int nstep, mjtNum dt) {
-  int nv = m->nv, slot = -1;
-  mjp_getPlugin("finrft.rft", &slot);
-  mjtNum* h = (mjtNum*)malloc((size_t)nv * nv * sizeof(mjtNum));
-  mjtNum* rhs = (mjtNum*)malloc(nv * sizeof(mjtNum));
-  mjtNum* jacp = (mjtNum*)malloc(3 * (size_t)nv * sizeof(mjtNum));
-  int failed = (!h || !rhs || !jacp) ? 1 : 0;
-  for (int step = 0; step < nstep && !failed; step++) {
-    mj_forward(m, d);
-    mj_mulM(m, d, rhs, d->qacc);
-    mj_fullM(m, d, h);
-    for (int i = 0; i < nv; i++) h[i * nv + i] += dt * m->dof_damping[i];
-    for (int a = 0; a < m->nu; a++) {
-      if (m->actuator_trntype[a] != mjTRN_JOINT || m->actuator_biastype[a] != mjBIAS_AFFINE) continue;
-      int dof = m->jnt_dofadr[m->actuator_trnid[2 * a]];
-      mjtNum gear = m->actuator_gear[6 * a];
-      h[dof * nv + dof] -= dt * gear * gear * m->actuator_biasprm[mjNBIAS * a + 2];
-    }
-    if (slot >= 0) add_rft_jacobian(m, d, slot, h, jacp, dt);
-    if (solve_dense(h, rhs, nv)) {
-      failed = step + 1;
-      break;
-    }
-    for (int a = 0; a < m->nu; a++) {
-      int adr = m->actuator_actadr[a];
-      if (adr < 0) continue;
-      for (int j = adr; j < adr + m->actuator_actnum[a]; j++) {
-        d->act[j] += dt * d->act_dot[j];
-        if (m->actuator_actlimited[a]) {
-          d->act[j] = mju_clip(d->act[j], m->actuator_actrange[2 * a], m->actuator_actrange[2 * a + 1]);
-        }
+// Where Newton's method finds no root (forces that feed energy in, such as f_par < 0, can leave the implicit
+// equation without one near v), the newton method halves the step, down to dt / 2^NEWTON_HALVINGS.
+#define NEWTON_HALVINGS 10
+
+typedef struct {
+  int slot;
+  Segments segments;
+  Newton w;
+  mjtNum* rhs;
+} Workspace;
+
+// One implicit step of size dt; 0, 1 when the state stopped being finite, or NOT_CONVERGED.
+static int implicit_step(const mjModel* m, mjData* d, mjtNum dt, int iterations, Workspace* ws, int halvings) {
+  int nv = m->nv;
+  Newton* w = &ws->w;
+  mj_forward(m, d);
+  mj_mulM(m, d, ws->rhs, d->qacc);
+  mj_fullM(m, d, w->matrix);
+  for (int i = 0; i < nv; i++) w->matrix[i * nv + i] += dt * m->dof_damping[i];
+  for (int a = 0; a < m->nu; a++) {
+    if (m->actuator_trntype[a] != mjTRN_JOINT || m->actuator_biastype[a] != mjBIAS_AFFINE) continue;
+    int dof = m->jnt_dofadr[m->actuator_trnid[2 * a]];
+    mjtNum gear = m->actuator_gear[6 * a];
+    w->matrix[dof * nv + dof] -= dt * gear * gear * m->actuator_biasprm[mjNBIAS * a + 2];
+  }
+  segments_update(m, d, ws->slot, &ws->segments);
+  if (newton_solve(&ws->segments, w, d->qvel, ws->rhs, dt, iterations)) {
+    if (iterations == 1 || halvings == NEWTON_HALVINGS) return NOT_CONVERGED;
+    int failed = implicit_step(m, d, dt / 2, iterations, ws, halvings + 1);
+    return failed ? failed : implicit_step(m, d, dt / 2, iterations, ws, halvings + 1);
+  }
+  for (int a = 0; a < m->nu; a++) {
+    int adr = m->actuator_actadr[a];
+    if (adr < 0) continue;
+    for (int j = adr; j < adr + m->actuator_actnum[a]; j++) {
+      d->act[j] += dt * d->act_dot[j];
+      if (m->actuator_actlimited[a]) {
+        d->act[j] = mju_clip(d->act[j], m->actuator_actrange[2 * a], m->actuator_actrange[2 * a + 1]);
       }
     }
-    for (int i = 0; i < nv; i++) {
-      d->qvel[i] += dt * rhs[i];
-      if (!isfinite(d->qvel[i])) failed = step + 1;
-    }
-    mju_copy(d->qacc_warmstart, d->qacc, nv);
-    mj_integratePos(m, d->qpos, d->qvel, dt);
-    d->time += dt;
   }
-  free(h);
-  free(rhs);
-  free(jacp);
+  int failed = 0;
+  for (int i = 0; i < nv; i++) {
+    d->qvel[i] += w->dv[i];
+    if (!isfinite(d->qvel[i])) failed = 1;
+  }
+  mju_copy(d->qacc_warmstart, d->qacc, nv);
+  mj_integratePos(m, d->qpos, d->qvel, dt);
+  d->time += dt;
   return failed;
 }
 
-// The implicit method: nstep steps of the model's time step.
-FINRFT_EXPORT int finrft_implicit_step(const mjModel* m, mjData* d, int nstep) {
-  return implicit_steps(m, d, nstep, m->opt.timestep);
+// nstep implicit steps of size dt; returns 0, 1 when the state stopped being finite, or NOT_CONVERGED.
+static int implicit_steps(const mjModel* m, mjData* d, int nstep, mjtNum dt, int iterations) {
+  int nv = m->nv;
+  Workspace ws;
+  ws.slot = -1;
+  mjp_getPlugin("finrft.rft", &ws.slot);
+  mjtNum* block = (mjtNum*)malloc((3 * (size_t)nv * nv + 9 * (size_t)nv) * sizeof(mjtNum));
+  int failed = (segments_alloc(m, d, ws.slot, &ws.segments) || !block) ? 1 : 0;
+  if (block) {
+    mjtNum* next = block;
+    mjtNum** squares[] = {&ws.w.matrix, &ws.w.jacobian, &ws.w.slope};
+    mjtNum** vectors[] = {&ws.w.other, &ws.w.force, &ws.w.dv, &ws.w.step, &ws.w.g, &ws.w.trial, &ws.w.candidate,
+                          &ws.w.u, &ws.rhs};
+    for (int i = 0; i < 3; i++, next += nv * nv) *squares[i] = next;
+    for (int i = 0; i < 9; i++, next += nv) *vectors[i] = next;
+  }
+  for (int step = 0; step < nstep && !failed; step++) failed = implicit_step(m, d, dt, iterations, &ws, 0);
+  segments_free(&ws.segments);
+  free(block);
+  return failed;
+}
+
+// The implicit (iterations == 1) and newton methods: nstep steps of the model's time step.
+FINRFT_EXPORT int finrft_implicit_step(const mjModel* m, mjData* d, int nstep, int iterations) {
+  return implicit_steps(m, d, nstep, m->opt.timestep, iterations);
 }
 
 // The adaptive method: implicit steps over `duration` seconds, each accepted when one step of h and two of h/2
 // agree to `tol` (max over qpos, qvel of |difference| / (1e-3 + |value|)). The accepted positions and velocities
 // are extrapolated, 2 (two halves) - (one step), which cancels the first-order error of the implicit step. The
 // step grows or shrinks by 0.9 sqrt(tol / error) (within 0.2x..2x), never above hmax; *h carries it over calls.
-// Returns 0, 1 when the state stops being finite, or 2 when the step falls below 1e-9 s.
+// Returns 0, 1 when the state stops being finite, 2 when the step falls below 1e-9 s, or NOT_CONVERGED.
 FINRFT_EXPORT int finrft_adaptive_advance(const mjModel* m, mjData* d, mjtNum duration, mjtNum hmax, mjtNum tol,
                                           mjtNum* h) {
   const int spec = mjSTATE_INTEGRATION;
@@ -408,17 +567,17 @@ FINRFT_EXPORT int finrft_adaptive_advance(const mjModel* m, mjData* d, mjtNum du
   while (!failed && d->time < end - 1e-12) {
     mjtNum step = mju_min(mju_min(*h, hmax), end - d->time);
     mj_getState(m, d, start, spec);
-    failed = implicit_steps(m, d, 1, step);
+    failed = implicit_steps(m, d, 1, step, 1);
     mj_getState(m, d, full, spec);
     mj_setState(m, d, start, spec);
-    failed = failed || implicit_steps(m, d, 2, step / 2);
+    failed = failed ? failed : implicit_steps(m, d, 2, step / 2, 1);
     mj_getState(m, d, halves, spec);
     mjtNum error = 0;
     for (int i = first; i < first + count; i++) {
       error = mju_max(error, fabs(full[i] - halves[i]) / (1e-3 + fabs(halves[i])));
     }
     if (failed || !isfinite(error)) {
-      failed = 1;
+      failed = failed ? failed : 1;
     } else if (error <= tol) {
       for (int i = first; i < first + count; i++) halves[i] += halves[i] - full[i];
       mj_setState(m, d, halves, spec);

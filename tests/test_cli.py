@@ -106,6 +106,14 @@ def test_unstable_run_exits_1_and_writes_nothing(tmp_path, capsys):
     assert not out.exists()
 
 
+def test_chattering_run_exits_1_and_writes_nothing(tmp_path, capsys):
+    out = tmp_path / "run.h5"
+    assert main(["drag", "--preset", "physical", "--set", "sim.method='explicit'", "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "chatters" in err and "newton" in err and len(err.strip().splitlines()) == 1
+    assert not out.exists()
+
+
 def test_scene_dump_round_trips(tmp_path, capsys):
     assert main(["scene", "--dump", "paper"]) == 0
     text = capsys.readouterr().out

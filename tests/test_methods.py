@@ -5,7 +5,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from finrft import integrate, models
+from finrft import integrate, models, reference
 from finrft.drive import Drive
 from finrft.scene import SceneError, preset
 from finrft.simulate import simulate
@@ -29,7 +29,7 @@ def test_implicit_step_without_rft_is_implicitfast(backend):
     np.testing.assert_allclose(ours.qvel, theirs.qvel, atol=1e-12)
 
 
-@pytest.mark.parametrize("method,atol", [("implicit", 1e-9), ("adaptive", 1e-6)])
+@pytest.mark.parametrize("method,atol", [("implicit", 1e-9), ("newton", 1e-9), ("adaptive", 1e-6)])
 def test_native_and_numpy_methods_agree(method, atol):
     scene = preset("paper").replace(**{"sim.method": method, "plate.segment_inertia": 1e-3, "sim.dt": 1e-3})
     drive = Drive(stroke=0.05, cycles=1)
@@ -59,3 +59,51 @@ def test_adaptive_step_underflow_stops_loudly():
                                        "plate.segment_inertia": 2.6e-7, "plate.rod_inertia": 4e-8})
     with pytest.raises(SimulationUnstable, match="fell below 1e-9 s at t = .* raise sim.tolerance"):
         simulate(scene, Drive(cycles=1))
+
+
+LIGHT_DRIVE = Drive(speed=0.03, stroke=0.045, cycles=1)
+
+
+def _flips(scene, method: str, dt: float) -> float:
+    """The share of steps, over 200 steps half a second into a 45 mm recovery stroke, in which some hinge's
+    acceleration changes sign: near 1 when the segments chatter (the RFT force reverses every step)."""
+    scene = scene.replace(**{"sim.method": method, "sim.dt": dt})
+    plate = models.build_plate(scene)
+    m, d = plate.model, mujoco.MjData(plate.model)
+    d.qvel[plate.drive_dof] = LIGHT_DRIVE.speed
+    advance = integrate.stepper(m, scene.sim, "native", plate.groups)
+    assert advance(d, round(0.5 / dt)) == 0
+    velocities = []
+    for _ in range(200):
+        assert advance(d, 1) == 0
+        velocities.append(d.qvel[plate.hinge_qpos - 1].copy())  # hinge dofs follow the drive's
+    change = np.sign(np.diff(velocities, axis=0))
+    return float(np.mean(np.any(change[1:] != change[:-1], axis=1)))
+
+
+def test_explicit_coupling_chatters_on_light_segments_and_newton_does_not():
+    light = preset("physical")
+    assert _flips(light, "explicit", 1e-4) > 0.9
+    assert _flips(light, "implicit", 1e-3) > 0.9  # the force linearised at the step's start overshoots too
+    assert _flips(light, "explicit", 1e-5) == 0
+    assert _flips(light, "newton", 1e-3) == 0
+
+
+@pytest.mark.parametrize("backend", ["native", "python"])
+def test_newton_on_light_segments_matches_reference_at_large_steps(backend):
+    # 15 mm out and back: Radau needs minutes for the longer drive's close against the stiff penalty stops.
+    light, drive = preset("physical").replace(**{"sim.backend": backend}), Drive(speed=0.03, stroke=0.015, cycles=1)
+    ref = None
+    for dt, angle, force in ((1e-3, 0.01, 0.005), (1e-2, 0.05, 0.03)):
+        run = simulate(light.replace(**{"sim.dt": dt}), drive)
+        ref = ref or reference.solve(light, drive, run.time, rtol=1e-7, atol=1e-10)
+        assert np.degrees(np.abs(run.segment_angle - ref.segment_angle)).max() < angle
+        assert np.abs(run.drive_force - ref.drive_force).max() < force * run.peak_drive_force
+    assert np.degrees(run.hinge_angle.min()) < -8  # the plate did fold
+
+
+def test_chatter_stops_the_run_loudly():
+    # The run that _flips shows chattering (explicit coupling, light segments, 0.1 ms) must not pass as a result.
+    from finrft.simulate import SimulationUnstable
+    with pytest.raises(SimulationUnstable, match=r"chatters at t = .* dt = 0.0001 s: use sim.method = 'newton'"):
+        simulate(preset("physical").replace(**{"sim.method": "explicit", "sim.dt": 1e-4}), LIGHT_DRIVE)

@@ -264,14 +264,22 @@ def build_parser() -> argparse.ArgumentParser:
     _add_workers(robot)
     robot.add_argument("--json", action="store_true", help="print the figures as JSON on the last line")
     acc = kinds.add_parser("accuracy", help="speed against accuracy of every time-stepping method and step",
-                           description="Run the origami drag (45 mm out and back) with the paper's and with "
-                           "physical inertias for every method (explicit with each MuJoCo integrator, implicit, "
-                           "adaptive) and step (10 µs to 10 ms); write DIR/accuracy.csv, a chart of error against "
-                           "wall time (accuracy.png) and a summary of the fastest setting within 0.1° and 1° "
-                           "(accuracy.md).")
+                           description="Run the origami drag (45 mm out and back) and one flap cycle of the "
+                           "robot, each with the paper's and with physical inertias, for every method (explicit "
+                           "with each MuJoCo integrator, implicit, newton: steps of 10 µs to 10 ms; adaptive: "
+                           "tolerances 0.1 to 1e-5), v_reg (0.1, 1, 10 mm/s) and backend (python at steps of 1 ms "
+                           "and more); write DIR/accuracy.csv, a chart of error against wall time (accuracy.png) "
+                           "and a summary of the fastest setting within 0.1° and 1° (accuracy.md). Takes about "
+                           "10 minutes on two cores.")
     acc.add_argument("--out", default="accuracy", metavar="DIR", help="output folder (default: %(default)s)")
-    acc.add_argument("--quick", action="store_true", help="two steps only and a coarser reference")
+    acc.add_argument("--quick", action="store_true", help="steps of 0.1 and 1 ms, one tolerance and v_reg, and a coarser reference (about 25 s)")
     _add_workers(acc)
+    model = kinds.add_parser("modelling", help="what each modelling choice costs and changes",
+                             description="Measure planar against 3D chains, rigid plates as one body against "
+                             "welded segments, MuJoCo limit against penalty stops, and the half against the full "
+                             "robot: the largest change in segment angle (deg), drive force (%% of its peak) or "
+                             "efficiency (points), and the wall-time ratio. About a minute.")
+    model.add_argument("--json", action="store_true", help="print the figures as JSON on the last line")
     fitb = kinds.add_parser("fit", help="a 4-parameter plate fit over three drag files",
                             description="Time a fit of k, b, f_perp and f_par of the paper plate over three drag "
                             "files with --budget evaluations on all cores.")
@@ -616,6 +624,8 @@ def _main(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> int:
                 return 0
             if args.bench == "fit":
                 figures = bench.fit_speed(args.data, budget=args.budget, workers=args.workers)
+            elif args.bench == "modelling":
+                figures = bench.modelling()
             elif args.bench == "robot":
                 figures = bench.robot(scenes.preset(args.preset, scenes.RobotScene), budget=args.budget,
                                       workers=args.workers)

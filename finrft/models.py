@@ -119,12 +119,14 @@ def _configure_chain(spec: mujoco.MjSpec, chain: Chain, dt: float) -> None:
 
 
 def _add_chain(spec: mujoco.MjSpec, parent: mujoco.MjsBody, chain: Chain, offset: float,
-               prefix: str = "") -> list[mujoco.MjsBody]:
+               prefix: str = "", spatial: bool = False, welded: bool = False) -> list[mujoco.MjsBody]:
     """Segments ``{prefix}seg{i}`` in series from ``offset`` along the parent's x axis, on hinges
-    ``{prefix}hinge{i}``; a rigid chain is one body ``{prefix}plate`` carrying every segment."""
+    ``{prefix}hinge{i}``; a rigid chain is one body ``{prefix}plate`` carrying every segment, unless ``welded``:
+    then hinged segments held by weld constraints. ``spatial``: each segment also turns freely about its own x
+    and y axes (hinges ``{prefix}bend{i}x``, ``{prefix}bend{i}y``)."""
     half = chain.segment_length / 2
     segment = spec.find_default("segment")
-    if chain.kind == "rigid":
+    if chain.kind == "rigid" and not welded:
         body = parent.add_body(name=f"{prefix}plate", pos=[offset, 0, 0])
         centres = [half + i * chain.segment_length for i in range(chain.segments)]
         com = float(np.mean(centres))
@@ -138,7 +140,15 @@ def _add_chain(spec: mujoco.MjSpec, parent: mujoco.MjsBody, chain: Chain, offset
     for i in range(1, chain.segments + 1):
         body = parent.add_body(name=f"{prefix}seg{i}", pos=pos)
         body.mass, body.ipos, body.inertia = chain.segment_mass, [half, 0, 0], [chain.segment_inertia] * 3
+        for axis in ("x", "y") if spatial else ():
+            body.add_joint(name=f"{prefix}bend{i}{axis}", type=mujoco.mjtJoint.mjJNT_HINGE,
+                           axis=[float(axis == "x"), float(axis == "y"), 0.0])
         body.add_joint(spec.find_default("hinge"), name=f"{prefix}hinge{i}")
+        if welded:
+            weld = spec.add_equality(type=mujoco.mjtEq.mjEQ_WELD, objtype=mujoco.mjtObj.mjOBJ_BODY,
+                                     name1=parent.name, name2=body.name)
+            weld.solref = [LIMIT_TIMECONST, 1.0]
+            weld.solimp = list(LIMIT_IMPEDANCE)
         body.add_geom(segment, name=f"{prefix}seg{i}", pos=[half, 0, 0])
         body.add_site(name=f"{prefix}seg{i}", pos=[half, 0, 0])
         bodies.append(body)
@@ -178,8 +188,8 @@ def _group(model: mujoco.MjModel, name: str, law: RFT, stop_stiffness: float, bo
     """A force group of a compiled model: every site on the named bodies, and their hinges."""
     ids = [model.body(b).id for b in body_names]
     sites = np.array([s for s in range(model.nsite) if model.site_bodyid[s] in ids], dtype=int)
-    hinges = [j for j in range(model.njnt) if model.jnt_bodyid[j] in ids
-              and model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE]
+    hinges = [j for j in range(model.njnt) if model.jnt_bodyid[j] in ids  # hinges about z, as the plugin's
+              and model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE and abs(model.jnt_axis[j, 2]) > 0.5]
     return ForceGroup(name, law, sites, model.site_bodyid[sites].copy(), stop_stiffness,
                       np.array([model.jnt_qposadr[j] for j in hinges], dtype=int),
                       np.array([model.jnt_dofadr[j] for j in hinges], dtype=int))
@@ -209,7 +219,7 @@ def plate_spec(scene: Scene, drive: str = "drag", attack_deg: float = 90.0,
         joint.type = mujoco.mjtJoint.mjJNT_HINGE
         joint.axis = [0, 0, 1]
     _configure_chain(spec, p, scene.sim.dt)
-    segments = _add_chain(spec, rod, p, p.rod_length)
+    segments = _add_chain(spec, rod, p, p.rod_length, spatial=p.chain == "spatial", welded=p.rigid_as == "welds")
     if backend == "native":
         _bind(spec, "sand", scene.rft, penalty_stiffness(p), segments)
 
@@ -227,10 +237,11 @@ def build_plate(scene: Scene, drive: str = "drag", attack_deg: float = 90.0) -> 
     backend = native.resolve_backend(scene.sim.backend)
     model = _compile(plate_spec(scene, drive, attack_deg, backend))
     p = scene.plate
-    bodies = ["plate"] if p.kind == "rigid" else [f"seg{i}" for i in range(1, p.segments + 1)]
+    one_body = p.kind == "rigid" and p.rigid_as == "body"
+    bodies = ["plate"] if one_body else [f"seg{i}" for i in range(1, p.segments + 1)]
     group = _group(model, "sand", scene.rft, penalty_stiffness(p), bodies)
     drive_id = model.joint("drive").id
-    hinge_ids = [model.joint(f"hinge{i}").id for i in range(1, p.segments + 1)] if p.kind != "rigid" else []
+    hinge_ids = [] if one_body else [model.joint(f"hinge{i}").id for i in range(1, p.segments + 1)]
     return PlateModel(
         model=model,
         backend=backend,

@@ -41,7 +41,8 @@ class Chain:
     stiffness: float = _f(0.209, "N m/rad", "hinge spring stiffness k", minimum=0.0, exclusive=False)
     springref: float = _f(0.0, "rad", "hinge rest angle; the origami stop sits here")
     damping: float = _f(1.43, "N m s/rad", "hinge damping b", minimum=0.0, exclusive=False)
-    stop: str = _f("limit", "", "origami stop: MuJoCo joint limit, or the reference's penalty spring",
+    stop: str = _f("penalty", "", "origami stop: the penalty spring (taken implicitly by the newton method), or a "
+                   "MuJoCo joint limit",
                    choices=("limit", "penalty"))
     stop_stiffness: float = _f(1.0e4, "N m/rad", "penalty stop: torque -(k_stop (d + |d|)) d for hinge deflection d",
                                minimum=0.0)
@@ -53,6 +54,10 @@ class Plate(Chain):
     rod_mass: float = _f(0.010, "kg", "mass of the extension rod, at its midpoint", minimum=0.0)
     rod_inertia: float = _f(4.1e-8, "kg m^2", "rotational inertia of the rod about z through its centre",
                             minimum=0.0)
+    chain: str = _f("planar", "", "planar: hinges about z only; spatial: each segment also turns freely about "
+                    "its own x and y axes (a 3D chain)", choices=("planar", "spatial"))
+    rigid_as: str = _f("body", "", "rigid plate: one body, or hinged segments held together by weld constraints",
+                       choices=("body", "welds"))
 
 
 @dataclass(frozen=True)
@@ -72,7 +77,7 @@ class Sim:
     dt: float = _f(1.0e-4, "s", "time step", minimum=0.0)
     backend: str = _f("native", "", "where the RFT force is computed: the C plugin, or a Python callback "
                       "(native falls back to python when the plugin is unavailable)", choices=("native", "python"))
-    method: str = _f("explicit", "", "explicit: MuJoCo's step, the RFT force as it is; implicit: implicitfast "
+    method: str = _f("newton", "", "explicit: MuJoCo's step, the RFT force as it is; implicit: implicitfast "
                      "with the RFT force linearised in velocity; newton: implicitfast with the RFT force at the new "
                      "velocity, solved by Newton's method (stable and accurate at large steps on light segments); "
                      "adaptive: implicit steps sized by an error estimate (dt is then the grid of reversals and samples)",

@@ -214,7 +214,7 @@ def step_through(m: mujoco.MjModel, d: mujoco.MjData, scene: Any, advance: Stepp
                     in_a_row = in_a_row + 1 if flips.any() else 0
                     if in_a_row == CHATTER_SAMPLES:
                         raise chatter(scene, d.time)
-                history.clear()
+                history = {step: history[step]} if probe else history  # the next check may reach back here
                 if progress is not None:
                     progress(step / steps)
             if step == steps:

@@ -2,7 +2,7 @@
 //
 // The C twin of finrft/rft.py and of the Python coupling in finrft/coupling.py: same laws, same formulas.
 // Every site on a body bound to an instance is a segment midpoint: its x axis runs along the segment and its
-// y axis is the segment's in-plane normal. Every hinge on a bound body gets the penalty stop when
+// y axis is the segment's in-plane normal. Every hinge about z on a bound body gets the penalty stop when
 // stop_stiffness > 0, acting on its deflection from the spring's rest angle (qpos_spring).
 //
 // Config (all values are strings in MJCF; every key is required, `table` only for the table law):
@@ -179,7 +179,9 @@ static int rft_init(const mjModel* m, mjData* d, int instance) {
       nseg++;
     }
     for (int j = 0; j < m->njnt; j++) {
-      if (m->body_plugin[m->jnt_bodyid[j]] != instance || m->jnt_type[j] != mjJNT_HINGE) continue;
+      // the plate's own hinges turn about z; a spatial chain's out-of-plane hinges carry no stop
+      if (m->body_plugin[m->jnt_bodyid[j]] != instance || m->jnt_type[j] != mjJNT_HINGE ||
+          fabs(m->jnt_axis[3 * j + 2]) < 0.5) continue;
       if (pass) {
         p->hinge_qpos[nhinge] = m->jnt_qposadr[j];
         p->hinge_dof[nhinge] = m->jnt_dofadr[j];

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
+from finrft import models
 from finrft.drive import Drive
 from finrft.simulate import SimulationUnstable, simulate
 
@@ -126,3 +127,20 @@ def test_instability_stops_loudly(paper):
                              "sim.integrator": "euler", "sim.dt": 1e-3})
     with pytest.raises(SimulationUnstable, match=r"unstable at t = .* reduce sim.dt"):
         simulate(scene, Drive(cycles=1))
+
+
+def test_spatial_chain_stays_in_the_plane(paper):
+    # A chain free to turn about each segment's own x and y axes too: the in-plane loads leave those six extra
+    # degrees of freedom at rest, so the motion is the planar chain's.
+    spatial = paper.replace(**{"plate.chain": "spatial"})
+    assert models.build_plate(spatial).model.nv == models.build_plate(paper).model.nv + 2 * paper.plate.segments
+    planar, free = simulate(paper, Drive()), simulate(spatial, Drive())
+    np.testing.assert_allclose(free.segment_angle, planar.segment_angle, atol=1e-12)
+    np.testing.assert_allclose(free.drive_force, planar.drive_force, atol=1e-9)
+
+
+def test_welded_segments_behave_as_one_rigid_body(paper):
+    rigid = paper.replace(**{"plate.kind": "rigid"})
+    body, welded = simulate(rigid, Drive()), simulate(rigid.replace(**{"plate.rigid_as": "welds"}), Drive())
+    assert np.degrees(np.abs(welded.hinge_angle)).max() < 1e-3  # the welds hold
+    np.testing.assert_allclose(welded.drive_force, body.drive_force, rtol=1e-3)

@@ -205,8 +205,8 @@ def _label(method: str, integrator: str) -> str:
 
 
 def _trial(scene: Scene | RobotScene) -> dict[str, Any]:
-    """One setting of the study: angles (deg) and the drive's load at SAMPLE_DT samples, the load's mean per
-    stroke, the robot's efficiency, wall time; or how it failed."""
+    """One setting of the study: angles (deg) at SAMPLE_DT samples, the mean of the drive's load (the plate's
+    drive force, the robot's servo torque) per stroke, the robot's efficiency, wall time; or how it failed."""
     from .simulate import SimulationUnstable
     start = time.perf_counter()
     try:
@@ -227,8 +227,9 @@ def _trial(scene: Scene | RobotScene) -> dict[str, Any]:
     angles = np.degrees(angles)
     if not np.all(np.isfinite(angles)):
         return {"failure": "non-finite", "wall_s": run.wall_s}
-    strokes = np.searchsorted(run.time, [0.0, reversal, run.time[-1] + 1])
-    means = [float(np.mean(load[a:b])) for a, b in zip(strokes[:-1], strokes[1:])]
+    # Samples strictly inside each stroke: at a reversal the load is an impulse, its sampled value arbitrary.
+    bounds = [0.0, reversal, run.time[-1]]
+    means = [float(np.mean(load[(run.time > a + 1e-9) & (run.time < b - 1e-9)])) for a, b in zip(bounds, bounds[1:])]
     return {"failure": "", "time": run.time, "angles": angles, "load": np.asarray(means), "eta": eta,
             "wall_s": run.wall_s}
 

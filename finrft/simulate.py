@@ -174,11 +174,13 @@ def schedule(drive: Drive, dt: float, record_dt: float) -> tuple[int, np.ndarray
 
 # A recorded sample chatters when some watched dof's velocity, over the three steps before it, moves by more than
 # CHATTER_DV (rad/s or m/s) one way, back, and that way again: an overshoot every step (the RFT force reversing
-# each step), which no oscillation the steps resolve can do. CHATTER_SAMPLES such samples in a row stop the run.
+# each step), which no oscillation the steps resolve can do. Every PROBE_EVERY-th sample is checked (each check
+# costs three single steps); CHATTER_SAMPLES checked samples in a row stop the run.
 # Chatter swings a segment across the law's regularisation speed (v_reg ~ 1 mm/s at levers of centimetres:
 # ~0.1 rad/s); a hinge resting on a MuJoCo limit jitters by ~2e-3 rad/s, which is no chatter.
 CHATTER_DV = 1e-2
 CHATTER_SAMPLES = 3
+PROBE_EVERY = 2
 
 
 def step_through(m: mujoco.MjModel, d: mujoco.MjData, scene: Any, advance: Stepper, steps: int,
@@ -187,41 +189,50 @@ def step_through(m: mujoco.MjModel, d: mujoco.MjData, scene: Any, advance: Stepp
                  watch: Sequence[int] = ()) -> None:
     """Step a model through a run: ``on_stroke(k)`` as stroke k starts, ``on_sample(i)`` (after mj_forward) at
     recorded step ``samples[i]``; ``advance`` steps in chunks in between. Stops loudly if the state blows up, or
-    if the ``watch`` dofs chatter (fixed-step methods: the three steps before each sample are taken one by one)."""
+    if the ``watch`` dofs chatter (fixed-step methods: the three steps before each sample are taken one by one
+    and checked when the run ends)."""
     probe = len(watch) > 0 and scene.sim.method != "adaptive"
-    probes = np.unique(np.concatenate([samples - 1, samples - 2, samples - 3])) if probe else np.array([], int)
-    events = np.union1d(np.union1d(samples, starts), probes[probes > 0])
+    # velocity[i, j]: the watched velocities 3 - j steps before sample i (j = 3: at the sample)
+    velocity = np.full((len(samples), 4, len(watch)), np.nan)
+    slot: dict[int, list[tuple[int, int]]] = {}
+    for i, s in enumerate(samples if probe else []):
+        for j in range(4 if i % PROBE_EVERY == 0 else 0):
+            slot.setdefault(int(s) - 3 + j, []).append((i, j))
+    events = np.union1d(np.union1d(samples, starts), np.array([s for s in slot if s >= 0], dtype=int))
     stroke_of = np.searchsorted(starts, events, side="right") - 1
     counts = d.warning.number
     bad = [int(w) for w in _BAD_STATE]
     messages: list[str] = []
-    history: dict[int, np.ndarray] = {}
-    sample, in_a_row = 0, 0
+    sample = 0
     with captured_warnings(messages):
         for i, step in enumerate(events):
             k = stroke_of[i]
             if step == starts[k]:
                 on_stroke(k)
-            if probe:
-                history[step] = d.qvel[watch].copy()
+            for at in slot.get(step, ()):
+                velocity[at] = d.qvel[watch]
             if sample < len(samples) and step == samples[sample]:
                 mujoco.mj_forward(m, d)
                 on_sample(sample)
                 sample += 1
-                if probe and step - 3 in history and starts[k] <= step - 3:
-                    moves = np.diff([history[step - j] for j in (3, 2, 1, 0)], axis=0)
-                    flips = np.all(np.abs(moves) > CHATTER_DV, axis=0) & np.all(moves[1:] * moves[:-1] < 0, axis=0)
-                    in_a_row = in_a_row + 1 if flips.any() else 0
-                    if in_a_row == CHATTER_SAMPLES:
-                        raise chatter(scene, d.time)
-                history = {step: history[step]} if probe else history  # the next check may reach back here
                 if progress is not None:
                     progress(step / steps)
             if step == steps:
-                return
+                break
             code = advance(d, int(events[i + 1] - step))
             if code or any(counts[w] for w in bad):
                 raise unstable(scene, d.time, messages, code or 1)
+    if probe:
+        # Samples whose three steps before lie in one stroke (a reversal jumps the velocities on purpose).
+        inside = np.searchsorted(starts, samples - 3, side="right") == np.searchsorted(starts, samples, side="right")
+        moves = np.diff(velocity, axis=1)
+        flips = np.any(np.all(np.abs(moves) > CHATTER_DV, axis=1) & np.all(moves[:, 1:] * moves[:, :-1] < 0, axis=1),
+                       axis=1) & inside
+        probed = np.arange(0, len(samples), PROBE_EVERY)
+        runs = np.convolve(flips[probed], np.ones(CHATTER_SAMPLES, int), mode="valid")
+        if np.any(runs == CHATTER_SAMPLES):
+            first = probed[int(np.argmax(runs == CHATTER_SAMPLES)) + CHATTER_SAMPLES - 1]
+            raise chatter(scene, samples[first] * scene.sim.dt)
 
 
 def simulate(scene: Scene, drive: Drive, *, progress: Callable[[float], None] | None = None) -> Run:

@@ -10,8 +10,8 @@
   (M - dt D') dv = dt (f(v) - F(v) + F(v + dv)), D' without the RFT term, f every force MuJoCo computed at v.
   A rate-independent law is nearly a step function of the velocity's direction, so on light segments the
   linearisation at v (the implicit step, Newton's first iterate) overshoots and chatters; Newton's method with a
-  backtracking line search on the residual converges to the root (|change| <= 1e-10 (1 + |qvel|)).
-
+  backtracking line search on the residual converges to the root (|change| <= 1e-10 (1 + |qvel|)). The
+  penalty stops are taken at the step's end too, at the deflection d + dt (v + dv).
 - ``adaptive``: implicit steps whose size follows a step-doubling error estimate: one step of h and two of h/2
   must agree to ``sim.tolerance`` (max over qpos and qvel of |difference| / (1e-3 + |value|)), never above
   ``sim.max_step``; the accepted state is extrapolated, 2 (two halves) - (one step), which cancels the implicit

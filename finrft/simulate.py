@@ -189,8 +189,8 @@ def step_through(m: mujoco.MjModel, d: mujoco.MjData, scene: Any, advance: Stepp
                  watch: Sequence[int] = ()) -> None:
     """Step a model through a run: ``on_stroke(k)`` as stroke k starts, ``on_sample(i)`` (after mj_forward) at
     recorded step ``samples[i]``; ``advance`` steps in chunks in between. Stops loudly if the state blows up, or
-    if the ``watch`` dofs chatter (fixed-step methods: the three steps before each sample are taken one by one
-    and checked when the run ends)."""
+    if the ``watch`` dofs chatter (fixed-step methods: the three steps before every PROBE_EVERY-th sample are
+    taken one by one and checked when the run ends)."""
     probe = len(watch) > 0 and scene.sim.method != "adaptive"
     # velocity[i, j]: the watched velocities 3 - j steps before sample i (j = 3: at the sample)
     velocity = np.full((len(samples), 4, len(watch)), np.nan)

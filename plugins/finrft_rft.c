@@ -14,9 +14,10 @@
 //
 // No static state: everything lives in the per-mjData struct, so instances and threads never share memory.
 //
-// The library also exports the "implicit" method, finrft_implicit_step: MuJoCo's implicitfast step with the RFT
-// force's velocity Jacobian added to the damping matrix, which MuJoCo cannot see in a plugin force; and the
-// "adaptive" method, finrft_adaptive_advance: implicit steps whose size follows a step-doubling error estimate.
+// The library also exports the "implicit" and "newton" methods, finrft_implicit_step: MuJoCo's implicitfast step
+// with the RFT force (which MuJoCo cannot differentiate in a plugin) linearised in velocity, or taken at the new
+// velocity, penalty stops at the new positions, by Newton's method; and the "adaptive" method,
+// finrft_adaptive_advance: implicit steps whose size follows a step-doubling error estimate.
 
 #include <math.h>
 #include <stdint.h>

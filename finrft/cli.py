@@ -272,13 +272,14 @@ def build_parser() -> argparse.ArgumentParser:
                            "and a summary of the fastest setting within 0.1° and 1° (accuracy.md). Takes about "
                            "4 minutes on two cores.")
     acc.add_argument("--out", default="accuracy", metavar="DIR", help="output folder (default: %(default)s)")
-    acc.add_argument("--quick", action="store_true", help="steps of 0.1 and 1 ms, one tolerance and v_reg, and a coarser reference (about 25 s)")
+    acc.add_argument("--quick", action="store_true",
+                     help="steps of 0.1 and 1 ms, one tolerance and v_reg, and a coarser reference (about 25 s)")
     _add_workers(acc)
     model = kinds.add_parser("modelling", help="what each modelling choice costs and changes",
                              description="Measure planar against 3D chains, rigid plates as one body against "
                              "welded segments, MuJoCo limit against penalty stops, and the half against the full "
                              "robot: the largest change in segment angle (deg), drive force (%% of its peak) or "
-                             "efficiency (points), and the wall-time ratio. About a minute.")
+                             "efficiency (points), and the wall-time ratio. About 10 s.")
     model.add_argument("--json", action="store_true", help="print the figures as JSON on the last line")
     fitb = kinds.add_parser("fit", help="a 4-parameter plate fit over three drag files",
                             description="Time a fit of k, b, f_perp and f_par of the paper plate over three drag "

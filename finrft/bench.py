@@ -133,7 +133,7 @@ def modelling(*, repeat: int = 3, log: Callable[[str], None] = print) -> dict[st
     out of the plane, the half robot against the full one, a MuJoCo limit stop against the penalty stop, and a
     rigid plate as one body against hinged segments held by welds. Returns the rows and a Markdown table."""
     drag = Drive()  # 200 mm at 30 mm/s
-    cycle = Drive(speed=0.03, stroke=0.045, cycles=1)
+    cycle = PLATE_DRIVE  # 45 mm out and back
     rows = []
 
     def add(choice: str, scene: str, a: str, b: str, pair: dict[str, float], note: str = "") -> None:

@@ -182,8 +182,9 @@ class PythonImplicit:
         forces = self._segments(d)
         qvel = d.qvel.copy()
         ahead = dt if iterations > 1 else 0.0
-        other = self._rhs - self._forces(forces, qvel, 0.0, False)[0]
         force, slope = self._forces(forces, qvel, ahead, True)
+        # every force but F, taken out at the stops' present deflection
+        other = self._rhs - (self._forces(forces, qvel, 0.0, False)[0] if ahead else force)
 
         def residual(dv: np.ndarray) -> np.ndarray:
             return matrix @ dv - dt * (other + self._forces(forces, qvel + dv, dt, False)[0])

@@ -233,14 +233,19 @@ static void segment_force(const RFTData* p, const mjtNum v[3], const mjtNum x[3]
   for (int k = 0; k < 3; k++) force[k] = -ramp * (cy * y[k] + cx * x[k]);
 }
 
+// A segment's axis x and normal y (world frame): its site's x and y axes.
+static void site_axes(const mjData* d, int s, mjtNum x[3], mjtNum y[3]) {
+  const mjtNum* R = d->site_xmat + 9 * s;
+  x[0] = R[0]; x[1] = R[3]; x[2] = R[6];
+  y[0] = R[1]; y[1] = R[4]; y[2] = R[7];
+}
+
 // A segment's midpoint velocity (world frame) and its axis x and normal y: the law's inputs.
 static void site_state(const mjModel* m, const mjData* d, int s, mjtNum v[3], mjtNum x[3], mjtNum y[3]) {
   mjtNum twist[6];
-  const mjtNum* R = d->site_xmat + 9 * s;
   mj_objectVelocity(m, d, mjOBJ_SITE, s, twist, 0);
   v[0] = twist[3]; v[1] = twist[4]; v[2] = twist[5];
-  x[0] = R[0]; x[1] = R[3]; x[2] = R[6];
-  y[0] = R[1]; y[1] = R[4]; y[2] = R[7];
+  site_axes(d, s, x, y);
 }
 
 static void rft_compute(const mjModel* m, mjData* d, int instance, int capability_bit) {
@@ -263,15 +268,16 @@ static void rft_compute(const mjModel* m, mjData* d, int instance, int capabilit
 }
 
 // ---------------------------------------------------------------------------------------------------------
-// The "implicit" method: backward Euler in the RFT force. MuJoCo's implicitfast step treats the joint damping D
-// (and the velocity derivative of affine actuator bias) implicitly; on top of that the RFT force is taken at the
-// new velocity: the velocity change dv solves
+// The "implicit" and "newton" methods. MuJoCo's implicitfast step treats the joint damping D (and the velocity
+// derivative of affine actuator bias) implicitly; on top of that the RFT force is taken at the new velocity: the
+// velocity change dv solves
 //     G(dv) = (M - dt D) dv - dt (f(v) - F(v) + F(v + dv)) = 0,
 // f every force MuJoCo computed at v, F the RFT force summed over every segment of every finrft.rft instance,
 // F(u) = sum_i J_i^T F_i(J_i u). A rate-independent law is a near-discontinuity in velocity, so a linearisation
-// at v (the first Newton iterate) overshoots on light segments; Newton's method with a backtracking line search
-// on |G| converges to the root. dF_i/dv comes from central differences of the same law, so both laws need no
-// derivative of their own. Then, as MuJoCo's implicitfast: activations, qvel += dv, positions, time.
+// at v (the first Newton iterate: the "implicit" method) overshoots on light segments; the "newton" method
+// iterates, with a backtracking line search on |G|, to the root, the penalty stops taken at the new positions.
+// dF_i/dv comes from central differences of the same law, so both laws need no derivative of their own. Then, as
+// MuJoCo's implicitfast: activations, qvel += dv, positions, time.
 
 // dF/dv (3 x 3, row-major) of one segment at velocity v, by central differences.
 static void segment_jacobian(const RFTData* p, const mjtNum v[3], const mjtNum x[3], const mjtNum y[3],
@@ -359,9 +365,8 @@ static void segments_update(const mjModel* m, mjData* d, int slot, Segments* s) 
     const RFTData* p = (const RFTData*)d->plugin_data[inst];
     if (m->plugin[inst] != slot || !p) continue;
     for (int k = 0; k < p->nseg; k++, i++) {
-      mjtNum v[3];
       s->law[i] = p;
-      site_state(m, d, p->site[k], v, s->axes + 6 * i, s->axes + 6 * i + 3);
+      site_axes(d, p->site[k], s->axes + 6 * i, s->axes + 6 * i + 3);
       mj_jacSite(m, d, s->jacp + 3 * (size_t)s->nv * i, NULL, p->site[k]);
     }
     for (int k = 0; p->stop_stiffness > 0 && k < p->nhinge; k++, h++) {
@@ -428,9 +433,11 @@ static int newton_solve(const Segments* s, Newton* w, const mjtNum* qvel, const 
                         int iterations) {
   int nv = s->nv;
   mjtNum ahead = iterations > 1 ? dt : 0;
-  segments_force(s, qvel, 0, w->force, NULL);
-  for (int i = 0; i < nv; i++) w->other[i] = rhs[i] - w->force[i];
   segments_force(s, qvel, ahead, w->force, w->slope);
+  // other: every force but F, taken out at the stops' present deflection (w->trial is free until the search)
+  if (ahead > 0) segments_force(s, qvel, 0, w->trial, NULL);
+  const mjtNum* now = ahead > 0 ? w->trial : w->force;
+  for (int i = 0; i < nv; i++) w->other[i] = rhs[i] - now[i];
   for (int i = 0; i < nv; i++) {
     w->dv[i] = 0;
     w->g[i] = -dt * (w->other[i] + w->force[i]);

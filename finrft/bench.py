@@ -13,8 +13,9 @@ import numpy as np
 
 from . import batch, models
 from .drive import Drive
+from .convergence import ErrorLimits, SimulationFailed
 from .optimize import optimize
-from .scene import RobotScene, Scene, preset
+from .scene import PRESETS, RobotScene, Scene, preset
 from .simulate import simulate
 from .swim import gait_drive, swim
 
@@ -38,10 +39,11 @@ def backends(scene: Scene | None = None, *, batch_size: int = 64, workers: int |
     out: dict[str, Any] = {"date": date.today().isoformat(), "machine": f"{platform.machine()}, "
                            f"{batch.default_workers()} cores, {platform.python_implementation()} "
                            f"{platform.python_version()}", "mujoco": mujoco.__version__, "dt": scene.sim.dt}
-    steps = simulate(scene, drive).steps
+    steps = simulate(scene, drive, estimate_error=False).steps
     out["steps"] = steps
     for backend in ("python", "native"):
-        wall = _best(lambda: simulate(scene.replace(**{"sim.backend": backend}), drive), repeat)
+        wall = _best(lambda: simulate(scene.replace(**{"sim.backend": backend}), drive, estimate_error=False),
+                     repeat)
         out[f"{backend}_wall_s"], out[f"{backend}_steps_per_s"] = wall, steps / wall
         log(f"{backend:>6} backend: {wall * 1e3:8.1f} ms per drag, {steps / wall:10.0f} steps/s")
 
@@ -58,6 +60,11 @@ def backends(scene: Scene | None = None, *, batch_size: int = 64, workers: int |
     out["native_over_bare"] = out["native_wall_s"] / out["bare_wall_s"]
     log(f"native is {out['native_over_python']:.1f}x faster than the Python callback (target >= 10x) and costs "
         f"{out['native_over_bare']:.2f}x bare mj_step (target <= 2x)")
+    for name in PRESETS[Scene]:
+        out[f"error_estimate_overhead_{name}"] = _estimate_overhead(
+            lambda **options: simulate(preset(name), drive, max_error=None, **options), repeat)
+        log(f"error estimate on the {name} preset's drag: {100 * out[f'error_estimate_overhead_{name}']:.0f} % of "
+            f"the run (target <= 30 %)")
 
     rng = np.random.default_rng(0)
     jobs = [(scene.replace(**{"plate.damping": float(b)}), drive) for b in rng.uniform(0.5, 2.5, batch_size)]
@@ -81,17 +88,29 @@ def robot(scene: RobotScene | None = None, *, budget: int = 300, workers: int | 
     out: dict[str, Any] = {"date": date.today().isoformat(), "machine": f"{platform.machine()}, "
                            f"{batch.default_workers()} cores", "mujoco": mujoco.__version__, "dt": scene.sim.dt,
                            "method": scene.sim.method}
-    run = swim(scene, 1)
-    wall = _best(lambda: swim(scene, 1), repeat)
-    out.update(gait_steps=run.steps, gait_wall_s=wall, gait_us_per_step=1e6 * wall / run.steps)
+    run = swim(scene, 1, estimate_error=False)
+    wall = _best(lambda: swim(scene, 1, estimate_error=False), repeat)
+    out.update(gait_steps=run.steps, gait_wall_s=wall, gait_us_per_step=1e6 * wall / run.steps,
+               error_estimate_overhead=_estimate_overhead(lambda **o: swim(scene, 1, max_error=None, **o), repeat))
     log(f"one gait evaluation ({scene.sim.method}, dt {scene.sim.dt:g} s, {run.steps} steps): {wall * 1e3:.1f} ms "
-        f"(target <= 20 ms; the authors' model ~15 s)")
+        f"(target <= 20 ms; the authors' model ~15 s); its error estimate costs "
+        f"{100 * out['error_estimate_overhead']:.0f} % more (target <= 30 %)")
     result = optimize(scene, budget=budget, seed=1, workers=workers)
     out.update(optimize_budget=budget, optimize_evaluations=result.evaluations, optimize_wall_s=result.wall_s,
                optimize_eta=1 - result.cost, best=result.best, workers=workers)
     log(f"optimize, budget {budget} ({result.evaluations} evaluations) on {workers} workers: {result.wall_s:.1f} s "
         f"(target <= 60 s), best eta {100 * (1 - result.cost):.2f} %")
     return out
+
+
+def _estimate_overhead(run: Callable[..., Any], repeat: int) -> float:
+    """What the always-on error estimate adds to a run, as a fraction of the run without it (best of
+    ``repeat`` each, interleaved so that machine load affects both alike)."""
+    plain, checked = [], []
+    for _ in range(max(repeat, 5)):
+        plain.append(_best(lambda: run(estimate_error=False), 1))
+        checked.append(_best(run, 1))
+    return min(checked) / min(plain) - 1
 
 
 def fit_speed(paths: list[str] | None = None, *, budget: int = 300, workers: int | None = None,
@@ -121,11 +140,12 @@ def fit_speed(paths: list[str] | None = None, *, budget: int = 300, workers: int
 def _plate_pair(a: Scene, b: Scene, drive: Drive, repeat: int) -> dict[str, float]:
     """Two plate models of the same test: the largest difference of their segment angles (deg) and drive force
     (% of the peak), and their best wall times."""
-    first, second = simulate(a, drive), simulate(b, drive)
+    first, second = simulate(a, drive, estimate_error=False), simulate(b, drive, estimate_error=False)
     return {"angle_diff_deg": float(np.degrees(np.abs(first.segment_angle - second.segment_angle)).max()),
             "force_diff_pct": float(100 * np.abs(first.drive_force - second.drive_force).max()
                                     / first.peak_drive_force),
-            "wall_a_s": _best(lambda: simulate(a, drive), repeat), "wall_b_s": _best(lambda: simulate(b, drive), repeat)}
+            "wall_a_s": _best(lambda: simulate(a, drive, estimate_error=False), repeat),
+            "wall_b_s": _best(lambda: simulate(b, drive, estimate_error=False), repeat)}
 
 
 def modelling(*, repeat: int = 3, log: Callable[[str], None] = print) -> dict[str, Any]:
@@ -155,17 +175,20 @@ def modelling(*, repeat: int = 3, log: Callable[[str], None] = print) -> dict[st
         scene = preset(name).replace(**{"sim.dt": dt})
         pair = _plate_pair(scene.replace(**{"plate.stop": "penalty"}), scene.replace(**{"plate.stop": "limit"}),
                            cycle, repeat)
-        fine = [simulate(scene.replace(**{"plate.stop": stop, "sim.dt": 1e-5}), cycle) for stop in ("penalty", "limit")]
-        coarse = [simulate(scene.replace(**{"plate.stop": stop}), cycle) for stop in ("penalty", "limit")]
+        fine = [simulate(scene.replace(**{"plate.stop": stop, "sim.dt": 1e-5}), cycle, estimate_error=False)
+                for stop in ("penalty", "limit")]
+        coarse = [simulate(scene.replace(**{"plate.stop": stop}), cycle, estimate_error=False)
+                  for stop in ("penalty", "limit")]
         errors = [float(np.degrees(np.abs(c.segment_angle - f.segment_angle)).max()) for c, f in zip(coarse, fine)]
         add("origami stop", f"plate {name} ({scene.sim.method}, dt {dt:g} s), 45 mm out and back", "penalty",
             "limit", pair, f"error against the same stop at 10 µs: penalty {errors[0]:.2g}°, limit {errors[1]:.2g}°")
     for name in ("paper", "physical"):
         scene = preset(name, RobotScene)
-        half, full = swim(scene, 1), swim(scene.replace(**{"robot.model": "full"}), 1)
+        full_scene = scene.replace(**{"robot.model": "full"})
+        half, full = swim(scene, 1, estimate_error=False), swim(full_scene, 1, estimate_error=False)
         pair = {"eta_diff_pts": 100 * abs(half.cycle_table()[0]["eta"] - full.cycle_table()[0]["eta"]),
-                "wall_a_s": _best(lambda: swim(scene, 1), repeat),
-                "wall_b_s": _best(lambda: swim(scene.replace(**{"robot.model": "full"}), 1), repeat)}
+                "wall_a_s": _best(lambda: swim(scene, 1, estimate_error=False), repeat),
+                "wall_b_s": _best(lambda: swim(full_scene, 1, estimate_error=False), repeat)}
         add("robot", f"robot {name}, optimised gait, one cycle", "half", "full", pair)
     lines = ["| choice | scene | A | B | what changes (B against A) | cost of B / A |", "|---|---|---|---|---|---:|"]
     for r in rows:
@@ -192,6 +215,7 @@ V_REGS = (1e-4, 1e-3, 1e-2)
 # 45 mm at 30 mm/s: every step of the grid divides the 1.5 s stroke, so the plate's reversals fall on the grid.
 PLATE_DRIVE = Drive(speed=0.03, stroke=0.045, cycles=1)
 SAMPLE_DT = 0.03  # a whole number of every step of the grid: all runs sample the same instants
+LIMIT = ErrorLimits().angle_deg
 
 
 def study_scenes() -> dict[str, Scene | RobotScene]:
@@ -204,25 +228,27 @@ def _label(method: str, integrator: str) -> str:
     return f"{method} ({integrator})" if method == "explicit" else method
 
 
-def _trial(scene: Scene | RobotScene) -> dict[str, Any]:
+def _trial(job: Scene | RobotScene | tuple[Scene | RobotScene, bool]) -> dict[str, Any]:
     """One setting of the study: angles (deg) at SAMPLE_DT samples, the mean of the drive's load (the plate's
-    drive force, the robot's servo torque) per stroke, the robot's efficiency, wall time; or how it failed."""
-    from .simulate import SimulationUnstable
+    drive force, the robot's servo torque) per stroke, the robot's efficiency, wall time, the run's own error
+    estimate (finrft.convergence; ``estimate``: False to skip it); or how it failed."""
+    scene, estimate = job if isinstance(job, tuple) else (job, True)
     start = time.perf_counter()
     try:
         with np.errstate(over="ignore", invalid="ignore"):  # a diverging run is reported, not warned about
             if isinstance(scene, RobotScene):
-                run = swim(scene, 1)
+                run = swim(scene, 1, max_error=None, estimate_error=estimate)
                 angles, load, eta = run.hinge_angle, run.servo_torque, run.cycle_table()[0]["eta"]
                 reversal = gait_drive(scene, 1).stroke_time
             else:
-                run = simulate(scene, PLATE_DRIVE)
+                run = simulate(scene, PLATE_DRIVE, max_error=None, estimate_error=estimate)
                 angles, load, eta = run.segment_angle, run.drive_force, float("nan")
                 reversal = PLATE_DRIVE.stroke_time
-    except SimulationUnstable as exc:
+    except SimulationFailed as exc:
         text = str(exc)
         failure = ("chatter" if "chatters" in text else "step underflow" if "fell below" in text
-                   else "no root" if "did not converge" in text else "unstable")
+                   else "no root" if "did not converge" in text else "eta undefined" if "undefined" in text
+                   else "unstable")
         return {"failure": failure, "detail": text, "wall_s": time.perf_counter() - start}
     angles = np.degrees(angles)
     if not np.all(np.isfinite(angles)):
@@ -231,7 +257,7 @@ def _trial(scene: Scene | RobotScene) -> dict[str, Any]:
     bounds = [0.0, reversal, run.time[-1]]
     means = [float(np.mean(load[(run.time > a + 1e-9) & (run.time < b - 1e-9)])) for a, b in zip(bounds, bounds[1:])]
     return {"failure": "", "time": run.time, "angles": angles, "load": np.asarray(means), "eta": eta,
-            "wall_s": run.wall_s}
+            "wall_s": run.wall_s, "estimate": run.error_estimate or {}}
 
 
 def _independent(job: tuple[Scene | RobotScene, np.ndarray]) -> np.ndarray:
@@ -286,8 +312,8 @@ def accuracy(out: str | Path = "accuracy", *, quick: bool = False, workers: int 
                 base = base.replace(**{"rft.v_reg": v_reg})
             reg = base.rft.v_reg
             default = v_reg is None or np.isclose(v_reg, preset_scene.rft.v_reg)
-            ref, check = batch.map_jobs(_trial, [base.replace(**{"sim.method": "newton", "sim.integrator":
-                                                                 "implicitfast", "sim.dt": dt})
+            ref, check = batch.map_jobs(_trial, [(base.replace(**{"sim.method": "newton", "sim.integrator":
+                                                                  "implicitfast", "sim.dt": dt}), False)
                                                  for dt in (ref_dt, 2 * ref_dt)], workers=workers)
             if ref["failure"] or check["failure"]:
                 raise RuntimeError(f"the reference of {name} failed: {ref.get('detail', ref['failure'])}")
@@ -298,7 +324,9 @@ def accuracy(out: str | Path = "accuracy", *, quick: bool = False, workers: int 
             for (fields, _), result in zip(settings, results):
                 row = {"scene": name, "v_reg": reg, **fields, "failure": result["failure"],
                        "angle_error_deg": float("nan"), "force_error_pct": float("nan"),
-                       "eta_error_pts": float("nan"), "wall_s": result["wall_s"]}
+                       "eta_error_pts": float("nan"), "wall_s": result["wall_s"],
+                       "estimated_angle_error_deg": result.get("estimate", {}).get("angle_deg", float("nan")),
+                       "estimated_eta_error_pts": result.get("estimate", {}).get("eta_points", float("nan"))}
                 if not result["failure"]:
                     # Common instants: every run samples each SAMPLE_DT; the last sample is the run's end.
                     _, mine, theirs = np.intersect1d(np.round(result["time"], 9), np.round(ref["time"], 9),
@@ -360,6 +388,21 @@ def _accuracy_summary(rows: list[dict[str, Any]], summary: dict[str, Any]) -> st
                      f"{newton['angle_error_deg']:.2g}°; plain explicit coupling (implicitfast) does not fail up "
                      f"to dt {largest['dt']:g} s, {1e3 * largest['wall_s']:.1f} ms and "
                      f"{largest['angle_error_deg']:.2g}°: {largest['wall_s'] / newton['wall_s']:.1f}x.")
+    lines += ["", "Each run's own error estimate (finrft.convergence) against its error from the reference, at the "
+              f"default limit of {LIMIT}° (η: {LIMIT} points):", "",
+              "| scene | runs | estimate ≥ error | would pass but are wrong | flagged but right | estimate / error "
+              "(median) |", "|---|---:|---:|---:|---:|---:|"]
+    for name in summary:
+        ok = [r for r in rows if r["scene"] == name and not r["failure"]]
+        pairs = [(r["estimated_angle_error_deg"], r["angle_error_deg"]) for r in ok]
+        if "robot" in name:
+            pairs += [(r["estimated_eta_error_pts"], r["eta_error_pts"]) for r in ok]
+        pairs = np.array([p for p in pairs if np.all(np.isfinite(p))]).reshape(-1, 2)
+        estimate, error = pairs.T
+        ratio = np.median(estimate[error > 1e-6] / error[error > 1e-6]) if np.any(error > 1e-6) else float("nan")
+        lines.append(f"| {name} | {len(ok)} | {np.mean(estimate >= error):.0%} | "
+                     f"{np.sum((estimate <= LIMIT) & (error > LIMIT))} | {np.sum((estimate > LIMIT) & (error <= LIMIT))} "
+                     f"| {ratio:.2g} |")
     return "\n".join(lines) + "\n"
 
 

@@ -18,8 +18,9 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from . import scene as scenes
+from .convergence import ErrorLimits, SimulationFailed
 from .drive import Drive
-from .simulate import Run, SimulationUnstable, simulate
+from .simulate import Run, simulate
 
 
 class UsageError(Exception):
@@ -67,6 +68,7 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     o.add_argument("--quiet", action="store_true", help="no progress or summary text, only files and --json")
     o.add_argument("--forces-csv", metavar="FILE.csv", help="append the steady force on the plate (normal and "
                    "tangential, N) at this angle of attack to a CSV, for finrft fit-rft (drag only)")
+    _add_max_error(p)
 
 
 def _add_plate_scene(p: argparse.ArgumentParser):
@@ -76,6 +78,17 @@ def _add_plate_scene(p: argparse.ArgumentParser):
                    help="built-in scene when no --scene is given (default: %(default)s)")
     g.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a scene key (SI)")
     return g
+
+
+def _add_max_error(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--max-error", type=_number("degrees or points"), default=ErrorLimits().angle_deg,
+                   metavar="X", help="largest estimated discretisation error accepted, in degrees for angles and "
+                   "percentage points for eta (default: %(default)s); every run estimates its own from a companion "
+                   "run at another step, and a larger one stops with exit status 1, nothing written")
+
+
+def _limits(args: argparse.Namespace) -> ErrorLimits:
+    return ErrorLimits.uniform(args.max_error)
 
 
 def _add_workers(p: argparse.ArgumentParser) -> None:
@@ -152,6 +165,7 @@ def build_parser() -> argparse.ArgumentParser:
     swim.add_argument("--cycles", type=_number("cycles", minimum=1, inclusive=True, integer=True), default=1,
                       metavar="N", help="flap cycles (default: %(default)s); figures are the last cycle's")
     _add_robot(swim)
+    _add_max_error(swim)
     swim.add_argument("--out", metavar="FILE.h5", help="write the time series and the resolved scene (SI units)")
     swim.add_argument("--rrd", metavar="FILE.rrd", help="write a rerun recording; open it with 'rerun FILE.rrd'")
     swim.add_argument("--json", action="store_true", help="print a JSON summary as the last line of stdout")
@@ -180,6 +194,7 @@ def build_parser() -> argparse.ArgumentParser:
                           "population, and the best gait's motion")
     optimize.add_argument("--json", action="store_true", help="print the result as JSON on the last line")
     _add_robot(optimize)
+    _add_max_error(optimize)
 
     table = sub.add_parser("table", help="the paper's Table I: six gaits, eta next to the paper's",
                            description="Evaluate the six gaits of the paper's Table I (one flap cycle each) and "
@@ -188,6 +203,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_workers(table)
     table.add_argument("--json", action="store_true", help="print the rows as JSON on the last line")
     _add_robot(table)
+    _add_max_error(table)
 
     fitp = sub.add_parser("fit", help="fit plate-scene parameters to measured segment angles (CMA-ES)",
                           description="Fit plate-scene parameters so that simulated segment angles match measured "
@@ -208,6 +224,7 @@ def build_parser() -> argparse.ArgumentParser:
     fitp.add_argument("--seed", type=_number("", minimum=1, inclusive=True, integer=True), default=1, metavar="S",
                       help="random seed, >= 1 (default: %(default)s)")
     _add_workers(fitp)
+    _add_max_error(fitp)
     fitp.add_argument("--write-scene", metavar="OUT.toml", help="write the fitted scene (finrft drag --scene OUT.toml)")
     fitp.add_argument("--plot", metavar="OUT.png", help="simulated against measured angles for every file")
     fitp.add_argument("--out", metavar="LOG.h5", help="HDF5 log of every evaluation (never overwritten)")
@@ -360,7 +377,15 @@ def _describe(run: Run, summary: dict[str, Any]) -> str:
     for i, row in enumerate(run.cycle_table(), start=1):
         lines.append(f"cycle {i}: mean {q} recovery {row[f'mean_recovery_{q}_{u}']:+.4g}, "
                      f"power {row[f'mean_power_{q}_{u}']:+.4g}; net impulse {row[f'net_impulse_{u}s']:+.4g} {u}s")
+    lines.append(_error_line(run))
     return "\n".join(lines)
+
+
+def _error_line(run: Any) -> str:
+    units = {"angle_deg": "deg", "force_N": "N", "torque_Nm": "N m", "eta_points": "points", "body_mm": "mm"}
+    return (f"estimated discretisation error (companion run at {run.error_companion}): "
+            + ", ".join(f"{key.rsplit('_', 1)[0]} {value:.2g} {units[key]}" for key, value in
+                        run.error_estimate.items()))
 
 
 def _run_test(args: argparse.Namespace) -> int:
@@ -372,7 +397,7 @@ def _run_test(args: argparse.Namespace) -> int:
         if args.command != "drag" or scene.plate.kind != "rigid":
             raise UsageError("--forces-csv needs a drag of a rigid plate (--plate rigid)")
         _check_output(args.forces_csv, ".csv", "--forces-csv")
-    run = simulate(scene, drive, progress=_progress(not args.quiet and sys.stderr.isatty()))
+    run = simulate(scene, drive, progress=_progress(not args.quiet and sys.stderr.isatty()), max_error=_limits(args))
     if args.forces_csv:
         from .fit import append_forces, plate_forces
         append_forces(args.forces_csv, plate_forces(run))
@@ -394,14 +419,19 @@ def _run_test(args: argparse.Namespace) -> int:
 
 
 def _json(value: Any) -> str:
-    return json.dumps(value, default=lambda x: x.tolist() if isinstance(x, np.ndarray) else float(x))
+    """One line of strict JSON; a NaN or infinity anywhere is a failed result (exit 1), never invalid JSON."""
+    try:
+        return json.dumps(value, allow_nan=False,
+                          default=lambda x: x.tolist() if isinstance(x, np.ndarray) else float(x))
+    except ValueError:
+        raise SimulationFailed("the result holds a NaN or infinite value: nothing is reported") from None
 
 
 def _swim(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
     from . import swim as swimming
     _check_output(args.out, ".h5", "--out")
     _check_output(args.rrd, ".rrd", "--rrd")
-    run = swimming.swim(scene, args.cycles)
+    run = swimming.swim(scene, args.cycles, max_error=_limits(args))
     summary = run.summary()
     if args.out or args.rrd:
         from . import record
@@ -415,6 +445,7 @@ def _swim(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
     for i, row in enumerate(run.cycle_table(), start=1):
         print(f"cycle {i}: eta {100 * row['eta']:+.2f} %, forward D1 {row['D1_mm']:.2f} mm, back D2 "
               f"{row['D2_mm']:.2f} mm, net {row['net_mm']:+.2f} mm ({row['net_speed_mm_s']:+.3f} mm/s)")
+    print(_error_line(run))
     if args.json:
         print(_json(summary))
     return 0
@@ -422,7 +453,8 @@ def _swim(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
 
 def _table(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
     from . import batch, swim as swimming
-    runs = batch.map_jobs(swimming.swim_job, [(s, 1) for s in swimming.table_scenes(scene)], workers=args.workers)
+    runs = batch.map_jobs(swimming.swim_job, [(s, 1, _limits(args)) for s in swimming.table_scenes(scene)],
+                          workers=args.workers)
     rows = swimming.table_rows(runs)
     print(swimming.table_markdown(rows))
     if args.json:
@@ -450,7 +482,7 @@ def _fit(args: argparse.Namespace) -> int:
                   f"{np.sqrt(es.best.f):.2f} deg", end="", file=sys.stderr, flush=True)
 
     result = fitting.fit(scene, data, variables, budget=args.budget, seed=args.seed, validate=validate,
-                         log=args.out, workers=args.workers, on_generation=on_generation)
+                         log=args.out, workers=args.workers, max_error=_limits(args), on_generation=on_generation)
     if show:
         print(file=sys.stderr)
     if args.write_scene:
@@ -546,17 +578,20 @@ def _optimize(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
 
     result = opt.optimize(scene, variables=list(variables.values()), budget=args.budget, seed=args.seed,
                           log=args.resume or args.out, resume=bool(args.resume), executor=executor,
-                          workers=args.workers, on_generation=on_generation)
+                          workers=args.workers, max_error=_limits(args), on_generation=on_generation)
     if show:
         print(file=sys.stderr)
+    from . import swim as swimming
     best_scene = scene.replace(**result.best)
+    best = swimming.swim(best_scene, 1, max_error=_limits(args))
     if args.rrd:
-        from . import record, swim as swimming
-        record.write_optimization_rrd(args.rrd, generations, list(variables), swimming.swim(best_scene, 1))
+        from . import record
+        record.write_optimization_rrd(args.rrd, generations, list(variables), best)
     g = best_scene.gait
     eta = 1 - result.cost
     summary = {"theta1_deg": math.degrees(g.theta1), "theta2_deg": math.degrees(g.theta2),
                "arm_length_mm": 1e3 * best_scene.arm.length, "eta": eta, "best": result.best,
+               "error_estimate": best.error_estimate, "error_companion": best.error_companion,
                "evaluations": result.evaluations, "generations": result.generations, "wall_s": result.wall_s,
                "seed": args.seed, "stop": {k: str(v) for k, v in result.stop.items()}}
     print(f"best eta {100 * eta:.2f} % at theta1 {summary['theta1_deg']:.1f} deg, theta2 "
@@ -639,7 +674,7 @@ def _main(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> int:
     except (UsageError, scenes.SceneError) as exc:
         print(f"finrft: error: {exc}", file=sys.stderr)
         return 2
-    except SimulationUnstable as exc:
+    except SimulationFailed as exc:
         print(f"finrft: error: {exc}", file=sys.stderr)
         return 1
 

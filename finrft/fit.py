@@ -18,11 +18,12 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from . import batch
+from .convergence import ErrorLimits, SimulationFailed
 from .drive import Drive
 from .optimize import Search, Variable, cmaes
 from .rft import ForceTable
 from .scene import RFT, Scene, SceneError, field_of, split_key, to_toml
-from .simulate import Run, SimulationUnstable, simulate
+from .simulate import Run, simulate
 
 # Short names for the paper's parameters, and default bounds (SI).
 ALIASES = {"b": "plate.damping", "k": "plate.stiffness", "f_perp": "rft.f_perp", "f_par": "rft.f_par"}
@@ -128,9 +129,9 @@ def drag_for(data: DragData) -> Drive:
     return Drive(speed=data.speed, stroke=data.speed * data.time[-1])
 
 
-def simulated_angles(scene: Scene, data: DragData) -> np.ndarray:
+def simulated_angles(scene: Scene, data: DragData, max_error: ErrorLimits | None = ErrorLimits()) -> np.ndarray:
     """The scene's segment angles (deg) at the data's times."""
-    return _angles_at(simulate(scene, drag_for(data)), data.time)
+    return _angles_at(simulate(scene, drag_for(data), max_error=max_error), data.time)
 
 
 def _angles_at(run: Run, time: np.ndarray) -> np.ndarray:
@@ -138,15 +139,16 @@ def _angles_at(run: Run, time: np.ndarray) -> np.ndarray:
     return np.column_stack([np.interp(time, run.time, np.degrees(a)) for a in run.segment_angle.T])
 
 
-def mse(scene: Scene, data: DragData) -> float:
-    """Mean squared error (deg^2) over segments and times; FAILED when the scene cannot be simulated."""
+def mse(scene: Scene, data: DragData, max_error: ErrorLimits = ErrorLimits()) -> float:
+    """Mean squared error (deg^2) over segments and times; FAILED when the scene cannot be simulated or its
+    estimated discretisation error exceeds ``max_error``: a fit must not fit a discretisation error."""
     try:
-        return float(np.mean((simulated_angles(scene, data) - data.angles) ** 2))
-    except (SimulationUnstable, SceneError):
+        return float(np.mean((simulated_angles(scene, data, max_error) - data.angles) ** 2))
+    except (SimulationFailed, SceneError):
         return FAILED
 
 
-def _mse_job(job: tuple[Scene, DragData]) -> float:
+def _mse_job(job: tuple[Scene, DragData, ErrorLimits]) -> float:
     return mse(*job)
 
 
@@ -156,12 +158,15 @@ class Fit:
     scene: Scene                   # the scene with the fitted values
     rmse_deg: dict[str, float]     # per fitted file
     validate_rmse_deg: dict[str, float]
+    error_estimate_deg: dict[str, float]  # per file, fitted and validation: the angles' discretisation error
 
 
 def fit(scene: Scene, data: Sequence[DragData], variables: Sequence[Variable], *, budget: int = 300, seed: int = 1,
         validate: Sequence[DragData] = (), log: str | Path | None = None, workers: int | None = None,
-        on_generation: Callable[..., None] | None = None) -> Fit:
-    """Fit ``variables`` of a plate scene to drag data with CMA-ES, starting from the scene's own values."""
+        max_error: ErrorLimits = ErrorLimits(), on_generation: Callable[..., None] | None = None) -> Fit:
+    """Fit ``variables`` of a plate scene to drag data with CMA-ES, starting from the scene's own values. Scenes
+    whose estimated discretisation error exceeds ``max_error`` score as failed; the fitted scene must meet it on
+    every file (else InaccurateResult)."""
     if scene.plate.segments != data[0].angles.shape[1]:
         raise SceneError(f"{data[0].path} has {data[0].angles.shape[1]} segments, the scene "
                          f"{scene.plate.segments}")
@@ -175,7 +180,7 @@ def fit(scene: Scene, data: Sequence[DragData], variables: Sequence[Variable], *
 
     def population(values: np.ndarray) -> tuple[list[float], dict[str, np.ndarray]]:
         scenes = [scene.replace(**{v.key: float(x) for v, x in zip(variables, row)}) for row in values]
-        jobs = [(s, d) for s in scenes for d in data]
+        jobs = [(s, d, max_error) for s in scenes for d in data]
         errors = np.array(batch.map_jobs(_mse_job, jobs, executor=pool, workers=1))
         errors = errors.reshape(len(scenes), len(data))
         return list(errors.mean(axis=1)), {"rmse": np.sqrt(errors)}
@@ -185,9 +190,17 @@ def fit(scene: Scene, data: Sequence[DragData], variables: Sequence[Variable], *
                        log_attrs={"scene_toml": to_toml(scene), "objective": "mean over files of the mean squared "
                                   "segment-angle error (deg^2)", "data": [d.path for d in data]},
                        columns={"rmse": ("deg", len(data))}, on_generation=on_generation)
+    if search.cost >= FAILED:
+        raise SimulationFailed(f"none of the {search.evaluations} parameter sets tried could be simulated within the "
+                               f"error limit: check the scene and the bounds")
     fitted = scene.replace(**search.best)
-    return Fit(search, fitted, {d.name: math.sqrt(mse(fitted, d)) for d in data},
-               {d.name: math.sqrt(mse(fitted, d)) for d in validate})
+    rmse, errors = {}, {}
+    for d in [*data, *validate]:
+        run = simulate(fitted, drag_for(d), max_error=max_error)
+        rmse[d.name] = math.sqrt(float(np.mean((_angles_at(run, d.time) - d.angles) ** 2)))
+        errors[d.name] = run.error_estimate["angle_deg"]
+    return Fit(search, fitted, {d.name: rmse[d.name] for d in data}, {d.name: rmse[d.name] for d in validate},
+               errors)
 
 
 def plot(fitted: Scene, files: Sequence[tuple[DragData, str]], path: str | Path) -> None:
@@ -294,5 +307,6 @@ def rft_fragment(law: RFT, table_csv: str) -> str:
 
 def fit_summary(result: Fit) -> dict[str, Any]:
     return {"params": result.search.best, "rmse_deg": result.rmse_deg, "validate_rmse_deg": result.validate_rmse_deg,
+            "error_estimate": {"angle_deg": max(result.error_estimate_deg.values())},
             "evaluations": result.search.evaluations, "wall_s": result.search.wall_s,
             "mse_deg2": result.search.cost}

@@ -16,6 +16,8 @@ from typing import Any, Callable, Sequence
 import mujoco
 import numpy as np
 
+from .convergence import (ErrorLimits, SimulationUnstable, check_resolution, checked,
+                          max_difference, paired, record_every, require_finite)
 from .coupling import PythonCoupling, SegmentForces, installed
 from .drive import Drive
 from .integrate import NOT_CONVERGED, STEP_TOO_SMALL, Stepper, stepper
@@ -23,10 +25,6 @@ from .models import build_plate, captured_warnings
 from .scene import Scene
 
 _BAD_STATE = (mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL)
-
-
-class SimulationUnstable(RuntimeError):
-    """The integration blew up; the message says when and what to change."""
 
 
 @dataclass
@@ -46,6 +44,22 @@ class Run:
     steps: int
     wall_s: float
     backend: str = "python"
+    error_estimate: dict[str, float] | None = None  # see finrft.convergence; None when not estimated
+    error_companion: str = ""                       # the companion run the estimate came from
+    error_wall_s: float = 0.0                       # the companion run's wall time
+
+    @property
+    def stroke_time(self) -> float:
+        return self.drive.stroke_time
+
+    def differences(self, other: Run) -> dict[str, float]:
+        """Largest differences from a run of the same test at another resolution, at the same instants: segment
+        and hinge angles (deg) and the per-stroke mean drive load (N or N m)."""
+        i, j = paired(self.time, other.time)
+        angles = max(max_difference(self.segment_angle[i], other.segment_angle[j]),
+                     max_difference(self.hinge_angle[i], other.hinge_angle[j]))
+        stroke_load = max_difference(self.stroke_impulse, other.stroke_impulse) / self.drive.stroke_time
+        return {"angle_deg": float(np.degrees(angles)), f"{self.quantity}_{self.unit}": stroke_load}
 
     @property
     def quantity(self) -> str:
@@ -84,6 +98,9 @@ class Run:
             "integrator": self.scene.sim.integrator,
             "dt": self.scene.sim.dt,
         }
+        if self.error_estimate is not None:
+            out["error_estimate"] = dict(self.error_estimate)
+            out["error_companion"] = self.error_companion
         cycles = self.cycle_table()
         if cycles:
             later = cycles[1:] or cycles
@@ -164,11 +181,12 @@ def chatter(scene: Any, t: float) -> SimulationUnstable:
 
 
 def schedule(drive: Drive, dt: float, record_dt: float) -> tuple[int, np.ndarray, np.ndarray]:
-    """Step count, the steps at which each stroke starts, and the steps recorded (always the first and last)."""
+    """Step count, the steps at which each stroke starts, and the steps recorded (always the first and last);
+    SceneError when dt cannot resolve a stroke."""
+    check_resolution(drive.stroke_time, dt)
     steps = max(1, round(drive.duration / dt))
     starts = np.array([round(k * drive.stroke_time / dt) for k in range(drive.strokes)])
-    every = max(1, round(record_dt / dt))
-    samples = np.unique(np.r_[np.arange(0, steps, every), steps])
+    samples = np.unique(np.r_[np.arange(0, steps, record_every(dt, record_dt)), steps])
     return steps, starts, samples
 
 
@@ -186,11 +204,11 @@ PROBE_EVERY = 2
 def step_through(m: mujoco.MjModel, d: mujoco.MjData, scene: Any, advance: Stepper, steps: int,
                  starts: np.ndarray, samples: np.ndarray, on_stroke: Callable[[int], None],
                  on_sample: Callable[[int], None], progress: Callable[[float], None] | None = None,
-                 watch: Sequence[int] = ()) -> None:
-    """Step a model through a run: ``on_stroke(k)`` as stroke k starts, ``on_sample(i)`` (after mj_forward) at
-    recorded step ``samples[i]``; ``advance`` steps in chunks in between. Stops loudly if the state blows up, or
-    if the ``watch`` dofs chatter (fixed-step methods: the three steps before every PROBE_EVERY-th sample are
-    taken one by one and checked when the run ends)."""
+                 watch: Sequence[int] = (), forward: bool = True) -> None:
+    """Step a model through a run: ``on_stroke(k)`` as stroke k starts, ``on_sample(i)`` (after mj_forward, unless
+    ``forward`` is False: then only the state is current) at recorded step ``samples[i]``; ``advance`` steps in
+    chunks in between. Stops loudly if the state blows up, or if the ``watch`` dofs chatter (fixed-step methods:
+    the three steps before every PROBE_EVERY-th sample are taken one by one and checked when the run ends)."""
     probe = len(watch) > 0 and scene.sim.method != "adaptive"
     # velocity[i, j]: the watched velocities 3 - j steps before sample i (j = 3: at the sample)
     velocity = np.full((len(samples), 4, len(watch)), np.nan)
@@ -212,7 +230,8 @@ def step_through(m: mujoco.MjModel, d: mujoco.MjData, scene: Any, advance: Stepp
             for at in slot.get(step, ()):
                 velocity[at] = d.qvel[watch]
             if sample < len(samples) and step == samples[sample]:
-                mujoco.mj_forward(m, d)
+                if forward:
+                    mujoco.mj_forward(m, d)
                 on_sample(sample)
                 sample += 1
                 if progress is not None:
@@ -235,8 +254,18 @@ def step_through(m: mujoco.MjModel, d: mujoco.MjData, scene: Any, advance: Stepp
             raise chatter(scene, samples[first] * scene.sim.dt)
 
 
-def simulate(scene: Scene, drive: Drive, *, progress: Callable[[float], None] | None = None) -> Run:
-    """Simulate one plate test; raises SimulationUnstable rather than return a diverged run."""
+def simulate(scene: Scene, drive: Drive, *, progress: Callable[[float], None] | None = None,
+             max_error: ErrorLimits | None = ErrorLimits(), estimate_error: bool = True) -> Run:
+    """Simulate one plate test, with an estimate of its discretisation error (``run.error_estimate``, from a
+    companion run: see finrft.convergence). Raises SimulationUnstable rather than return a diverged run, and
+    InaccurateResult when the estimate exceeds ``max_error`` (None: report it only). ``estimate_error=False``
+    skips the estimate, for studies that measure the error themselves."""
+    if not estimate_error:
+        return _simulate(scene, drive, progress, False)
+    return checked(lambda s, p, companion: _simulate(s, drive, p, companion), scene, progress, max_error)
+
+
+def _simulate(scene: Scene, drive: Drive, progress: Callable[[float], None] | None, companion: bool) -> Run:
     start = time.perf_counter()
     plate = build_plate(scene, drive.kind, drive.attack_deg)
     m = plate.model
@@ -259,19 +288,23 @@ def simulate(scene: Scene, drive: Drive, *, progress: Callable[[float], None] | 
     def record(i: int) -> None:
         rec_x[i] = d.qpos[plate.drive_qpos]
         rec_q[i, :len(hinges)] = d.qpos[hinges]
-        rec_f[i] = base.load(d)[0]
-        forces.snapshot(m, d, rec_cvel[i], rec_offset[i], rec_frame[i])
+        if not companion:
+            rec_f[i] = base.load(d)[0]
+            forces.snapshot(m, d, rec_cvel[i], rec_offset[i], rec_frame[i])
 
     advance = stepper(m, scene.sim, plate.backend, plate.groups)
     with installed(callback):
         step_through(m, d, scene, advance, steps, starts, samples, lambda k: base.start_stroke(m, d, k), record,
-                     progress, plate.hinge_dof)
+                     progress, () if companion else plate.hinge_dof, forward=not companion)
     base.finish(d)
 
     segment_angle = np.cumsum(rec_q, axis=1)
     if drive.kind == "rotate":
         segment_angle += rec_x[:, None]
-    return Run(scene=scene, drive=drive, time=samples * dt, displacement=rec_x, segment_angle=segment_angle,
-               hinge_angle=rec_q, drive_force=rec_f, rft_force=forces.recorded(rec_cvel, rec_offset, rec_frame),
-               stroke_impulse=base.impulse, peak_drive_force=float(np.max(np.abs(rec_f))), steps=steps,
-               wall_s=time.perf_counter() - start, backend=plate.backend)
+    run = Run(scene=scene, drive=drive, time=samples * dt, displacement=rec_x, segment_angle=segment_angle,
+              hinge_angle=rec_q, drive_force=rec_f, rft_force=forces.recorded(rec_cvel, rec_offset, rec_frame),
+              stroke_impulse=base.impulse, peak_drive_force=float(np.max(np.abs(rec_f))), steps=steps,
+              wall_s=time.perf_counter() - start, backend=plate.backend)
+    require_finite({"displacement": rec_x, "segment_angle": segment_angle, "drive_force": rec_f,
+                    "rft_force": run.rft_force, "stroke_impulse": base.impulse}, f"{drive.kind} at dt {dt:g} s")
+    return run

@@ -15,6 +15,8 @@ from typing import Any, Callable
 import mujoco
 import numpy as np
 
+from .convergence import (ErrorLimits, SimulationFailed, checked, max_difference, paired,
+                          require_finite)
 from .coupling import PythonCoupling, installed
 from .drive import Drive
 from .integrate import stepper
@@ -38,11 +40,29 @@ class SwimRun:
     steps: int
     wall_s: float
     backend: str
+    error_estimate: dict[str, float] | None = None  # see finrft.convergence; None when not estimated
+    error_companion: str = ""                       # the companion run the estimate came from
+    error_wall_s: float = 0.0                       # the companion run's wall time
 
     @property
     def cycle_time(self) -> float:
         g = self.scene.gait
         return 2 * (g.theta1 - g.theta2) / g.omega
+
+    @property
+    def stroke_time(self) -> float:
+        return self.cycle_time / 2
+
+    def differences(self, other: SwimRun) -> dict[str, float]:
+        """Largest differences from a swim at another resolution: arm and fin hinge angles (deg) at the same
+        instants, eta per cycle (points) and the body's position at the stroke ends (mm)."""
+        i, j = paired(self.time, other.time)
+        angles = max(max_difference(self.arm_angle[i], other.arm_angle[j]),
+                     max_difference(self.hinge_angle[i], other.hinge_angle[j]))
+        eta = [max_difference(np.array([a["eta"]]), np.array([b["eta"]]))
+               for a, b in zip(self.cycle_table(), other.cycle_table())]
+        return {"angle_deg": float(np.degrees(angles)), "eta_points": 100 * max(eta),
+                "body_mm": 1e3 * max_difference(self.stroke_y, other.stroke_y)}
 
     def cycle_table(self) -> list[dict[str, float]]:
         """Per flap cycle: D2 (back in recovery), D1 (forward in the power stroke), eta, net distance and speed."""
@@ -66,6 +86,8 @@ class SwimRun:
                    fin=self.scene.fin.kind, model=self.scene.robot.model, cycles=self.cycles, steps=self.steps,
                    sim_time_s=self.steps * self.scene.sim.dt, wall_s=self.wall_s, backend=self.backend,
                    integrator=self.scene.sim.integrator, dt=self.scene.sim.dt)
+        if self.error_estimate is not None:
+            out.update(error_estimate=dict(self.error_estimate), error_companion=self.error_companion)
         return out
 
 
@@ -82,8 +104,20 @@ def _stroke_drag(robot: RobotModel, scene: RobotScene, d: mujoco.MjData, k: int)
     d.xfrc_applied[robot.body, 1] = -drag if k % 2 == 0 else drag
 
 
-def swim(scene: RobotScene, cycles: int = 1, *, progress: Callable[[float], None] | None = None) -> SwimRun:
-    """Simulate ``cycles`` flap cycles from rest; raises SimulationUnstable rather than return a diverged run."""
+def swim(scene: RobotScene, cycles: int = 1, *, progress: Callable[[float], None] | None = None,
+         max_error: ErrorLimits | None = ErrorLimits(), estimate_error: bool = True) -> SwimRun:
+    """Simulate ``cycles`` flap cycles from rest, with an estimate of the discretisation error
+    (``run.error_estimate``, from a companion run: see finrft.convergence). Raises SimulationUnstable rather than
+    return a diverged run, SimulationFailed when eta is undefined (a power stroke that does not move the body
+    forward), and InaccurateResult when the estimate exceeds ``max_error`` (None: report it only).
+    ``estimate_error=False`` skips the estimate, for studies that measure the error themselves."""
+    if not estimate_error:
+        return _swim(scene, cycles, progress, False)
+    return checked(lambda s, p, companion: _swim(s, cycles, p, companion), scene, progress, max_error)
+
+
+def _swim(scene: RobotScene, cycles: int, progress: Callable[[float], None] | None,
+          companion: bool) -> SwimRun:
     start = time.perf_counter()
     robot = build_robot(scene)
     m = robot.model
@@ -121,16 +155,26 @@ def swim(scene: RobotScene, cycles: int = 1, *, progress: Callable[[float], None
         rec["y"][i] = d.qpos[robot.travel_qpos]
         rec["arm"][i] = d.qpos[robot.servo_qpos[0]]
         rec["hinge"][i, :len(hinges)] = d.qpos[hinges]
-        rec["torque"][i] = servos.load(d)[0] if prescribed else d.actuator_force[robot.actuators[0]]
+        if not companion:
+            rec["torque"][i] = servos.load(d)[0] if prescribed else d.actuator_force[robot.actuators[0]]
 
     advance = stepper(m, scene.sim, robot.backend, robot.groups)
     with installed(callback):
-        free = [robot.travel_dof, *robot.fin_hinge_dof.ravel(), *([] if prescribed else robot.servo_dof)]
-        step_through(m, d, scene, advance, steps, starts, samples, on_stroke, on_sample, progress, free)
+        free = [] if companion else [robot.travel_dof, *robot.fin_hinge_dof.ravel(),
+                                     *([] if prescribed else robot.servo_dof)]
+        step_through(m, d, scene, advance, steps, starts, samples, on_stroke, on_sample, progress, free,
+                     forward=not companion)
     stroke_y[-1] = d.qpos[robot.travel_qpos]
-    return SwimRun(scene=scene, cycles=cycles, time=samples * scene.sim.dt, body_y=rec["y"], arm_angle=rec["arm"],
-                   hinge_angle=rec["hinge"], servo_torque=rec["torque"], stroke_y=stroke_y, steps=steps,
-                   wall_s=time.perf_counter() - start, backend=robot.backend)
+    run = SwimRun(scene=scene, cycles=cycles, time=samples * scene.sim.dt, body_y=rec["y"], arm_angle=rec["arm"],
+                  hinge_angle=rec["hinge"], servo_torque=rec["torque"], stroke_y=stroke_y, steps=steps,
+                  wall_s=time.perf_counter() - start, backend=robot.backend)
+    what = f"swim at dt {scene.sim.dt:g} s"
+    require_finite({**rec, "stroke_y": stroke_y}, what)
+    for c, row in enumerate(run.cycle_table(), start=1):
+        if not row["D1_mm"] > 0:
+            raise SimulationFailed(f"{what}: eta is undefined in cycle {c}: its power stroke moved the body "
+                                   f"{row['D1_mm']:+.3g} mm, not forward")
+    return run
 
 
 # The paper's Table I: (name, theta1 deg, theta2 deg, L_a mm, fin, eta_exp %, eta_sim %, net speed mm/s exp).
@@ -160,7 +204,8 @@ def table_rows(runs: list[SwimRun]) -> list[dict[str, Any]]:
         rows.append({"gait": name, "theta1_deg": t1, "theta2_deg": t2, "arm_length_mm": la, "fin": fin,
                      "eta": s["eta"], "eta_script": abs(s["net_mm"]) / s["D1_mm"], "D1_mm": s["D1_mm"],
                      "D2_mm": s["D2_mm"], "net_speed_mm_s": s["net_speed_mm_s"], "paper_eta_sim": eta_sim / 100,
-                     "paper_eta_exp": eta_exp / 100, "paper_net_speed_exp_mm_s": speed_exp})
+                     "paper_eta_exp": eta_exp / 100, "paper_net_speed_exp_mm_s": speed_exp,
+                     "error_estimate": s.get("error_estimate")})
     return rows
 
 
@@ -176,6 +221,8 @@ def table_markdown(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
-def swim_job(job: tuple[RobotScene, int]) -> SwimRun:
-    """`swim` of a (scene, cycles) pair: the module-level function a process pool can send to its workers."""
-    return swim(*job)
+def swim_job(job: tuple[RobotScene, int, ErrorLimits | None]) -> SwimRun:
+    """`swim` of a (scene, cycles, max_error) job: the module-level function a process pool can send to its
+    workers."""
+    scene, cycles, max_error = job
+    return swim(scene, cycles, max_error=max_error)

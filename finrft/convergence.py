@@ -1,0 +1,183 @@
+"""Every run estimates its own discretisation error, and a result whose error exceeds a limit is never returned.
+
+The estimate repeats the whole run at another resolution, a companion run, and compares the two at the same
+instants. The companion normally takes steps COARSER = 4 times longer (the adaptive method: a tolerance 16 times
+looser and a largest step 4 times longer, as its steps grow with the square root of the tolerance), which costs
+about a quarter of the run. Every method converges at least at first order in the step over a run with stroke
+reversals (the drive's velocity jumps there), so by Richardson's argument the run's own error is about
+|run - companion| / (4 - 1): for a method of higher order this overestimates, never underestimates. Where the
+coarse companion would resolve a stroke in fewer than MIN_STROKE_STEPS steps, or cannot run (it goes unstable,
+chatters, or its Newton solve fails), the companion takes steps half as long instead and the error is
+|run - companion| / (1 - 1/2).
+
+A result reports ``error_estimate``: the largest estimated error of each quantity it reports, named with its
+unit (``angle_deg``; ``force_N`` or ``torque_Nm``, the per-stroke mean drive load; ``eta_points``, ``body_mm``).
+`ErrorLimits` bounds the angles and eta; the loads are reported, not bounded, as their scale is the scene's.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+import time
+from typing import Any, Callable, Protocol, TypeVar
+
+import numpy as np
+
+from .scene import SceneError
+
+COARSER = 4
+FINER = 0.5
+MIN_STROKE_STEPS = 8
+
+
+class SimulationFailed(RuntimeError):
+    """A run that cannot give a trustworthy result; the message says what happened and what to change."""
+
+
+class SimulationUnstable(SimulationFailed):
+    """The integration blew up, chattered or did not converge."""
+
+
+class InaccurateResult(SimulationFailed):
+    """The run's estimated discretisation error exceeds the limit."""
+
+
+@dataclass(frozen=True)
+class ErrorLimits:
+    """The largest estimated discretisation error a result may carry."""
+
+    angle_deg: float = 0.5      # any reported angle (segment, hinge)
+    eta_points: float = 0.5     # the swimming efficiency, percentage points
+
+    @classmethod
+    def uniform(cls, value: float) -> ErrorLimits:
+        """The same number for every bounded quantity: degrees for angles, points for eta."""
+        return cls(angle_deg=value, eta_points=value)
+
+    def exceeded(self, estimate: dict[str, float]) -> list[str]:
+        """The bounded quantities of an estimate that exceed their limit, as 'name = value > limit'."""
+        return [f"{key} = {estimate[key]:.3g} > {limit:g}" for key, limit in dataclasses.asdict(self).items()
+                if key in estimate and not estimate[key] <= limit]
+
+
+class Checked(Protocol):
+    """What a result offers the check: its scene, its shortest stroke, and its differences from a companion."""
+
+    scene: Any
+    error_estimate: dict[str, float] | None
+    error_companion: str
+
+    @property
+    def stroke_time(self) -> float: ...
+
+    def differences(self, other: Any) -> dict[str, float]: ...
+
+
+R = TypeVar("R", bound=Checked)
+
+
+def _companion(scene: Any, ratio: float, record_interval: float) -> tuple[Any, str]:
+    """The scene at ``ratio`` times the step (the adaptive method: ratio^2 times the tolerance, ratio times the
+    largest step), recording at the run's own instants."""
+    sim = scene.sim
+    if sim.method == "adaptive":
+        updates = {"sim.tolerance": sim.tolerance * ratio ** 2, "sim.max_step": sim.max_step * ratio}
+        label = f"tolerance {sim.tolerance * ratio ** 2:g}, largest step {sim.max_step * ratio:g} s"
+    else:
+        updates = {"sim.dt": sim.dt * ratio}
+        label = f"dt {sim.dt * ratio:g} s"
+    # Not scene.replace, which validates: a tolerance above the users' limit is the coarse companion's purpose.
+    sim = dataclasses.replace(scene.sim, **{k.split(".")[1]: v for k, v in updates.items()},
+                              record_dt=record_interval)
+    return dataclasses.replace(scene, sim=sim), label
+
+
+def record_every(dt: float, record_dt: float) -> int:
+    """Steps between recorded samples: ``record_dt`` rounded to whole steps."""
+    return max(1, round(record_dt / dt))
+
+
+def checked(run_once: Callable[[Any, Callable[[float], None] | None, bool], R], scene: Any,
+            progress: Callable[[float], None] | None = None, limits: ErrorLimits | None = ErrorLimits()) -> R:
+    """``run_once(scene, progress, companion)`` with ``error_estimate`` filled from a companion run;
+    InaccurateResult when it exceeds ``limits`` (None: report only). A companion (``companion`` True) records the
+    state only, at instants the run records too, and takes no chatter probe: its comparison with the run is the
+    check."""
+    sim = scene.sim
+    run = run_once(scene, None if progress is None else lambda f: progress(0.8 * f), False)
+    start = time.perf_counter()
+    every = record_every(sim.dt, sim.record_dt)
+    tail = None if progress is None else lambda f: progress(0.8 + 0.2 * f)
+    other = None
+    if sim.method == "adaptive" or run.stroke_time >= MIN_STROKE_STEPS * COARSER * sim.dt:
+        # The adaptive companion keeps the time grid; a coarse one samples where both grids meet.
+        interval = (every if sim.method == "adaptive" else math.lcm(every, COARSER)) * sim.dt
+        companion, label = _companion(scene, COARSER, interval)
+        try:
+            other, ratio = run_once(companion, tail, True), COARSER
+        except (SimulationFailed, SceneError):
+            pass
+    if other is None:
+        companion, label = _companion(scene, FINER, every * sim.dt)
+        other, ratio = run_once(companion, tail, True), FINER
+    run.error_estimate = {key: value / abs(ratio - 1) for key, value in run.differences(other).items()}
+    run.error_companion = label
+    run.error_wall_s = time.perf_counter() - start
+    over = [] if limits is None else limits.exceeded(run.error_estimate)
+    if over:
+        raise InaccurateResult(f"the estimated discretisation error is too large ({', '.join(over)}; from a "
+                               f"companion run at {label}): {advice(scene)}, or raise the limit (--max-error)")
+    return run
+
+
+def paired(time: np.ndarray, other: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Indices of the samples two runs share (the same instant within 1 ns), and always their last samples: both
+    end where the drive ends, whatever whole steps their grids round it to."""
+    j = np.clip(np.searchsorted(other, time), 0, len(other) - 1)
+    j = np.where(np.abs(other[j - 1] - time) < np.abs(other[j] - time), j - 1, j)
+    same = np.abs(other[j] - time) < 1e-9
+    same[-1] = True
+    return np.flatnonzero(same), np.r_[j[same][:-1], len(other) - 1]
+
+
+def advice(scene: Any) -> str:
+    """What to change for a finer result."""
+    sim = scene.sim
+    if sim.method == "adaptive":
+        return f"tighten sim.tolerance (now {sim.tolerance:g}) or sim.max_step (now {sim.max_step:g} s)"
+    if sim.method == "newton":
+        return f"reduce sim.dt (now {sim.dt:g} s)"
+    return f"reduce sim.dt (now {sim.dt:g} s) or use sim.method = 'newton'"
+
+
+def max_difference(a: np.ndarray, b: np.ndarray) -> float:
+    """max |a - b| over arrays of the same shape (0 for empty ones); inf where exactly one is not finite."""
+    if a.size == 0:
+        return 0.0
+    return float(np.max(np.abs(np.asarray(a, float) - np.asarray(b, float))))
+
+
+def require_finite(values: dict[str, Any], what: str) -> None:
+    """SimulationUnstable naming the first entry of a result that is NaN or infinite."""
+    for key, value in values.items():
+        if isinstance(value, dict):
+            require_finite(value, what)
+            continue
+        array = np.asarray(value)
+        if array.dtype.kind in "fc" and not np.all(np.isfinite(array)):
+            raise SimulationUnstable(f"{what}: {key} is not finite")
+
+
+def check_resolution(stroke_time: float, dt: float, what: str = "stroke") -> int:
+    """The whole steps a stroke takes; SceneError when dt cannot resolve it: longer than the stroke, or rounding
+    the stroke to whole steps would change its length by more than 1 %."""
+    if dt > stroke_time:
+        raise SceneError(f"sim.dt = {dt:g} s is longer than a {what} ({stroke_time:.4g} s): reduce sim.dt")
+    steps = round(stroke_time / dt)
+    if abs(steps * dt - stroke_time) > 0.01 * stroke_time:
+        raise SceneError(f"sim.dt = {dt:g} s does not resolve a {what} of {stroke_time:.4g} s: in {steps} whole "
+                         f"steps it would run {100 * (steps * dt / stroke_time - 1):+.1f} % of its length; use "
+                         f"sim.dt <= {stroke_time / 50:.3g} s")
+    return steps

@@ -5,10 +5,11 @@ instants. The companion normally takes steps COARSER = 4 times longer (the adapt
 looser and a largest step 4 times longer, as its steps grow with the square root of the tolerance), which costs
 about a quarter of the run. Every method converges at least at first order in the step over a run with stroke
 reversals (the drive's velocity jumps there), so by Richardson's argument the run's own error is about
-|run - companion| / (4 - 1): for a method of higher order this overestimates, never underestimates. Where the
-coarse companion would resolve a stroke in fewer than MIN_STROKE_STEPS steps, or cannot run (it goes unstable,
-chatters, or its Newton solve fails), the companion takes steps half as long instead and the error is
-|run - companion| / (1 - 1/2).
+|run - companion| / (4 - 1): for a method of higher order this overestimates. Where the coarse companion would
+resolve a stroke in fewer than MIN_STROKE_STEPS steps, cannot run (it goes unstable, or its Newton solve fails),
+or gives an estimate above the limit, a fine companion takes steps half as long instead and the error is
+|run - companion| / (1 - 1/2): a coarse companion can be outside the range where the error falls with the step
+(an explicit feedback that needs the run's step), and only the fine one refuses a run.
 
 A result reports ``error_estimate``: the largest estimated error of each quantity it reports, named with its
 unit (``angle_deg``; ``force_N`` or ``torque_Nm``, the per-stroke mean drive load; ``eta_points``, ``body_mm``).
@@ -104,28 +105,33 @@ def checked(run_once: Callable[[Any, Callable[[float], None] | None, bool], R], 
     """``run_once(scene, progress, companion)`` with ``error_estimate`` filled from a companion run;
     InaccurateResult when it exceeds ``limits`` (None: report only). A companion (``companion`` True) records the
     state only, at instants the run records too, and takes no chatter probe: its comparison with the run is the
-    check."""
+    check. A coarse companion can leave the range where the error falls with the step (an explicit feedback
+    that needs the run's step, a stroke barely resolved): an estimate above the limit is confirmed by the fine
+    companion before the run is refused."""
     sim = scene.sim
     run = run_once(scene, None if progress is None else lambda f: progress(0.8 * f), False)
     start = time.perf_counter()
     every = record_every(sim.dt, sim.record_dt)
     tail = None if progress is None else lambda f: progress(0.8 + 0.2 * f)
-    other = None
+    # The adaptive companion keeps the time grid; a coarse one samples where both grids meet.
+    coarse = (every if sim.method == "adaptive" else math.lcm(every, COARSER)) * sim.dt
+    ratios = [(FINER, every * sim.dt)]
     if sim.method == "adaptive" or run.stroke_time >= MIN_STROKE_STEPS * COARSER * sim.dt:
-        # The adaptive companion keeps the time grid; a coarse one samples where both grids meet.
-        interval = (every if sim.method == "adaptive" else math.lcm(every, COARSER)) * sim.dt
-        companion, label = _companion(scene, COARSER, interval)
+        ratios.insert(0, (COARSER, coarse))
+    for n, (ratio, interval) in enumerate(ratios, start=1):
+        companion, label = _companion(scene, ratio, interval)
         try:
-            other, ratio = run_once(companion, tail, True), COARSER
+            other = run_once(companion, tail, True)
         except (SimulationFailed, SceneError):
-            pass
-    if other is None:
-        companion, label = _companion(scene, FINER, every * sim.dt)
-        other, ratio = run_once(companion, tail, True), FINER
-    run.error_estimate = {key: value / abs(ratio - 1) for key, value in run.differences(other).items()}
-    run.error_companion = label
+            if n < len(ratios):
+                continue
+            raise
+        run.error_estimate = {key: value / abs(ratio - 1) for key, value in run.differences(other).items()}
+        run.error_companion = label
+        over = [] if limits is None else limits.exceeded(run.error_estimate)
+        if not over or n == len(ratios):
+            break
     run.error_wall_s = time.perf_counter() - start
-    over = [] if limits is None else limits.exceeded(run.error_estimate)
     if over:
         raise InaccurateResult(f"the estimated discretisation error is too large ({', '.join(over)}; from a "
                                f"companion run at {label}): {advice(scene)}, or raise the limit (--max-error)")

@@ -349,11 +349,16 @@ def _progress(enabled: bool) -> Callable[[float], None] | None:
     return show
 
 
+def _steps(summary: dict[str, Any]) -> str:
+    return f"{summary['steps']} steps taken ({summary['steps_rejected']} rejected)"
+
+
 def _describe(run: Run, summary: dict[str, Any]) -> str:
     """A human-readable summary in the paper's units."""
     q, u = run.quantity, run.unit
-    lines = [f"{run.drive.kind} of the {run.scene.plate.kind} plate: {summary['steps']} steps of "
-             f"{run.scene.sim.dt * 1e3:g} ms ({run.scene.sim.integrator}, {run.backend}) in {run.wall_s:.2f} s",
+    sim = run.scene.sim
+    lines = [f"{run.drive.kind} of the {run.scene.plate.kind} plate, {sim.method} method (dt {sim.dt * 1e3:g} ms, "
+             f"{sim.integrator}, {run.backend}): {_steps(summary)} in {run.wall_s:.2f} s",
              "final segment angles (deg): " + ", ".join(f"{a:.2f}" for a in summary["final_segment_angle_deg"]),
              "final hinge angles (deg):   " + ", ".join(f"{a:.2f}" for a in summary["final_hinge_angle_deg"]),
              f"peak drive {q}: {summary[f'peak_drive_{q}_{u}']:.4g} {u.replace('Nm', 'N m')}"]
@@ -411,7 +416,8 @@ def _swim(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
             record.write_swim_rrd(run, args.rrd)
     print(f"{scene.robot.model} robot, {scene.fin.kind} fin, theta1 {summary['theta1_deg']:g} deg, theta2 "
           f"{summary['theta2_deg']:g} deg, arm {summary['arm_length_mm']:g} mm, omega {summary['omega_deg_s']:g} "
-          f"deg/s: {run.steps} steps ({scene.sim.method}, dt {scene.sim.dt:g} s, {run.backend}) in {run.wall_s:.2f} s")
+          f"deg/s, {scene.sim.method} method (dt {scene.sim.dt:g} s, {run.backend}): {_steps(summary)} in "
+          f"{run.wall_s:.2f} s")
     for i, row in enumerate(run.cycle_table(), start=1):
         print(f"cycle {i}: eta {100 * row['eta']:+.2f} %, forward D1 {row['D1_mm']:.2f} mm, back D2 "
               f"{row['D2_mm']:.2f} mm, net {row['net_mm']:+.2f} mm ({row['net_speed_mm_s']:+.3f} mm/s)")

@@ -142,6 +142,11 @@ def test_mujoco_spellings_of_the_integrator_are_accepted(tmp_path, capsys, file_
     assert build_plate(scene).model.opt.integrator == getattr(mujoco.mjtIntegrator, names[expected])
 
 
+def test_a_wrong_integrator_lists_the_choices(capsys):
+    assert main(["drag", "--set", "sim.integrator=Verlet"]) == 2
+    assert capsys.readouterr().err.strip().endswith("use one of euler, implicitfast, implicit, rk4")
+
+
 def test_table_law_from_a_scene_file_matches_the_paper_law(tmp_path, capsys):
     # The paper law written as a fine table must give the same drag: two laws, one result.
     rft.write_table(tmp_path / "forces.csv", rft.paper_table(1.2, -0.2, samples=1801))

@@ -41,6 +41,14 @@ def test_every_export_is_documented_and_is_the_modules_own():
         finrft.nothing
 
 
+def test_the_package_docstring_example_runs(tmp_path):
+    example = finrft.__doc__.split("::\n\n", 1)[1].split("\n\n", 1)[0]
+    assert "finrft.simulate(" in example
+    done = _python(example, tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert "'steps': " in done.stdout
+
+
 def _plain(value) -> bool:
     if isinstance(value, dict):
         return all(type(k) is str and _plain(v) for k, v in value.items())

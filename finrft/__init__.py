@@ -1,0 +1,56 @@
+"""finrft: compliant fins and a two-fin robot in granular media, simulated on MuJoCo with granular resistive
+force theory (RFT).
+
+A scene (a plate test, or the robot) holds every parameter in SI units; a drive moves the plate's base; a run holds
+the results and their summary::
+
+    import finrft
+    run = finrft.simulate(finrft.preset("paper"), finrft.Drive(speed=0.03, stroke=0.2, cycles=2))
+    print(run.summary())
+
+The API, by topic:
+
+- scenes: `Scene` (a plate test), `RobotScene` (the robot), `preset`, `load_scene` (TOML file and overrides),
+  `to_toml`, `SceneError`
+- plate tests: `Drive`, `simulate` -> `Run`; `SimulationUnstable` when a run blows up or chatters
+- the robot: `swim` -> `SwimRun`; the paper's Table I with `table_scenes` and `table_rows`
+- many runs on all cores: `run_many` (plate tests), `map_jobs` (any module-level function), `local_executor`
+- fitting plate parameters to measured drags: `read_drag`, `resolve_params`, `fit` -> `Fit`
+- optimising the robot's gait: `optimize`, `Variable`
+- files: `write_h5`, `write_rrd` (a plate run), `write_swim_h5`, `write_swim_rrd` (a swim); they load h5py and
+  rerun on first use, not on ``import finrft``
+
+The functions `simulate`, `swim`, `fit` and `optimize` share their names with the modules that define them
+(``finrft.simulate`` ...): here the names are the functions; import other names from those modules by their full
+path (``from finrft.fit import simulated_drag``).
+"""
+
+from __future__ import annotations
+
+from importlib import import_module
+from typing import Any
+
+from .batch import local_executor, map_jobs, run_many
+from .drive import Drive
+from .fit import Fit, fit, read_drag, resolve_params
+from .optimize import Variable, optimize
+from .scene import RobotScene, Scene, SceneError, load_scene, preset, to_toml
+from .simulate import Run, SimulationUnstable, simulate
+from .swim import SwimRun, swim, table_rows, table_scenes
+
+_RECORDING = ("write_h5", "write_rrd", "write_swim_h5", "write_swim_rrd")
+
+__all__ = ["Drive", "Fit", "RobotScene", "Run", "Scene", "SceneError", "SimulationUnstable", "SwimRun", "Variable",
+           "fit", "load_scene", "local_executor", "map_jobs", "optimize", "preset", "read_drag", "resolve_params",
+           "run_many", "simulate", "swim", "table_rows", "table_scenes", "to_toml", *_RECORDING]
+
+
+def __getattr__(name: str) -> Any:
+    # The writers live in finrft.record, which imports h5py and rerun: load it on first use.
+    if name in _RECORDING:
+        return getattr(import_module(".record", __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_RECORDING))

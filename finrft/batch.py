@@ -3,6 +3,9 @@
 A process pool rather than MuJoCo's threaded rollout: a plate test reverses its drive with an impulse computed
 between strokes, so its motion is not an open-loop control sequence. Every worker loads the native plugin when it
 imports MuJoCo; a result is the same, bit for bit, as the single run of the same job.
+
+Workers are spawned, and a spawned worker imports the main module again: in a script, call `run_many` and
+`map_jobs` under ``if __name__ == "__main__":`` (notebooks and the interactive prompt need nothing).
 """
 
 from __future__ import annotations
@@ -11,6 +14,7 @@ import contextlib
 import multiprocessing
 import os
 from concurrent.futures import Executor, ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from typing import Callable, Iterator, Sequence, TypeVar
 
 from .drive import Drive
@@ -48,10 +52,15 @@ def map_jobs(fn: Callable[[T], R], jobs: Sequence[T], *, workers: int | None = N
     results: list[R] = []
     with pool_for(executor, 1 if len(jobs) <= 1 else workers) as pool:
         pending = [pool.submit(fn, job) for job in jobs] if pool is not None else jobs
-        for item in pending:
-            results.append(item.result() if pool is not None else fn(item))
-            if progress is not None:
-                progress(len(results), len(jobs))
+        try:
+            for item in pending:
+                results.append(item.result() if pool is not None else fn(item))
+                if progress is not None:
+                    progress(len(results), len(jobs))
+        except BrokenProcessPool as exc:
+            # The usual cause: a script without the main guard, whose workers run it again and stop at this call.
+            raise BrokenProcessPool(f"{exc} If this runs from a script, call it under "
+                                    f"`if __name__ == \"__main__\":` (each worker imports the script again).") from exc
     return results
 
 

@@ -117,13 +117,13 @@ def fit_speed(paths: list[str] | None = None, *, budget: int = 300, workers: int
               log: Callable[[str], None] = print) -> dict[str, Any]:
     """A 4-parameter fit (k, b, f_perp, f_par) of the paper plate over three drag files with ``budget``
     evaluations: the given files, or the model's own drags at 10, 30 and 50 mm/s over 200 mm."""
-    from . import fit as fitting
+    from .fit import fit, read_drag, resolve_params, simulated_drag
     scene = preset("paper")
-    data = [fitting.read_drag(p) for p in paths] if paths else [
-        fitting.simulated_drag(scene.replace(**{"plate.damping": 0.8}), v, 0.2) for v in (0.01, 0.03, 0.05)]
+    data = [read_drag(p) for p in paths] if paths else [
+        simulated_drag(scene.replace(**{"plate.damping": 0.8}), v, 0.2) for v in (0.01, 0.03, 0.05)]
     workers = workers or batch.default_workers()
-    result = fitting.fit(scene, data, fitting.resolve_params(["k", "b", "f_perp", "f_par"]), budget=budget, seed=1,
-                         workers=workers)
+    result = fit(scene, data, resolve_params(["k", "b", "f_perp", "f_par"]), budget=budget, seed=1,
+                 workers=workers)
     out = {"date": date.today().isoformat(), "files": [d.name for d in data], "budget": budget,
            "evaluations": result.search.evaluations, "wall_s": result.search.wall_s, "workers": workers,
            "rmse_deg": result.rmse_deg}

@@ -366,11 +366,16 @@ def _progress(enabled: bool) -> Callable[[float], None] | None:
     return show
 
 
+def _steps(summary: dict[str, Any]) -> str:
+    return f"{summary['steps']} steps taken ({summary['steps_rejected']} rejected)"
+
+
 def _describe(run: Run, summary: dict[str, Any]) -> str:
     """A human-readable summary in the paper's units."""
     q, u = run.quantity, run.unit
-    lines = [f"{run.drive.kind} of the {run.scene.plate.kind} plate: {summary['steps']} steps of "
-             f"{run.scene.sim.dt * 1e3:g} ms ({run.scene.sim.integrator}, {run.backend}) in {run.wall_s:.2f} s",
+    sim = run.scene.sim
+    lines = [f"{run.drive.kind} of the {run.scene.plate.kind} plate, {sim.method} method (dt {sim.dt * 1e3:g} ms, "
+             f"{sim.integrator}, {run.backend}): {_steps(summary)} in {run.wall_s:.2f} s",
              "final segment angles (deg): " + ", ".join(f"{a:.2f}" for a in summary["final_segment_angle_deg"]),
              "final hinge angles (deg):   " + ", ".join(f"{a:.2f}" for a in summary["final_hinge_angle_deg"]),
              f"peak drive {q}: {summary[f'peak_drive_{q}_{u}']:.4g} {u.replace('Nm', 'N m')}"]
@@ -428,10 +433,10 @@ def _json(value: Any) -> str:
 
 
 def _swim(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
-    from . import swim as swimming
+    from .swim import swim
     _check_output(args.out, ".h5", "--out")
     _check_output(args.rrd, ".rrd", "--rrd")
-    run = swimming.swim(scene, args.cycles, max_error=_limits(args))
+    run = swim(scene, args.cycles, max_error=_limits(args))
     summary = run.summary()
     if args.out or args.rrd:
         from . import record
@@ -441,7 +446,8 @@ def _swim(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
             record.write_swim_rrd(run, args.rrd)
     print(f"{scene.robot.model} robot, {scene.fin.kind} fin, theta1 {summary['theta1_deg']:g} deg, theta2 "
           f"{summary['theta2_deg']:g} deg, arm {summary['arm_length_mm']:g} mm, omega {summary['omega_deg_s']:g} "
-          f"deg/s: {run.steps} steps ({scene.sim.method}, dt {scene.sim.dt:g} s, {run.backend}) in {run.wall_s:.2f} s")
+          f"deg/s, {scene.sim.method} method (dt {scene.sim.dt:g} s, {run.backend}): {_steps(summary)} in "
+          f"{run.wall_s:.2f} s")
     for i, row in enumerate(run.cycle_table(), start=1):
         print(f"cycle {i}: eta {100 * row['eta']:+.2f} %, forward D1 {row['D1_mm']:.2f} mm, back D2 "
               f"{row['D2_mm']:.2f} mm, net {row['net_mm']:+.2f} mm ({row['net_speed_mm_s']:+.3f} mm/s)")
@@ -452,28 +458,27 @@ def _swim(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
 
 
 def _table(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
-    from . import batch, swim as swimming
-    runs = batch.map_jobs(swimming.swim_job, [(s, 1, _limits(args)) for s in swimming.table_scenes(scene)],
-                          workers=args.workers)
-    rows = swimming.table_rows(runs)
-    print(swimming.table_markdown(rows))
+    from .batch import map_jobs
+    from .swim import swim_job, table_markdown, table_rows, table_scenes
+    rows = table_rows(map_jobs(swim_job, [(s, 1, _limits(args)) for s in table_scenes(scene)], workers=args.workers))
+    print(table_markdown(rows))
     if args.json:
         print(_json(rows))
     return 0
 
 
 def _fit(args: argparse.Namespace) -> int:
-    from . import fit as fitting
+    from .fit import drag_for, fit, fit_summary, plot, read_drag, resolve_params
     scene = _resolve_scene(args)
     for path, suffix, flag in ((args.write_scene, ".toml", "--write-scene"), (args.plot, ".png", "--plot"),
                                (args.out, ".h5", "--out"), (args.rrd, ".rrd", "--rrd")):
         _check_output(path, suffix, flag)
     if args.out and Path(args.out).exists():
         raise UsageError(f"--out {args.out} exists: choose a new file")
-    data = [fitting.read_drag(p) for p in args.data]
-    validate = [fitting.read_drag(p) for p in args.validate]
+    data = [read_drag(p) for p in args.data]
+    validate = [read_drag(p) for p in args.validate]
     names = [n.strip() for n in args.params.split(",") if n.strip()]
-    variables = fitting.resolve_params(names, _parse_bounds(args.bounds))
+    variables = resolve_params(names, _parse_bounds(args.bounds))
     show = sys.stderr.isatty()
 
     def on_generation(g: int, values: np.ndarray, extras: dict[str, np.ndarray], es: Any) -> None:
@@ -481,17 +486,18 @@ def _fit(args: argparse.Namespace) -> int:
             print(f"\rgeneration {g + 1}: {es.countevals}/{args.budget} evaluations, best RMSE "
                   f"{np.sqrt(es.best.f):.2f} deg", end="", file=sys.stderr, flush=True)
 
-    result = fitting.fit(scene, data, variables, budget=args.budget, seed=args.seed, validate=validate,
-                         log=args.out, workers=args.workers, max_error=_limits(args), on_generation=on_generation)
+    result = fit(scene, data, variables, budget=args.budget, seed=args.seed, validate=validate,
+                 log=args.out, workers=args.workers, max_error=_limits(args),
+                 on_generation=on_generation)
     if show:
         print(file=sys.stderr)
     if args.write_scene:
         Path(args.write_scene).write_text(scenes.to_toml(result.scene))
     if args.plot:
-        fitting.plot(result.scene, [(d, "fitted") for d in data] + [(d, "validation") for d in validate], args.plot)
+        plot(result.scene, [(d, "fitted") for d in data] + [(d, "validation") for d in validate], args.plot)
     if args.rrd:
         from . import record
-        record.write_rrd(simulate(result.scene, fitting.drag_for(data[0])), args.rrd)
+        record.write_rrd(simulate(result.scene, drag_for(data[0])), args.rrd)
     for key, value in result.search.best.items():
         print(f"{key} = {value:.6g}")
     for label, table in (("fitted", result.rmse_deg), ("validation", result.validate_rmse_deg)):
@@ -499,22 +505,22 @@ def _fit(args: argparse.Namespace) -> int:
             print(f"RMSE {name} ({label}): {rmse:.2f} deg")
     print(f"{result.search.evaluations} evaluations in {result.search.wall_s:.1f} s")
     if args.json:
-        print(_json(fitting.fit_summary(result)))
+        print(_json(fit_summary(result)))
     return 0
 
 
 def _fit_rft(args: argparse.Namespace) -> int:
-    from . import fit as fitting
+    from .fit import identify_rft, read_forces, rft_fragment
     from .rft import write_table
     scene = _resolve_scene(args)
     _check_output(args.out, ".toml", "--out")
-    forces = fitting.read_forces(args.data)
-    law, table = fitting.identify_rft(forces, scene.plate.segments, scene.rft.v_reg, args.speed / 1000)
+    forces = read_forces(args.data)
+    law, table = identify_rft(forces, scene.plate.segments, scene.rft.v_reg, args.speed / 1000)
     table_path = args.table or (str(Path(args.out).with_suffix(".csv")) if args.out else None)
     if table_path:
         _check_output(table_path, ".csv", "--table")
         write_table(table_path, table)
-    fragment = fitting.rft_fragment(law, Path(table_path).name if table_path else "TABLE.csv")
+    fragment = rft_fragment(law, Path(table_path).name if table_path else "TABLE.csv")
     if args.out:
         Path(args.out).write_text(fragment)
         print(f"wrote {args.out}" + (f" and {table_path}" if table_path else ""))
@@ -545,7 +551,7 @@ def _parse_bounds(items: list[str]) -> dict[str, tuple[float, float]]:
 
 
 def _optimize(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
-    from . import optimize as opt
+    from .optimize import DEFAULT_VARIABLES, Variable, optimize, read_log
     if args.out and args.resume:
         raise UsageError("give either --out (a new log) or --resume (an existing one), not both")
     if args.out and Path(args.out).exists():
@@ -554,13 +560,13 @@ def _optimize(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
     _check_output(args.rrd, ".rrd", "--rrd")
     if args.resume and not Path(args.resume).is_file():
         raise UsageError(f"--resume {args.resume}: no such file")
-    variables = {v.key: v for v in opt.DEFAULT_VARIABLES}
+    variables = {v.key: v for v in DEFAULT_VARIABLES}
     if args.resume:
-        logged = opt.read_log(args.resume)
+        logged = read_log(args.resume)
         variables = {v.key: v for v in logged["variables"]}
         scene = scenes.scene_from_dict(tomllib.loads(logged["attrs"]["scene_toml"]), scenes.RobotScene)
     for key, (low, high) in _parse_bounds(args.bounds).items():
-        variables[key] = opt.Variable(key, low, high)
+        variables[key] = Variable(key, low, high)
     executor = None
     if args.executor == "dask":
         executor = _dask_executor(args.address)
@@ -576,14 +582,14 @@ def _optimize(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
             print(f"\rgeneration {g + 1}: {es.countevals}/{args.budget} evaluations, best eta this generation "
                   f"{100 * best:.2f} %", end="", file=sys.stderr, flush=True)
 
-    result = opt.optimize(scene, variables=list(variables.values()), budget=args.budget, seed=args.seed,
-                          log=args.resume or args.out, resume=bool(args.resume), executor=executor,
-                          workers=args.workers, max_error=_limits(args), on_generation=on_generation)
+    result = optimize(scene, variables=list(variables.values()), budget=args.budget, seed=args.seed,
+                      log=args.resume or args.out, resume=bool(args.resume), executor=executor,
+                      workers=args.workers, max_error=_limits(args), on_generation=on_generation)
     if show:
         print(file=sys.stderr)
-    from . import swim as swimming
+    from .swim import swim
     best_scene = scene.replace(**result.best)
-    best = swimming.swim(best_scene, 1, max_error=_limits(args))
+    best = swim(best_scene, 1, max_error=_limits(args))
     if args.rrd:
         from . import record
         record.write_optimization_rrd(args.rrd, generations, list(variables), best)

@@ -18,13 +18,15 @@
   step's first-order error. ``sim.dt`` is then only the time grid of reversals and recorded samples.
 
 A stepper advances ``n`` steps of ``sim.dt`` and returns 0, nonzero when the state stopped being finite,
-STEP_TOO_SMALL when the adaptive step fell below 1e-9 s, or NOT_CONVERGED when Newton's method did not.
+STEP_TOO_SMALL when the adaptive step fell below 1e-9 s, or NOT_CONVERGED when Newton's method did not. It counts
+the steps it has taken and rejected: a fixed step takes exactly the steps asked for, unless Newton's method halves
+one (one rejected, two taken); the adaptive method takes its accepted steps and rejects those over the tolerance.
 """
 
 from __future__ import annotations
 
 import ctypes
-from typing import Callable, Sequence
+from typing import Callable, Protocol, Sequence
 
 import mujoco
 import numpy as np
@@ -33,7 +35,6 @@ from . import native, rft
 from .models import ForceGroup
 from .scene import Sim
 
-Stepper = Callable[[mujoco.MjData, int], int]
 STEP_TOO_SMALL = 2  # the native library's codes too
 NOT_CONVERGED = 3
 NEWTON_ITERATIONS = 50
@@ -48,32 +49,81 @@ def _native(name: str, *argtypes) -> Callable[..., int]:
     return function
 
 
+class Stepper(Protocol):
+    """``advance(d, n)``: ``n`` steps of ``sim.dt``, 0 or a failure code (above); ``taken`` and ``rejected``: the
+    steps taken and rejected since the stepper was made."""
+
+    taken: int
+    rejected: int
+
+    def __call__(self, d: mujoco.MjData, n: int) -> int: ...
+
+
+Counts = ctypes.c_int64 * 2  # steps taken, steps rejected: the native functions add to it
+
+
 def stepper(m: mujoco.MjModel, sim: Sim, backend: str, groups: Sequence[ForceGroup]) -> Stepper:
     """The step function for a model: MuJoCo's step, or the implicit or adaptive method (native or numpy)."""
     if sim.method == "explicit":
-        def explicit(d: mujoco.MjData, n: int) -> int:
-            mujoco.mj_step(m, d, n)
-            return 0
-        return explicit
+        return Explicit(m)
     if sim.method in ("implicit", "newton"):
-        iterations = 1 if sim.method == "implicit" else NEWTON_ITERATIONS
-        if backend == "native":
-            step = _native("finrft_implicit_step", ctypes.c_int, ctypes.c_int)
-            return lambda d, n: step(m._address, d._address, n, iterations)
-        implicit = PythonImplicit(m, groups)
-        return lambda d, n: implicit.steps(d, n, m.opt.timestep, iterations)
+        return Implicit(m, 1 if sim.method == "implicit" else NEWTON_ITERATIONS, backend, groups)
     return Adaptive(m, sim, backend, groups)
 
 
-class Adaptive:
+class _Counted:
+    def __init__(self) -> None:
+        self.counts = Counts()
+
+    @property
+    def taken(self) -> int:
+        return self.counts[0]
+
+    @property
+    def rejected(self) -> int:
+        return self.counts[1]
+
+
+class Explicit(_Counted):
+    """MuJoCo's own step."""
+
+    def __init__(self, m: mujoco.MjModel) -> None:
+        super().__init__()
+        self.m = m
+
+    def __call__(self, d: mujoco.MjData, n: int) -> int:
+        mujoco.mj_step(self.m, d, n)
+        self.counts[0] += n
+        return 0
+
+
+class Implicit(_Counted):
+    """The implicit (one Newton iteration) or newton method, native or numpy."""
+
+    def __init__(self, m: mujoco.MjModel, iterations: int, backend: str, groups: Sequence[ForceGroup]) -> None:
+        super().__init__()
+        self.m, self.iterations = m, iterations
+        if backend == "native":
+            self._native = _native("finrft_implicit_step", ctypes.c_int, ctypes.c_int, ctypes.POINTER(ctypes.c_int64))
+        else:
+            self._native, self._python = None, PythonImplicit(m, groups)
+
+    def __call__(self, d: mujoco.MjData, n: int) -> int:
+        if self._native is not None:
+            return self._native(self.m._address, d._address, n, self.iterations, self.counts)
+        return self._python.steps(d, n, self.m.opt.timestep, self.iterations, self.counts)
+
+
+class Adaptive(_Counted):
     """The adaptive method; the step size carries over from one call to the next."""
 
     def __init__(self, m: mujoco.MjModel, sim: Sim, backend: str, groups: Sequence[ForceGroup]) -> None:
+        super().__init__()
         self.m, self.max_step, self.tolerance, self.h = m, sim.max_step, sim.tolerance, sim.dt
         self._native = None
         if backend == "native":
             self._native = _native("finrft_adaptive_advance", ctypes.c_double, ctypes.c_double, ctypes.c_double,
-                                   ctypes.POINTER(ctypes.c_double))
+                                   ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int64))
         else:
             self._implicit = PythonImplicit(m, groups)
             self._spec = mujoco.mjtState.mjSTATE_INTEGRATION
@@ -85,7 +135,7 @@ class Adaptive:
         if self._native is not None:
             h = ctypes.c_double(self.h)
             failed = self._native(self.m._address, d._address, duration, self.max_step, self.tolerance,
-                                  ctypes.byref(h))
+                                  ctypes.byref(h), self.counts)
             self.h = h.value
             return failed
         return self._python(d, duration)
@@ -108,9 +158,11 @@ class Adaptive:
                 self._halves[span] += self._halves[span] - self._full[span]
                 mujoco.mj_setState(m, d, self._halves, spec)
                 self.h = min(self.max_step, step * min(2.0, 0.9 * np.sqrt(self.tolerance / max(error, 1e-300))))
+                self.counts[0] += 1
             else:
                 mujoco.mj_setState(m, d, self._start, spec)
                 self.h = step * max(0.2, 0.9 * np.sqrt(self.tolerance / error))
+                self.counts[1] += 1
                 if self.h < 1e-9:
                     return STEP_TOO_SMALL
         return 0
@@ -206,24 +258,28 @@ class PythonImplicit:
             _, slope = self._forces(forces, qvel + dv, dt, True)
         return None
 
-    def steps(self, d: mujoco.MjData, n: int, dt: float, iterations: int) -> int:
+    def steps(self, d: mujoco.MjData, n: int, dt: float, iterations: int, counts: Counts | None = None) -> int:
+        """``n`` steps of ``dt``; the steps taken and rejected are added to ``counts`` when given."""
         for _ in range(n):
-            failed = self.step(d, dt, iterations, 0)
+            failed = self.step(d, dt, iterations, 0, counts)
             if failed:
                 return failed
         return 0
 
-    def step(self, d: mujoco.MjData, dt: float, iterations: int, halvings: int) -> int:
+    def step(self, d: mujoco.MjData, dt: float, iterations: int, halvings: int, counts: Counts | None = None) -> int:
         """One step of ``dt``; where Newton's method finds no root (forces that feed energy in, such as
         f_par < 0, can leave the implicit equation without one near v) it halves the step, at most
-        NEWTON_HALVINGS times."""
+        NEWTON_HALVINGS times (the step is rejected, its halves taken)."""
         m = self.m
         mujoco.mj_forward(m, d)
         dv = self.velocity_change(d, dt, iterations)
         if dv is None:
             if iterations == 1 or halvings == NEWTON_HALVINGS:
                 return NOT_CONVERGED
-            return self.step(d, dt / 2, iterations, halvings + 1) or self.step(d, dt / 2, iterations, halvings + 1)
+            if counts is not None:
+                counts[1] += 1
+            return (self.step(d, dt / 2, iterations, halvings + 1, counts)
+                    or self.step(d, dt / 2, iterations, halvings + 1, counts))
         for a in range(m.nu):
             adr = m.actuator_actadr[a]
             if adr < 0:
@@ -233,6 +289,8 @@ class PythonImplicit:
             if m.actuator_actlimited[a]:
                 d.act[span] = np.clip(d.act[span], *m.actuator_actrange[a])
         d.qvel[:] += dv
+        if counts is not None:
+            counts[0] += 1
         if not np.all(np.isfinite(d.qvel)):
             return 1
         d.qacc_warmstart[:] = d.qacc

@@ -22,7 +22,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
-import h5py
 import numpy as np
 
 from . import batch
@@ -123,6 +122,7 @@ Evaluate = Callable[[np.ndarray], tuple[list[float], dict[str, np.ndarray]]]
 
 def _log_new(path: Path, variables: Sequence[Variable], attrs: dict[str, Any],
              columns: dict[str, tuple[str, int]]) -> None:
+    import h5py  # here, not at the top: `import finrft` stays light
     with h5py.File(path, "w") as f:
         f.attrs.update(schema=SCHEMA, variables=json.dumps([[v.key, v.low, v.high] for v in variables]), **attrs)
         specs = {"x": ("SI, one column per variable", len(variables)), "cost": ("1", 0), "generation": ("", 0),
@@ -136,6 +136,7 @@ def _log_new(path: Path, variables: Sequence[Variable], attrs: dict[str, Any],
 
 
 def _log_append(path: Path, generation: int, rows: dict[str, np.ndarray], es: Any) -> None:
+    import h5py
     with h5py.File(path, "a") as f:
         n, count = f["cost"].shape[0], len(rows["cost"])
         for name, data in {**rows, "generation": np.full(count, generation)}.items():
@@ -147,6 +148,7 @@ def _log_append(path: Path, generation: int, rows: dict[str, np.ndarray], es: An
 
 def read_log(path: str | Path) -> dict[str, Any]:
     """A log's contents; SceneError when the file is not a finrft optimisation log."""
+    import h5py
     try:
         with h5py.File(path, "r") as f:
             if f.attrs.get("schema") != SCHEMA:

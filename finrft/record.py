@@ -155,7 +155,9 @@ def _blueprint(run: Run, points: np.ndarray, load: tuple[str, str], motion: tupl
             rrb.Vertical(
                 rrb.TimeSeriesView(name="Segment angles (deg)", origin="angles/segment"),
                 rrb.TimeSeriesView(name="Hinge angles (deg)", origin="angles/hinge"),
-                *(rrb.TimeSeriesView(name=label.capitalize(), origin=entity) for entity, label in (load, motion)),
+                # upper-case the first letter only: capitalize() would lower the unit, "(n)"
+                *(rrb.TimeSeriesView(name=label[0].upper() + label[1:], origin=entity)
+                  for entity, label in (load, motion)),
             ),
             column_shares=[3, 2],
         ),

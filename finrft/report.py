@@ -1,6 +1,6 @@
 """`finrft report`: the paper's results regenerated from this package, as figures, tables and recordings.
 
-Every figure comes from the public API a user would call (simulate, batch.run_many, fit.fit, swim, optimize).
+Every figure comes from the public API a user would call (simulate, run_many, fit, swim, optimize).
 ``quick`` makes a smaller version (fewer cycles, amplitudes and evaluations) for tests.
 """
 
@@ -14,9 +14,10 @@ from typing import Iterator
 
 import numpy as np
 
-from . import batch, fit, record
+from . import batch, record
 from .convergence import ErrorLimits
 from .drive import Drive
+from .fit import fit, read_drag, resolve_params, simulated_angles
 from .optimize import optimize
 from .scene import RobotScene, Scene, preset
 from .simulate import Run
@@ -152,14 +153,14 @@ def experiment(out: Path, quick: bool, workers: int | None, data_dir: Path, scen
     files = sorted(data_dir.glob("*.csv"))
     if not files:
         return f"No measurements in {data_dir}: this section needs the plate-drag data."
-    data = [fit.read_drag(p) for p in files]
+    data = [read_drag(p) for p in files]
     budget = 20 if quick else 300
-    fits = {"paper procedure: b only, all speeds": fit.fit(scene, data, fit.resolve_params(["b"]), budget=budget,
-                                                           workers=workers)}
+    fits = {"paper procedure: b only, all speeds": fit(scene, data, resolve_params(["b"]), budget=budget,
+                                                       workers=workers)}
     train = [data[0], data[-1]] if len(data) > 2 else data
     validate = [d for d in data if d not in train]
-    fits[f"k, b, f_perp, f_par on {', '.join(d.name for d in train)}"] = fit.fit(
-        scene, train, fit.resolve_params(["k", "b", "f_perp", "f_par"]), budget=budget, workers=workers,
+    fits[f"k, b, f_perp, f_par on {', '.join(d.name for d in train)}"] = fit(
+        scene, train, resolve_params(["k", "b", "f_perp", "f_par"]), budget=budget, workers=workers,
         validate=validate)
     plt = _pyplot()
     fig, axes = plt.subplots(len(fits), 2, figsize=(13, 4.5 * len(fits)), squeeze=False,
@@ -167,7 +168,7 @@ def experiment(out: Path, quick: bool, workers: int | None, data_dir: Path, scen
     lines = []
     grid = np.linspace(0.0, min(1e3 * d.displacement[-1] for d in data), 200)
     for row, (name, result) in zip(axes, fits.items()):
-        simulated = [fit.simulated_angles(result.scene, d) for d in data]
+        simulated = [simulated_angles(result.scene, d) for d in data]
         for i in range(data[0].angles.shape[1]):
             measured = np.mean([np.interp(grid, 1e3 * d.displacement, d.angles[:, i]) for d in data], axis=0)
             sims = np.array([np.interp(grid, 1e3 * d.displacement, s[:, i]) for d, s in zip(data, simulated)])

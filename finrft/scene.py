@@ -248,8 +248,12 @@ def _check(section: str, f: dataclasses.Field, value: Any) -> Any:
             raise SceneError(f"{key} must be a whole number, got {value!r}")
     elif not isinstance(value, str):
         raise SceneError(f"{key} must be a string, got {value!r}")
-    if meta["choices"] and value not in meta["choices"]:
-        raise SceneError(f"{key} = {value!r} is not allowed: use one of {', '.join(meta['choices'])}")
+    if meta["choices"]:
+        # Names match whatever their case, so MuJoCo's own spellings (Euler, RK4) name the schema's choices.
+        canonical = {choice.lower(): choice for choice in meta["choices"]}
+        if value.lower() not in canonical:
+            raise SceneError(f"{key} = {value!r} is not allowed: use one of {', '.join(meta['choices'])}")
+        value = canonical[value.lower()]
     low = meta["minimum"]
     if low is not None and (value <= low if meta["exclusive"] else value < low):
         relation = ">" if meta["exclusive"] else ">="

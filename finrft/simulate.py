@@ -41,9 +41,10 @@ class Run:
     rft_force: np.ndarray          # (T, N, 3) N, RFT force on each segment, world frame
     stroke_impulse: np.ndarray     # (strokes,) integral of the drive force over each stroke (N s or N m s)
     peak_drive_force: float        # max |drive force| over the recorded samples
-    steps: int
+    steps: int                     # steps taken (the adaptive method's accepted steps)
     wall_s: float
     backend: str = "python"
+    steps_rejected: int = 0        # the adaptive method's rejected steps, and newton's halved ones
     error_estimate: dict[str, float] | None = None  # see finrft.convergence; None when not estimated
     error_companion: str = ""                       # the companion run the estimate came from
     error_wall_s: float = 0.0                       # the companion run's wall time
@@ -78,25 +79,26 @@ class Run:
         rows = []
         for c in range(self.drive.cycles):
             out, back = self.stroke_impulse[2 * c], self.stroke_impulse[2 * c + 1]
-            rows.append({f"mean_recovery_{q}_{u}": out / ts, f"mean_power_{q}_{u}": back / ts,
-                         f"net_impulse_{u}s": -(out + back)})
+            rows.append({f"mean_recovery_{q}_{u}": float(out / ts), f"mean_power_{q}_{u}": float(back / ts),
+                         f"net_impulse_{u}s": float(-(out + back))})
         return rows
 
     def summary(self) -> dict[str, Any]:
-        """The figures `finrft ... --json` prints."""
+        """The figures `finrft ... --json` prints, as plain Python numbers."""
         q, u = self.quantity, self.unit
         out: dict[str, Any] = {
             "test": self.drive.kind,
             "plate": self.scene.plate.kind,
             "final_segment_angle_deg": np.degrees(self.segment_angle[-1]).tolist(),
             "final_hinge_angle_deg": np.degrees(self.hinge_angle[-1]).tolist(),
-            f"peak_drive_{q}_{u}": self.peak_drive_force,
-            "steps": self.steps,
-            "sim_time_s": self.steps * self.scene.sim.dt,
-            "wall_s": self.wall_s,
+            f"peak_drive_{q}_{u}": float(self.peak_drive_force),
+            "steps": int(self.steps),
+            "steps_rejected": int(self.steps_rejected),
+            "sim_time_s": float(self.time[-1]),
+            "wall_s": float(self.wall_s),
             "backend": self.backend,
             "integrator": self.scene.sim.integrator,
-            "dt": self.scene.sim.dt,
+            "dt": float(self.scene.sim.dt),
         }
         if self.error_estimate is not None:
             out["error_estimate"] = dict(self.error_estimate)
@@ -303,8 +305,8 @@ def _simulate(scene: Scene, drive: Drive, progress: Callable[[float], None] | No
         segment_angle += rec_x[:, None]
     run = Run(scene=scene, drive=drive, time=samples * dt, displacement=rec_x, segment_angle=segment_angle,
               hinge_angle=rec_q, drive_force=rec_f, rft_force=forces.recorded(rec_cvel, rec_offset, rec_frame),
-              stroke_impulse=base.impulse, peak_drive_force=float(np.max(np.abs(rec_f))), steps=steps,
-              wall_s=time.perf_counter() - start, backend=plate.backend)
+              stroke_impulse=base.impulse, peak_drive_force=float(np.max(np.abs(rec_f))), steps=advance.taken,
+              wall_s=time.perf_counter() - start, backend=plate.backend, steps_rejected=advance.rejected)
     require_finite({"displacement": rec_x, "segment_angle": segment_angle, "drive_force": rec_f,
                     "rft_force": run.rft_force, "stroke_impulse": base.impulse}, f"{drive.kind} at dt {dt:g} s")
     return run

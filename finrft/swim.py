@@ -37,9 +37,10 @@ class SwimRun:
     hinge_angle: np.ndarray    # (T, N) rad, right fin hinges (zeros for a rigid fin)
     servo_torque: np.ndarray   # (T,) N m, what the right servo applies to its arm
     stroke_y: np.ndarray       # (2 cycles + 1,) m, body position at the start of each stroke and at the end
-    steps: int
+    steps: int                 # steps taken (the adaptive method's accepted steps)
     wall_s: float
     backend: str
+    steps_rejected: int = 0    # the adaptive method's rejected steps, and newton's halved ones
     error_estimate: dict[str, float] | None = None  # see finrft.convergence; None when not estimated
     error_companion: str = ""                       # the companion run the estimate came from
     error_wall_s: float = 0.0                       # the companion run's wall time
@@ -68,7 +69,7 @@ class SwimRun:
         """Per flap cycle: D2 (back in recovery), D1 (forward in the power stroke), eta, net distance and speed."""
         rows = []
         for c in range(self.cycles):
-            y0, y1, y2 = self.stroke_y[2 * c: 2 * c + 3]
+            y0, y1, y2 = (float(y) for y in self.stroke_y[2 * c: 2 * c + 3])
             back, forward = y0 - y1, y2 - y1
             rows.append({"D1_mm": 1e3 * forward, "D2_mm": 1e3 * back,
                          "eta": (forward - back) / forward if forward > 0 else float("nan"),
@@ -76,16 +77,17 @@ class SwimRun:
         return rows
 
     def summary(self) -> dict[str, Any]:
-        """The figures `finrft swim --json` prints: the last cycle's, and per-cycle lists."""
+        """The figures `finrft swim --json` prints: the last cycle's, and per-cycle lists; plain Python numbers."""
         rows = self.cycle_table()
         g = self.scene.gait
         out: dict[str, Any] = dict(rows[-1])
         out.update({f"{key}_per_cycle": [row[key] for row in rows] for key in rows[-1]})
         out.update(theta1_deg=float(np.degrees(g.theta1)), theta2_deg=float(np.degrees(g.theta2)),
                    arm_length_mm=1e3 * self.scene.arm.length, omega_deg_s=float(np.degrees(g.omega)),
-                   fin=self.scene.fin.kind, model=self.scene.robot.model, cycles=self.cycles, steps=self.steps,
-                   sim_time_s=self.steps * self.scene.sim.dt, wall_s=self.wall_s, backend=self.backend,
-                   integrator=self.scene.sim.integrator, dt=self.scene.sim.dt)
+                   fin=self.scene.fin.kind, model=self.scene.robot.model, cycles=int(self.cycles),
+                   steps=int(self.steps), steps_rejected=int(self.steps_rejected), sim_time_s=float(self.time[-1]),
+                   wall_s=float(self.wall_s), backend=self.backend, integrator=self.scene.sim.integrator,
+                   dt=float(self.scene.sim.dt))
         if self.error_estimate is not None:
             out.update(error_estimate=dict(self.error_estimate), error_companion=self.error_companion)
         return out
@@ -166,8 +168,8 @@ def _swim(scene: RobotScene, cycles: int, progress: Callable[[float], None] | No
                      forward=not companion)
     stroke_y[-1] = d.qpos[robot.travel_qpos]
     run = SwimRun(scene=scene, cycles=cycles, time=samples * scene.sim.dt, body_y=rec["y"], arm_angle=rec["arm"],
-                  hinge_angle=rec["hinge"], servo_torque=rec["torque"], stroke_y=stroke_y, steps=steps,
-                  wall_s=time.perf_counter() - start, backend=robot.backend)
+                  hinge_angle=rec["hinge"], servo_torque=rec["torque"], stroke_y=stroke_y, steps=advance.taken,
+                  wall_s=time.perf_counter() - start, backend=robot.backend, steps_rejected=advance.rejected)
     what = f"swim at dt {scene.sim.dt:g} s"
     require_finite({**rec, "stroke_y": stroke_y}, what)
     for c, row in enumerate(run.cycle_table(), start=1):

@@ -488,6 +488,7 @@ typedef struct {
   Segments segments;
   Newton w;
   mjtNum* rhs;
+  int64_t* counts;  // NULL, or where to add the steps taken and rejected (halved by the newton method)
 } Workspace;
 
 // One implicit step of size dt; 0, 1 when the state stopped being finite, or NOT_CONVERGED.
@@ -507,6 +508,7 @@ static int implicit_step(const mjModel* m, mjData* d, mjtNum dt, int iterations,
   segments_update(m, d, ws->slot, &ws->segments);
   if (newton_solve(&ws->segments, w, d->qvel, ws->rhs, dt, iterations)) {
     if (iterations == 1 || halvings == NEWTON_HALVINGS) return NOT_CONVERGED;
+    if (ws->counts) ws->counts[1]++;
     int failed = implicit_step(m, d, dt / 2, iterations, ws, halvings + 1);
     return failed ? failed : implicit_step(m, d, dt / 2, iterations, ws, halvings + 1);
   }
@@ -525,6 +527,7 @@ static int implicit_step(const mjModel* m, mjData* d, mjtNum dt, int iterations,
     d->qvel[i] += w->dv[i];
     if (!isfinite(d->qvel[i])) failed = 1;
   }
+  if (ws->counts) ws->counts[0]++;
   mju_copy(d->qacc_warmstart, d->qacc, nv);
   mj_integratePos(m, d->qpos, d->qvel, dt);
   d->time += dt;
@@ -532,10 +535,12 @@ static int implicit_step(const mjModel* m, mjData* d, mjtNum dt, int iterations,
 }
 
 // nstep implicit steps of size dt; returns 0, 1 when the state stopped being finite, or NOT_CONVERGED.
-static int implicit_steps(const mjModel* m, mjData* d, int nstep, mjtNum dt, int iterations) {
+// counts (or NULL): the steps taken and rejected are added to counts[0] and counts[1].
+static int implicit_steps(const mjModel* m, mjData* d, int nstep, mjtNum dt, int iterations, int64_t* counts) {
   int nv = m->nv;
   Workspace ws;
   ws.slot = -1;
+  ws.counts = counts;
   mjp_getPlugin("finrft.rft", &ws.slot);
   mjtNum* block = (mjtNum*)malloc((3 * (size_t)nv * nv + 9 * (size_t)nv) * sizeof(mjtNum));
   int failed = (segments_alloc(m, d, ws.slot, &ws.segments) || !block) ? 1 : 0;
@@ -553,18 +558,20 @@ static int implicit_steps(const mjModel* m, mjData* d, int nstep, mjtNum dt, int
   return failed;
 }
 
-// The implicit (iterations == 1) and newton methods: nstep steps of the model's time step.
-FINRFT_EXPORT int finrft_implicit_step(const mjModel* m, mjData* d, int nstep, int iterations) {
-  return implicit_steps(m, d, nstep, m->opt.timestep, iterations);
+// The implicit (iterations == 1) and newton methods: nstep steps of the model's time step. counts (or NULL):
+// the steps taken (a halved step counts as two) and rejected (halved) are added to counts[0] and counts[1].
+FINRFT_EXPORT int finrft_implicit_step(const mjModel* m, mjData* d, int nstep, int iterations, int64_t* counts) {
+  return implicit_steps(m, d, nstep, m->opt.timestep, iterations, counts);
 }
 
 // The adaptive method: implicit steps over `duration` seconds, each accepted when one step of h and two of h/2
 // agree to `tol` (max over qpos, qvel of |difference| / (1e-3 + |value|)). The accepted positions and velocities
 // are extrapolated, 2 (two halves) - (one step), which cancels the first-order error of the implicit step. The
 // step grows or shrinks by 0.9 sqrt(tol / error) (within 0.2x..2x), never above hmax; *h carries it over calls.
+// counts (or NULL): the steps accepted and rejected are added to counts[0] and counts[1].
 // Returns 0, 1 when the state stops being finite, 2 when the step falls below 1e-9 s, or NOT_CONVERGED.
 FINRFT_EXPORT int finrft_adaptive_advance(const mjModel* m, mjData* d, mjtNum duration, mjtNum hmax, mjtNum tol,
-                                          mjtNum* h) {
+                                          mjtNum* h, int64_t* counts) {
   const int spec = mjSTATE_INTEGRATION;
   int size = mj_stateSize(m, spec);
   mjtNum* start = (mjtNum*)malloc(size * sizeof(mjtNum));
@@ -577,10 +584,10 @@ FINRFT_EXPORT int finrft_adaptive_advance(const mjModel* m, mjData* d, mjtNum du
   while (!failed && d->time < end - 1e-12) {
     mjtNum step = mju_min(mju_min(*h, hmax), end - d->time);
     mj_getState(m, d, start, spec);
-    failed = implicit_steps(m, d, 1, step, 1);
+    failed = implicit_steps(m, d, 1, step, 1, NULL);
     mj_getState(m, d, full, spec);
     mj_setState(m, d, start, spec);
-    failed = failed ? failed : implicit_steps(m, d, 2, step / 2, 1);
+    failed = failed ? failed : implicit_steps(m, d, 2, step / 2, 1, NULL);
     mj_getState(m, d, halves, spec);
     mjtNum error = 0;
     for (int i = first; i < first + count; i++) {
@@ -592,9 +599,11 @@ FINRFT_EXPORT int finrft_adaptive_advance(const mjModel* m, mjData* d, mjtNum du
       for (int i = first; i < first + count; i++) halves[i] += halves[i] - full[i];
       mj_setState(m, d, halves, spec);
       *h = mju_min(hmax, step * mju_min(2.0, 0.9 * sqrt(tol / mju_max(error, 1e-300))));
+      if (counts) counts[0]++;
     } else {
       mj_setState(m, d, start, spec);
       *h = step * mju_max(0.2, 0.9 * sqrt(tol / error));
+      if (counts) counts[1]++;
       if (*h < 1e-9) failed = 2;
     }
   }

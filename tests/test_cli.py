@@ -6,6 +6,7 @@ import sys
 import tomllib
 
 import h5py
+import mujoco
 import numpy as np
 import pytest
 
@@ -123,6 +124,27 @@ def test_scene_dump_round_trips(tmp_path, capsys):
     assert main(["scene", "--scene", str(path), "--set", "sim.dt=2e-4"]) == 0
     resolved = tomllib.loads(capsys.readouterr().out)
     assert resolved["plate"]["stiffness"] == 0.5 and resolved["sim"]["dt"] == 2e-4
+
+
+@pytest.mark.parametrize("file_value,override,expected", [
+    ("RK4", None, "rk4"), ("Euler", None, "euler"), ("rk4", "sim.integrator=implicitFAST", "implicitfast"),
+    ("implicit", "sim.integrator=Euler", "euler")])
+def test_mujoco_spellings_of_the_integrator_are_accepted(tmp_path, capsys, file_value, override, expected):
+    from finrft.models import build_plate
+    from finrft.scene import load_scene
+    path = tmp_path / "mine.toml"
+    path.write_text(f'[sim]\nmethod = "explicit"\nintegrator = "{file_value}"\n')
+    assert main(["scene", "--scene", str(path), *(["--set", override] if override else [])]) == 0
+    assert tomllib.loads(capsys.readouterr().out)["sim"]["integrator"] == expected
+    scene = load_scene(path, overrides=dict([override.split("=")]) if override else None)
+    assert scene.sim.integrator == expected
+    names = {"rk4": "mjINT_RK4", "euler": "mjINT_EULER", "implicitfast": "mjINT_IMPLICITFAST"}
+    assert build_plate(scene).model.opt.integrator == getattr(mujoco.mjtIntegrator, names[expected])
+
+
+def test_a_wrong_integrator_lists_the_choices(capsys):
+    assert main(["drag", "--set", "sim.integrator=Verlet"]) == 2
+    assert capsys.readouterr().err.strip().endswith("use one of euler, implicitfast, implicit, rk4")
 
 
 def test_table_law_from_a_scene_file_matches_the_paper_law(tmp_path, capsys):

@@ -7,7 +7,7 @@ import tomllib
 import numpy as np
 import pytest
 
-from finrft import fit
+from finrft.fit import fit, read_drag, resolve_params, simulated_drag, write_drag
 from finrft.cli import main
 from finrft.rft import read_table
 from finrft.scene import SceneError, load_scene, preset
@@ -21,9 +21,9 @@ def truth():
 
 
 def test_fit_recovers_known_parameters(truth, tmp_path):
-    data = [fit.simulated_drag(truth, speed, 0.15) for speed in (0.02, 0.04)]
+    data = [simulated_drag(truth, speed, 0.15) for speed in (0.02, 0.04)]
     start = preset("paper")  # k = 0.209, b = 1.43: both well off
-    result = fit.fit(start, data, fit.resolve_params(["k", "b"]), budget=150, seed=2, workers=2)
+    result = fit(start, data, resolve_params(["k", "b"]), budget=150, seed=2, workers=2)
     assert result.search.best["plate.stiffness"] == pytest.approx(0.3, rel=0.02)
     assert result.search.best["plate.damping"] == pytest.approx(0.8, rel=0.02)
     assert max(result.rmse_deg.values()) < 0.05
@@ -33,7 +33,7 @@ def test_fit_cli_writes_a_scene_drag_accepts(tmp_path, capsys, truth):
     paths = []
     for speed in (0.02, 0.04):
         path = tmp_path / f"v{speed}.csv"
-        fit.write_drag(path, fit.simulated_drag(truth, speed, 0.06), "simulated")
+        write_drag(path, simulated_drag(truth, speed, 0.06), "simulated")
         paths.append(str(path))
     scene, png, log = tmp_path / "fitted.toml", tmp_path / "fit.png", tmp_path / "fit.h5"
     assert main(["fit", "--data", paths[0], "--validate", paths[1], "--params", "b", "--budget", "30",
@@ -50,8 +50,8 @@ def test_paper_procedure_on_the_measurements():
     # The paper's fit (damping only, k = 0.209) against the three measured speeds: it runs, and its error is
     # what it is with the preset's 1 kg m^2 inertias; fitting k, b, f_perp, f_par on two speeds must predict
     # the third to 3 degrees (README).
-    data = [fit.read_drag(f"{DATA}/origami_v{v}.csv") for v in (10, 30, 50)]
-    result = fit.fit(preset("paper"), data, fit.resolve_params(["b"]), budget=20, seed=1, workers=2)
+    data = [read_drag(f"{DATA}/origami_v{v}.csv") for v in (10, 30, 50)]
+    result = fit(preset("paper"), data, resolve_params(["b"]), budget=20, seed=1, workers=2)
     assert set(result.rmse_deg) == {"origami_v10", "origami_v30", "origami_v50"}
     assert all(np.isfinite(list(result.rmse_deg.values())))
 
@@ -104,8 +104,8 @@ def test_bad_fit_input(capsys, argv, named):
 
 
 def test_read_drag_matches_the_data_readme():
-    data = fit.read_drag(f"{DATA}/origami_v30.csv")
+    data = read_drag(f"{DATA}/origami_v30.csv")
     assert data.speed == pytest.approx(0.03, rel=1e-6)
     assert data.angles.shape[1] == 3 and data.angles[-1, 2] < -60  # negative: the sand bends them clockwise
     with pytest.raises(SceneError):
-        fit.resolve_params(["plate.kind"])
+        resolve_params(["plate.kind"])

@@ -37,6 +37,42 @@ def test_native_and_numpy_methods_agree(method, atol):
     python = simulate(scene.replace(**{"sim.backend": "python"}), drive)
     np.testing.assert_allclose(native.segment_angle, python.segment_angle, atol=atol)
     assert np.degrees(np.abs(native.hinge_angle).max()) > 5
+    assert (native.steps, native.steps_rejected) == (python.steps, python.steps_rejected)
+
+
+@pytest.mark.parametrize("method", ["explicit", "implicit", "newton"])
+def test_fixed_steps_take_the_nominal_count(method):
+    scene = preset("paper").replace(**{"sim.method": method, "sim.dt": 1e-3})
+    run = simulate(scene, Drive(stroke=0.02, cycles=1))
+    nominal = round(run.drive.duration / 1e-3)
+    assert (run.steps, run.steps_rejected) == (nominal, 0)
+    assert run.summary()["sim_time_s"] == pytest.approx(nominal * 1e-3)
+
+
+def test_adaptive_counts_its_steps_on_the_paper_robot():
+    from finrft.scene import RobotScene
+    from finrft.swim import swim
+    scene = preset("paper", RobotScene)
+    runs = [swim(scene.replace(**{"sim.backend": backend})) for backend in ("native", "python")]
+    duration = runs[0].cycle_time
+    for run in runs:
+        # at least the largest step's count, far fewer than the time grid's; rejections cost little
+        assert duration / scene.sim.max_step <= run.steps < 0.01 * round(duration / scene.sim.dt)
+        assert 0 < run.steps_rejected < 0.1 * run.steps
+    # the twins' accept/reject decisions can round apart, not by many steps
+    assert abs(runs[0].steps - runs[1].steps) <= 0.02 * runs[0].steps
+
+
+@pytest.mark.parametrize("backend", ["native", "python"])
+def test_newton_halvings_count_as_rejected_and_taken(backend):
+    from finrft.scene import RobotScene
+    from finrft.swim import swim
+    # At 10 ms the paper robot's f_par < 0 leaves Newton's method without a root twice: a halving replaces one
+    # step by two.
+    scene = preset("paper", RobotScene).replace(**{"sim.method": "newton", "sim.dt": 1e-2, "sim.backend": backend})
+    run = swim(scene)
+    nominal = round(run.cycle_time / 1e-2)
+    assert run.steps_rejected == 2 and run.steps == nominal + run.steps_rejected
 
 
 def test_adaptive_error_falls_with_the_tolerance():

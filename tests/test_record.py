@@ -136,6 +136,8 @@ def test_rrd_matches_the_h5_file(runs, name, tmp_path):
                 batch.column("ViewBlueprint:class_identifier").to_pylist()[-1][0])
     assert views["Plate (top view, 1 cm grid)"] == "3D"
     assert views["Segment angles (deg)"] == views["Hinge angles (deg)"] == "TimeSeries"
+    series = ("Drive force (N)", "Displacement (mm)") if name == "drag" else ("Drive torque (N m)", "Rotation (deg)")
+    assert all(views[label] == "TimeSeries" for label in series), sorted(views)
     assert [p.name for p in sorted(tmp_path.iterdir())] == ["run.h5", "run.rrd"]
 
 

@@ -70,7 +70,7 @@ def test_newton_halvings_count_as_rejected_and_taken(backend):
     # At 10 ms the paper robot's f_par < 0 leaves Newton's method without a root twice: a halving replaces one
     # step by two.
     scene = preset("paper", RobotScene).replace(**{"sim.method": "newton", "sim.dt": 1e-2, "sim.backend": backend})
-    run = swim(scene)
+    run = swim(scene, max_error=None)  # the counts, not the (coarse) result, are tested
     nominal = round(run.cycle_time / 1e-2)
     assert run.steps_rejected == 2 and run.steps == nominal + run.steps_rejected
 

@@ -177,7 +177,8 @@ def cmaes(evaluate: Evaluate, variables: Sequence[Variable], *, budget: int | No
     (name -> (unit, width (0 for one value), description)) and the optimiser's state, next to the variables (SI
     ``units``), ``problem`` (root attributes: the scene, the objective and its units) and ``tables`` (datasets:
     what was fitted). ``resume`` continues it: the problem must be the logged one, the seed is the log's (None, or the
-    same), ``budget`` is the new total (None: the log's). Without a log, budget and seed default to 300 and 1."""
+    same), ``budget`` is the new total (None: the log's; CMA-ES finishes the generation that reaches it, so a log may
+    hold more evaluations than its budget). Without a log, budget and seed default to 300 and 1."""
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message=".*matplotlib.*")
         import cma
@@ -194,10 +195,8 @@ def cmaes(evaluate: Evaluate, variables: Sequence[Variable], *, budget: int | No
     if resume:
         if path is None:
             raise SceneError("resuming needs the log to resume from")
-        attrs, x0, logged = _load(path, schema, variables, problem or {}, fixed, rows, states, seed)
+        attrs, x0 = _load(path, schema, variables, problem or {}, fixed, rows, states, seed)
         budget = attrs["budget"] if budget is None else budget
-        if budget < logged:
-            raise SceneError(f"{path} holds {logged} evaluations already: a budget of {budget} is spent")
         attrs["budget"] = budget
     else:
         budget = 300 if budget is None else budget
@@ -244,9 +243,9 @@ def cmaes(evaluate: Evaluate, variables: Sequence[Variable], *, budget: int | No
 
 def _load(path: Path, schema: str, variables: Sequence[Variable], problem: dict[str, Any],
           fixed: dict[str, searchlog.Dataset], rows: dict[str, searchlog.Series],
-          states: dict[str, searchlog.Series], seed: int | None) -> tuple[dict[str, Any], np.ndarray, int]:
-    """Fill ``rows`` and ``states`` from a log of this very problem, one block per generation; its attributes, start
-    point and number of evaluations."""
+          states: dict[str, searchlog.Series], seed: int | None) -> tuple[dict[str, Any], np.ndarray]:
+    """Fill ``rows`` and ``states`` from a log of this very problem, one block per generation; its attributes and
+    start point."""
     attrs, datasets = searchlog.read(path, schema)
     if attrs.get("variables") != [v.key for v in variables] or not np.array_equal(datasets["bounds"].data,
                                                                                   fixed["bounds"].data):
@@ -271,7 +270,7 @@ def _load(path: Path, schema: str, variables: Sequence[Variable], problem: dict[
         series.blocks = [datasets[name].data[generation == g] for g in range(count)]
     for name, series in states.items():
         series.blocks = [datasets[f"state/{name}"].data[g:g + 1] for g in range(count)]
-    return attrs, datasets["x0"].data, len(generation)
+    return attrs, datasets["x0"].data
 
 
 def _replay(es: Any, rng: np.random.RandomState, rows: dict[str, searchlog.Series],

@@ -454,19 +454,20 @@ def _search_log(args: argparse.Namespace, fixed: dict[str, str]) -> str | None:
     return args.resume or args.out
 
 
-def _interrupted(command: str, log: str | None, read: Callable[[str], dict[str, Any]]) -> "Interrupted":
+def _interrupted(command: str, log: str | None, schema: str) -> "Interrupted":
     """Ctrl-C during a search: how far the log got and how to continue it."""
+    from .optimize import read_log
     if log is None:
         return Interrupted("interrupted; nothing was logged (--out LOG.h5 makes a run resumable)")
     if not Path(log).is_file():
         return Interrupted("interrupted before the log was written")
-    done = len(read(log)["state/sigma"])
+    done = len(read_log(log, schema)["state/sigma"])
     return Interrupted(f"interrupted after {done} generation{'s' * (done != 1)}; continue with: finrft {command} "
                        f"--resume {shlex.quote(log)}")
 
 
 def _fit(args: argparse.Namespace) -> int:
-    from . import fit as fitting, optimize as opt, searchlog
+    from . import fit as fitting, searchlog
     for path, suffix, flag in ((args.write_scene, ".toml", "--write-scene"), (args.plot, ".png", "--plot"),
                                (args.rrd, ".rrd", "--rrd")):
         _check_output(path, suffix, flag)
@@ -493,7 +494,7 @@ def _fit(args: argparse.Namespace) -> int:
         result = fitting.fit(scene, data, variables, budget=args.budget, seed=args.seed, validate=validate,
                              log=log, resume=bool(args.resume), workers=args.workers, on_generation=on_generation)
     except KeyboardInterrupt:
-        raise _interrupted("fit", log, lambda path: opt.read_log(path, searchlog.FIT)) from None
+        raise _interrupted("fit", log, searchlog.FIT) from None
     if show:
         print(file=sys.stderr)
     if args.write_scene:
@@ -556,14 +557,18 @@ def _parse_bounds(items: list[str]) -> dict[str, tuple[float, float]]:
 
 
 def _optimize(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
-    from . import optimize as opt
+    from . import optimize as opt, searchlog
     _check_output(args.rrd, ".rrd", "--rrd")
     log = _search_log(args, {"bounds": "--bounds", "scene": "--scene", "set": "--set", "fin": "--fin",
                              "model": "--model", "backend": "--backend"})
     variables = {v.key: v for v in opt.DEFAULT_VARIABLES}
+    generations: list[tuple[np.ndarray, np.ndarray]] = []  # searched values (CLI units) and eta, for --rrd
     if args.resume:
         scene, logged = opt.logged_problem(args.resume)
         variables = {v.key: v for v in logged}
+        past = opt.read_log(args.resume)
+        generations = [(_display_units(list(variables), past["x"][past["generation"] == g]),
+                        past["eta"][past["generation"] == g]) for g in range(len(past["state/sigma"]))]
     for key, (low, high) in _parse_bounds(args.bounds).items():
         variables[key] = opt.Variable(key, low, high)
     executor = None
@@ -571,7 +576,6 @@ def _optimize(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
         executor = _dask_executor(args.address)
     elif args.address:
         raise UsageError("--address goes with --executor dask")
-    generations: list[tuple[np.ndarray, np.ndarray]] = []
     show = sys.stderr.isatty()
 
     def on_generation(g: int, values: np.ndarray, extras: dict[str, np.ndarray], es: Any) -> None:
@@ -586,7 +590,7 @@ def _optimize(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
                               log=log, resume=bool(args.resume), executor=executor, workers=args.workers,
                               on_generation=on_generation)
     except KeyboardInterrupt:
-        raise _interrupted("optimize", log, opt.read_log) from None
+        raise _interrupted("optimize", log, searchlog.OPTIMIZE) from None
     if show:
         print(file=sys.stderr)
     best_scene = scene.replace(**result.best)

@@ -319,5 +319,5 @@ def rft_fragment(law: RFT, table_csv: str) -> str:
 
 def fit_summary(result: Fit) -> dict[str, Any]:
     return {"params": result.search.best, "rmse_deg": result.rmse_deg, "validate_rmse_deg": result.validate_rmse_deg,
-            "evaluations": result.search.evaluations, "wall_s": result.search.wall_s,
-            "mse_deg2": result.search.cost}
+            "evaluations": result.search.evaluations, "seed": result.search.seed, "budget": result.search.budget,
+            "wall_s": result.search.wall_s, "mse_deg2": result.search.cost}

@@ -13,6 +13,7 @@ from __future__ import annotations
 import contextlib
 import multiprocessing
 import os
+import signal
 from concurrent.futures import Executor, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from typing import Callable, Iterator, Sequence, TypeVar
@@ -34,10 +35,17 @@ def default_workers() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
+def _ignore_interrupt() -> None:
+    # Ctrl-C reaches every process in the terminal's group: the parent handles it and shuts the pool down, a
+    # worker would only print a traceback.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 def local_executor(workers: int | None = None) -> ProcessPoolExecutor:
-    """A process pool for `run_many`; spawned workers, so nothing of the parent's MuJoCo state is inherited."""
+    """A process pool for `run_many`; spawned workers, so nothing of the parent's MuJoCo state is inherited, that
+    leave Ctrl-C to the parent."""
     return ProcessPoolExecutor(max_workers=workers or default_workers(),
-                               mp_context=multiprocessing.get_context("spawn"))
+                               mp_context=multiprocessing.get_context("spawn"), initializer=_ignore_interrupt)
 
 
 def map_jobs(fn: Callable[[T], R], jobs: Sequence[T], *, workers: int | None = None,
@@ -75,7 +83,8 @@ def pool_for(executor: Executor | None = None, workers: int | None = None) -> It
     try:
         yield pool
     finally:
-        pool.shutdown()
+        # After an error or Ctrl-C, jobs not started yet are dropped, not run.
+        pool.shutdown(cancel_futures=True)
 
 
 def run_many(jobs: Sequence[Job], **options) -> list[Run]:

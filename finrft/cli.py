@@ -1,6 +1,7 @@
 """The ``finrft`` command line: a thin layer over the Python API that speaks the paper's units (mm, mm/s, degrees).
 
-Exit status: 0 success, 1 the simulation went unstable, 2 bad input (one line on stderr, nothing written).
+Exit status: 0 success, 1 the simulation went unstable, 2 bad input (one line on stderr, nothing written), 130
+interrupted (Ctrl-C).
 """
 
 from __future__ import annotations
@@ -9,8 +10,8 @@ import argparse
 import json
 import math
 import os
+import shlex
 import sys
-import tomllib
 import warnings
 from pathlib import Path
 from typing import Any, Callable, Sequence
@@ -25,6 +26,10 @@ from .simulate import Run, simulate
 
 class UsageError(Exception):
     """Bad input from the command line; reported in one line with exit status 2."""
+
+
+class Interrupted(Exception):
+    """Ctrl-C: reported in one line (how to continue, when there is a log) with exit status 130."""
 
 
 class _Parser(argparse.ArgumentParser):
@@ -94,6 +99,19 @@ def _limits(args: argparse.Namespace) -> ErrorLimits:
 def _add_workers(p: argparse.ArgumentParser) -> None:
     p.add_argument("--workers", type=_number("processes", minimum=1, inclusive=True, integer=True),
                    help="worker processes (default: all cores)")
+
+
+def _add_search(p: argparse.ArgumentParser, command: str) -> None:
+    p.add_argument("--budget", type=_number("evaluations", minimum=1, inclusive=True, integer=True),
+                   metavar="EVALS", help="evaluations in all (default: 300, or the log's with --resume; CMA-ES "
+                   "finishes the generation it is in)")
+    p.add_argument("--seed", type=_number("", minimum=1, inclusive=True, integer=True), metavar="S",
+                   help="random seed, >= 1; the same seed gives the same result (default: 1, or the log's with "
+                   "--resume)")
+    p.add_argument("--out", metavar="LOG.h5", help="new HDF5 log of every evaluation and of the optimiser's state, "
+                   "rewritten after each generation (never overwrites a file)")
+    p.add_argument("--resume", metavar="LOG.h5", help=f"continue the run logged in LOG.h5 (a finrft {command} log) "
+                   "exactly as if it had not stopped, and go on logging to it")
 
 
 def _add_robot(p: argparse.ArgumentParser) -> None:
@@ -174,12 +192,7 @@ def build_parser() -> argparse.ArgumentParser:
                               description="Maximise the swimming efficiency eta over one flap cycle with CMA-ES "
                               "(pycma): by default over theta1 in [0, 90] deg, theta2 in [-90, 0] deg and the arm "
                               "length in [60, 85] mm. Every evaluation is logged to HDF5 after each generation.")
-    optimize.add_argument("--budget", type=_number("evaluations", minimum=1, inclusive=True, integer=True),
-                          default=300, metavar="EVALS", help="evaluations (default: %(default)s; CMA-ES finishes "
-                          "the generation it is in)")
-    optimize.add_argument("--seed", type=_number("", minimum=1, inclusive=True, integer=True), default=1,
-                          metavar="S", help="random seed, >= 1; the same seed gives the same result (default: "
-                          "%(default)s)")
+    _add_search(optimize, "optimize")
     optimize.add_argument("--bounds", action="append", default=[], metavar="KEY=LOW:HIGH",
                           help="search a scene key between bounds, in SI or with a unit suffix deg or mm, e.g. "
                                "gait.theta1=10:80deg, gait.omega=0.5:2, fin.stiffness=0.1:2 (repeatable; "
@@ -188,8 +201,6 @@ def build_parser() -> argparse.ArgumentParser:
     optimize.add_argument("--executor", choices=("local", "dask"), default="local",
                           help="where evaluations run: local processes, or a Dask cluster (needs finrft[cluster])")
     optimize.add_argument("--address", metavar="tcp://HOST:PORT", help="Dask scheduler address (--executor dask)")
-    optimize.add_argument("--out", metavar="LOG.h5", help="new HDF5 log of every evaluation (never overwritten)")
-    optimize.add_argument("--resume", metavar="LOG.h5", help="continue the run logged in LOG.h5, appending to it")
     optimize.add_argument("--rrd", metavar="FILE.rrd", help="rerun recording: best eta per generation, the "
                           "population, and the best gait's motion")
     optimize.add_argument("--json", action="store_true", help="print the result as JSON on the last line")
@@ -210,24 +221,20 @@ def build_parser() -> argparse.ArgumentParser:
                           "ones: each data file is a drag from flat at its own speed (columns time_s, "
                           "displacement_mm, segment1_deg ...); the objective is the mean over files of the mean "
                           "squared error (deg^2), as the paper's E(b).")
-    fitp.add_argument("--data", nargs="+", required=True, metavar="FILE.csv", help="drag data to fit")
+    fitp.add_argument("--data", nargs="+", metavar="FILE.csv", help="drag data to fit (required unless --resume)")
     fitp.add_argument("--validate", nargs="+", default=[], metavar="FILE.csv",
                       help="drag data to check the fit on, not fitted")
-    fitp.add_argument("--params", default="b", metavar="NAMES",
+    fitp.add_argument("--params", metavar="NAMES",
                       help="comma-separated parameters: b (plate.damping), k (plate.stiffness), f_perp, f_par, or "
-                           "any numeric plate-scene key (default: %(default)s, the paper's procedure)")
+                           "any numeric plate-scene key (default: b, the paper's procedure)")
     fitp.add_argument("--bounds", action="append", default=[], metavar="KEY=LOW:HIGH",
                       help="bounds of a fitted key in SI (defaults: b 0.01:100, k 0.01:100, f_perp 0.1:100, "
                            "f_par -2:2); positive bounds over more than a decade are searched in log space")
-    fitp.add_argument("--budget", type=_number("evaluations", minimum=1, inclusive=True, integer=True),
-                      default=300, metavar="N", help="evaluations (default: %(default)s)")
-    fitp.add_argument("--seed", type=_number("", minimum=1, inclusive=True, integer=True), default=1, metavar="S",
-                      help="random seed, >= 1 (default: %(default)s)")
+    _add_search(fitp, "fit")
     _add_workers(fitp)
     _add_max_error(fitp)
     fitp.add_argument("--write-scene", metavar="OUT.toml", help="write the fitted scene (finrft drag --scene OUT.toml)")
     fitp.add_argument("--plot", metavar="OUT.png", help="simulated against measured angles for every file")
-    fitp.add_argument("--out", metavar="LOG.h5", help="HDF5 log of every evaluation (never overwritten)")
     fitp.add_argument("--rrd", metavar="FILE.rrd", help="rerun recording of the fitted drag of the first file")
     fitp.add_argument("--json", action="store_true", help="print the result as JSON on the last line")
     _add_plate_scene(fitp).add_argument("--backend", choices=("native", "python"),
@@ -467,28 +474,66 @@ def _table(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
     return 0
 
 
-def _fit(args: argparse.Namespace) -> int:
-    from .fit import drag_for, fit, fit_summary, plot, read_drag, resolve_params
-    scene = _resolve_scene(args)
-    for path, suffix, flag in ((args.write_scene, ".toml", "--write-scene"), (args.plot, ".png", "--plot"),
-                               (args.out, ".h5", "--out"), (args.rrd, ".rrd", "--rrd")):
-        _check_output(path, suffix, flag)
+def _search_log(args: argparse.Namespace, fixed: dict[str, str]) -> str | None:
+    """The log of an optimise or fit command, after checking --out and --resume; ``fixed``: the options (attribute
+    -> flag) that a resumed run takes from its log, so that they may not be given with --resume."""
+    if args.out and args.resume:
+        raise UsageError("give either --out (a new log) or --resume (an existing one), not both")
     if args.out and Path(args.out).exists():
-        raise UsageError(f"--out {args.out} exists: choose a new file")
-    data = [read_drag(p) for p in args.data]
+        raise UsageError(f"--out {args.out} exists: continue it with --resume {args.out}, or choose a new file")
+    _check_output(args.out, ".h5", "--out")
+    if args.resume:
+        if not Path(args.resume).is_file():
+            raise UsageError(f"--resume {args.resume}: no such file")
+        for name, flag in fixed.items():
+            if getattr(args, name, None):
+                raise UsageError(f"{flag} cannot be given with --resume: the log fixes it")
+    return args.resume or args.out
+
+
+def _interrupted(command: str, log: str | None, schema: str) -> "Interrupted":
+    """Ctrl-C during a search: how far the log got and how to continue it."""
+    from .optimize import read_log
+    if log is None:
+        return Interrupted("interrupted; nothing was logged (--out LOG.h5 makes a run resumable)")
+    if not Path(log).is_file():
+        return Interrupted("interrupted before the log was written")
+    done = len(read_log(log, schema)["state/sigma"])
+    return Interrupted(f"interrupted after {done} generation{'s' * (done != 1)}; continue with: finrft {command} "
+                       f"--resume {shlex.quote(log)}")
+
+
+def _fit(args: argparse.Namespace) -> int:
+    from . import searchlog
+    from .fit import drag_for, fit, fit_summary, logged_problem, plot, read_drag, resolve_params
+    for path, suffix, flag in ((args.write_scene, ".toml", "--write-scene"), (args.plot, ".png", "--plot"),
+                               (args.rrd, ".rrd", "--rrd")):
+        _check_output(path, suffix, flag)
+    log = _search_log(args, {"data": "--data", "params": "--params", "bounds": "--bounds", "scene": "--scene",
+                             "set": "--set", "backend": "--backend"})
+    if args.resume:
+        scene, data, variables = logged_problem(args.resume)
+    elif not args.data:
+        raise UsageError("--data is required (or --resume LOG.h5)")
+    else:
+        scene = _resolve_scene(args)
+        data = [read_drag(p) for p in args.data]
+        names = [n.strip() for n in (args.params or "b").split(",") if n.strip()]
+        variables = resolve_params(names, _parse_bounds(args.bounds))
     validate = [read_drag(p) for p in args.validate]
-    names = [n.strip() for n in args.params.split(",") if n.strip()]
-    variables = resolve_params(names, _parse_bounds(args.bounds))
     show = sys.stderr.isatty()
 
     def on_generation(g: int, values: np.ndarray, extras: dict[str, np.ndarray], es: Any) -> None:
         if show:
-            print(f"\rgeneration {g + 1}: {es.countevals}/{args.budget} evaluations, best RMSE "
+            print(f"\rgeneration {g + 1}: {es.countevals}/{es.opts['maxfevals']} evaluations, best RMSE "
                   f"{np.sqrt(es.best.f):.2f} deg", end="", file=sys.stderr, flush=True)
 
-    result = fit(scene, data, variables, budget=args.budget, seed=args.seed, validate=validate,
-                 log=args.out, workers=args.workers, max_error=_limits(args),
-                 on_generation=on_generation)
+    try:
+        result = fit(scene, data, variables, budget=args.budget, seed=args.seed, validate=validate, log=log,
+                     resume=bool(args.resume), workers=args.workers, max_error=_limits(args),
+                     on_generation=on_generation)
+    except KeyboardInterrupt:
+        raise _interrupted("fit", log, searchlog.FIT) from None
     if show:
         print(file=sys.stderr)
     if args.write_scene:
@@ -551,20 +596,19 @@ def _parse_bounds(items: list[str]) -> dict[str, tuple[float, float]]:
 
 
 def _optimize(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
-    from .optimize import DEFAULT_VARIABLES, Variable, optimize, read_log
-    if args.out and args.resume:
-        raise UsageError("give either --out (a new log) or --resume (an existing one), not both")
-    if args.out and Path(args.out).exists():
-        raise UsageError(f"--out {args.out} exists: continue it with --resume {args.out}, or choose a new file")
-    _check_output(args.out, ".h5", "--out")
+    from . import searchlog
+    from .optimize import DEFAULT_VARIABLES, Variable, logged_problem, optimize, read_log
     _check_output(args.rrd, ".rrd", "--rrd")
-    if args.resume and not Path(args.resume).is_file():
-        raise UsageError(f"--resume {args.resume}: no such file")
+    log = _search_log(args, {"bounds": "--bounds", "scene": "--scene", "set": "--set", "fin": "--fin",
+                             "model": "--model", "backend": "--backend"})
     variables = {v.key: v for v in DEFAULT_VARIABLES}
+    generations: list[tuple[np.ndarray, np.ndarray]] = []  # searched values (CLI units) and eta, for --rrd
     if args.resume:
-        logged = read_log(args.resume)
-        variables = {v.key: v for v in logged["variables"]}
-        scene = scenes.scene_from_dict(tomllib.loads(logged["attrs"]["scene_toml"]), scenes.RobotScene)
+        scene, logged = logged_problem(args.resume)
+        variables = {v.key: v for v in logged}
+        past = read_log(args.resume)
+        generations = [(_display_units(list(variables), past["x"][past["generation"] == g]),
+                        past["eta"][past["generation"] == g]) for g in range(len(past["state/sigma"]))]
     for key, (low, high) in _parse_bounds(args.bounds).items():
         variables[key] = Variable(key, low, high)
     executor = None
@@ -572,19 +616,21 @@ def _optimize(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
         executor = _dask_executor(args.address)
     elif args.address:
         raise UsageError("--address goes with --executor dask")
-    generations: list[tuple[np.ndarray, np.ndarray]] = []
     show = sys.stderr.isatty()
 
     def on_generation(g: int, values: np.ndarray, extras: dict[str, np.ndarray], es: Any) -> None:
         generations.append((_display_units(list(variables), values), extras["eta"]))
         if show:
             best = np.nanmax([1 - c for c in es.fit.fit]) if len(es.fit.fit) else float("nan")
-            print(f"\rgeneration {g + 1}: {es.countevals}/{args.budget} evaluations, best eta this generation "
-                  f"{100 * best:.2f} %", end="", file=sys.stderr, flush=True)
+            print(f"\rgeneration {g + 1}: {es.countevals}/{es.opts['maxfevals']} evaluations, best eta this "
+                  f"generation {100 * best:.2f} %", end="", file=sys.stderr, flush=True)
 
-    result = optimize(scene, variables=list(variables.values()), budget=args.budget, seed=args.seed,
-                      log=args.resume or args.out, resume=bool(args.resume), executor=executor,
-                      workers=args.workers, max_error=_limits(args), on_generation=on_generation)
+    try:
+        result = optimize(scene, variables=list(variables.values()), budget=args.budget, seed=args.seed, log=log,
+                          resume=bool(args.resume), executor=executor, workers=args.workers,
+                          max_error=_limits(args), on_generation=on_generation)
+    except KeyboardInterrupt:
+        raise _interrupted("optimize", log, searchlog.OPTIMIZE) from None
     if show:
         print(file=sys.stderr)
     from .swim import swim
@@ -599,7 +645,7 @@ def _optimize(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
                "arm_length_mm": 1e3 * best_scene.arm.length, "eta": eta, "best": result.best,
                "error_estimate": best.error_estimate, "error_companion": best.error_companion,
                "evaluations": result.evaluations, "generations": result.generations, "wall_s": result.wall_s,
-               "seed": args.seed, "stop": {k: str(v) for k, v in result.stop.items()}}
+               "seed": result.seed, "budget": result.budget, "stop": {k: str(v) for k, v in result.stop.items()}}
     print(f"best eta {100 * eta:.2f} % at theta1 {summary['theta1_deg']:.1f} deg, theta2 "
           f"{summary['theta2_deg']:.1f} deg, arm {summary['arm_length_mm']:.1f} mm after {result.evaluations} "
           f"evaluations in {result.wall_s:.1f} s")
@@ -683,6 +729,12 @@ def _main(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> int:
     except SimulationFailed as exc:
         print(f"finrft: error: {exc}", file=sys.stderr)
         return 1
+    except Interrupted as exc:
+        print(f"finrft: {exc}", file=sys.stderr)
+        return 130
+    except KeyboardInterrupt:
+        print("finrft: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

@@ -11,18 +11,19 @@ from __future__ import annotations
 
 import csv
 import math
+import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from . import batch
+from . import batch, searchlog
 from .convergence import ErrorLimits, SimulationFailed
 from .drive import Drive
-from .optimize import Search, Variable, cmaes
+from .optimize import Search, Variable, cmaes, read_log, si_units
 from .rft import ForceTable
-from .scene import RFT, Scene, SceneError, field_of, split_key, to_toml
+from .scene import RFT, Scene, SceneError, field_of, scene_from_dict, split_key, to_toml
 from .simulate import Run, simulate
 
 # Short names for the paper's parameters, and default bounds (SI).
@@ -161,12 +162,14 @@ class Fit:
     error_estimate_deg: dict[str, float]  # per file, fitted and validation: the angles' discretisation error
 
 
-def fit(scene: Scene, data: Sequence[DragData], variables: Sequence[Variable], *, budget: int = 300, seed: int = 1,
-        validate: Sequence[DragData] = (), log: str | Path | None = None, workers: int | None = None,
-        max_error: ErrorLimits = ErrorLimits(), on_generation: Callable[..., None] | None = None) -> Fit:
-    """Fit ``variables`` of a plate scene to drag data with CMA-ES, starting from the scene's own values. Scenes
-    whose estimated discretisation error exceeds ``max_error`` score as failed; the fitted scene must meet it on
-    every file (else InaccurateResult)."""
+def fit(scene: Scene, data: Sequence[DragData], variables: Sequence[Variable], *, budget: int | None = None,
+        seed: int | None = None, validate: Sequence[DragData] = (), log: str | Path | None = None,
+        resume: bool = False, workers: int | None = None, max_error: ErrorLimits = ErrorLimits(),
+        on_generation: Callable[..., None] | None = None) -> Fit:
+    """Fit ``variables`` of a plate scene to drag data with CMA-ES, starting from the scene's own values. Budget,
+    seed, log and resume as `finrft.optimize.cmaes`; the log holds the data too, and `logged_problem` gives the
+    scene, data and variables to resume it with. Scenes whose estimated discretisation error exceeds
+    ``max_error`` score as failed; the fitted scene must meet it on every file (else InaccurateResult)."""
     if scene.plate.segments != data[0].angles.shape[1]:
         raise SceneError(f"{data[0].path} has {data[0].angles.shape[1]} segments, the scene "
                          f"{scene.plate.segments}")
@@ -186,10 +189,14 @@ def fit(scene: Scene, data: Sequence[DragData], variables: Sequence[Variable], *
         return list(errors.mean(axis=1)), {"rmse": np.sqrt(errors)}
 
     with batch.pool_for(workers=workers) as pool:
-        search = cmaes(population, variables, budget=budget, seed=seed, start=start, log=log,
-                       log_attrs={"scene_toml": to_toml(scene), "objective": "mean over files of the mean squared "
-                                  "segment-angle error (deg^2)", "data": [d.path for d in data]},
-                       columns={"rmse": ("deg", len(data))}, on_generation=on_generation)
+        search = cmaes(population, variables, budget=budget, seed=seed, start=start, log=log, resume=resume,
+                       schema=searchlog.FIT, units=si_units(Scene, variables),
+                       problem={"scene_toml": to_toml(scene), "objective": "mean over files of the mean squared "
+                                "segment-angle error (failed or above the error limit: 1e6)", "objective_units": "deg^2",
+                                "error_limit_deg": max_error.angle_deg},
+                       tables=_data_tables(data),
+                       columns={"rmse": ("deg", len(data), "RMS segment-angle error for each data file")},
+                       on_generation=on_generation)
     if search.cost >= FAILED:
         raise SimulationFailed(f"none of the {search.evaluations} parameter sets tried could be simulated within the "
                                f"error limit: check the scene and the bounds")
@@ -201,6 +208,25 @@ def fit(scene: Scene, data: Sequence[DragData], variables: Sequence[Variable], *
         errors[d.name] = run.error_estimate["angle_deg"]
     return Fit(search, fitted, {d.name: rmse[d.name] for d in data}, {d.name: rmse[d.name] for d in validate},
                errors)
+
+
+def _data_tables(data: Sequence[DragData]) -> dict[str, searchlog.Dataset]:
+    """The fitted data as log datasets, data/<i>/time, angles and speed, the file's path as an attribute."""
+    tables = {}
+    for i, d in enumerate(data):
+        tables[f"data/{i}/time"] = searchlog.Dataset(d.time, "s", "sample times from the first", {"path": d.path})
+        tables[f"data/{i}/angles"] = searchlog.Dataset(d.angles, "deg", "segment angles (samples x segments)")
+        tables[f"data/{i}/speed"] = searchlog.Dataset(np.float64(d.speed), "m/s", "drag speed")
+    return tables
+
+
+def logged_problem(path: str | Path) -> tuple[Scene, list[DragData], list[Variable]]:
+    """The scene, data and variables of a fit log, to continue it."""
+    log = read_log(path, searchlog.FIT)
+    files = sorted({int(name.split("/")[1]) for name in log if name.startswith("data/")})
+    data = [DragData(log["dataset_attrs"][f"data/{i}/time"]["path"], log[f"data/{i}/time"],
+                     float(log[f"data/{i}/speed"]), log[f"data/{i}/angles"]) for i in files]
+    return scene_from_dict(tomllib.loads(log["attrs"]["scene_toml"]), Scene), data, log["variables"]
 
 
 def plot(fitted: Scene, files: Sequence[tuple[DragData, str]], path: str | Path) -> None:
@@ -308,5 +334,5 @@ def rft_fragment(law: RFT, table_csv: str) -> str:
 def fit_summary(result: Fit) -> dict[str, Any]:
     return {"params": result.search.best, "rmse_deg": result.rmse_deg, "validate_rmse_deg": result.validate_rmse_deg,
             "error_estimate": {"angle_deg": max(result.error_estimate_deg.values())},
-            "evaluations": result.search.evaluations, "wall_s": result.search.wall_s,
-            "mse_deg2": result.search.cost}
+            "evaluations": result.search.evaluations, "seed": result.search.seed, "budget": result.search.budget,
+            "wall_s": result.search.wall_s, "mse_deg2": result.search.cost}

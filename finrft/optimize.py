@@ -5,17 +5,18 @@ quantities whose bounds span more than a decade are searched in log space). The 
 minimise 1 - eta over one flap cycle; a gait that cannot be simulated, or whose power stroke barely moves the
 body forward, scores 2.
 
-Every evaluation is appended to an HDF5 log after each generation, with the optimiser's pickled state, so an
-interrupted run resumes bit for bit. Same seed, same result: the objective is deterministic and pycma's own
-random state is the only randomness.
+After each generation the HDF5 log (`finrft.searchlog`) holds every evaluation and the optimiser's state as plain
+numbers. A run resumes by replaying the logged generations through a new optimiser of the same seed, which gives
+back pycma's whole state; the replay must reproduce every logged point and state exactly, so a resumed run is the
+uninterrupted one bit for bit. Same seed, same result: the objective is deterministic and the optimiser's private
+random generator is the only randomness.
 """
 
 from __future__ import annotations
 
-import json
 import math
-import pickle
 import time
+import tomllib
 import warnings
 from concurrent.futures import Executor
 from dataclasses import dataclass
@@ -24,12 +25,12 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from . import batch
+from . import batch, searchlog
 from .convergence import ErrorLimits, SimulationFailed
-from .scene import RobotScene, SceneError, field_of, to_toml
+from .files import provenance
+from .scene import RobotScene, SceneError, field_of, scene_from_dict, to_toml
 from .swim import swim
 
-SCHEMA = "finrft.optimize/1"
 FAILED = 2.0
 # eta = (D1 - D2) / D1 grows without bound as D1 -> 0: a power stroke that moves the body forward by less than
 # this scores as a failed gait, so the search cannot chase a vanishing denominator.
@@ -114,117 +115,217 @@ class Search:
     wall_s: float
     stop: dict[str, Any]
     best_cost_per_generation: list[float]
+    seed: int
+    budget: int
 
 
 # evaluate(values (population x variables, SI)) -> (costs, extra per-evaluation columns to log)
 Evaluate = Callable[[np.ndarray], tuple[list[float], dict[str, np.ndarray]]]
 
-
-def _log_new(path: Path, variables: Sequence[Variable], attrs: dict[str, Any],
-             columns: dict[str, tuple[str, int]]) -> None:
-    import h5py  # here, not at the top: `import finrft` stays light
-    with h5py.File(path, "w") as f:
-        f.attrs.update(schema=SCHEMA, variables=json.dumps([[v.key, v.low, v.high] for v in variables]), **attrs)
-        specs = {"x": ("SI, one column per variable", len(variables)), "cost": ("1", 0), "generation": ("", 0),
-                 **columns}
-        for name, (unit, width) in specs.items():
-            shape = (0, width) if width else (0,)
-            ds = f.create_dataset(name, shape=shape, maxshape=(None, *shape[1:]),
-                                  dtype="i8" if name == "generation" else "f8", chunks=True)
-            ds.attrs["units"] = unit
-        f.create_dataset("es_state", data=np.zeros(0, dtype=np.uint8))
+def _state_series(n: int) -> dict[str, searchlog.Series]:
+    """The optimiser's state after each generation, logged to check a rebuilt optimiser against."""
+    S = searchlog.Series
+    return {"mean": S("1", "distribution mean in pycma's coordinates (before its transform onto the bounds)", (n,)),
+            "sigma": S("1", "step size"),
+            "C": S("1", "covariance matrix", (n, n)),
+            "countiter": S("1", "generations told", dtype="i8"),
+            "countevals": S("1", "evaluations told", dtype="i8"),
+            "rng_key": S("1", "MT19937 key of the sampling generator (numpy RandomState.get_state)", (624,), "u4"),
+            "rng_pos": S("1", "position in the MT19937 key", dtype="i8"),
+            "rng_has_gauss": S("1", "1 when a normal deviate is cached", dtype="i8"),
+            "rng_cached_gaussian": S("1", "the cached normal deviate")}
 
 
-def _log_append(path: Path, generation: int, rows: dict[str, np.ndarray], es: Any) -> None:
-    import h5py
-    with h5py.File(path, "a") as f:
-        n, count = f["cost"].shape[0], len(rows["cost"])
-        for name, data in {**rows, "generation": np.full(count, generation)}.items():
-            f[name].resize(n + count, axis=0)
-            f[name][n:] = data
-        del f["es_state"]
-        f.create_dataset("es_state", data=np.frombuffer(pickle.dumps(es), dtype=np.uint8))
+def _row_series(variables: Sequence[Variable], units: str, cost_units: str,
+                columns: dict[str, tuple[str, int, str]]) -> dict[str, searchlog.Series]:
+    """Every evaluation: its generation, the asked point, its cost and the caller's columns."""
+    S, n = searchlog.Series, len(variables)
+    return {"generation": S("1", "generation of each evaluation", dtype="i8"),
+            "unit": S("1", "asked point, each variable normalised to [0, 1] between its bounds (in log space when "
+                      "they span more than a decade)", (n,)),
+            "x": S(units, "asked point, one column per variable (root attribute variables)", (n,)),
+            "cost": S(cost_units, "objective"),
+            **{name: S(unit, text, (width,) if width else ()) for name, (unit, width, text) in columns.items()}}
 
 
-def read_log(path: str | Path) -> dict[str, Any]:
-    """A log's contents; SceneError when the file is not a finrft optimisation log."""
-    import h5py
-    try:
-        with h5py.File(path, "r") as f:
-            if f.attrs.get("schema") != SCHEMA:
-                raise SceneError(f"{path} is not a finrft optimisation log")
-            out = {name: f[name][()] for name in f if name != "es_state"}
-            out["variables"] = [Variable(k, lo, hi) for k, lo, hi in json.loads(f.attrs["variables"])]
-            out["attrs"] = dict(f.attrs)
-            state = f["es_state"][()].tobytes()  # the pickled CMAEvolutionStrategy
-            out["es"] = pickle.loads(state) if state else None
-            return out
-    except (OSError, KeyError, ValueError, pickle.UnpicklingError, EOFError) as exc:
-        raise SceneError(f"cannot resume from {path}: {exc}") from None
+def _options(dimension: int, budget: int, rng: np.random.RandomState) -> dict[str, Any]:
+    # pycma samples from numpy's global generator when given a seed: anything else drawing from it would change
+    # the search, and its state is not the optimiser's to save. A private generator of the same seed draws the
+    # same samples.
+    options = {"bounds": [0.0, 1.0], "maxfevals": budget, "seed": math.nan, "randn": rng.randn, "verbose": -9,
+               "verb_log": 0, "verb_disp": 0}
+    if dimension == 1:
+        # pycma 4.5 fails in one dimension when it caps the step size to the bound range
+        options["maxstd_boundrange"] = math.inf
+    return options
 
 
-def cmaes(evaluate: Evaluate, variables: Sequence[Variable], *, budget: int, seed: int,
+def _state(es: Any, rng: np.random.RandomState) -> dict[str, np.ndarray]:
+    _, key, pos, has_gauss, cached = rng.get_state()
+    return {"mean": np.array(es.mean, dtype=float), "sigma": np.float64(es.sigma), "C": np.array(es.sm.C),
+            "countiter": np.int64(es.countiter), "countevals": np.int64(es.countevals), "rng_key": key,
+            "rng_pos": np.int64(pos), "rng_has_gauss": np.int64(has_gauss),
+            "rng_cached_gaussian": np.float64(cached)}
+
+
+def si_units(cls: type, variables: Sequence[Variable]) -> list[str]:
+    """The SI unit of each variable's scene key ("1" when dimensionless)."""
+    return [field_of(cls, v.key).metadata["unit"] or "1" for v in variables]
+
+
+def cmaes(evaluate: Evaluate, variables: Sequence[Variable], *, budget: int | None = None, seed: int | None = None,
           start: dict[str, float] | None = None, log: str | Path | None = None, resume: bool = False,
-          log_attrs: dict[str, Any] | None = None, columns: dict[str, tuple[str, int]] | None = None,
+          schema: str = searchlog.OPTIMIZE, units: Sequence[str] | None = None, problem: dict[str, Any] | None = None,
+          tables: dict[str, searchlog.Dataset] | None = None,
+          columns: dict[str, tuple[str, int, str]] | None = None,
           on_generation: Callable[[int, np.ndarray, dict[str, np.ndarray], Any], None] | None = None) -> Search:
     """Minimise a population cost over ``variables`` with CMA-ES (normalised to [0, 1], sigma0 = 0.25, from
-    ``start`` or the middle of the bounds). ``log`` (HDF5) records every evaluation with ``columns``
-    (name -> (unit, width; 0 for one value)) and the optimiser's state; ``resume`` continues from it."""
+    ``start`` or the middle of the bounds).
+
+    ``log`` (HDF5, schema ``schema``) is rewritten after each generation with every evaluation, its ``columns``
+    (name -> (unit, width (0 for one value), description)) and the optimiser's state, next to the variables (SI
+    ``units``), ``problem`` (root attributes: the scene, the objective and its units) and ``tables`` (datasets:
+    what was fitted). ``resume`` continues it: the problem must be the logged one, the seed is the log's (None, or the
+    same), ``budget`` is the new total (None: the log's; CMA-ES finishes the generation that reaches it, so a log may
+    hold more evaluations than its budget). Without a log, budget and seed default to 300 and 1."""
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message=".*matplotlib.*")
         import cma
     variables = tuple(variables)
-    if budget < 1:
-        raise SceneError(f"the budget must be at least 1 evaluation, got {budget}")
+    n = len(variables)
     path = Path(log) if log is not None else None
+    unit_text = ", ".join(units or ["SI"] * n)
+    rows = _row_series(variables, unit_text, (problem or {}).get("objective_units", "1"), columns or {})
+    states = _state_series(n)
+    fixed = {"bounds": searchlog.Dataset(np.array([[v.low, v.high] for v in variables]), unit_text,
+                                         "lower and upper bound of each variable (one row each)"),
+             **(tables or {})}
     start_time = time.perf_counter()
-    history: list[float] = []
     if resume:
         if path is None:
             raise SceneError("resuming needs the log to resume from")
-        state = read_log(path)
-        if [(v.key, v.low, v.high) for v in state["variables"]] != [(v.key, v.low, v.high) for v in variables]:
-            raise SceneError(f"{path} searched other variables: {[v.key for v in state['variables']]}")
-        es = state["es"]
-        if es is None:
-            raise SceneError(f"{path} holds no optimiser state yet: start a new run instead")
-        generation = int(state["generation"].max()) + 1 if len(state["generation"]) else 0
-        history = [float(state["cost"][state["generation"] == g].min()) for g in range(generation)]
+        attrs, x0 = _load(path, schema, variables, problem or {}, fixed, rows, states, seed)
+        budget = attrs["budget"] if budget is None else budget
+        attrs["budget"] = budget
     else:
-        x0 = [v.to_unit((start or {}).get(v.key, v.from_unit(0.5))) for v in variables]
-        options = {"bounds": [0.0, 1.0], "seed": seed, "maxfevals": budget, "verbose": -9, "verb_log": 0,
-                   "verb_disp": 0}
-        if len(variables) == 1:
-            # pycma 4.5 fails in one dimension when it caps the step size to the bound range
-            options["maxstd_boundrange"] = math.inf
-        es = cma.CMAEvolutionStrategy(x0, 0.25, options)
-        generation = 0
+        budget = 300 if budget is None else budget
+        seed = 1 if seed is None else seed
+        x0 = np.array([v.to_unit((start or {}).get(v.key, v.from_unit(0.5))) for v in variables])
+        attrs = {"schema": schema, **provenance(), "cma_version": cma.__version__, "seed": seed,
+                 "budget": budget, "sigma0": 0.25, "variables": [v.key for v in variables], **(problem or {})}
+    if budget < 1:
+        raise SceneError(f"the budget must be at least 1 evaluation, got {budget}")
+    rng = np.random.RandomState(attrs["seed"])
+    es = cma.CMAEvolutionStrategy(list(x0), attrs["sigma0"], _options(n, budget, rng))
+    generations = len(states["sigma"].blocks)
+    _replay(es, rng, rows, states, f"{path}: ", attrs["cma_version"])
+
+    def write() -> None:
         if path is not None:
-            _log_new(path, variables, {"seed": seed, "budget": budget, **(log_attrs or {})}, columns or {})
+            searchlog.write(path, attrs, {**fixed, "x0": searchlog.Dataset(x0, "1", "start point, normalised"),
+                                          **{k: s.dataset() for k, s in rows.items()},
+                                          **{f"state/{k}": s.dataset() for k, s in states.items()}})
+
+    write()
     while not es.stop():
-        unit = es.ask()
+        asked = es.ask()
+        unit = np.array(asked)
         values = np.array([[v.from_unit(u) for v, u in zip(variables, x)] for x in unit])
         costs, extras = evaluate(values)
-        es.tell(unit, list(costs))
-        history.append(float(min(costs)))
-        if path is not None:
-            _log_append(path, generation, {"x": values, "cost": np.asarray(costs), **extras}, es)
+        es.tell(asked, list(costs))
+        block = {"generation": np.full(len(unit), generations), "unit": unit, "x": values,
+                 "cost": np.asarray(costs, dtype=float), **extras}
+        for name, series in rows.items():
+            series.blocks.append(np.asarray(block[name]))
+        for name, value in _state(es, rng).items():
+            states[name].blocks.append(np.asarray(value)[None])
+        write()
         if on_generation is not None:
-            on_generation(generation, values, extras, es)
-        generation += 1
+            on_generation(generations, values, extras, es)
+        generations += 1
     best = {v.key: v.from_unit(float(u)) for v, u in zip(variables, es.result.xbest)}
     return Search(variables=variables, best=best, cost=float(es.result.fbest), evaluations=es.result.evaluations,
-                  generations=generation, wall_s=time.perf_counter() - start_time, stop=dict(es.stop()),
-                  best_cost_per_generation=history)
+                  generations=generations, wall_s=time.perf_counter() - start_time, stop=dict(es.stop()),
+                  best_cost_per_generation=[float(c.min()) for c in rows["cost"].blocks], seed=attrs["seed"],
+                  budget=budget)
 
 
-def optimize(scene: RobotScene, *, variables: Sequence[Variable] = DEFAULT_VARIABLES, budget: int = 300,
-             seed: int = 1, log: str | Path | None = None, resume: bool = False, executor: Executor | None = None,
-             workers: int | None = None, max_error: ErrorLimits = ErrorLimits(),
+def _load(path: Path, schema: str, variables: Sequence[Variable], problem: dict[str, Any],
+          fixed: dict[str, searchlog.Dataset], rows: dict[str, searchlog.Series],
+          states: dict[str, searchlog.Series], seed: int | None) -> tuple[dict[str, Any], np.ndarray]:
+    """Fill ``rows`` and ``states`` from a log of this very problem, one block per generation; its attributes and
+    start point."""
+    attrs, datasets = searchlog.read(path, schema)
+    if attrs.get("variables") != [v.key for v in variables] or not np.array_equal(datasets["bounds"].data,
+                                                                                  fixed["bounds"].data):
+        raise SceneError(f"{path} searched other variables or bounds: "
+                         + ", ".join(f"{k} {lo:g}:{hi:g}" for k, (lo, hi) in zip(attrs.get("variables", []),
+                                                                                 datasets["bounds"].data)))
+    for name, value in problem.items():
+        if attrs.get(name) != value:
+            raise SceneError(f"{path} was run with another {name.replace('_', ' ')}")
+    for name, table in fixed.items():
+        if name not in datasets or not np.array_equal(datasets[name].data, table.data):
+            raise SceneError(f"{path} was run on other data ({name})")
+    missing = sorted(set(rows) - set(datasets))
+    if missing:
+        raise SceneError(f"{path} does not log {', '.join(missing)}")
+    if seed is not None and seed != attrs["seed"]:
+        raise SceneError(f"seed {seed} differs from the seed of {path}, {attrs['seed']}: a continued run keeps its "
+                         "seed")
+    generation = datasets["generation"].data
+    count = len(datasets["state/sigma"].data)
+    for name, series in rows.items():
+        series.blocks = [datasets[name].data[generation == g] for g in range(count)]
+    for name, series in states.items():
+        series.blocks = [datasets[f"state/{name}"].data[g:g + 1] for g in range(count)]
+    return attrs, datasets["x0"].data
+
+
+def _replay(es: Any, rng: np.random.RandomState, rows: dict[str, searchlog.Series],
+            states: dict[str, searchlog.Series], where: str, logged_version: str) -> None:
+    """Bring a new optimiser of the logged seed to the logged state: ask and tell every logged generation again,
+    checking that it asks the logged points and ends each generation in the logged state."""
+    import cma
+    for g, (unit, cost) in enumerate(zip(rows["unit"].blocks, rows["cost"].blocks)):
+        es.stop()  # as the logged run called it, in case it keeps state
+        asked = es.ask()
+        if not np.array_equal(np.array(asked), unit):
+            raise SceneError(f"{where}generation {g} asks other points than logged: pycma {cma.__version__} cannot "
+                             f"continue a log of pycma {logged_version}")
+        es.tell(asked, list(cost))
+        if any(not np.array_equal(value, states[name].blocks[g][0]) for name, value in _state(es, rng).items()):
+            raise SceneError(f"{where}the optimiser rebuilt from the log differs from its logged state after "
+                             f"generation {g} (pycma {cma.__version__}, the log's {logged_version})")
+
+
+def read_log(path: str | Path, schema: str = searchlog.OPTIMIZE) -> dict[str, Any]:
+    """A log's datasets by name, its root attributes ("attrs"), the datasets' other attributes than units and
+    description ("dataset_attrs") and its variables; SceneError when the file is not a finrft log of this
+    ``schema``."""
+    attrs, datasets = searchlog.read(path, schema)
+    out: dict[str, Any] = {name: d.data for name, d in datasets.items()}
+    out["attrs"] = attrs
+    out["dataset_attrs"] = {name: d.attrs for name, d in datasets.items()}
+    out["variables"] = [Variable(k, float(lo), float(hi)) for k, (lo, hi) in zip(attrs["variables"],
+                                                                                 out["bounds"])]
+    return out
+
+
+def logged_problem(path: str | Path) -> tuple[RobotScene, list[Variable]]:
+    """The scene and variables of an optimisation log, to continue it."""
+    log = read_log(path)
+    return scene_from_dict(tomllib.loads(log["attrs"]["scene_toml"]), RobotScene), log["variables"]
+
+
+def optimize(scene: RobotScene, *, variables: Sequence[Variable] = DEFAULT_VARIABLES, budget: int | None = None,
+             seed: int | None = None, log: str | Path | None = None, resume: bool = False,
+             executor: Executor | None = None, workers: int | None = None, max_error: ErrorLimits = ErrorLimits(),
              on_generation: Callable[[int, np.ndarray, dict[str, np.ndarray], Any], None] | None = None) -> Search:
     """Maximise the robot's eta over ``variables`` with CMA-ES, minimising 1 - eta (failed gaits, gaits whose
     estimated error exceeds ``max_error``, and power strokes that move the body forward by less than
-    MIN_FORWARD_MM: 2)."""
+    MIN_FORWARD_MM: 2). Budget, seed, log and resume as `cmaes`; `logged_problem` gives the scene and variables
+    to resume a log with."""
     check_variables(scene, variables)
 
     def population(values: np.ndarray) -> tuple[list[float], dict[str, np.ndarray]]:
@@ -240,10 +341,15 @@ def optimize(scene: RobotScene, *, variables: Sequence[Variable] = DEFAULT_VARIA
 
     with batch.pool_for(executor, workers) as pool:
         search = cmaes(population, variables, budget=budget, seed=seed, start=PAPER_START, log=log, resume=resume,
-                       log_attrs={"scene_toml": to_toml(scene), "objective": "1 - eta over one flap cycle from rest "
-                                  f"(failed gaits, estimated errors above the limit and power strokes under "
-                                  f"{MIN_FORWARD_MM} mm: 2)"},
-                       columns={"eta": ("1", 0), "D1": ("m", 0), "D2": ("m", 0), "eta_error": ("points", 0)},
+                       units=si_units(RobotScene, variables),
+                       problem={"scene_toml": to_toml(scene), "objective": "1 - eta over one flap cycle from rest "
+                                f"(failed gaits, estimated errors above the limit and power strokes under "
+                                f"{MIN_FORWARD_MM} mm: 2)", "objective_units": "1",
+                                "error_limit_points": max_error.eta_points},
+                       columns={"eta": ("1", 0, "swimming efficiency (D1 - D2) / D1; NaN when the gait failed"),
+                                "D1": ("m", 0, "distance forward in the power stroke"),
+                                "D2": ("m", 0, "distance back in the recovery stroke"),
+                                "eta_error": ("points", 0, "estimated discretisation error of eta (finrft.convergence)")},
                        on_generation=on_generation)
     if search.cost >= FAILED:
         raise SimulationFailed(f"none of the {search.evaluations} gaits evaluated gave a usable eta (each failed, "

@@ -7,22 +7,18 @@ interrupted or failed write never leaves a truncated file where a complete one i
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import json
-import os
 import uuid
-from datetime import datetime, timezone
-from importlib import metadata
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import h5py
-import mujoco
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
+from .files import atomic_path as _atomic_path, provenance
 from .models import initial_heading
 from .scene import to_toml
 from .simulate import Run
@@ -38,27 +34,6 @@ _ROOT_ATTRS = ("schema", "scene_toml", "scene_json", "drive_json", "summary_json
                "mujoco_version", "numpy_version", "created_utc", "sign_convention")
 
 
-@contextlib.contextmanager
-def _atomic_path(path: str | Path) -> Iterator[Path]:
-    """A temporary path next to ``path`` that replaces it when the block succeeds and is removed when it fails."""
-    target = Path(path)
-    # Not tempfile.mkstemp: its 0600 mode would carry over to the result; the writers create the file themselves.
-    tmp = target.with_name(f".{target.name}.{uuid.uuid4().hex[:12]}.tmp")
-    try:
-        yield tmp
-        os.replace(tmp, target)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-
-
-def _finrft_version() -> str:
-    try:
-        return metadata.version("finrft")
-    except metadata.PackageNotFoundError:
-        return "unknown"
-
-
 def _motion(run: Run) -> tuple[str, str, str, str]:
     """Names and units of the drive's position and load: (position, its unit, load, its unit)."""
     if run.drive.kind == "drag":
@@ -69,9 +44,7 @@ def _motion(run: Run) -> tuple[str, str, str, str]:
 def _provenance(scene: Any, summary: dict[str, Any]) -> dict[str, str]:
     """What every result file stores about how it was made."""
     return {"scene_toml": to_toml(scene), "scene_json": json.dumps(scene.to_dict()),
-            "summary_json": json.dumps(summary), "finrft_version": _finrft_version(),
-            "mujoco_version": mujoco.__version__, "numpy_version": np.__version__,
-            "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds")}
+            "summary_json": json.dumps(summary), **provenance()}
 
 
 def _write_series(path: str | Path, time: np.ndarray, series: list[tuple[str, np.ndarray, str, str]],

@@ -6,19 +6,22 @@ Exit status: 0 success, 1 the simulation went unstable, 2 bad input (one line on
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
 import sys
+import tempfile
 import tomllib
 import warnings
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Iterator, Sequence
 
 import numpy as np
 
 from . import scene as scenes
 from .drive import Drive
+from .files import atomic_path
 from .simulate import Run, SimulationUnstable, simulate
 
 
@@ -44,38 +47,60 @@ def _number(unit: str, *, minimum: float = 0.0, inclusive: bool = False, integer
     return parse
 
 
-def _add_common(p: argparse.ArgumentParser) -> None:
+PLATE_PRESETS_HELP = ("built-in plate scene when no --scene is given (default: paper): paper = the authors' "
+                      "plate with its quirks: inertias of 1 kg m^2, penalty stop, explicit method; physical = "
+                      "real inertias, fitted to the measurements, penalty stop, newton method")
+ROBOT_PRESETS_HELP = ("built-in robot scene when no --scene is given (default: paper): paper = the authors' model "
+                      "with its quirks: inertias of 1 kg m^2, penalty stops, stroke body drag (a constant force "
+                      "against the fin's sweep), adaptive method; physical = real inertias, penalty stops, "
+                      "velocity body drag (against the body's velocity), newton method")
+
+
+def _add_quiet(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--quiet", action="store_true", help="no progress bar and no summary text (files and --json "
+                   "are still written)")
+
+
+def _add_json(p: argparse.ArgumentParser, what: str) -> None:
+    p.add_argument("--json", action="store_true", help=f"print {what} as JSON on the last line of stdout (SI units)")
+
+
+def _add_force(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--force", action="store_true", help="replace output files that exist (default: refuse)")
+
+
+def _add_plate_scene(p: argparse.ArgumentParser, *, kinds: bool = False, backend: bool = True):
     g = p.add_argument_group("scene")
-    g.add_argument("--plate", choices=("origami", "soft", "rigid"),
-                   help="plate kind (overrides plate.kind): origami = one-sided stop, soft = compliant both ways, "
-                        "rigid = one body")
-    g.add_argument("--scene", metavar="FILE.toml", help="scene file in SI units (default: the built-in preset)")
-    g.add_argument("--preset", default="paper", choices=scenes.PRESETS[scenes.Scene],
-                   help="built-in scene used when no --scene is given (default: %(default)s)")
+    if kinds:
+        g.add_argument("--plate", choices=("origami", "soft", "rigid"),
+                       help="plate kind (overrides plate.kind): origami = one-sided stop, soft = compliant both "
+                            "ways, rigid = does not bend")
+    g.add_argument("--scene", metavar="FILE.toml", help="plate scene file in SI units (instead of --preset)")
+    g.add_argument("--preset", choices=scenes.PRESETS[scenes.Scene], help=PLATE_PRESETS_HELP)
     g.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scene key in SI units, e.g. --set plate.segment_inertia=0.001 (repeatable)")
-    g.add_argument("--backend", choices=("native", "python"),
-                   help="where the RFT force is computed (overrides sim.backend; default native, the C plugin, "
-                        "falling back to python when it cannot be loaded)")
-    g.add_argument("--cycles", type=_number("cycles", minimum=1, inclusive=True, integer=True), metavar="N",
-                   help="back-and-forth cycles of the triangle wave (the paper used 5; the first is reported "
-                        "separately); without it, a single stroke out")
+    if backend:
+        g.add_argument("--backend", choices=("native", "python"),
+                       help="where the RFT force is computed (overrides sim.backend; default native, the C "
+                            "plugin, falling back to python when it cannot be loaded)")
+    return g
+
+
+def _add_test(p: argparse.ArgumentParser, *, drag: bool) -> None:
+    """Flags of the plate tests, drag and rotate."""
+    _add_plate_scene(p, kinds=True).add_argument(
+        "--cycles", type=_number("cycles", minimum=1, inclusive=True, integer=True), metavar="N",
+        help="back-and-forth cycles of the triangle wave (the paper used 5; the first is reported separately); "
+             "without it, a single stroke out")
     o = p.add_argument_group("output")
     o.add_argument("--out", metavar="FILE.h5", help="write the time series and the resolved scene to HDF5 (SI units)")
     o.add_argument("--rrd", metavar="FILE.rrd", help="write a rerun recording; open it with 'rerun FILE.rrd'")
-    o.add_argument("--json", action="store_true", help="print a JSON summary as the last line of stdout (SI units)")
-    o.add_argument("--quiet", action="store_true", help="no progress or summary text, only files and --json")
-    o.add_argument("--forces-csv", metavar="FILE.csv", help="append the steady force on the plate (normal and "
-                   "tangential, N) at this angle of attack to a CSV, for finrft fit-rft (drag only)")
-
-
-def _add_plate_scene(p: argparse.ArgumentParser):
-    g = p.add_argument_group("scene")
-    g.add_argument("--scene", metavar="FILE.toml", help="plate scene file in SI units (default: the preset)")
-    g.add_argument("--preset", default="paper", choices=scenes.PRESETS[scenes.Scene],
-                   help="built-in scene when no --scene is given (default: %(default)s)")
-    g.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a scene key (SI)")
-    return g
+    _add_force(o)
+    _add_json(o, "a summary")
+    _add_quiet(o)
+    if drag:
+        o.add_argument("--forces-csv", metavar="FILE.csv", help="append the steady force on the plate (normal and "
+                       "tangential, N) at this angle of attack to a CSV, for finrft fit-rft (rigid plate only)")
 
 
 def _add_workers(p: argparse.ArgumentParser) -> None:
@@ -85,11 +110,8 @@ def _add_workers(p: argparse.ArgumentParser) -> None:
 
 def _add_robot(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("robot scene")
-    g.add_argument("--preset", default="paper", choices=scenes.PRESETS[scenes.RobotScene],
-                   help="built-in robot scene when no --scene is given: paper = the authors' model and quirks, "
-                        "physical = real inertias, limit stops, drag against the body's velocity (default: "
-                        "%(default)s)")
-    g.add_argument("--scene", metavar="FILE.toml", help="robot scene file in SI units")
+    g.add_argument("--preset", choices=scenes.PRESETS[scenes.RobotScene], help=ROBOT_PRESETS_HELP)
+    g.add_argument("--scene", metavar="FILE.toml", help="robot scene file in SI units (instead of --preset)")
     g.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scene key in SI units, e.g. --set fin.stiffness=0.4 (repeatable)")
     g.add_argument("--fin", choices=("origami", "soft", "rigid"), help="fin kind (overrides fin.kind)")
@@ -101,7 +123,8 @@ def _add_robot(p: argparse.ArgumentParser) -> None:
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="finrft", description="Compliant fins in granular media: resistive force theory (RFT) "
                      "on MuJoCo. Command-line flags use the paper's units (mm, mm/s, degrees); scene files and "
-                     "outputs use SI units.")
+                     "outputs use SI units. Exit status: 0 done, 1 the simulation went unstable, 2 bad input, "
+                     "130 interrupted.")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     drag = sub.add_parser("drag", help="drag a plate through the medium along +y (the paper's drag test)",
@@ -115,7 +138,7 @@ def build_parser() -> argparse.ArgumentParser:
     drag.add_argument("--attack", type=_number("degrees", inclusive=True), default=90.0, metavar="DEG",
                       help="angle of attack between the plate and the motion, degrees in 0..180 "
                            "(default: %(default)s, plate normal to the motion)")
-    _add_common(drag)
+    _add_test(drag, drag=True)
 
     rotate = sub.add_parser("rotate", help="turn a plate about its base (the paper's rotate test)",
                             description="Turn the rod about z through its base at constant angular speed: one "
@@ -125,16 +148,17 @@ def build_parser() -> argparse.ArgumentParser:
                         help="stroke angle in degrees (default: %(default)s)")
     rotate.add_argument("--omega", type=_number("deg/s"), default=60.0, metavar="DEG_S",
                         help="angular speed in degrees/s (default: %(default)s)")
-    _add_common(rotate)
+    _add_test(rotate, drag=False)
 
     scene = sub.add_parser("scene", help="print a resolved scene as TOML",
                            description="Print the full resolved scene (SI units) as TOML, to copy and edit.")
-    scene.add_argument("--dump", metavar="NAME", default="paper",
-                       help="preset to print: paper for plates; paper or physical with --robot (default: "
-                            "%(default)s)")
+    scene.add_argument("--dump", metavar="NAME", help=f"preset to print (default: paper): "
+                       f"{', '.join(scenes.PRESETS[scenes.Scene])} for plates, "
+                       f"{', '.join(scenes.PRESETS[scenes.RobotScene])} with --robot")
     scene.add_argument("--robot", action="store_true", help="a robot scene instead of a plate scene")
-    scene.add_argument("--scene", metavar="FILE.toml", help="resolve this file instead of a preset")
+    scene.add_argument("--scene", metavar="FILE.toml", help="resolve this file (instead of --dump)")
     scene.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a key (SI)")
+    _add_quiet(scene)
 
     swim = sub.add_parser("swim", help="the two-fin robot swimming: flap cycles and the swimming efficiency",
                           description="Simulate the robot's flap cycles from rest, the arm at theta2: recovery "
@@ -144,17 +168,20 @@ def build_parser() -> argparse.ArgumentParser:
                       help="arm angle at the end of the recovery stroke, degrees in -90..90 (0 sideways, 90 "
                            "forward; default: the scene's, 60 in the presets)")
     swim.add_argument("--theta2", type=_number("degrees", minimum=-math.inf), metavar="DEG",
-                      help="arm angle at the end of the power stroke, degrees (default: the scene's, -90)")
+                      help="arm angle at the end of the power stroke, degrees (default: the scene's, -90 in the "
+                           "presets)")
     swim.add_argument("--arm-length", type=_number("mm"), metavar="MM",
-                      help="arm length L_a in mm (default: the scene's, 65)")
+                      help="arm length L_a in mm (default: the scene's, 65 in the presets)")
     swim.add_argument("--omega", type=_number("deg/s"), metavar="DEG_S",
-                      help="arm angular speed in degrees/s (default: the scene's, 66)")
+                      help="arm angular speed in degrees/s (default: the scene's, 66 in the presets)")
     swim.add_argument("--cycles", type=_number("cycles", minimum=1, inclusive=True, integer=True), default=1,
                       metavar="N", help="flap cycles (default: %(default)s); figures are the last cycle's")
     _add_robot(swim)
     swim.add_argument("--out", metavar="FILE.h5", help="write the time series and the resolved scene (SI units)")
     swim.add_argument("--rrd", metavar="FILE.rrd", help="write a rerun recording; open it with 'rerun FILE.rrd'")
-    swim.add_argument("--json", action="store_true", help="print a JSON summary as the last line of stdout")
+    _add_force(swim)
+    _add_json(swim, "a summary")
+    _add_quiet(swim)
 
     optimize = sub.add_parser("optimize", help="optimise the gait with CMA-ES",
                               description="Maximise the swimming efficiency eta over one flap cycle with CMA-ES "
@@ -174,11 +201,13 @@ def build_parser() -> argparse.ArgumentParser:
     optimize.add_argument("--executor", choices=("local", "dask"), default="local",
                           help="where evaluations run: local processes, or a Dask cluster (needs finrft[cluster])")
     optimize.add_argument("--address", metavar="tcp://HOST:PORT", help="Dask scheduler address (--executor dask)")
-    optimize.add_argument("--out", metavar="LOG.h5", help="new HDF5 log of every evaluation (never overwritten)")
+    optimize.add_argument("--out", metavar="LOG.h5", help="new HDF5 log of every evaluation")
     optimize.add_argument("--resume", metavar="LOG.h5", help="continue the run logged in LOG.h5, appending to it")
     optimize.add_argument("--rrd", metavar="FILE.rrd", help="rerun recording: best eta per generation, the "
                           "population, and the best gait's motion")
-    optimize.add_argument("--json", action="store_true", help="print the result as JSON on the last line")
+    _add_force(optimize)
+    _add_json(optimize, "the result")
+    _add_quiet(optimize)
     _add_robot(optimize)
 
     table = sub.add_parser("table", help="the paper's Table I: six gaits, eta next to the paper's",
@@ -186,63 +215,74 @@ def build_parser() -> argparse.ArgumentParser:
                            "print eta, the authors' script measure |net|/D1, D1, D2 and the net speed next to the "
                            "paper's eta_sim and eta_exp, as a Markdown table.")
     _add_workers(table)
-    table.add_argument("--json", action="store_true", help="print the rows as JSON on the last line")
+    _add_json(table, "the rows")
+    _add_quiet(table)
     _add_robot(table)
 
     fitp = sub.add_parser("fit", help="fit plate-scene parameters to measured segment angles (CMA-ES)",
                           description="Fit plate-scene parameters so that simulated segment angles match measured "
-                          "ones: each data file is a drag from flat at its own speed (columns time_s, "
-                          "displacement_mm, segment1_deg ...); the objective is the mean over files of the mean "
-                          "squared error (deg^2), as the paper's E(b).")
+                          "ones: each data file is a drag from flat at constant speed, 1 to 1000 mm/s (columns "
+                          "time_s, displacement_mm, segment1_deg ...); the objective is the mean over files of the "
+                          "mean squared error (deg^2), as the paper's E(b). The measurements shipped with finrft "
+                          "are in the folder python -c 'import finrft.data as d; print(d.plate_drag_dir())' "
+                          "prints.")
     fitp.add_argument("--data", nargs="+", required=True, metavar="FILE.csv", help="drag data to fit")
     fitp.add_argument("--validate", nargs="+", default=[], metavar="FILE.csv",
                       help="drag data to check the fit on, not fitted")
     fitp.add_argument("--params", default="b", metavar="NAMES",
-                      help="comma-separated parameters: b (plate.damping), k (plate.stiffness), f_perp, f_par, or "
-                           "any numeric plate-scene key (default: %(default)s, the paper's procedure)")
+                      help="comma-separated parameters: b (plate.damping), k (plate.stiffness), f_perp "
+                           "(rft.f_perp), f_par (rft.f_par), or any numeric plate-scene key (default: %(default)s, "
+                           "the paper's procedure)")
     fitp.add_argument("--bounds", action="append", default=[], metavar="KEY=LOW:HIGH",
-                      help="bounds of a fitted key in SI (defaults: b 0.01:100, k 0.01:100, f_perp 0.1:100, "
-                           "f_par -2:2); positive bounds over more than a decade are searched in log space")
+                      help="bounds of a fitted parameter in SI, by name or key, e.g. b=0.0001:100 (defaults: b "
+                           "0.01:100, k 0.01:100, f_perp 0.1:100, f_par -2:2); positive bounds over more than a "
+                           "decade are searched in log space")
     fitp.add_argument("--budget", type=_number("evaluations", minimum=1, inclusive=True, integer=True),
-                      default=300, metavar="N", help="evaluations (default: %(default)s)")
+                      default=300, metavar="N", help="evaluations (default: %(default)s; CMA-ES finishes the "
+                      "generation it is in)")
     fitp.add_argument("--seed", type=_number("", minimum=1, inclusive=True, integer=True), default=1, metavar="S",
                       help="random seed, >= 1 (default: %(default)s)")
     _add_workers(fitp)
     fitp.add_argument("--write-scene", metavar="OUT.toml", help="write the fitted scene (finrft drag --scene OUT.toml)")
     fitp.add_argument("--plot", metavar="OUT.png", help="simulated against measured angles for every file")
-    fitp.add_argument("--out", metavar="LOG.h5", help="HDF5 log of every evaluation (never overwritten)")
+    fitp.add_argument("--out", metavar="LOG.h5", help="new HDF5 log of every evaluation")
     fitp.add_argument("--rrd", metavar="FILE.rrd", help="rerun recording of the fitted drag of the first file")
-    fitp.add_argument("--json", action="store_true", help="print the result as JSON on the last line")
-    _add_plate_scene(fitp).add_argument("--backend", choices=("native", "python"),
-                                        help="where the RFT force is computed")
+    _add_force(fitp)
+    _add_json(fitp, "the result")
+    _add_quiet(fitp)
+    _add_plate_scene(fitp)
 
     fitrft = sub.add_parser("fit-rft", help="identify RFT coefficients from rigid-plate forces",
                             description="Identify the paper law's f_perp and f_par (least squares) and the table "
                             "law's F_perp(theta), F_par(theta) from the steady forces on a rigid plate dragged at "
                             "several angles of attack (columns attack_deg, force_normal_N, force_tangential_N, as "
-                            "written by finrft drag --plate rigid --forces-csv). Writes a scene fragment and the "
-                            "table CSV.")
+                            "written by finrft drag --plate rigid --forces-csv; one row per angle, with an angle "
+                            "above 0 and one below 90 deg). Writes a scene fragment and the table CSV.")
     fitrft.add_argument("--data", required=True, metavar="FORCES.csv", help="forces per angle of attack")
     fitrft.add_argument("--speed", type=_number("mm/s"), default=30.0, metavar="MM_S",
                         help="drag speed of the measurements in mm/s (default: %(default)s)")
     fitrft.add_argument("--out", metavar="FRAGMENT.toml", help="write the [rft] scene fragment here "
                         "(default: print it)")
     fitrft.add_argument("--table", metavar="TABLE.csv", help="write the table law here (default: beside --out)")
-    fitrft.add_argument("--json", action="store_true", help="print the coefficients as JSON on the last line")
-    _add_plate_scene(fitrft)
+    _add_force(fitrft)
+    _add_json(fitrft, "the coefficients")
+    _add_quiet(fitrft)
+    _add_plate_scene(fitrft, backend=False)
 
     report = sub.add_parser("report", help="regenerate the paper's figures and table (Markdown, PNG, rerun)",
                             description="Write DIR/report.md with the paper's results regenerated: drag and rotate "
                             "forces, effective flapping, model against the plate-drag measurements, the robot's "
                             "Table I, optimisation and trajectories, and how long each part took; plus rerun "
-                            "recordings.")
+                            "recordings. The files appear in DIR only when every part has succeeded.")
     report.add_argument("--out", default="report", metavar="DIR", help="output folder (default: %(default)s)")
     report.add_argument("--quick", action="store_true", help="a smaller version: fewer cycles and evaluations")
     report.add_argument("--preset", default="paper", choices=scenes.PRESETS[scenes.Scene],
-                        help="plate scene fitted to the measurements (default: %(default)s)")
-    report.add_argument("--data", default="../shared/data/plate_drag", metavar="DIR",
-                        help="folder of plate-drag measurements (default: %(default)s)")
+                        help="plate preset fitted to the measurements (default: %(default)s)")
+    report.add_argument("--data", metavar="DIR", help="folder of plate-drag measurements (default: those shipped "
+                        "with finrft)")
     _add_workers(report)
+    _add_force(report)
+    _add_quiet(report)
 
     bench = sub.add_parser("bench", help="benchmarks, measured as ratios in one run on this machine")
     kinds = bench.add_subparsers(dest="bench", required=True, parser_class=_Parser)
@@ -253,7 +293,6 @@ def build_parser() -> argparse.ArgumentParser:
     backends.add_argument("--batch", type=_number("simulations", minimum=1, inclusive=True, integer=True),
                           default=64, help="simulations in the batch (default: %(default)s)")
     _add_workers(backends)
-    backends.add_argument("--json", action="store_true", help="print the figures as JSON on the last line")
     robot = kinds.add_parser("robot", help="one gait evaluation and a full optimisation",
                              description="Time one gait evaluation (one flap cycle) and a CMA-ES optimisation of "
                              "--budget evaluations on all cores, for a robot preset.")
@@ -262,7 +301,6 @@ def build_parser() -> argparse.ArgumentParser:
     robot.add_argument("--budget", type=_number("evaluations", minimum=1, inclusive=True, integer=True),
                        default=300, help="optimisation budget (default: %(default)s)")
     _add_workers(robot)
-    robot.add_argument("--json", action="store_true", help="print the figures as JSON on the last line")
     acc = kinds.add_parser("accuracy", help="speed against accuracy of every time-stepping method and step",
                            description="Run the origami drag (45 mm out and back) and one flap cycle of the "
                            "robot, each with the paper's and with physical inertias, for every method (explicit "
@@ -275,12 +313,12 @@ def build_parser() -> argparse.ArgumentParser:
     acc.add_argument("--quick", action="store_true",
                      help="steps of 0.1 and 1 ms, one tolerance and v_reg, and a coarser reference (about 25 s)")
     _add_workers(acc)
+    _add_force(acc)
     model = kinds.add_parser("modelling", help="what each modelling choice costs and changes",
                              description="Measure planar against 3D chains, rigid plates as one body against "
                              "welded segments, MuJoCo limit against penalty stops, and the half against the full "
                              "robot: the largest change in segment angle (deg), drive force (%% of its peak) or "
                              "efficiency (points), and the wall-time ratio. About 10 s.")
-    model.add_argument("--json", action="store_true", help="print the figures as JSON on the last line")
     fitb = kinds.add_parser("fit", help="a 4-parameter plate fit over three drag files",
                             description="Time a fit of k, b, f_perp and f_par of the paper plate over three drag "
                             "files with --budget evaluations on all cores.")
@@ -289,8 +327,17 @@ def build_parser() -> argparse.ArgumentParser:
     fitb.add_argument("--budget", type=_number("evaluations", minimum=1, inclusive=True, integer=True),
                       default=300, help="evaluations (default: %(default)s)")
     _add_workers(fitb)
-    fitb.add_argument("--json", action="store_true", help="print the figures as JSON on the last line")
+    for kind in (backends, robot, model, fitb):
+        _add_json(kind, "the figures")
+    for kind in (backends, robot, acc, model, fitb):
+        _add_quiet(kind)
     return parser
+
+
+def _preset(args: argparse.Namespace) -> str:
+    if args.scene and args.preset:
+        raise UsageError(f"give --scene {args.scene} or --preset {args.preset}, not both")
+    return args.preset or "paper"
 
 
 def _resolve_scene(args: argparse.Namespace) -> scenes.Scene:
@@ -299,7 +346,7 @@ def _resolve_scene(args: argparse.Namespace) -> scenes.Scene:
         overrides["plate.kind"] = args.plate
     if getattr(args, "backend", None):
         overrides["sim.backend"] = args.backend
-    return scenes.load_scene(args.scene, preset_name=args.preset, overrides=overrides)
+    return scenes.load_scene(args.scene, preset_name=_preset(args), overrides=overrides)
 
 
 def _resolve_robot(args: argparse.Namespace) -> scenes.RobotScene:
@@ -311,20 +358,51 @@ def _resolve_robot(args: argparse.Namespace) -> scenes.RobotScene:
                              ("arm_length", "arm.length", 1e-3), ("omega", "gait.omega", math.pi / 180)):
         if getattr(args, flag, None) is not None:
             overrides[key] = getattr(args, flag) * scale
-    return scenes.load_scene(args.scene, preset_name=args.preset, overrides=overrides, cls=scenes.RobotScene)
+    return scenes.load_scene(args.scene, preset_name=_preset(args), overrides=overrides, cls=scenes.RobotScene)
 
 
-def _check_output(path: str | None, suffix: str, flag: str) -> None:
+def _check_output(path: str | None, suffix: str, flag: str, force: bool, *, append: bool = False) -> None:
+    """Refuse, before anything runs, an output file that cannot be written: the wrong suffix, a missing or
+    read-only folder, a directory, or (unless ``force``, or ``append`` for files added to) an existing file."""
     if path is None:
         return
     target = Path(path)
     if target.suffix != suffix:
         raise UsageError(f"{flag} {path}: the file name must end in {suffix}")
-    folder = target.parent if str(target.parent) else Path(".")
+    _check_writable(target.parent, flag, path)
+    if target.is_dir():
+        raise UsageError(f"{flag} {path} is a directory: give a file name")
+    if target.exists() and not (force or append):
+        raise UsageError(f"{flag} {path} exists: choose a new file, or pass --force to replace it")
+
+
+def _check_output_dir(path: str, flag: str, force: bool) -> None:
+    """The same for an output folder: it may exist, empty, or with ``force``."""
+    target = Path(path)
+    _check_writable(target.parent, flag, path)
+    if target.exists() and not target.is_dir():
+        raise UsageError(f"{flag} {path} is a file: give a folder")
+    if target.is_dir() and any(target.iterdir()) and not force:
+        raise UsageError(f"{flag} {path} exists and is not empty: choose a new folder, or pass --force to write "
+                         f"into it")
+    if target.is_dir():
+        _check_writable(target, flag, path)
+
+
+def _check_writable(folder: Path, flag: str, path: str) -> None:
     if not folder.is_dir():
-        raise UsageError(f"{flag} {path}: directory {folder} does not exist")
-    if not os.access(folder, os.W_OK):
-        raise UsageError(f"{flag} {path}: directory {folder} is not writable")
+        raise UsageError(f"{flag} {path}: {folder} is not a directory" if folder.exists() else
+                         f"{flag} {path}: directory {folder} does not exist")
+    try:  # a file made and removed, not os.access: that says yes to root, and to read-only file systems
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as exc:
+        raise UsageError(f"{flag} {path}: cannot write in {folder}: {exc.strerror}") from None
+
+
+def _write_text(path: str, text: str) -> None:
+    with atomic_path(path) as tmp:
+        tmp.write_text(text)
 
 
 def _drive(args: argparse.Namespace) -> Drive:
@@ -335,18 +413,32 @@ def _drive(args: argparse.Namespace) -> Drive:
     return Drive("rotate", math.radians(args.omega), math.radians(args.amplitude), args.cycles)
 
 
-def _progress(enabled: bool) -> Callable[[float], None] | None:
-    if not enabled:
-        return None
-    state = {"last": -1}
+@contextlib.contextmanager
+def _progress(args: argparse.Namespace, total: float, what: str,
+              unit: str = "") -> Iterator[Callable[..., None] | None]:
+    """A progress bar on stderr: yields ``update(done, note="")``, ``done`` counted towards ``total`` and never
+    shown past it (``unit`` "%": ``done`` is a fraction of 1); None when stderr is not a terminal or with --quiet,
+    so that the work skips its callbacks."""
+    if args.quiet or not sys.stderr.isatty():
+        yield None
+        return
+    from tqdm import tqdm
+    scale = 100.0 if unit == "%" else 1.0
+    form = "{desc}: {percentage:3.0f}% |{bar}| {elapsed}<{remaining}{postfix}" if unit == "%" else None
+    with tqdm(total=scale * total, desc=what, unit=unit or "it", file=sys.stderr, leave=False,
+              dynamic_ncols=True, bar_format=form) as bar:
+        def update(done: float, note: str = "") -> None:
+            bar.update(min(scale * done, bar.total) - bar.n)
+            if note:
+                bar.set_postfix_str(note)
+        yield update
 
-    def show(fraction: float) -> None:
-        percent = int(100 * fraction)
-        if percent != state["last"]:
-            state["last"] = percent
-            end = "\n" if percent >= 100 else ""
-            print(f"\rsimulating {percent:3d} %", end=end, file=sys.stderr, flush=True)
-    return show
+
+def _say(args: argparse.Namespace, text: str) -> None:
+    """Human text on stdout, unless --quiet; it keeps a progress bar intact."""
+    if not args.quiet:
+        from tqdm import tqdm
+        tqdm.write(text, file=sys.stdout)
 
 
 def _describe(run: Run, summary: dict[str, Any]) -> str:
@@ -365,17 +457,20 @@ def _describe(run: Run, summary: dict[str, Any]) -> str:
 
 def _run_test(args: argparse.Namespace) -> int:
     scene = _resolve_scene(args)
-    _check_output(args.out, ".h5", "--out")
-    _check_output(args.rrd, ".rrd", "--rrd")
+    _check_output(args.out, ".h5", "--out", args.force)
+    _check_output(args.rrd, ".rrd", "--rrd", args.force)
     drive = _drive(args)
-    if args.forces_csv:
-        if args.command != "drag" or scene.plate.kind != "rigid":
-            raise UsageError("--forces-csv needs a drag of a rigid plate (--plate rigid)")
-        _check_output(args.forces_csv, ".csv", "--forces-csv")
-    run = simulate(scene, drive, progress=_progress(not args.quiet and sys.stderr.isatty()))
-    if args.forces_csv:
-        from .fit import append_forces, plate_forces
-        append_forces(args.forces_csv, plate_forces(run))
+    forces_csv = getattr(args, "forces_csv", None)
+    if forces_csv:
+        from .fit import append_forces, check_forces_header, plate_forces
+        if scene.plate.kind != "rigid":
+            raise UsageError("--forces-csv needs a rigid plate (--plate rigid)")
+        _check_output(forces_csv, ".csv", "--forces-csv", args.force, append=True)
+        check_forces_header(forces_csv)
+    with _progress(args, 1, args.command, "%") as bar:
+        run = simulate(scene, drive, progress=bar)
+    if forces_csv:
+        append_forces(forces_csv, plate_forces(run))
     summary = run.summary()
     if args.out or args.rrd:
         from . import record  # h5py and rerun load only when a file is asked for
@@ -383,11 +478,10 @@ def _run_test(args: argparse.Namespace) -> int:
             record.write_h5(run, args.out)
         if args.rrd:
             record.write_rrd(run, args.rrd)
-    if not args.quiet:
-        print(_describe(run, summary))
-        for flag, path in (("HDF5", args.out), ("rerun recording", args.rrd)):
-            if path:
-                print(f"wrote {flag}: {path}")
+    _say(args, _describe(run, summary))
+    for flag, path in (("HDF5", args.out), ("rerun recording", args.rrd), ("forces", forces_csv)):
+        if path:
+            _say(args, f"wrote {flag}: {path}")
     if args.json:
         print(_json(summary))
     return 0
@@ -399,9 +493,10 @@ def _json(value: Any) -> str:
 
 def _swim(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
     from . import swim as swimming
-    _check_output(args.out, ".h5", "--out")
-    _check_output(args.rrd, ".rrd", "--rrd")
-    run = swimming.swim(scene, args.cycles)
+    _check_output(args.out, ".h5", "--out", args.force)
+    _check_output(args.rrd, ".rrd", "--rrd", args.force)
+    with _progress(args, 1, "swim", "%") as bar:
+        run = swimming.swim(scene, args.cycles, progress=bar)
     summary = run.summary()
     if args.out or args.rrd:
         from . import record
@@ -409,12 +504,13 @@ def _swim(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
             record.write_swim_h5(run, args.out)
         if args.rrd:
             record.write_swim_rrd(run, args.rrd)
-    print(f"{scene.robot.model} robot, {scene.fin.kind} fin, theta1 {summary['theta1_deg']:g} deg, theta2 "
-          f"{summary['theta2_deg']:g} deg, arm {summary['arm_length_mm']:g} mm, omega {summary['omega_deg_s']:g} "
-          f"deg/s: {run.steps} steps ({scene.sim.method}, dt {scene.sim.dt:g} s, {run.backend}) in {run.wall_s:.2f} s")
+    _say(args, f"{scene.robot.model} robot, {scene.fin.kind} fin, theta1 {summary['theta1_deg']:g} deg, theta2 "
+         f"{summary['theta2_deg']:g} deg, arm {summary['arm_length_mm']:g} mm, omega {summary['omega_deg_s']:g} "
+         f"deg/s: {run.steps} steps ({scene.sim.method}, dt {scene.sim.dt:g} s, {run.backend}) in "
+         f"{run.wall_s:.2f} s")
     for i, row in enumerate(run.cycle_table(), start=1):
-        print(f"cycle {i}: eta {100 * row['eta']:+.2f} %, forward D1 {row['D1_mm']:.2f} mm, back D2 "
-              f"{row['D2_mm']:.2f} mm, net {row['net_mm']:+.2f} mm ({row['net_speed_mm_s']:+.3f} mm/s)")
+        _say(args, f"cycle {i}: eta {100 * row['eta']:+.2f} %, forward D1 {row['D1_mm']:.2f} mm, back D2 "
+             f"{row['D2_mm']:.2f} mm, net {row['net_mm']:+.2f} mm ({row['net_speed_mm_s']:+.3f} mm/s)")
     if args.json:
         print(_json(summary))
     return 0
@@ -422,9 +518,12 @@ def _swim(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
 
 def _table(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
     from . import batch, swim as swimming
-    runs = batch.map_jobs(swimming.swim_job, [(s, 1) for s in swimming.table_scenes(scene)], workers=args.workers)
+    jobs = [(s, 1) for s in swimming.table_scenes(scene)]
+    with _progress(args, len(jobs), "Table I gaits") as bar:
+        runs = batch.map_jobs(swimming.swim_job, jobs, workers=args.workers,
+                              progress=bar and (lambda done, total: bar(done)))
     rows = swimming.table_rows(runs)
-    print(swimming.table_markdown(rows))
+    _say(args, swimming.table_markdown(rows))
     if args.json:
         print(_json(rows))
     return 0
@@ -435,37 +534,32 @@ def _fit(args: argparse.Namespace) -> int:
     scene = _resolve_scene(args)
     for path, suffix, flag in ((args.write_scene, ".toml", "--write-scene"), (args.plot, ".png", "--plot"),
                                (args.out, ".h5", "--out"), (args.rrd, ".rrd", "--rrd")):
-        _check_output(path, suffix, flag)
-    if args.out and Path(args.out).exists():
-        raise UsageError(f"--out {args.out} exists: choose a new file")
+        _check_output(path, suffix, flag, args.force)
     data = [fitting.read_drag(p) for p in args.data]
     validate = [fitting.read_drag(p) for p in args.validate]
     names = [n.strip() for n in args.params.split(",") if n.strip()]
     variables = fitting.resolve_params(names, _parse_bounds(args.bounds))
-    show = sys.stderr.isatty()
+    with _progress(args, args.budget, "fit", "evaluations") as bar:
+        def on_generation(g: int, values: np.ndarray, extras: dict[str, np.ndarray], es: Any) -> None:
+            if bar:
+                bar(es.countevals, f"best RMSE {np.sqrt(es.best.f):.2f} deg")
 
-    def on_generation(g: int, values: np.ndarray, extras: dict[str, np.ndarray], es: Any) -> None:
-        if show:
-            print(f"\rgeneration {g + 1}: {es.countevals}/{args.budget} evaluations, best RMSE "
-                  f"{np.sqrt(es.best.f):.2f} deg", end="", file=sys.stderr, flush=True)
-
-    result = fitting.fit(scene, data, variables, budget=args.budget, seed=args.seed, validate=validate,
-                         log=args.out, workers=args.workers, on_generation=on_generation)
-    if show:
-        print(file=sys.stderr)
+        result = fitting.fit(scene, data, variables, budget=args.budget, seed=args.seed, validate=validate,
+                             log=args.out, workers=args.workers, on_generation=on_generation)
     if args.write_scene:
-        Path(args.write_scene).write_text(scenes.to_toml(result.scene))
+        _write_text(args.write_scene, scenes.to_toml(result.scene))
     if args.plot:
-        fitting.plot(result.scene, [(d, "fitted") for d in data] + [(d, "validation") for d in validate], args.plot)
+        with atomic_path(args.plot) as tmp:
+            fitting.plot(result.scene, [(d, "fitted") for d in data] + [(d, "validation") for d in validate], tmp)
     if args.rrd:
         from . import record
         record.write_rrd(simulate(result.scene, fitting.drag_for(data[0])), args.rrd)
     for key, value in result.search.best.items():
-        print(f"{key} = {value:.6g}")
+        _say(args, f"{key} = {value:.6g}")
     for label, table in (("fitted", result.rmse_deg), ("validation", result.validate_rmse_deg)):
         for name, rmse in table.items():
-            print(f"RMSE {name} ({label}): {rmse:.2f} deg")
-    print(f"{result.search.evaluations} evaluations in {result.search.wall_s:.1f} s")
+            _say(args, f"RMSE {name} ({label}): {rmse:.2f} deg")
+    _say(args, f"{result.search.evaluations} evaluations in {result.search.wall_s:.1f} s")
     if args.json:
         print(_json(fitting.fit_summary(result)))
     return 0
@@ -475,17 +569,18 @@ def _fit_rft(args: argparse.Namespace) -> int:
     from . import fit as fitting
     from .rft import write_table
     scene = _resolve_scene(args)
-    _check_output(args.out, ".toml", "--out")
+    table_path = args.table or (str(Path(args.out).with_suffix(".csv")) if args.out else None)
+    _check_output(args.out, ".toml", "--out", args.force)
+    _check_output(table_path, ".csv", "--table", args.force)
     forces = fitting.read_forces(args.data)
     law, table = fitting.identify_rft(forces, scene.plate.segments, scene.rft.v_reg, args.speed / 1000)
-    table_path = args.table or (str(Path(args.out).with_suffix(".csv")) if args.out else None)
-    if table_path:
-        _check_output(table_path, ".csv", "--table")
-        write_table(table_path, table)
     fragment = fitting.rft_fragment(law, Path(table_path).name if table_path else "TABLE.csv")
+    if table_path:
+        with atomic_path(table_path) as tmp:
+            write_table(tmp, table)
     if args.out:
-        Path(args.out).write_text(fragment)
-        print(f"wrote {args.out}" + (f" and {table_path}" if table_path else ""))
+        _write_text(args.out, fragment)
+        _say(args, f"wrote {args.out}" + (f" and {table_path}" if table_path else ""))
     else:
         print(fragment, end="")
     if args.json:
@@ -516,10 +611,11 @@ def _optimize(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
     from . import optimize as opt
     if args.out and args.resume:
         raise UsageError("give either --out (a new log) or --resume (an existing one), not both")
-    if args.out and Path(args.out).exists():
-        raise UsageError(f"--out {args.out} exists: continue it with --resume {args.out}, or choose a new file")
-    _check_output(args.out, ".h5", "--out")
-    _check_output(args.rrd, ".rrd", "--rrd")
+    if args.out and Path(args.out).exists() and not args.force:
+        raise UsageError(f"--out {args.out} exists: continue it with --resume {args.out}, choose a new file, or "
+                         f"pass --force to replace it")
+    _check_output(args.out, ".h5", "--out", args.force)
+    _check_output(args.rrd, ".rrd", "--rrd", args.force)
     if args.resume and not Path(args.resume).is_file():
         raise UsageError(f"--resume {args.resume}: no such file")
     variables = {v.key: v for v in opt.DEFAULT_VARIABLES}
@@ -535,20 +631,16 @@ def _optimize(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
     elif args.address:
         raise UsageError("--address goes with --executor dask")
     generations: list[tuple[np.ndarray, np.ndarray]] = []
-    show = sys.stderr.isatty()
+    with _progress(args, args.budget, "optimize", "evaluations") as bar:
+        def on_generation(g: int, values: np.ndarray, extras: dict[str, np.ndarray], es: Any) -> None:
+            generations.append((_display_units(list(variables), values), extras["eta"]))
+            if bar:
+                best = np.nanmax([1 - c for c in es.fit.fit]) if len(es.fit.fit) else float("nan")
+                bar(es.countevals, f"generation {g + 1}, best eta {100 * best:.2f} %")
 
-    def on_generation(g: int, values: np.ndarray, extras: dict[str, np.ndarray], es: Any) -> None:
-        generations.append((_display_units(list(variables), values), extras["eta"]))
-        if show:
-            best = np.nanmax([1 - c for c in es.fit.fit]) if len(es.fit.fit) else float("nan")
-            print(f"\rgeneration {g + 1}: {es.countevals}/{args.budget} evaluations, best eta this generation "
-                  f"{100 * best:.2f} %", end="", file=sys.stderr, flush=True)
-
-    result = opt.optimize(scene, variables=list(variables.values()), budget=args.budget, seed=args.seed,
-                          log=args.resume or args.out, resume=bool(args.resume), executor=executor,
-                          workers=args.workers, on_generation=on_generation)
-    if show:
-        print(file=sys.stderr)
+        result = opt.optimize(scene, variables=list(variables.values()), budget=args.budget, seed=args.seed,
+                              log=args.resume or args.out, resume=bool(args.resume), executor=executor,
+                              workers=args.workers, on_generation=on_generation)
     best_scene = scene.replace(**result.best)
     if args.rrd:
         from . import record, swim as swimming
@@ -559,9 +651,9 @@ def _optimize(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
                "arm_length_mm": 1e3 * best_scene.arm.length, "eta": eta, "best": result.best,
                "evaluations": result.evaluations, "generations": result.generations, "wall_s": result.wall_s,
                "seed": args.seed, "stop": {k: str(v) for k, v in result.stop.items()}}
-    print(f"best eta {100 * eta:.2f} % at theta1 {summary['theta1_deg']:.1f} deg, theta2 "
-          f"{summary['theta2_deg']:.1f} deg, arm {summary['arm_length_mm']:.1f} mm after {result.evaluations} "
-          f"evaluations in {result.wall_s:.1f} s")
+    _say(args, f"best eta {100 * eta:.2f} % at theta1 {summary['theta1_deg']:.1f} deg, theta2 "
+         f"{summary['theta2_deg']:.1f} deg, arm {summary['arm_length_mm']:.1f} mm after {result.evaluations} "
+         f"evaluations in {result.wall_s:.1f} s")
     if args.json:
         print(_json(summary))
     return 0
@@ -586,6 +678,52 @@ def _dask_executor(address: str | None):
         raise UsageError(f"cannot reach the Dask scheduler at {address}: {exc}") from None
 
 
+def _scene(args: argparse.Namespace) -> int:
+    if args.scene and args.dump:
+        raise UsageError(f"give --scene {args.scene} or --dump {args.dump}, not both")
+    kind = scenes.RobotScene if args.robot else scenes.Scene
+    overrides = dict(scenes.parse_override(item, kind) for item in args.set)
+    resolved = scenes.load_scene(args.scene, preset_name=args.dump or "paper", overrides=overrides, cls=kind)
+    print(scenes.to_toml(resolved), end="")
+    return 0
+
+
+def _report(args: argparse.Namespace) -> int:
+    from .report import write_report
+    _check_output_dir(args.out, "--out", args.force)
+    with _progress(args, 1, "report", "%") as bar:
+        path = write_report(args.out, quick=args.quick, workers=args.workers, data_dir=args.data,
+                            plate=scenes.preset(args.preset),
+                            progress=bar and (lambda done, total, part: bar(done / total, part)))
+    _say(args, f"wrote {path}")
+    return 0
+
+
+def _bench(args: argparse.Namespace) -> int:
+    from . import bench
+    log = lambda text: _say(args, text)  # noqa: E731
+    if args.bench == "accuracy":
+        _check_output_dir(args.out, "--out", args.force)
+        with _progress(args, 1, "bench accuracy", "%") as bar:
+            bench.accuracy(args.out, quick=args.quick, workers=args.workers, log=log,
+                           progress=bar and (lambda done, total: bar(done / total)))
+        return 0
+    if args.bench == "fit":
+        with _progress(args, args.budget, "bench fit", "evaluations") as bar:
+            figures = bench.fit_speed(args.data, budget=args.budget, workers=args.workers, log=log,
+                                      progress=bar and (lambda done, total: bar(done)))
+    else:
+        run = {"modelling": lambda **kw: bench.modelling(**kw),
+               "robot": lambda **kw: bench.robot(scenes.preset(args.preset, scenes.RobotScene), budget=args.budget,
+                                                 workers=args.workers, **kw),
+               "backends": lambda **kw: bench.backends(batch_size=args.batch, workers=args.workers, **kw)}
+        with _progress(args, 1, f"bench {args.bench}", "%") as bar:
+            figures = run[args.bench](log=log, progress=bar and (lambda done, total: bar(done / total)))
+    if args.json:
+        print(_json(figures))
+    return 0
+
+
 def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
     print(f"finrft: warning: {message}", file=sys.stderr)
 
@@ -594,54 +732,44 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     with warnings.catch_warnings():
         warnings.showwarning = _one_line_warning
-        return _main(parser, argv)
+        try:
+            status = _main(parser, argv)
+            sys.stdout.flush()  # a reader that went away shows here, not as a traceback at exit
+            return status
+        except BrokenPipeError:
+            # stdout was closed early (finrft swim --json | head): stop quietly, as Unix tools do on SIGPIPE.
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            return 141
+        except KeyboardInterrupt:
+            print("finrft: interrupted", file=sys.stderr)
+            return 130
+
+
+def _robot(command: Callable[[argparse.Namespace, scenes.RobotScene], int]) -> Callable[[argparse.Namespace], int]:
+    return lambda args: command(args, _resolve_robot(args))
+
+
+COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
+    "drag": _run_test, "rotate": _run_test, "scene": _scene, "swim": _robot(_swim), "optimize": _robot(_optimize),
+    "table": _robot(_table), "fit": _fit, "fit-rft": _fit_rft, "report": _report, "bench": _bench}
 
 
 def _main(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> int:
     try:
         args = parser.parse_args(argv)
-        if args.command == "scene":
-            kind = scenes.RobotScene if args.robot else scenes.Scene
-            overrides = dict(scenes.parse_override(item, kind) for item in args.set)
-            resolved = scenes.load_scene(args.scene, preset_name=args.dump, overrides=overrides, cls=kind)
-            print(scenes.to_toml(resolved), end="")
-            return 0
-        if args.command == "report":
-            from .report import write_report
-            path = write_report(args.out, quick=args.quick, workers=args.workers, data_dir=args.data,
-                                plate=scenes.preset(args.preset))
-            print(f"wrote {path}")
-            return 0
-        if args.command == "fit":
-            return _fit(args)
-        if args.command == "fit-rft":
-            return _fit_rft(args)
-        if args.command in ("swim", "optimize", "table"):
-            return {"swim": _swim, "optimize": _optimize, "table": _table}[args.command](args, _resolve_robot(args))
-        if args.command == "bench":
-            from . import bench
-            if args.bench == "accuracy":
-                bench.accuracy(args.out, quick=args.quick, workers=args.workers)
-                return 0
-            if args.bench == "fit":
-                figures = bench.fit_speed(args.data, budget=args.budget, workers=args.workers)
-            elif args.bench == "modelling":
-                figures = bench.modelling()
-            elif args.bench == "robot":
-                figures = bench.robot(scenes.preset(args.preset, scenes.RobotScene), budget=args.budget,
-                                      workers=args.workers)
-            else:
-                figures = bench.backends(batch_size=args.batch, workers=args.workers)
-            if args.json:
-                print(_json(figures))
-            return 0
-        return _run_test(args)
+        return COMMANDS[args.command](args)
     except (UsageError, scenes.SceneError) as exc:
         print(f"finrft: error: {exc}", file=sys.stderr)
         return 2
     except SimulationUnstable as exc:
         print(f"finrft: error: {exc}", file=sys.stderr)
         return 1
+    except BrokenPipeError:
+        raise
+    except OSError as exc:  # a file that could not be read or written after the checks (disk full, removed)
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"finrft: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

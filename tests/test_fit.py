@@ -9,10 +9,11 @@ import pytest
 
 from finrft import fit
 from finrft.cli import main
+from finrft.data import plate_drag_dir
 from finrft.rft import read_table
 from finrft.scene import SceneError, load_scene, preset
 
-DATA = "../shared/data/plate_drag"
+DATA = plate_drag_dir()
 
 
 @pytest.fixture(scope="module")

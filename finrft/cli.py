@@ -611,10 +611,10 @@ def _optimize(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
     from . import optimize as opt
     if args.out and args.resume:
         raise UsageError("give either --out (a new log) or --resume (an existing one), not both")
+    _check_output(args.out, ".h5", "--out", True)
     if args.out and Path(args.out).exists() and not args.force:
         raise UsageError(f"--out {args.out} exists: continue it with --resume {args.out}, choose a new file, or "
                          f"pass --force to replace it")
-    _check_output(args.out, ".h5", "--out", args.force)
     _check_output(args.rrd, ".rrd", "--rrd", args.force)
     if args.resume and not Path(args.resume).is_file():
         raise UsageError(f"--resume {args.resume}: no such file")

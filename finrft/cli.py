@@ -423,14 +423,18 @@ def _progress(args: argparse.Namespace, total: float, what: str,
         yield None
         return
     from tqdm import tqdm
-    scale = 100.0 if unit == "%" else 1.0
+    scale = 100 if unit == "%" else 1
     form = "{desc}: {percentage:3.0f}% |{bar}| {elapsed}<{remaining}{postfix}" if unit == "%" else None
+    try:  # a terminal that reports no size (0 x 0) would hide the bar
+        size = os.get_terminal_size(sys.stderr.fileno())
+    except (OSError, ValueError):
+        size = os.terminal_size((0, 0))
     with tqdm(total=scale * total, desc=what, unit=unit or "it", file=sys.stderr, leave=False,
-              dynamic_ncols=True, bar_format=form) as bar:
+              ncols=size.columns or 80, nrows=size.lines or 24, bar_format=form) as bar:
         def update(done: float, note: str = "") -> None:
-            bar.update(min(scale * done, bar.total) - bar.n)
             if note:
-                bar.set_postfix_str(note)
+                bar.set_postfix_str(note, refresh=False)
+            bar.update(min(round(scale * done), bar.total) - bar.n)
         yield update
 
 
@@ -519,7 +523,7 @@ def _swim(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
 def _table(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
     from . import batch, swim as swimming
     jobs = [(s, 1) for s in swimming.table_scenes(scene)]
-    with _progress(args, len(jobs), "Table I gaits") as bar:
+    with _progress(args, len(jobs), "Table I", "gaits") as bar:
         runs = batch.map_jobs(swimming.swim_job, jobs, workers=args.workers,
                               progress=bar and (lambda done, total: bar(done)))
     rows = swimming.table_rows(runs)

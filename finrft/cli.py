@@ -104,7 +104,7 @@ def _add_test(p: argparse.ArgumentParser, *, drag: bool) -> None:
 
 
 def _add_workers(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--workers", type=_number("processes", minimum=1, inclusive=True, integer=True),
+    p.add_argument("--workers", type=_number("processes", minimum=1, inclusive=True, integer=True), metavar="N",
                    help="worker processes (default: all cores)")
 
 
@@ -152,9 +152,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     scene = sub.add_parser("scene", help="print a resolved scene as TOML",
                            description="Print the full resolved scene (SI units) as TOML, to copy and edit.")
-    scene.add_argument("--dump", metavar="NAME", help=f"preset to print (default: paper): "
-                       f"{', '.join(scenes.PRESETS[scenes.Scene])} for plates, "
-                       f"{', '.join(scenes.PRESETS[scenes.RobotScene])} with --robot")
+    scene.add_argument("--dump", metavar="NAME", help=f"preset to print (default: paper): a plate preset "
+                       f"({', '.join(scenes.PRESETS[scenes.Scene])}), or with --robot a robot preset "
+                       f"({', '.join(scenes.PRESETS[scenes.RobotScene])})")
     scene.add_argument("--robot", action="store_true", help="a robot scene instead of a plate scene")
     scene.add_argument("--scene", metavar="FILE.toml", help="resolve this file (instead of --dump)")
     scene.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a key (SI)")
@@ -291,7 +291,7 @@ def build_parser() -> argparse.ArgumentParser:
                                 "against bare mj_step of the same model, and the throughput of a batch of drags "
                                 "on all cores against one core.")
     backends.add_argument("--batch", type=_number("simulations", minimum=1, inclusive=True, integer=True),
-                          default=64, help="simulations in the batch (default: %(default)s)")
+                          default=64, metavar="N", help="simulations in the batch (default: %(default)s)")
     _add_workers(backends)
     robot = kinds.add_parser("robot", help="one gait evaluation and a full optimisation",
                              description="Time one gait evaluation (one flap cycle) and a CMA-ES optimisation of "
@@ -299,7 +299,7 @@ def build_parser() -> argparse.ArgumentParser:
     robot.add_argument("--preset", default="paper", choices=scenes.PRESETS[scenes.RobotScene],
                        help="robot preset (default: %(default)s)")
     robot.add_argument("--budget", type=_number("evaluations", minimum=1, inclusive=True, integer=True),
-                       default=300, help="optimisation budget (default: %(default)s)")
+                       default=300, metavar="EVALS", help="optimisation budget (default: %(default)s)")
     _add_workers(robot)
     acc = kinds.add_parser("accuracy", help="speed against accuracy of every time-stepping method and step",
                            description="Run the origami drag (45 mm out and back) and one flap cycle of the "
@@ -325,7 +325,7 @@ def build_parser() -> argparse.ArgumentParser:
     fitb.add_argument("--data", nargs="+", metavar="FILE.csv", help="drag data (default: the model's own drags "
                       "at 10, 30 and 50 mm/s)")
     fitb.add_argument("--budget", type=_number("evaluations", minimum=1, inclusive=True, integer=True),
-                      default=300, help="evaluations (default: %(default)s)")
+                      default=300, metavar="EVALS", help="evaluations (default: %(default)s)")
     _add_workers(fitb)
     for kind in (backends, robot, model, fitb):
         _add_json(kind, "the figures")

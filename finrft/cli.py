@@ -1,6 +1,8 @@
 """The ``finrft`` command line: a thin layer over the Python API that speaks the paper's units (mm, mm/s, degrees).
 
-Exit status: 0 success, 1 the simulation went unstable, 2 bad input (one line on stderr, nothing written).
+Exit status: 0 success, 1 the simulation went unstable, 2 bad input or a file that cannot be read or written
+(one line on stderr, nothing written), 130 interrupted, 141 stdout closed early (as Unix tools on SIGPIPE).
+Output paths are checked before anything runs; every command takes --quiet, every writer --force.
 """
 
 from __future__ import annotations
@@ -123,8 +125,8 @@ def _add_robot(p: argparse.ArgumentParser) -> None:
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="finrft", description="Compliant fins in granular media: resistive force theory (RFT) "
                      "on MuJoCo. Command-line flags use the paper's units (mm, mm/s, degrees); scene files and "
-                     "outputs use SI units. Exit status: 0 done, 1 the simulation went unstable, 2 bad input, "
-                     "130 interrupted.")
+                     "outputs use SI units. Exit status: 0 done, 1 the simulation went unstable, 2 bad input or a file "
+                     "that cannot be written, 130 interrupted.")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     drag = sub.add_parser("drag", help="drag a plate through the medium along +y (the paper's drag test)",

@@ -20,6 +20,15 @@ from .simulate import simulate
 from .swim import gait_drive, swim
 
 
+# progress(cases done, cases): called as each measured case of a benchmark finishes.
+Progress = Callable[[int, int], None] | None
+
+
+def _tick(progress: Progress, done: int, total: int) -> None:
+    if progress is not None:
+        progress(done, total)
+
+
 def _best(fn: Callable[[], Any], repeat: int) -> float:
     times = []
     for _ in range(repeat):
@@ -30,7 +39,7 @@ def _best(fn: Callable[[], Any], repeat: int) -> float:
 
 
 def backends(scene: Scene | None = None, *, batch_size: int = 64, workers: int | None = None,
-             repeat: int = 3, log: Callable[[str], None] = print) -> dict[str, Any]:
+             repeat: int = 3, log: Callable[[str], None] = print, progress: Progress = None) -> dict[str, Any]:
     """The paper plate drag (200 mm at 30 mm/s) with each backend, against bare MuJoCo stepping of the same
     model without RFT, and the batch throughput of ``batch_size`` drags on all cores against one core."""
     scene = scene or preset("paper")
@@ -41,11 +50,12 @@ def backends(scene: Scene | None = None, *, batch_size: int = 64, workers: int |
                            f"{platform.python_version()}", "mujoco": mujoco.__version__, "dt": scene.sim.dt}
     steps = simulate(scene, drive, estimate_error=False).steps
     out["steps"] = steps
-    for backend in ("python", "native"):
+    for i, backend in enumerate(("python", "native")):
         wall = _best(lambda: simulate(scene.replace(**{"sim.backend": backend}), drive, estimate_error=False),
                      repeat)
         out[f"{backend}_wall_s"], out[f"{backend}_steps_per_s"] = wall, steps / wall
         log(f"{backend:>6} backend: {wall * 1e3:8.1f} ms per drag, {steps / wall:10.0f} steps/s")
+        _tick(progress, i + 1, 4)
 
     bare = models.build_plate(scene.replace(**{"sim.backend": "python"})).model
 
@@ -54,6 +64,7 @@ def backends(scene: Scene | None = None, *, batch_size: int = 64, workers: int |
         for _ in range(steps):
             mujoco.mj_step(bare, d)
     wall = _best(bare_loop, repeat)
+    _tick(progress, 3, 4)
     out["bare_wall_s"], out["bare_steps_per_s"] = wall, steps / wall
     log(f"  bare mj_step, same model without RFT: {wall * 1e3:8.1f} ms, {steps / wall:10.0f} steps/s")
     out["native_over_python"] = out["python_wall_s"] / out["native_wall_s"]
@@ -72,6 +83,7 @@ def backends(scene: Scene | None = None, *, batch_size: int = 64, workers: int |
     with batch.local_executor(workers) as pool:
         batch.run_many(jobs[:workers], executor=pool)  # start the workers before timing
         parallel = _best(lambda: batch.run_many(jobs, executor=pool), 1)
+    _tick(progress, 4, 4)
     total = steps * batch_size
     out.update(batch_size=batch_size, workers=workers, batch_serial_steps_per_s=total / serial,
                batch_parallel_steps_per_s=total / parallel, batch_speedup=serial / parallel)
@@ -81,7 +93,7 @@ def backends(scene: Scene | None = None, *, batch_size: int = 64, workers: int |
 
 
 def robot(scene: RobotScene | None = None, *, budget: int = 300, workers: int | None = None, repeat: int = 3,
-          log: Callable[[str], None] = print) -> dict[str, Any]:
+          log: Callable[[str], None] = print, progress: Progress = None) -> dict[str, Any]:
     """One gait evaluation (one flap cycle) and a full CMA-ES optimisation of ``budget`` evaluations."""
     scene = scene or preset("paper", RobotScene)
     workers = workers or batch.default_workers()
@@ -95,7 +107,9 @@ def robot(scene: RobotScene | None = None, *, budget: int = 300, workers: int | 
     log(f"one gait evaluation ({scene.sim.method}, dt {scene.sim.dt:g} s, {run.steps} steps): {wall * 1e3:.1f} ms "
         f"(target <= 20 ms; the authors' model ~15 s); its error estimate costs "
         f"{100 * out['error_estimate_overhead']:.0f} % more (target <= 30 %)")
+    _tick(progress, 1, 2)
     result = optimize(scene, budget=budget, seed=1, workers=workers)
+    _tick(progress, 2, 2)
     out.update(optimize_budget=budget, optimize_evaluations=result.evaluations, optimize_wall_s=result.wall_s,
                optimize_eta=1 - result.cost, best=result.best, workers=workers)
     log(f"optimize, budget {budget} ({result.evaluations} evaluations) on {workers} workers: {result.wall_s:.1f} s "
@@ -114,16 +128,18 @@ def _estimate_overhead(run: Callable[..., Any], repeat: int) -> float:
 
 
 def fit_speed(paths: list[str] | None = None, *, budget: int = 300, workers: int | None = None,
-              log: Callable[[str], None] = print) -> dict[str, Any]:
+              log: Callable[[str], None] = print, progress: Progress = None) -> dict[str, Any]:
     """A 4-parameter fit (k, b, f_perp, f_par) of the paper plate over three drag files with ``budget``
-    evaluations: the given files, or the model's own drags at 10, 30 and 50 mm/s over 200 mm."""
+    evaluations: the given files, or the model's own drags at 10, 30 and 50 mm/s over 200 mm. ``progress``
+    counts evaluations (at most ``budget``)."""
     from .fit import fit, read_drag, resolve_params, simulated_drag
     scene = preset("paper")
     data = [read_drag(p) for p in paths] if paths else [
         simulated_drag(scene.replace(**{"plate.damping": 0.8}), v, 0.2) for v in (0.01, 0.03, 0.05)]
     workers = workers or batch.default_workers()
     result = fit(scene, data, resolve_params(["k", "b", "f_perp", "f_par"]), budget=budget, seed=1,
-                 workers=workers)
+                 workers=workers, on_generation=lambda g, values, extras, es:
+                 _tick(progress, min(es.countevals, budget), budget))
     out = {"date": date.today().isoformat(), "files": [d.name for d in data], "budget": budget,
            "evaluations": result.search.evaluations, "wall_s": result.search.wall_s, "workers": workers,
            "rmse_deg": result.rmse_deg}
@@ -137,6 +153,9 @@ def fit_speed(paths: list[str] | None = None, *, budget: int = 300, workers: int
 # What each modelling choice costs and changes
 
 
+MODELLING_CASES = 9  # chain x 2 presets, rigid plate x 2, origami stop x 3, robot x 2
+
+
 def _plate_pair(a: Scene, b: Scene, drive: Drive, repeat: int) -> dict[str, float]:
     """Two plate models of the same test: the largest difference of their segment angles (deg) and drive force
     (% of the peak), and their best wall times."""
@@ -148,7 +167,7 @@ def _plate_pair(a: Scene, b: Scene, drive: Drive, repeat: int) -> dict[str, floa
             "wall_b_s": _best(lambda: simulate(b, drive, estimate_error=False), repeat)}
 
 
-def modelling(*, repeat: int = 3, log: Callable[[str], None] = print) -> dict[str, Any]:
+def modelling(*, repeat: int = 3, log: Callable[[str], None] = print, progress: Progress = None) -> dict[str, Any]:
     """Measure what each modelling choice costs and changes: a planar chain against a 3D chain free to turn
     out of the plane, the half robot against the full one, a MuJoCo limit stop against the penalty stop, and a
     rigid plate as one body against hinged segments held by welds. Returns the rows and a Markdown table."""
@@ -160,6 +179,7 @@ def modelling(*, repeat: int = 3, log: Callable[[str], None] = print) -> dict[st
         row = {"choice": choice, "scene": scene, "a": a, "b": b, **pair,
                "cost_ratio": pair["wall_b_s"] / pair["wall_a_s"], "note": note}
         rows.append(row)
+        _tick(progress, len(rows), MODELLING_CASES)
         log(f"{choice}, {scene}: {a} {1e3 * pair['wall_a_s']:.1f} ms, {b} {1e3 * pair['wall_b_s']:.1f} ms; "
             + ", ".join(f"{k} {v:.3g}" for k, v in pair.items() if not k.startswith("wall")))
 
@@ -292,7 +312,7 @@ def _settings(base: Scene | RobotScene, quick: bool, python: bool) -> list[tuple
 
 
 def accuracy(out: str | Path = "accuracy", *, quick: bool = False, workers: int | None = None,
-             log: Callable[[str], None] = print) -> dict[str, Any]:
+             log: Callable[[str], None] = print, progress: Progress = None) -> dict[str, Any]:
     """Error against wall time for every time-stepping method, step (or tolerance), backend and v_reg, on the origami
     drag (one 45 mm recovery and one power stroke) and on one flap cycle of the robot, each with the paper's and
     with physical inertias. The reference is the newton method at 2 µs (10 µs with ``quick``), checked against
@@ -305,6 +325,8 @@ def accuracy(out: str | Path = "accuracy", *, quick: bool = False, workers: int 
     rows, summary, references = [], {}, {}
     v_regs = (None,) if quick else V_REGS
     ref_dt = 1e-5 if quick else 2e-6
+    cases = len(study_scenes()) * len(v_regs) + (0 if quick else 1)  # + the independent solutions
+    done = 0
     for name, preset_scene in study_scenes().items():
         for v_reg in v_regs:
             base = preset_scene.replace(**{"sim.record_dt": SAMPLE_DT})
@@ -343,11 +365,14 @@ def accuracy(out: str | Path = "accuracy", *, quick: bool = False, workers: int 
                                             key=lambda r: r["wall_s"], default=None) for limit in (0.1, 1.0)}
                 summary[name]["reference"] = (ref_dt, self_error)
                 references[name] = (base, ref)
+            done += 1
+            _tick(progress, done, cases)
     if not quick:
         log("independent solutions of the references (Radau)")
         jobs = [(base, ref["time"]) for base, ref in references.values()]
         for (name, (_, ref)), angles in zip(references.items(), batch.map_jobs(_independent, jobs, workers=workers)):
             summary[name]["independent"] = float(np.abs(angles - ref["angles"]).max())
+        _tick(progress, cases, cases)
     with (out / "accuracy.csv").open("w", newline="") as handle:
         writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
         writer.writeheader()

@@ -1,26 +1,31 @@
 """The ``finrft`` command line: a thin layer over the Python API that speaks the paper's units (mm, mm/s, degrees).
 
-Exit status: 0 success, 1 the simulation went unstable, 2 bad input (one line on stderr, nothing written), 130
-interrupted (Ctrl-C).
+Exit status: 0 success, 1 the simulation went unstable or its estimated discretisation error exceeds --max-error,
+2 bad input or a file that cannot be read or written (one line on stderr, nothing written), 130 interrupted
+(Ctrl-C), 141 stdout closed early (as Unix tools on SIGPIPE). Output paths are checked before anything runs;
+every command takes --quiet, every writer --force.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
 import shlex
 import sys
+import tempfile
 import warnings
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Iterator, Sequence
 
 import numpy as np
 
 from . import scene as scenes
 from .convergence import ErrorLimits, SimulationFailed
 from .drive import Drive
+from .files import atomic_path
 from .simulate import Run, simulate
 
 
@@ -50,39 +55,60 @@ def _number(unit: str, *, minimum: float = 0.0, inclusive: bool = False, integer
     return parse
 
 
-def _add_common(p: argparse.ArgumentParser) -> None:
+PLATE_PRESETS_HELP = ("built-in plate scene when no --scene is given (default: paper): paper = the authors' "
+                      "plate with its quirks: inertias of 1 kg m^2, penalty stop, explicit method; physical = "
+                      "real inertias, fitted to the measurements, penalty stop, newton method")
+ROBOT_PRESETS_HELP = ("built-in robot scene when no --scene is given (default: paper): paper = the authors' model "
+                      "with its quirks: inertias of 1 kg m^2, penalty stops, stroke body drag (a constant force "
+                      "against the fin's sweep), adaptive method; physical = real inertias, penalty stops, "
+                      "velocity body drag (against the body's velocity), newton method")
+
+
+def _add_quiet(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--quiet", action="store_true", help="no progress bar and no summary text (files and --json "
+                   "are still written)")
+
+
+def _add_json(p: argparse.ArgumentParser, what: str) -> None:
+    p.add_argument("--json", action="store_true", help=f"print {what} as JSON on the last line of stdout (SI units)")
+
+
+def _add_force(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--force", action="store_true", help="replace output files that exist (default: refuse)")
+
+
+def _add_plate_scene(p: argparse.ArgumentParser, *, kinds: bool = False, backend: bool = True):
     g = p.add_argument_group("scene")
-    g.add_argument("--plate", choices=("origami", "soft", "rigid"),
-                   help="plate kind (overrides plate.kind): origami = one-sided stop, soft = compliant both ways, "
-                        "rigid = one body")
-    g.add_argument("--scene", metavar="FILE.toml", help="scene file in SI units (default: the built-in preset)")
-    g.add_argument("--preset", default="paper", choices=scenes.PRESETS[scenes.Scene],
-                   help="built-in scene used when no --scene is given (default: %(default)s)")
+    if kinds:
+        g.add_argument("--plate", choices=("origami", "soft", "rigid"),
+                       help="plate kind (overrides plate.kind): origami = one-sided stop, soft = compliant both "
+                            "ways, rigid = does not bend")
+    g.add_argument("--scene", metavar="FILE.toml", help="plate scene file in SI units (instead of --preset)")
+    g.add_argument("--preset", choices=scenes.PRESETS[scenes.Scene], help=PLATE_PRESETS_HELP)
     g.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scene key in SI units, e.g. --set plate.segment_inertia=0.001 (repeatable)")
-    g.add_argument("--backend", choices=("native", "python"),
-                   help="where the RFT force is computed (overrides sim.backend; default native, the C plugin, "
-                        "falling back to python when it cannot be loaded)")
-    g.add_argument("--cycles", type=_number("cycles", minimum=1, inclusive=True, integer=True), metavar="N",
-                   help="back-and-forth cycles of the triangle wave (the paper used 5; the first is reported "
-                        "separately); without it, a single stroke out")
+    if backend:
+        g.add_argument("--backend", choices=("native", "python"),
+                       help="where the RFT force is computed (overrides sim.backend; default native, the C "
+                            "plugin, falling back to python when it cannot be loaded)")
+    return g
+
+
+def _add_test(p: argparse.ArgumentParser, *, drag: bool) -> None:
+    """Flags of the plate tests, drag and rotate."""
+    _add_plate_scene(p, kinds=True).add_argument(
+        "--cycles", type=_number("cycles", minimum=1, inclusive=True, integer=True), metavar="N",
+        help="back-and-forth cycles of the triangle wave (the paper used 5; the first is reported separately); "
+             "without it, a single stroke out")
     o = p.add_argument_group("output")
     o.add_argument("--out", metavar="FILE.h5", help="write the time series and the resolved scene to HDF5 (SI units)")
     o.add_argument("--rrd", metavar="FILE.rrd", help="write a rerun recording; open it with 'rerun FILE.rrd'")
-    o.add_argument("--json", action="store_true", help="print a JSON summary as the last line of stdout (SI units)")
-    o.add_argument("--quiet", action="store_true", help="no progress or summary text, only files and --json")
-    o.add_argument("--forces-csv", metavar="FILE.csv", help="append the steady force on the plate (normal and "
-                   "tangential, N) at this angle of attack to a CSV, for finrft fit-rft (drag only)")
-    _add_max_error(p)
-
-
-def _add_plate_scene(p: argparse.ArgumentParser):
-    g = p.add_argument_group("scene")
-    g.add_argument("--scene", metavar="FILE.toml", help="plate scene file in SI units (default: the preset)")
-    g.add_argument("--preset", default="paper", choices=scenes.PRESETS[scenes.Scene],
-                   help="built-in scene when no --scene is given (default: %(default)s)")
-    g.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a scene key (SI)")
-    return g
+    _add_force(o)
+    _add_json(o, "a summary")
+    _add_quiet(o)
+    if drag:
+        o.add_argument("--forces-csv", metavar="FILE.csv", help="append the steady force on the plate (normal and "
+                       "tangential, N) at this angle of attack to a CSV, for finrft fit-rft (rigid plate only)")
 
 
 def _add_max_error(p: argparse.ArgumentParser) -> None:
@@ -97,7 +123,7 @@ def _limits(args: argparse.Namespace) -> ErrorLimits:
 
 
 def _add_workers(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--workers", type=_number("processes", minimum=1, inclusive=True, integer=True),
+    p.add_argument("--workers", type=_number("processes", minimum=1, inclusive=True, integer=True), metavar="N",
                    help="worker processes (default: all cores)")
 
 
@@ -109,18 +135,15 @@ def _add_search(p: argparse.ArgumentParser, command: str) -> None:
                    help="random seed, >= 1; the same seed gives the same result (default: 1, or the log's with "
                    "--resume)")
     p.add_argument("--out", metavar="LOG.h5", help="new HDF5 log of every evaluation and of the optimiser's state, "
-                   "rewritten after each generation (never overwrites a file)")
+                   "rewritten after each generation (an existing file only with --force)")
     p.add_argument("--resume", metavar="LOG.h5", help=f"continue the run logged in LOG.h5 (a finrft {command} log) "
                    "exactly as if it had not stopped, and go on logging to it")
 
 
 def _add_robot(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("robot scene")
-    g.add_argument("--preset", default="paper", choices=scenes.PRESETS[scenes.RobotScene],
-                   help="built-in robot scene when no --scene is given: paper = the authors' model and quirks, "
-                        "physical = real inertias, limit stops, drag against the body's velocity (default: "
-                        "%(default)s)")
-    g.add_argument("--scene", metavar="FILE.toml", help="robot scene file in SI units")
+    g.add_argument("--preset", choices=scenes.PRESETS[scenes.RobotScene], help=ROBOT_PRESETS_HELP)
+    g.add_argument("--scene", metavar="FILE.toml", help="robot scene file in SI units (instead of --preset)")
     g.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scene key in SI units, e.g. --set fin.stiffness=0.4 (repeatable)")
     g.add_argument("--fin", choices=("origami", "soft", "rigid"), help="fin kind (overrides fin.kind)")
@@ -132,7 +155,8 @@ def _add_robot(p: argparse.ArgumentParser) -> None:
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="finrft", description="Compliant fins in granular media: resistive force theory (RFT) "
                      "on MuJoCo. Command-line flags use the paper's units (mm, mm/s, degrees); scene files and "
-                     "outputs use SI units.")
+                     "outputs use SI units. Exit status: 0 done, 1 the simulation went unstable, 2 bad input or a file "
+                     "that cannot be written, 130 interrupted.")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     drag = sub.add_parser("drag", help="drag a plate through the medium along +y (the paper's drag test)",
@@ -146,7 +170,7 @@ def build_parser() -> argparse.ArgumentParser:
     drag.add_argument("--attack", type=_number("degrees", inclusive=True), default=90.0, metavar="DEG",
                       help="angle of attack between the plate and the motion, degrees in 0..180 "
                            "(default: %(default)s, plate normal to the motion)")
-    _add_common(drag)
+    _add_test(drag, drag=True)
 
     rotate = sub.add_parser("rotate", help="turn a plate about its base (the paper's rotate test)",
                             description="Turn the rod about z through its base at constant angular speed: one "
@@ -156,16 +180,17 @@ def build_parser() -> argparse.ArgumentParser:
                         help="stroke angle in degrees (default: %(default)s)")
     rotate.add_argument("--omega", type=_number("deg/s"), default=60.0, metavar="DEG_S",
                         help="angular speed in degrees/s (default: %(default)s)")
-    _add_common(rotate)
+    _add_test(rotate, drag=False)
 
     scene = sub.add_parser("scene", help="print a resolved scene as TOML",
                            description="Print the full resolved scene (SI units) as TOML, to copy and edit.")
-    scene.add_argument("--dump", metavar="NAME", default="paper",
-                       help="preset to print: paper for plates; paper or physical with --robot (default: "
-                            "%(default)s)")
+    scene.add_argument("--dump", metavar="NAME", help=f"preset to print (default: paper): a plate preset "
+                       f"({', '.join(scenes.PRESETS[scenes.Scene])}), or with --robot a robot preset "
+                       f"({', '.join(scenes.PRESETS[scenes.RobotScene])})")
     scene.add_argument("--robot", action="store_true", help="a robot scene instead of a plate scene")
-    scene.add_argument("--scene", metavar="FILE.toml", help="resolve this file instead of a preset")
+    scene.add_argument("--scene", metavar="FILE.toml", help="resolve this file (instead of --dump)")
     scene.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a key (SI)")
+    _add_quiet(scene)
 
     swim = sub.add_parser("swim", help="the two-fin robot swimming: flap cycles and the swimming efficiency",
                           description="Simulate the robot's flap cycles from rest, the arm at theta2: recovery "
@@ -175,18 +200,21 @@ def build_parser() -> argparse.ArgumentParser:
                       help="arm angle at the end of the recovery stroke, degrees in -90..90 (0 sideways, 90 "
                            "forward; default: the scene's, 60 in the presets)")
     swim.add_argument("--theta2", type=_number("degrees", minimum=-math.inf), metavar="DEG",
-                      help="arm angle at the end of the power stroke, degrees (default: the scene's, -90)")
+                      help="arm angle at the end of the power stroke, degrees (default: the scene's, -90 in the "
+                           "presets)")
     swim.add_argument("--arm-length", type=_number("mm"), metavar="MM",
-                      help="arm length L_a in mm (default: the scene's, 65)")
+                      help="arm length L_a in mm (default: the scene's, 65 in the presets)")
     swim.add_argument("--omega", type=_number("deg/s"), metavar="DEG_S",
-                      help="arm angular speed in degrees/s (default: the scene's, 66)")
+                      help="arm angular speed in degrees/s (default: the scene's, 66 in the presets)")
     swim.add_argument("--cycles", type=_number("cycles", minimum=1, inclusive=True, integer=True), default=1,
                       metavar="N", help="flap cycles (default: %(default)s); figures are the last cycle's")
     _add_robot(swim)
     _add_max_error(swim)
     swim.add_argument("--out", metavar="FILE.h5", help="write the time series and the resolved scene (SI units)")
     swim.add_argument("--rrd", metavar="FILE.rrd", help="write a rerun recording; open it with 'rerun FILE.rrd'")
-    swim.add_argument("--json", action="store_true", help="print a JSON summary as the last line of stdout")
+    _add_force(swim)
+    _add_json(swim, "a summary")
+    _add_quiet(swim)
 
     optimize = sub.add_parser("optimize", help="optimise the gait with CMA-ES",
                               description="Maximise the swimming efficiency eta over one flap cycle with CMA-ES "
@@ -203,7 +231,9 @@ def build_parser() -> argparse.ArgumentParser:
     optimize.add_argument("--address", metavar="tcp://HOST:PORT", help="Dask scheduler address (--executor dask)")
     optimize.add_argument("--rrd", metavar="FILE.rrd", help="rerun recording: best eta per generation, the "
                           "population, and the best gait's motion")
-    optimize.add_argument("--json", action="store_true", help="print the result as JSON on the last line")
+    _add_force(optimize)
+    _add_json(optimize, "the result")
+    _add_quiet(optimize)
     _add_robot(optimize)
     _add_max_error(optimize)
 
@@ -212,61 +242,71 @@ def build_parser() -> argparse.ArgumentParser:
                            "print eta, the authors' script measure |net|/D1, D1, D2 and the net speed next to the "
                            "paper's eta_sim and eta_exp, as a Markdown table.")
     _add_workers(table)
-    table.add_argument("--json", action="store_true", help="print the rows as JSON on the last line")
+    _add_json(table, "the rows")
+    _add_quiet(table)
     _add_robot(table)
     _add_max_error(table)
 
     fitp = sub.add_parser("fit", help="fit plate-scene parameters to measured segment angles (CMA-ES)",
                           description="Fit plate-scene parameters so that simulated segment angles match measured "
-                          "ones: each data file is a drag from flat at its own speed (columns time_s, "
-                          "displacement_mm, segment1_deg ...); the objective is the mean over files of the mean "
-                          "squared error (deg^2), as the paper's E(b).")
+                          "ones: each data file is a drag from flat at constant speed, 1 to 1000 mm/s (columns "
+                          "time_s, displacement_mm, segment1_deg ...); the objective is the mean over files of the "
+                          "mean squared error (deg^2), as the paper's E(b). The measurements shipped with finrft "
+                          "are in the folder python -c 'import finrft.data as d; print(d.plate_drag_dir())' "
+                          "prints.")
     fitp.add_argument("--data", nargs="+", metavar="FILE.csv", help="drag data to fit (required unless --resume)")
     fitp.add_argument("--validate", nargs="+", default=[], metavar="FILE.csv",
                       help="drag data to check the fit on, not fitted")
     fitp.add_argument("--params", metavar="NAMES",
-                      help="comma-separated parameters: b (plate.damping), k (plate.stiffness), f_perp, f_par, or "
-                           "any numeric plate-scene key (default: b, the paper's procedure)")
+                      help="comma-separated parameters: b (plate.damping), k (plate.stiffness), f_perp "
+                           "(rft.f_perp), f_par (rft.f_par), or any numeric plate-scene key (default: b, the "
+                           "paper's procedure)")
     fitp.add_argument("--bounds", action="append", default=[], metavar="KEY=LOW:HIGH",
-                      help="bounds of a fitted key in SI (defaults: b 0.01:100, k 0.01:100, f_perp 0.1:100, "
-                           "f_par -2:2); positive bounds over more than a decade are searched in log space")
+                      help="bounds of a fitted parameter in SI, by name or key, e.g. b=0.0001:100 (defaults: b "
+                           "0.01:100, k 0.01:100, f_perp 0.1:100, f_par -2:2); positive bounds over more than a "
+                           "decade are searched in log space")
     _add_search(fitp, "fit")
     _add_workers(fitp)
     _add_max_error(fitp)
     fitp.add_argument("--write-scene", metavar="OUT.toml", help="write the fitted scene (finrft drag --scene OUT.toml)")
     fitp.add_argument("--plot", metavar="OUT.png", help="simulated against measured angles for every file")
     fitp.add_argument("--rrd", metavar="FILE.rrd", help="rerun recording of the fitted drag of the first file")
-    fitp.add_argument("--json", action="store_true", help="print the result as JSON on the last line")
-    _add_plate_scene(fitp).add_argument("--backend", choices=("native", "python"),
-                                        help="where the RFT force is computed")
+    _add_force(fitp)
+    _add_json(fitp, "the result")
+    _add_quiet(fitp)
+    _add_plate_scene(fitp)
 
     fitrft = sub.add_parser("fit-rft", help="identify RFT coefficients from rigid-plate forces",
                             description="Identify the paper law's f_perp and f_par (least squares) and the table "
                             "law's F_perp(theta), F_par(theta) from the steady forces on a rigid plate dragged at "
                             "several angles of attack (columns attack_deg, force_normal_N, force_tangential_N, as "
-                            "written by finrft drag --plate rigid --forces-csv). Writes a scene fragment and the "
-                            "table CSV.")
+                            "written by finrft drag --plate rigid --forces-csv; one row per angle, with an angle "
+                            "above 0 and one below 90 deg). Writes a scene fragment and the table CSV.")
     fitrft.add_argument("--data", required=True, metavar="FORCES.csv", help="forces per angle of attack")
     fitrft.add_argument("--speed", type=_number("mm/s"), default=30.0, metavar="MM_S",
                         help="drag speed of the measurements in mm/s (default: %(default)s)")
     fitrft.add_argument("--out", metavar="FRAGMENT.toml", help="write the [rft] scene fragment here "
                         "(default: print it)")
     fitrft.add_argument("--table", metavar="TABLE.csv", help="write the table law here (default: beside --out)")
-    fitrft.add_argument("--json", action="store_true", help="print the coefficients as JSON on the last line")
-    _add_plate_scene(fitrft)
+    _add_force(fitrft)
+    _add_json(fitrft, "the coefficients")
+    _add_quiet(fitrft)
+    _add_plate_scene(fitrft, backend=False)
 
     report = sub.add_parser("report", help="regenerate the paper's figures and table (Markdown, PNG, rerun)",
                             description="Write DIR/report.md with the paper's results regenerated: drag and rotate "
                             "forces, effective flapping, model against the plate-drag measurements, the robot's "
                             "Table I, optimisation and trajectories, and how long each part took; plus rerun "
-                            "recordings.")
+                            "recordings. The files appear in DIR only when every part has succeeded.")
     report.add_argument("--out", default="report", metavar="DIR", help="output folder (default: %(default)s)")
     report.add_argument("--quick", action="store_true", help="a smaller version: fewer cycles and evaluations")
     report.add_argument("--preset", default="paper", choices=scenes.PRESETS[scenes.Scene],
-                        help="plate scene fitted to the measurements (default: %(default)s)")
-    report.add_argument("--data", default="../shared/data/plate_drag", metavar="DIR",
-                        help="folder of plate-drag measurements (default: %(default)s)")
+                        help="plate preset fitted to the measurements (default: %(default)s)")
+    report.add_argument("--data", metavar="DIR", help="folder of plate-drag measurements (default: those shipped "
+                        "with finrft)")
     _add_workers(report)
+    _add_force(report)
+    _add_quiet(report)
 
     bench = sub.add_parser("bench", help="benchmarks, measured as ratios in one run on this machine")
     kinds = bench.add_subparsers(dest="bench", required=True, parser_class=_Parser)
@@ -275,18 +315,16 @@ def build_parser() -> argparse.ArgumentParser:
                                 "against bare mj_step of the same model, and the throughput of a batch of drags "
                                 "on all cores against one core.")
     backends.add_argument("--batch", type=_number("simulations", minimum=1, inclusive=True, integer=True),
-                          default=64, help="simulations in the batch (default: %(default)s)")
+                          default=64, metavar="N", help="simulations in the batch (default: %(default)s)")
     _add_workers(backends)
-    backends.add_argument("--json", action="store_true", help="print the figures as JSON on the last line")
     robot = kinds.add_parser("robot", help="one gait evaluation and a full optimisation",
                              description="Time one gait evaluation (one flap cycle) and a CMA-ES optimisation of "
                              "--budget evaluations on all cores, for a robot preset.")
     robot.add_argument("--preset", default="paper", choices=scenes.PRESETS[scenes.RobotScene],
                        help="robot preset (default: %(default)s)")
     robot.add_argument("--budget", type=_number("evaluations", minimum=1, inclusive=True, integer=True),
-                       default=300, help="optimisation budget (default: %(default)s)")
+                       default=300, metavar="EVALS", help="optimisation budget (default: %(default)s)")
     _add_workers(robot)
-    robot.add_argument("--json", action="store_true", help="print the figures as JSON on the last line")
     acc = kinds.add_parser("accuracy", help="speed against accuracy of every time-stepping method and step",
                            description="Run the origami drag (45 mm out and back) and one flap cycle of the "
                            "robot, each with the paper's and with physical inertias, for every method (explicit "
@@ -299,22 +337,31 @@ def build_parser() -> argparse.ArgumentParser:
     acc.add_argument("--quick", action="store_true",
                      help="steps of 0.1 and 1 ms, one tolerance and v_reg, and a coarser reference (about 25 s)")
     _add_workers(acc)
+    _add_force(acc)
     model = kinds.add_parser("modelling", help="what each modelling choice costs and changes",
                              description="Measure planar against 3D chains, rigid plates as one body against "
                              "welded segments, MuJoCo limit against penalty stops, and the half against the full "
                              "robot: the largest change in segment angle (deg), drive force (%% of its peak) or "
                              "efficiency (points), and the wall-time ratio. About 10 s.")
-    model.add_argument("--json", action="store_true", help="print the figures as JSON on the last line")
     fitb = kinds.add_parser("fit", help="a 4-parameter plate fit over three drag files",
                             description="Time a fit of k, b, f_perp and f_par of the paper plate over three drag "
                             "files with --budget evaluations on all cores.")
     fitb.add_argument("--data", nargs="+", metavar="FILE.csv", help="drag data (default: the model's own drags "
                       "at 10, 30 and 50 mm/s)")
     fitb.add_argument("--budget", type=_number("evaluations", minimum=1, inclusive=True, integer=True),
-                      default=300, help="evaluations (default: %(default)s)")
+                      default=300, metavar="EVALS", help="evaluations (default: %(default)s)")
     _add_workers(fitb)
-    fitb.add_argument("--json", action="store_true", help="print the figures as JSON on the last line")
+    for kind in (backends, robot, model, fitb):
+        _add_json(kind, "the figures")
+    for kind in (backends, robot, acc, model, fitb):
+        _add_quiet(kind)
     return parser
+
+
+def _preset(args: argparse.Namespace) -> str:
+    if args.scene and args.preset:
+        raise UsageError(f"give --scene {args.scene} or --preset {args.preset}, not both")
+    return args.preset or "paper"
 
 
 def _resolve_scene(args: argparse.Namespace) -> scenes.Scene:
@@ -323,7 +370,7 @@ def _resolve_scene(args: argparse.Namespace) -> scenes.Scene:
         overrides["plate.kind"] = args.plate
     if getattr(args, "backend", None):
         overrides["sim.backend"] = args.backend
-    return scenes.load_scene(args.scene, preset_name=args.preset, overrides=overrides)
+    return scenes.load_scene(args.scene, preset_name=_preset(args), overrides=overrides)
 
 
 def _resolve_robot(args: argparse.Namespace) -> scenes.RobotScene:
@@ -335,20 +382,51 @@ def _resolve_robot(args: argparse.Namespace) -> scenes.RobotScene:
                              ("arm_length", "arm.length", 1e-3), ("omega", "gait.omega", math.pi / 180)):
         if getattr(args, flag, None) is not None:
             overrides[key] = getattr(args, flag) * scale
-    return scenes.load_scene(args.scene, preset_name=args.preset, overrides=overrides, cls=scenes.RobotScene)
+    return scenes.load_scene(args.scene, preset_name=_preset(args), overrides=overrides, cls=scenes.RobotScene)
 
 
-def _check_output(path: str | None, suffix: str, flag: str) -> None:
+def _check_output(path: str | None, suffix: str, flag: str, force: bool, *, append: bool = False) -> None:
+    """Refuse, before anything runs, an output file that cannot be written: the wrong suffix, a missing or
+    read-only folder, a directory, or (unless ``force``, or ``append`` for files added to) an existing file."""
     if path is None:
         return
     target = Path(path)
     if target.suffix != suffix:
         raise UsageError(f"{flag} {path}: the file name must end in {suffix}")
-    folder = target.parent if str(target.parent) else Path(".")
+    _check_writable(target.parent, flag, path)
+    if target.is_dir():
+        raise UsageError(f"{flag} {path} is a directory: give a file name")
+    if target.exists() and not (force or append):
+        raise UsageError(f"{flag} {path} exists: choose a new file, or pass --force to replace it")
+
+
+def _check_output_dir(path: str, flag: str, force: bool) -> None:
+    """The same for an output folder: it may exist, empty, or with ``force``."""
+    target = Path(path)
+    _check_writable(target.parent, flag, path)
+    if target.exists() and not target.is_dir():
+        raise UsageError(f"{flag} {path} is a file: give a folder")
+    if target.is_dir() and any(target.iterdir()) and not force:
+        raise UsageError(f"{flag} {path} exists and is not empty: choose a new folder, or pass --force to write "
+                         f"into it")
+    if target.is_dir():
+        _check_writable(target, flag, path)
+
+
+def _check_writable(folder: Path, flag: str, path: str) -> None:
     if not folder.is_dir():
-        raise UsageError(f"{flag} {path}: directory {folder} does not exist")
-    if not os.access(folder, os.W_OK):
-        raise UsageError(f"{flag} {path}: directory {folder} is not writable")
+        raise UsageError(f"{flag} {path}: {folder} is not a directory" if folder.exists() else
+                         f"{flag} {path}: directory {folder} does not exist")
+    try:  # a file made and removed, not os.access: that says yes to root, and to read-only file systems
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as exc:
+        raise UsageError(f"{flag} {path}: cannot write in {folder}: {exc.strerror}") from None
+
+
+def _write_text(path: str, text: str) -> None:
+    with atomic_path(path) as tmp:
+        tmp.write_text(text)
 
 
 def _drive(args: argparse.Namespace) -> Drive:
@@ -359,18 +437,36 @@ def _drive(args: argparse.Namespace) -> Drive:
     return Drive("rotate", math.radians(args.omega), math.radians(args.amplitude), args.cycles)
 
 
-def _progress(enabled: bool) -> Callable[[float], None] | None:
-    if not enabled:
-        return None
-    state = {"last": -1}
+@contextlib.contextmanager
+def _progress(args: argparse.Namespace, total: float, what: str,
+              unit: str = "") -> Iterator[Callable[..., None] | None]:
+    """A progress bar on stderr: yields ``update(done, note="")``, ``done`` counted towards ``total`` and never
+    shown past it (``unit`` "%": ``done`` is a fraction of 1); None when stderr is not a terminal or with --quiet,
+    so that the work skips its callbacks."""
+    if args.quiet or not sys.stderr.isatty():
+        yield None
+        return
+    from tqdm import tqdm
+    scale = 100 if unit == "%" else 1
+    form = "{desc}: {percentage:3.0f}% |{bar}| {elapsed}<{remaining}{postfix}" if unit == "%" else None
+    try:  # a terminal that reports no size (0 x 0) would hide the bar
+        size = os.get_terminal_size(sys.stderr.fileno())
+    except (OSError, ValueError):
+        size = os.terminal_size((0, 0))
+    with tqdm(total=scale * total, desc=what, unit=unit or "it", file=sys.stderr, leave=False,
+              ncols=size.columns or 80, nrows=size.lines or 24, bar_format=form) as bar:
+        def update(done: float, note: str = "") -> None:
+            if note:
+                bar.set_postfix_str(note, refresh=False)
+            bar.update(min(round(scale * done), bar.total) - bar.n)
+        yield update
 
-    def show(fraction: float) -> None:
-        percent = int(100 * fraction)
-        if percent != state["last"]:
-            state["last"] = percent
-            end = "\n" if percent >= 100 else ""
-            print(f"\rsimulating {percent:3d} %", end=end, file=sys.stderr, flush=True)
-    return show
+
+def _say(args: argparse.Namespace, text: str) -> None:
+    """Human text on stdout, unless --quiet; it keeps a progress bar intact."""
+    if not args.quiet:
+        from tqdm import tqdm
+        tqdm.write(text, file=sys.stdout)
 
 
 def _steps(summary: dict[str, Any]) -> str:
@@ -402,17 +498,20 @@ def _error_line(run: Any) -> str:
 
 def _run_test(args: argparse.Namespace) -> int:
     scene = _resolve_scene(args)
-    _check_output(args.out, ".h5", "--out")
-    _check_output(args.rrd, ".rrd", "--rrd")
+    _check_output(args.out, ".h5", "--out", args.force)
+    _check_output(args.rrd, ".rrd", "--rrd", args.force)
     drive = _drive(args)
-    if args.forces_csv:
-        if args.command != "drag" or scene.plate.kind != "rigid":
-            raise UsageError("--forces-csv needs a drag of a rigid plate (--plate rigid)")
-        _check_output(args.forces_csv, ".csv", "--forces-csv")
-    run = simulate(scene, drive, progress=_progress(not args.quiet and sys.stderr.isatty()), max_error=_limits(args))
-    if args.forces_csv:
-        from .fit import append_forces, plate_forces
-        append_forces(args.forces_csv, plate_forces(run))
+    forces_csv = getattr(args, "forces_csv", None)
+    if forces_csv:
+        from .fit import append_forces, check_forces_header, plate_forces
+        if scene.plate.kind != "rigid":
+            raise UsageError("--forces-csv needs a rigid plate (--plate rigid)")
+        _check_output(forces_csv, ".csv", "--forces-csv", args.force, append=True)
+        check_forces_header(forces_csv)
+    with _progress(args, 1, args.command, "%") as bar:
+        run = simulate(scene, drive, progress=bar, max_error=_limits(args))
+    if forces_csv:
+        append_forces(forces_csv, plate_forces(run))
     summary = run.summary()
     if args.out or args.rrd:
         from . import record  # h5py and rerun load only when a file is asked for
@@ -420,11 +519,10 @@ def _run_test(args: argparse.Namespace) -> int:
             record.write_h5(run, args.out)
         if args.rrd:
             record.write_rrd(run, args.rrd)
-    if not args.quiet:
-        print(_describe(run, summary))
-        for flag, path in (("HDF5", args.out), ("rerun recording", args.rrd)):
-            if path:
-                print(f"wrote {flag}: {path}")
+    _say(args, _describe(run, summary))
+    for flag, path in (("HDF5", args.out), ("rerun recording", args.rrd), ("forces", forces_csv)):
+        if path:
+            _say(args, f"wrote {flag}: {path}")
     if args.json:
         print(_json(summary))
     return 0
@@ -441,9 +539,10 @@ def _json(value: Any) -> str:
 
 def _swim(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
     from .swim import swim
-    _check_output(args.out, ".h5", "--out")
-    _check_output(args.rrd, ".rrd", "--rrd")
-    run = swim(scene, args.cycles, max_error=_limits(args))
+    _check_output(args.out, ".h5", "--out", args.force)
+    _check_output(args.rrd, ".rrd", "--rrd", args.force)
+    with _progress(args, 1, "swim", "%") as bar:
+        run = swim(scene, args.cycles, progress=bar, max_error=_limits(args))
     summary = run.summary()
     if args.out or args.rrd:
         from . import record
@@ -451,14 +550,14 @@ def _swim(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
             record.write_swim_h5(run, args.out)
         if args.rrd:
             record.write_swim_rrd(run, args.rrd)
-    print(f"{scene.robot.model} robot, {scene.fin.kind} fin, theta1 {summary['theta1_deg']:g} deg, theta2 "
-          f"{summary['theta2_deg']:g} deg, arm {summary['arm_length_mm']:g} mm, omega {summary['omega_deg_s']:g} "
-          f"deg/s, {scene.sim.method} method (dt {scene.sim.dt:g} s, {run.backend}): {_steps(summary)} in "
-          f"{run.wall_s:.2f} s")
+    _say(args, f"{scene.robot.model} robot, {scene.fin.kind} fin, theta1 {summary['theta1_deg']:g} deg, theta2 "
+         f"{summary['theta2_deg']:g} deg, arm {summary['arm_length_mm']:g} mm, omega {summary['omega_deg_s']:g} "
+         f"deg/s, {scene.sim.method} method (dt {scene.sim.dt:g} s, {run.backend}): {_steps(summary)} in "
+         f"{run.wall_s:.2f} s")
     for i, row in enumerate(run.cycle_table(), start=1):
-        print(f"cycle {i}: eta {100 * row['eta']:+.2f} %, forward D1 {row['D1_mm']:.2f} mm, back D2 "
-              f"{row['D2_mm']:.2f} mm, net {row['net_mm']:+.2f} mm ({row['net_speed_mm_s']:+.3f} mm/s)")
-    print(_error_line(run))
+        _say(args, f"cycle {i}: eta {100 * row['eta']:+.2f} %, forward D1 {row['D1_mm']:.2f} mm, back D2 "
+             f"{row['D2_mm']:.2f} mm, net {row['net_mm']:+.2f} mm ({row['net_speed_mm_s']:+.3f} mm/s)")
+    _say(args, _error_line(run))
     if args.json:
         print(_json(summary))
     return 0
@@ -467,8 +566,11 @@ def _swim(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
 def _table(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
     from .batch import map_jobs
     from .swim import swim_job, table_markdown, table_rows, table_scenes
-    rows = table_rows(map_jobs(swim_job, [(s, 1, _limits(args)) for s in table_scenes(scene)], workers=args.workers))
-    print(table_markdown(rows))
+    jobs = [(s, 1, _limits(args)) for s in table_scenes(scene)]
+    with _progress(args, len(jobs), "Table I", "gaits") as bar:
+        runs = map_jobs(swim_job, jobs, workers=args.workers, progress=bar and (lambda done, total: bar(done)))
+    rows = table_rows(runs)
+    _say(args, table_markdown(rows))
     if args.json:
         print(_json(rows))
     return 0
@@ -479,9 +581,10 @@ def _search_log(args: argparse.Namespace, fixed: dict[str, str]) -> str | None:
     -> flag) that a resumed run takes from its log, so that they may not be given with --resume."""
     if args.out and args.resume:
         raise UsageError("give either --out (a new log) or --resume (an existing one), not both")
-    if args.out and Path(args.out).exists():
-        raise UsageError(f"--out {args.out} exists: continue it with --resume {args.out}, or choose a new file")
-    _check_output(args.out, ".h5", "--out")
+    _check_output(args.out, ".h5", "--out", True)
+    if args.out and Path(args.out).exists() and not args.force:
+        raise UsageError(f"--out {args.out} exists: continue it with --resume {args.out}, choose a new file, or "
+                         f"pass --force to replace it")
     if args.resume:
         if not Path(args.resume).is_file():
             raise UsageError(f"--resume {args.resume}: no such file")
@@ -508,7 +611,7 @@ def _fit(args: argparse.Namespace) -> int:
     from .fit import drag_for, fit, fit_summary, logged_problem, plot, read_drag, resolve_params
     for path, suffix, flag in ((args.write_scene, ".toml", "--write-scene"), (args.plot, ".png", "--plot"),
                                (args.rrd, ".rrd", "--rrd")):
-        _check_output(path, suffix, flag)
+        _check_output(path, suffix, flag, args.force)
     log = _search_log(args, {"data": "--data", "params": "--params", "bounds": "--bounds", "scene": "--scene",
                              "set": "--set", "backend": "--backend"})
     if args.resume:
@@ -521,34 +624,31 @@ def _fit(args: argparse.Namespace) -> int:
         names = [n.strip() for n in (args.params or "b").split(",") if n.strip()]
         variables = resolve_params(names, _parse_bounds(args.bounds))
     validate = [read_drag(p) for p in args.validate]
-    show = sys.stderr.isatty()
+    with _progress(args, args.budget, "fit", "evaluations") as bar:
+        def on_generation(g: int, values: np.ndarray, extras: dict[str, np.ndarray], es: Any) -> None:
+            if bar:
+                bar(es.countevals, f"best RMSE {np.sqrt(es.best.f):.2f} deg")
 
-    def on_generation(g: int, values: np.ndarray, extras: dict[str, np.ndarray], es: Any) -> None:
-        if show:
-            print(f"\rgeneration {g + 1}: {es.countevals}/{es.opts['maxfevals']} evaluations, best RMSE "
-                  f"{np.sqrt(es.best.f):.2f} deg", end="", file=sys.stderr, flush=True)
-
-    try:
-        result = fit(scene, data, variables, budget=args.budget, seed=args.seed, validate=validate, log=log,
-                     resume=bool(args.resume), workers=args.workers, max_error=_limits(args),
-                     on_generation=on_generation)
-    except KeyboardInterrupt:
-        raise _interrupted("fit", log, searchlog.FIT) from None
-    if show:
-        print(file=sys.stderr)
+        try:
+            result = fit(scene, data, variables, budget=args.budget, seed=args.seed, validate=validate, log=log,
+                         resume=bool(args.resume), workers=args.workers, max_error=_limits(args),
+                         on_generation=on_generation)
+        except KeyboardInterrupt:
+            raise _interrupted("fit", log, searchlog.FIT) from None
     if args.write_scene:
-        Path(args.write_scene).write_text(scenes.to_toml(result.scene))
+        _write_text(args.write_scene, scenes.to_toml(result.scene))
     if args.plot:
-        plot(result.scene, [(d, "fitted") for d in data] + [(d, "validation") for d in validate], args.plot)
+        with atomic_path(args.plot) as tmp:
+            plot(result.scene, [(d, "fitted") for d in data] + [(d, "validation") for d in validate], tmp)
     if args.rrd:
         from . import record
         record.write_rrd(simulate(result.scene, drag_for(data[0])), args.rrd)
     for key, value in result.search.best.items():
-        print(f"{key} = {value:.6g}")
+        _say(args, f"{key} = {value:.6g}")
     for label, table in (("fitted", result.rmse_deg), ("validation", result.validate_rmse_deg)):
         for name, rmse in table.items():
-            print(f"RMSE {name} ({label}): {rmse:.2f} deg")
-    print(f"{result.search.evaluations} evaluations in {result.search.wall_s:.1f} s")
+            _say(args, f"RMSE {name} ({label}): {rmse:.2f} deg")
+    _say(args, f"{result.search.evaluations} evaluations in {result.search.wall_s:.1f} s")
     if args.json:
         print(_json(fit_summary(result)))
     return 0
@@ -558,17 +658,18 @@ def _fit_rft(args: argparse.Namespace) -> int:
     from .fit import identify_rft, read_forces, rft_fragment
     from .rft import write_table
     scene = _resolve_scene(args)
-    _check_output(args.out, ".toml", "--out")
+    table_path = args.table or (str(Path(args.out).with_suffix(".csv")) if args.out else None)
+    _check_output(args.out, ".toml", "--out", args.force)
+    _check_output(table_path, ".csv", "--table", args.force)
     forces = read_forces(args.data)
     law, table = identify_rft(forces, scene.plate.segments, scene.rft.v_reg, args.speed / 1000)
-    table_path = args.table or (str(Path(args.out).with_suffix(".csv")) if args.out else None)
-    if table_path:
-        _check_output(table_path, ".csv", "--table")
-        write_table(table_path, table)
     fragment = rft_fragment(law, Path(table_path).name if table_path else "TABLE.csv")
+    if table_path:
+        with atomic_path(table_path) as tmp:
+            write_table(tmp, table)
     if args.out:
-        Path(args.out).write_text(fragment)
-        print(f"wrote {args.out}" + (f" and {table_path}" if table_path else ""))
+        _write_text(args.out, fragment)
+        _say(args, f"wrote {args.out}" + (f" and {table_path}" if table_path else ""))
     else:
         print(fragment, end="")
     if args.json:
@@ -598,7 +699,7 @@ def _parse_bounds(items: list[str]) -> dict[str, tuple[float, float]]:
 def _optimize(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
     from . import searchlog
     from .optimize import DEFAULT_VARIABLES, Variable, logged_problem, optimize, read_log
-    _check_output(args.rrd, ".rrd", "--rrd")
+    _check_output(args.rrd, ".rrd", "--rrd", args.force)
     log = _search_log(args, {"bounds": "--bounds", "scene": "--scene", "set": "--set", "fin": "--fin",
                              "model": "--model", "backend": "--backend"})
     variables = {v.key: v for v in DEFAULT_VARIABLES}
@@ -616,23 +717,19 @@ def _optimize(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
         executor = _dask_executor(args.address)
     elif args.address:
         raise UsageError("--address goes with --executor dask")
-    show = sys.stderr.isatty()
+    with _progress(args, args.budget, "optimize", "evaluations") as bar:
+        def on_generation(g: int, values: np.ndarray, extras: dict[str, np.ndarray], es: Any) -> None:
+            generations.append((_display_units(list(variables), values), extras["eta"]))
+            if bar:
+                best = np.nanmax([1 - c for c in es.fit.fit]) if len(es.fit.fit) else float("nan")
+                bar(es.countevals, f"generation {g + 1}, best eta {100 * best:.2f} %")
 
-    def on_generation(g: int, values: np.ndarray, extras: dict[str, np.ndarray], es: Any) -> None:
-        generations.append((_display_units(list(variables), values), extras["eta"]))
-        if show:
-            best = np.nanmax([1 - c for c in es.fit.fit]) if len(es.fit.fit) else float("nan")
-            print(f"\rgeneration {g + 1}: {es.countevals}/{es.opts['maxfevals']} evaluations, best eta this "
-                  f"generation {100 * best:.2f} %", end="", file=sys.stderr, flush=True)
-
-    try:
-        result = optimize(scene, variables=list(variables.values()), budget=args.budget, seed=args.seed, log=log,
-                          resume=bool(args.resume), executor=executor, workers=args.workers,
-                          max_error=_limits(args), on_generation=on_generation)
-    except KeyboardInterrupt:
-        raise _interrupted("optimize", log, searchlog.OPTIMIZE) from None
-    if show:
-        print(file=sys.stderr)
+        try:
+            result = optimize(scene, variables=list(variables.values()), budget=args.budget, seed=args.seed,
+                              log=log, resume=bool(args.resume), executor=executor, workers=args.workers,
+                              max_error=_limits(args), on_generation=on_generation)
+        except KeyboardInterrupt:
+            raise _interrupted("optimize", log, searchlog.OPTIMIZE) from None
     from .swim import swim
     best_scene = scene.replace(**result.best)
     best = swim(best_scene, 1, max_error=_limits(args))
@@ -646,9 +743,9 @@ def _optimize(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
                "error_estimate": best.error_estimate, "error_companion": best.error_companion,
                "evaluations": result.evaluations, "generations": result.generations, "wall_s": result.wall_s,
                "seed": result.seed, "budget": result.budget, "stop": {k: str(v) for k, v in result.stop.items()}}
-    print(f"best eta {100 * eta:.2f} % at theta1 {summary['theta1_deg']:.1f} deg, theta2 "
-          f"{summary['theta2_deg']:.1f} deg, arm {summary['arm_length_mm']:.1f} mm after {result.evaluations} "
-          f"evaluations in {result.wall_s:.1f} s")
+    _say(args, f"best eta {100 * eta:.2f} % at theta1 {summary['theta1_deg']:.1f} deg, theta2 "
+         f"{summary['theta2_deg']:.1f} deg, arm {summary['arm_length_mm']:.1f} mm after {result.evaluations} "
+         f"evaluations in {result.wall_s:.1f} s")
     if args.json:
         print(_json(summary))
     return 0
@@ -673,6 +770,52 @@ def _dask_executor(address: str | None):
         raise UsageError(f"cannot reach the Dask scheduler at {address}: {exc}") from None
 
 
+def _scene(args: argparse.Namespace) -> int:
+    if args.scene and args.dump:
+        raise UsageError(f"give --scene {args.scene} or --dump {args.dump}, not both")
+    kind = scenes.RobotScene if args.robot else scenes.Scene
+    overrides = dict(scenes.parse_override(item, kind) for item in args.set)
+    resolved = scenes.load_scene(args.scene, preset_name=args.dump or "paper", overrides=overrides, cls=kind)
+    print(scenes.to_toml(resolved), end="")
+    return 0
+
+
+def _report(args: argparse.Namespace) -> int:
+    from .report import write_report
+    _check_output_dir(args.out, "--out", args.force)
+    with _progress(args, 1, "report", "%") as bar:
+        path = write_report(args.out, quick=args.quick, workers=args.workers, data_dir=args.data,
+                            plate=scenes.preset(args.preset),
+                            progress=bar and (lambda done, total, part: bar(done / total, part)))
+    _say(args, f"wrote {path}")
+    return 0
+
+
+def _bench(args: argparse.Namespace) -> int:
+    from . import bench
+    log = lambda text: _say(args, text)  # noqa: E731
+    if args.bench == "accuracy":
+        _check_output_dir(args.out, "--out", args.force)
+        with _progress(args, 1, "bench accuracy", "%") as bar:
+            bench.accuracy(args.out, quick=args.quick, workers=args.workers, log=log,
+                           progress=bar and (lambda done, total: bar(done / total)))
+        return 0
+    if args.bench == "fit":
+        with _progress(args, args.budget, "bench fit", "evaluations") as bar:
+            figures = bench.fit_speed(args.data, budget=args.budget, workers=args.workers, log=log,
+                                      progress=bar and (lambda done, total: bar(done)))
+    else:
+        run = {"modelling": lambda **kw: bench.modelling(**kw),
+               "robot": lambda **kw: bench.robot(scenes.preset(args.preset, scenes.RobotScene), budget=args.budget,
+                                                 workers=args.workers, **kw),
+               "backends": lambda **kw: bench.backends(batch_size=args.batch, workers=args.workers, **kw)}
+        with _progress(args, 1, f"bench {args.bench}", "%") as bar:
+            figures = run[args.bench](log=log, progress=bar and (lambda done, total: bar(done / total)))
+    if args.json:
+        print(_json(figures))
+    return 0
+
+
 def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
     print(f"finrft: warning: {message}", file=sys.stderr)
 
@@ -681,48 +824,32 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     with warnings.catch_warnings():
         warnings.showwarning = _one_line_warning
-        return _main(parser, argv)
+        try:
+            status = _main(parser, argv)
+            sys.stdout.flush()  # a reader that went away shows here, not as a traceback at exit
+            return status
+        except BrokenPipeError:
+            # stdout was closed early (finrft swim --json | head): stop quietly, as Unix tools do on SIGPIPE.
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            return 141
+        except KeyboardInterrupt:
+            print("finrft: interrupted", file=sys.stderr)
+            return 130
+
+
+def _robot(command: Callable[[argparse.Namespace, scenes.RobotScene], int]) -> Callable[[argparse.Namespace], int]:
+    return lambda args: command(args, _resolve_robot(args))
+
+
+COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
+    "drag": _run_test, "rotate": _run_test, "scene": _scene, "swim": _robot(_swim), "optimize": _robot(_optimize),
+    "table": _robot(_table), "fit": _fit, "fit-rft": _fit_rft, "report": _report, "bench": _bench}
 
 
 def _main(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> int:
     try:
         args = parser.parse_args(argv)
-        if args.command == "scene":
-            kind = scenes.RobotScene if args.robot else scenes.Scene
-            overrides = dict(scenes.parse_override(item, kind) for item in args.set)
-            resolved = scenes.load_scene(args.scene, preset_name=args.dump, overrides=overrides, cls=kind)
-            print(scenes.to_toml(resolved), end="")
-            return 0
-        if args.command == "report":
-            from .report import write_report
-            path = write_report(args.out, quick=args.quick, workers=args.workers, data_dir=args.data,
-                                plate=scenes.preset(args.preset))
-            print(f"wrote {path}")
-            return 0
-        if args.command == "fit":
-            return _fit(args)
-        if args.command == "fit-rft":
-            return _fit_rft(args)
-        if args.command in ("swim", "optimize", "table"):
-            return {"swim": _swim, "optimize": _optimize, "table": _table}[args.command](args, _resolve_robot(args))
-        if args.command == "bench":
-            from . import bench
-            if args.bench == "accuracy":
-                bench.accuracy(args.out, quick=args.quick, workers=args.workers)
-                return 0
-            if args.bench == "fit":
-                figures = bench.fit_speed(args.data, budget=args.budget, workers=args.workers)
-            elif args.bench == "modelling":
-                figures = bench.modelling()
-            elif args.bench == "robot":
-                figures = bench.robot(scenes.preset(args.preset, scenes.RobotScene), budget=args.budget,
-                                      workers=args.workers)
-            else:
-                figures = bench.backends(batch_size=args.batch, workers=args.workers)
-            if args.json:
-                print(_json(figures))
-            return 0
-        return _run_test(args)
+        return COMMANDS[args.command](args)
     except (UsageError, scenes.SceneError) as exc:
         print(f"finrft: error: {exc}", file=sys.stderr)
         return 2
@@ -732,9 +859,12 @@ def _main(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> int:
     except Interrupted as exc:
         print(f"finrft: {exc}", file=sys.stderr)
         return 130
-    except KeyboardInterrupt:
-        print("finrft: interrupted", file=sys.stderr)
-        return 130
+    except BrokenPipeError:
+        raise
+    except OSError as exc:  # a file that could not be read or written after the checks (disk full, removed)
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"finrft: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

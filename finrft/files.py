@@ -1,5 +1,5 @@
-"""What every file finrft writes shares: it replaces its target in one step, and it names the versions that
-made it."""
+"""What every file finrft writes shares: it replaces its target in one step (a failed or interrupted write never
+leaves a truncated file where a complete one is expected), and it names the versions that made it."""
 
 from __future__ import annotations
 
@@ -17,10 +17,11 @@ import numpy as np
 
 @contextlib.contextmanager
 def atomic_path(path: str | Path) -> Iterator[Path]:
-    """A temporary path next to ``path`` that replaces it when the block succeeds and is removed when it fails."""
+    """A temporary path next to ``path`` that replaces it when the block succeeds and is removed when it fails.
+    It keeps the target's suffix, for writers that choose the format by it (matplotlib)."""
     target = Path(path)
     # Not tempfile.mkstemp: its 0600 mode would carry over to the result; the writers create the file themselves.
-    tmp = target.with_name(f".{target.name}.{uuid.uuid4().hex[:12]}.tmp")
+    tmp = target.with_name(f".{target.stem}.{uuid.uuid4().hex[:12]}.tmp{target.suffix}")
     try:
         yield tmp
         os.replace(tmp, target)

@@ -1,7 +1,7 @@
 """Parameter identification: fit a plate scene to measured segment angles, and RFT coefficients to rigid-plate
 forces.
 
-Drag data (``shared/data/plate_drag`` style CSV): columns ``time_s``, ``displacement_mm``, ``segment1_deg`` ...,
+Drag data (the CSV format of the measurements in `finrft.data.plate_drag_dir`): columns ``time_s``, ``displacement_mm``, ``segment1_deg`` ...,
 the absolute orientation change of each segment during a drag from flat at constant speed. For each file the plate
 is dragged at the file's speed over its duration and its segment angles are compared at the file's times; the
 objective is the paper's E: the mean over files of the mean squared error (deg^2) over segments and times.
@@ -31,6 +31,10 @@ ALIASES = {"b": "plate.damping", "k": "plate.stiffness", "f_perp": "rft.f_perp",
 DEFAULT_BOUNDS = {"plate.damping": (0.01, 100.0), "plate.stiffness": (0.01, 100.0), "rft.f_perp": (0.1, 100.0),
                   "rft.f_par": (-2.0, 2.0)}
 FAILED = 1e6  # deg^2: worse than any plate that moved at all
+# Drag speeds the model is meant for (m/s); a file outside them most likely has its columns in other units.
+SPEEDS = (1e-3, 1.0)
+# How far (fraction of the stroke) a drag's displacement may stray from constant speed.
+LINEARITY = 0.02
 
 
 @dataclass(frozen=True)
@@ -85,10 +89,23 @@ def read_drag(path: str | Path) -> DragData:
         if step <= 0:
             raise SceneError(f"{path}:{n}: time_s must increase")
     displacement = np.array([r["displacement_mm"] for _, r in rows]) / 1e3
-    speed = float(np.polyfit(time, displacement, 1)[0])
+    line = np.polyfit(time, displacement, 1)
+    speed = float(line[0])
     if speed <= 0:
         raise SceneError(f"{path}: displacement_mm must grow with time (a drag along +y)")
+    if not SPEEDS[0] <= speed <= SPEEDS[1]:
+        hint = (": are the times in ms, or the displacements in m?" if speed < SPEEDS[0] else
+                ": are the times in minutes, or the displacements in µm?")
+        raise SceneError(f"{path}: its drag speed is {1e3 * speed:.4g} mm/s, outside the {1e3 * SPEEDS[0]:g} to "
+                         f"{1e3 * SPEEDS[1]:g} mm/s finrft supports{hint}")
+    stray = float(np.abs(displacement - np.polyval(line, time)).max())
+    if stray > LINEARITY * (displacement.max() - displacement.min()):
+        raise SceneError(f"{path}: displacement_mm strays {1e3 * stray:.3g} mm from constant speed; a fit needs a "
+                         f"drag at constant speed")
     angles = np.array([[r[c] for c in angle_columns] for _, r in rows])
+    if np.abs(angles).max() > 180:
+        worst = angles.flat[np.abs(angles).argmax()]
+        raise SceneError(f"{path}: segment angles must lie within -180..180 deg, found {worst:g}")
     return DragData(str(path), time - time[0], speed, angles)
 
 
@@ -110,14 +127,20 @@ def simulated_drag(scene: Scene, speed: float, distance: float, rate: float = 30
 
 
 def resolve_params(names: Sequence[str], bounds: dict[str, tuple[float, float]] | None = None) -> list[Variable]:
-    """Fitted parameters from names (aliases b, k, f_perp, f_par, or any numeric plate-scene key) and bounds."""
+    """Fitted parameters from names (aliases b, k, f_perp, f_par, or any numeric plate-scene key) and bounds
+    (keyed by either); SceneError for bounds of a parameter that is not fitted."""
+    keys = [ALIASES.get(name, name) for name in names]
+    bounds = {ALIASES.get(k, k): span for k, span in (bounds or {}).items()}
+    stray = [k for k in bounds if k not in keys]
+    if stray:
+        raise SceneError(f"bounds given for {', '.join(stray)}, which {'is' if len(stray) == 1 else 'are'} not "
+                         f"fitted (fitted: {', '.join(keys)})")
     variables = []
-    for name in names:
-        key = ALIASES.get(name, name)
+    for key in keys:
         split_key(Scene, key)
         if field_of(Scene, key).type not in ("float", float):
             raise SceneError(f"{key} is not a number and cannot be fitted")
-        low, high = (bounds or {}).get(key, DEFAULT_BOUNDS.get(key, (None, None)))
+        low, high = bounds.get(key, DEFAULT_BOUNDS.get(key, (None, None)))
         if low is None:
             raise SceneError(f"{key} has no default bounds: give them with --bounds {key}=LOW:HIGH")
         if not low < high:
@@ -271,25 +294,39 @@ def plate_forces(run: Run) -> dict[str, float]:
 
 
 def append_forces(path: str | Path, row: dict[str, float]) -> None:
-    """Add a row to a forces CSV, writing its header first when the file is new."""
+    """Add a row to a forces CSV, writing its header first when the file is new; SceneError when the file has
+    another header. The file is replaced whole, so a failed write leaves it as it was."""
+    from .files import atomic_path
+    check_forces_header(path)
     path = Path(path)
-    new = not path.exists() or path.stat().st_size == 0
-    with path.open("a", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=FORCE_COLUMNS)
-        if new:
-            writer.writeheader()
-        writer.writerow({k: repr(float(row[k])) for k in FORCE_COLUMNS})
+    text = path.read_text() if path.exists() else ""
+    text = (text if text.endswith("\n") else text + "\n") if text.strip() else ",".join(FORCE_COLUMNS) + "\n"
+    with atomic_path(path) as tmp:
+        tmp.write_text(text + ",".join(repr(float(row[k])) for k in FORCE_COLUMNS) + "\n")
+
+
+def check_forces_header(path: str | Path) -> None:
+    """SceneError unless ``path`` is new, empty, or a forces CSV `append_forces` can add to."""
+    path = Path(path)
+    lines = [line for line in (path.read_text().splitlines() if path.is_file() else [])
+             if line.strip() and not line.startswith("#")]
+    header = ",".join(FORCE_COLUMNS)
+    if lines and lines[0] != header:
+        raise SceneError(f"{path} has the header '{lines[0]}', not '{header}': append to a forces file written "
+                         f"by finrft drag --forces-csv, or start a new one")
 
 
 def read_forces(path: str | Path) -> np.ndarray:
-    """(rows, 3): attack (deg), normal and tangential force (N); SceneError naming the file and line."""
+    """(rows, 3): attack (deg), normal and tangential force (N), one row per angle (repeated identical rows are
+    merged); SceneError naming the file and line on any problem, and for repeated angles whose forces differ or
+    angles that cannot identify both coefficients."""
     path = Path(path)
     try:
         with path.open(newline="") as handle:
             reader = csv.DictReader(line for line in handle if not line.startswith("#"))
             if reader.fieldnames is None or any(c not in reader.fieldnames for c in FORCE_COLUMNS):
                 raise SceneError(f"{path}: columns must include {', '.join(FORCE_COLUMNS)}")
-            rows = []
+            rows: dict[float, tuple[int, list[float]]] = {}
             for n, row in enumerate(reader, start=2):
                 try:
                     values = [float(row[c]) for c in FORCE_COLUMNS]
@@ -297,12 +334,19 @@ def read_forces(path: str | Path) -> np.ndarray:
                     raise SceneError(f"{path}:{n}: every value must be a number") from None
                 if not all(math.isfinite(v) for v in values) or not 0 <= values[0] <= 90:
                     raise SceneError(f"{path}:{n}: values must be finite, attack_deg within 0..90")
-                rows.append(values)
+                if values[0] in rows and rows[values[0]][1] != values:
+                    raise SceneError(f"{path}:{n}: attack {values[0]:g} deg again (line {rows[values[0]][0]}) with "
+                                     f"other forces: keep one row per angle")
+                rows.setdefault(values[0], (n, values))
     except OSError as exc:
         raise SceneError(f"cannot read forces file {path}: {exc.strerror}") from None
     if not rows:
         raise SceneError(f"{path}: no data")
-    return np.array(rows)
+    attack = np.array(list(rows))
+    if not (attack > 0).any() or not (attack < 90).any():
+        raise SceneError(f"{path}: needs an angle of attack above 0 deg (for f_perp) and one below 90 deg (for "
+                         f"f_par), found only {', '.join(f'{a:g}' for a in sorted(rows))} deg")
+    return np.array([values for _, values in rows.values()])
 
 
 def identify_rft(forces: np.ndarray, segments: int, v_reg: float, speed: float) -> tuple[RFT, ForceTable]:

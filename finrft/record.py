@@ -1,7 +1,7 @@
 """File writers: HDF5 files for analysis and rerun recordings (.rrd) for viewing, of plate runs, swims and
 optimisations.
 
-Every writer goes through a temporary file in the target's directory and `os.replace` it onto the target, so an
+Every writer goes through `files.atomic_path` (a temporary file in the target's directory replaced onto it), so an
 interrupted or failed write never leaves a truncated file where a complete one is expected.
 """
 
@@ -18,7 +18,7 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from .files import atomic_path as _atomic_path, provenance
+from .files import atomic_path, provenance
 from .models import initial_heading
 from .scene import to_toml
 from .simulate import Run
@@ -51,7 +51,7 @@ def _write_series(path: str | Path, time: np.ndarray, series: list[tuple[str, np
                   attrs: dict[str, Any], dataset_attrs: dict[str, dict[str, str]] | None = None) -> None:
     """An HDF5 file of time series (name, data, SI unit, description) on the dimension scale ``time``, written
     atomically, with root attributes and any further attributes per dataset."""
-    with _atomic_path(path) as tmp, h5py.File(tmp, "w", track_order=True) as f:
+    with atomic_path(path) as tmp, h5py.File(tmp, "w", track_order=True) as f:
         t = f.create_dataset("time", data=time)
         t.attrs.update(units="s", description="simulated time of each sample")
         t.make_scale("time")
@@ -163,7 +163,7 @@ def write_rrd(run: Run, path: str | Path) -> None:
     rec = rr.RecordingStream("finrft", recording_id=uuid.uuid4())
     if not rec.is_enabled():
         raise RuntimeError(f"rerun logging is disabled (RERUN=off?), so {path} cannot be written")
-    with _atomic_path(path) as tmp:
+    with atomic_path(path) as tmp:
         rec.save(tmp, default_blueprint=_blueprint(run, points, load, motion))
         try:
             times = rr.TimeColumn("sim_time", duration=run.time)
@@ -266,7 +266,7 @@ def _swim_views(prefix: str = "") -> list:
 
 def write_swim_rrd(run: SwimRun, path: str | Path) -> None:
     """Write a swim as a rerun recording: the robot from above and time series, on the timeline ``sim_time``."""
-    with _atomic_path(path) as tmp:
+    with atomic_path(path) as tmp:
         rec = _stream(tmp, rrb.Blueprint(rrb.Horizontal(*_swim_views(), column_shares=[3, 2])))
         try:
             rec.log("scene", rr.TextDocument(to_toml(run.scene), media_type=rr.MediaType.TEXT), static=True)
@@ -279,7 +279,7 @@ def write_optimization_rrd(path: str | Path, generations: list[tuple[np.ndarray,
                            names: list[str], best: SwimRun) -> None:
     """An optimisation as a rerun recording: best eta per generation, the population in the searched variables
     (the first three, in the CLI's units) per generation, and the best gait's motion."""
-    with _atomic_path(path) as tmp:
+    with atomic_path(path) as tmp:
         views = rrb.Vertical(rrb.TimeSeriesView(name="Best eta per generation (%)", origin="optimization/best_eta"),
                              rrb.Spatial3DView(name="Population: " + ", ".join(names[:3]),
                                                origin="optimization/population"))

@@ -1,8 +1,11 @@
 """The command line: outputs, units, and how bad input and failures are reported."""
 
 import json
+import re
+import signal
 import subprocess
 import sys
+import time
 import tomllib
 
 import h5py
@@ -12,7 +15,7 @@ import pytest
 
 from finrft import rft
 from finrft.cli import main
-from finrft.scene import preset, to_toml
+from finrft.scene import RobotScene, preset, to_toml
 
 FAST = ["--set", "sim.dt=0.001", "--distance", "30"]
 
@@ -69,6 +72,11 @@ BAD = [
     (["drag", "--set", "novalue"], "KEY=VALUE"),
     (["rotate", "--omega", "abc"], "--omega"),
     (["drag", "--scene", "missing.toml"], "missing.toml"),
+    (["drag", "--scene", "missing.toml", "--preset", "physical"], "--preset"),
+    (["swim", "--scene", "missing.toml", "--preset", "paper"], "--preset"),
+    (["drag", "--rrd", "run.h5"], ".rrd"),
+    (["drag", "--forces-csv", "forces.csv"], "rigid"),
+    (["rotate", "--plate", "rigid", "--forces-csv", "forces.csv"], "--forces-csv"),
 ]
 
 
@@ -170,3 +178,193 @@ def test_robot_scene_dump_round_trips(capsys):
     from finrft.scene import RobotScene
     assert main(["scene", "--robot", "--dump", "physical"]) == 0
     assert tomllib.loads(capsys.readouterr().out) == preset("physical", RobotScene).to_dict()
+
+
+# Every writer of every command: (argv without the output, the flag, a good file name for it).
+WRITERS = [
+    (["drag"], "--out", "run.h5"),
+    (["drag"], "--rrd", "run.rrd"),
+    (["swim"], "--out", "run.h5"),
+    (["swim"], "--rrd", "run.rrd"),
+    (["optimize"], "--out", "log.h5"),
+    (["optimize"], "--rrd", "run.rrd"),
+    (["fit", "--data", "drag.csv"], "--write-scene", "fitted.toml"),
+    (["fit", "--data", "drag.csv"], "--plot", "fit.png"),
+    (["fit", "--data", "drag.csv"], "--out", "log.h5"),
+    (["fit", "--data", "drag.csv"], "--rrd", "run.rrd"),
+    (["fit-rft", "--data", "forces.csv"], "--out", "rft.toml"),
+    (["fit-rft", "--data", "forces.csv"], "--table", "rft.csv"),
+    (["report"], "--out", "report"),
+    (["bench", "accuracy"], "--out", "accuracy"),
+]
+
+
+def _one_line(capsys, *named: str) -> str:
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
+    assert all(n in err for n in named), err
+    return err
+
+
+@pytest.mark.parametrize("argv,flag,name", WRITERS)
+def test_every_writer_refuses_a_path_it_cannot_write_before_running(tmp_path, capsys, argv, flag, name):
+    # Each refusal comes before any simulation or data file is read (drag.csv and forces.csv do not exist).
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    for path, named in ((f"/proc/{name}", "cannot write in /proc"), (blocker / name, "not a directory"),
+                        (tmp_path / "missing" / name, "does not exist")):
+        assert main([*argv, flag, str(path)]) == 2
+        _one_line(capsys, flag, named)
+    if "." in name:  # a file: a directory in its place, and an existing file without --force
+        folder = tmp_path / name
+        folder.mkdir()
+        assert main([*argv, flag, str(folder)]) == 2
+        _one_line(capsys, "is a directory")
+        folder.rmdir()
+        folder.write_text("keep")
+        assert main([*argv, flag, str(folder)]) == 2
+        _one_line(capsys, "exists", "--force")
+        assert folder.read_text() == "keep"
+    else:  # a folder: a file in its place, and a folder with files in it without --force
+        (tmp_path / name).write_text("keep")
+        assert main([*argv, flag, str(tmp_path / name)]) == 2
+        _one_line(capsys, "is a file")
+        (tmp_path / name).unlink()
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "mine.txt").write_text("keep")
+        assert main([*argv, flag, str(tmp_path / name)]) == 2
+        _one_line(capsys, "not empty", "--force")
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["file", name])
+
+
+def test_force_replaces_existing_files(tmp_path, capsys):
+    out, rrd = tmp_path / "run.h5", tmp_path / "run.rrd"
+    out.write_text("old")
+    rrd.write_text("old")
+    assert main(["drag", "--quiet", "--force", "--out", str(out), "--rrd", str(rrd), *FAST]) == 0
+    with h5py.File(out) as f:
+        assert f["displacement"][-1] == pytest.approx(0.03, abs=1e-6)
+    assert rrd.stat().st_size > 100
+    assert capsys.readouterr().out == ""  # --quiet: no summary
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run.h5", "run.rrd"]  # no temporary left behind
+
+
+def test_forces_csv_refuses_a_file_with_another_header(tmp_path, capsys):
+    forces = tmp_path / "forces.csv"
+    forces.write_text("angle,fn,ft\n45,1,2\n")
+    assert main(["drag", "--plate", "rigid", "--distance", "5", "--forces-csv", str(forces)]) == 2
+    _one_line(capsys, "header", "forces.csv")
+    assert forces.read_text() == "angle,fn,ft\n45,1,2\n"
+
+
+def test_scene_dump_with_a_scene_file_is_refused(capsys):
+    assert main(["scene", "--dump", "physical", "--scene", "mine.toml"]) == 2
+    _one_line(capsys, "--dump", "--scene")
+
+
+def _run_cli(*argv: str, **options) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "finrft", *argv], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, **options)
+
+
+def test_closed_stdout_is_no_traceback():
+    # finrft swim --json | head -c 10: the reader goes away before finrft writes.
+    done = _run_cli("swim", "--json")
+    done.stdout.close()
+    err = done.stderr.read()
+    assert done.wait() == 141 and err == ""
+
+
+def test_interrupt_is_one_line_and_exit_130():
+    code = ("import sys; from finrft.cli import main; print('ready', flush=True); "
+            "sys.exit(main(sys.argv[1:]))")
+    run = subprocess.Popen([sys.executable, "-c", code, "drag", "--distance", "100000"], stdout=subprocess.PIPE,
+                           stderr=subprocess.PIPE, text=True)
+    assert run.stdout.readline() == "ready\n"
+    time.sleep(0.5)
+    run.send_signal(signal.SIGINT)
+    assert run.wait(timeout=60) == 130
+    assert run.stderr.read() == "finrft: interrupted\n"
+
+
+def _robot_preset_facts(help_text: str, name: str) -> str:
+    return re.search(rf"\b{name} = ([^;]*)", " ".join(help_text.split())).group(1)
+
+
+@pytest.mark.parametrize("command,cls", [("drag", "plate"), ("fit", "plate"), ("swim", "robot"),
+                                         ("optimize", "robot"), ("table", "robot")])
+def test_preset_help_states_what_the_presets_hold(capsys, command, cls):
+    # The --preset help names each preset's stops, body drag law, method and inertias: compare with the dumps.
+    with pytest.raises(SystemExit):
+        main([command, "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    help_text = text[text.index("--preset {"):]
+    for name in ("paper", "physical"):
+        assert main(["scene", "--dump", name, *(["--robot"] if cls == "robot" else [])]) == 0
+        dump = tomllib.loads(capsys.readouterr().out)
+        facts = _robot_preset_facts(help_text, name)
+        plate = dump["fin"] if cls == "robot" else dump["plate"]
+        assert f"{plate['stop']} stop" in facts and f"{dump['sim']['method']} method" in facts
+        assert ("inertias of 1 kg m^2" in facts) == (plate["segment_inertia"] == 1.0)
+        if cls == "robot":
+            assert f"{dump['body']['drag_law']} body drag" in facts
+
+
+def test_swim_help_defaults_are_the_presets():
+    text = " ".join(subprocess.run([sys.executable, "-m", "finrft", "swim", "--help"], capture_output=True,
+                                   text=True).stdout.split())
+    options = text[text.index("options:"):]
+    stated = {key: float(re.search(rf"{flag} [A-Z_]+ .*?default: the scene's, (-?\d+)", options).group(1))
+              for flag, key in (("--theta1", "theta1"), ("--theta2", "theta2"), ("--omega", "omega"),
+                                ("--arm-length", "length"))}
+    for name in ("paper", "physical"):
+        scene = preset(name, RobotScene)
+        assert np.degrees(scene.gait.theta1) == pytest.approx(stated["theta1"])
+        assert np.degrees(scene.gait.theta2) == pytest.approx(stated["theta2"])
+        assert np.degrees(scene.gait.omega) == pytest.approx(stated["omega"])
+        assert 1e3 * scene.arm.length == pytest.approx(stated["length"])
+
+
+COMMANDS = [["drag"], ["rotate"], ["scene"], ["swim"], ["optimize"], ["table"], ["fit"], ["fit-rft"], ["report"],
+            *[["bench", kind] for kind in ("backends", "robot", "accuracy", "modelling", "fit")]]
+
+
+@pytest.mark.parametrize("argv", COMMANDS, ids=" ".join)
+def test_every_command_takes_quiet(capsys, argv):
+    with pytest.raises(SystemExit):
+        main([*argv, "--help"])
+    text = capsys.readouterr().out
+    assert "--quiet" in text
+    assert ("--forces-csv FILE.csv" in text) == (argv == ["drag"])  # rotate refuses it, so does not offer it
+
+
+def _bar_updates(monkeypatch) -> list[tuple[float, float]]:
+    """Turn stderr into a terminal and record (count, total) at every progress bar update."""
+    import tqdm
+    seen = []
+    update = tqdm.tqdm.update
+
+    def spy(self, n=1):
+        update(self, n)
+        seen.append((self.n, self.total))
+    monkeypatch.setattr(tqdm.tqdm, "update", spy)
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
+    return seen
+
+
+def test_progress_on_a_terminal_never_past_the_budget(monkeypatch, capsys):
+    seen = _bar_updates(monkeypatch)
+    # Three variables: CMA-ES asks for 7 gaits per generation, more than the budget of 5.
+    assert main(["optimize", "--budget", "5", "--workers", "1", "--set", "sim.dt=1e-4"]) == 0
+    assert seen and max(n for n, _ in seen) == 5 and {t for _, t in seen} == {5}
+    assert "evaluations" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("quiet", [False, True])
+def test_progress_of_a_drag_and_quiet(monkeypatch, capsys, quiet):
+    seen = _bar_updates(monkeypatch)
+    assert main(["drag", *FAST, *(["--quiet"] if quiet else [])]) == 0
+    assert bool(seen) != quiet
+    if not quiet:
+        assert seen[-1] == (100, 100)
+    assert (capsys.readouterr().out == "") == quiet

@@ -7,12 +7,13 @@ import tomllib
 import numpy as np
 import pytest
 
-from finrft.fit import fit, read_drag, resolve_params, simulated_drag, write_drag
+from finrft.fit import fit, read_drag, read_forces, resolve_params, simulated_drag, write_drag
 from finrft.cli import main
+from finrft.data import plate_drag_dir
 from finrft.rft import read_table
 from finrft.scene import SceneError, load_scene, preset
 
-DATA = "../shared/data/plate_drag"
+DATA = plate_drag_dir()
 
 
 @pytest.fixture(scope="module")
@@ -109,3 +110,70 @@ def test_read_drag_matches_the_data_readme():
     assert data.angles.shape[1] == 3 and data.angles[-1, 2] < -60  # negative: the sand bends them clockwise
     with pytest.raises(SceneError):
         resolve_params(["plate.kind"])
+
+
+def _measured_with(tmp_path, name: str, time_scale: float = 1.0, displacement_scale: float = 1.0,
+                   angle_scale: float = 1.0, bend: float = 0.0) -> str:
+    """The 30 mm/s measurement with its columns rescaled (a file in other units), or its displacement bent off
+    constant speed by ``bend`` mm at mid-stroke."""
+    data = read_drag(DATA / "origami_v30.csv")
+    lines = ["time_s,displacement_mm,segment1_deg,segment2_deg,segment3_deg"]
+    stroke = 1e3 * data.displacement
+    stroke = stroke + bend * np.sin(np.pi * stroke / stroke[-1])
+    for t, x, row in zip(data.time, stroke, data.angles):
+        lines.append(",".join(repr(float(v)) for v in (t * time_scale, x * displacement_scale,
+                                                       *(row * angle_scale))))
+    path = tmp_path / name
+    path.write_text("\n".join(lines) + "\n")
+    return str(path)
+
+
+@pytest.mark.parametrize("scales,named", [
+    ({"time_scale": 1e3}, "in ms"),              # time in ms: 0.03 mm/s
+    ({"displacement_scale": 1e-3}, "in m"),      # displacement in m: 0.03 mm/s
+    ({"displacement_scale": 1e3}, "in µm"),      # 30 m/s
+    ({"angle_scale": 180 / np.pi}, "-180..180"),  # degrees converted once too often
+    ({"bend": 20.0}, "constant speed"),
+])
+def test_data_in_the_wrong_units_is_refused(tmp_path, capsys, scales, named):
+    path = _measured_with(tmp_path, "odd.csv", **scales)
+    assert main(["fit", "--data", path, "--budget", "1"]) == 2
+    err = capsys.readouterr().err
+    assert named in err and "odd.csv" in err and len(err.strip().splitlines()) == 1
+
+
+def test_bounds_by_short_name_are_used(tmp_path, capsys):
+    # The paper's procedure would put b at its lower bound 0.01 (README): bounded to 1..5 it must stay inside.
+    assert resolve_params(["b"], {"b": (1.0, 5.0)}) == resolve_params(["b"], {"plate.damping": (1.0, 5.0)})
+    assert main(["fit", "--data", str(DATA / "origami_v30.csv"), "--bounds", "b=1:5", "--budget", "8",
+                 "--json", "--quiet"]) == 0
+    out = capsys.readouterr().out.strip().splitlines()
+    assert len(out) == 1 and 1.0 <= json.loads(out[0])["params"]["plate.damping"] <= 5.0
+
+
+def test_bounds_of_a_parameter_not_fitted_are_refused(capsys):
+    assert main(["fit", "--data", str(DATA / "origami_v30.csv"), "--params", "b", "--bounds", "k=1:5"]) == 2
+    err = capsys.readouterr().err
+    assert "plate.stiffness" in err and "not fitted" in err and len(err.strip().splitlines()) == 1
+
+
+FORCES = "attack_deg,force_normal_N,force_tangential_N\n"
+
+
+@pytest.mark.parametrize("rows,named", [
+    ("45,-1,-0.1\n90,-2,0\n45,-1.5,-0.1\n", ":4"),          # 45 deg twice with other forces
+    ("90,-2,0\n", "below 90"),                               # f_par cannot be identified
+    ("0,0,-0.5\n0,0,-0.5\n", "above 0"),                     # f_perp cannot be identified
+])
+def test_bad_forces_files(tmp_path, capsys, rows, named):
+    path = tmp_path / "forces.csv"
+    path.write_text(FORCES + rows)
+    assert main(["fit-rft", "--data", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert named in err and "forces.csv" in err and len(err.strip().splitlines()) == 1
+
+
+def test_identical_repeated_forces_are_merged(tmp_path):
+    path = tmp_path / "forces.csv"
+    path.write_text(FORCES + "45,-1,-0.1\n90,-2,0\n45,-1,-0.1\n")
+    np.testing.assert_array_equal(read_forces(path), [[45, -1, -0.1], [90, -2, 0]])

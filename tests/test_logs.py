@@ -19,7 +19,7 @@ import pytest
 
 import finrft
 import finrft.scene
-from finrft import fit
+from finrft.fit import read_drag, simulated_drag, write_drag
 from finrft.cli import main
 from finrft.scene import preset
 
@@ -97,7 +97,7 @@ def drag_data(tmp_path_factory) -> Path:
     """A short simulated drag of a plate with b = 0.8, to fit b to."""
     path = tmp_path_factory.mktemp("data") / "v20.csv"
     truth = preset("paper").replace(**{"plate.damping": 0.8, "sim.dt": 0.002})
-    fit.write_drag(path, fit.simulated_drag(truth, 0.02, 0.03), "simulated, b = 0.8")
+    write_drag(path, simulated_drag(truth, 0.02, 0.03), "simulated, b = 0.8")
     return path
 
 
@@ -136,7 +136,7 @@ def test_fit_resumes_after_sigkill_bit_for_bit(tmp_path, capsys, drag_data):
     _assert_same_log(log, reference)
     with h5py.File(log) as f:
         assert f.attrs["objective_units"] == "deg^2" and f["cost"].attrs["units"] == "deg^2"
-        np.testing.assert_array_equal(f["data/0/angles"][()], fit.read_drag(drag_data).angles)
+        np.testing.assert_array_equal(f["data/0/angles"][()], read_drag(drag_data).angles)
 
 
 def test_ctrl_c_reaches_no_worker(tmp_path):

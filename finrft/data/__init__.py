@@ -1,0 +1,16 @@
+"""Measurements shipped with finrft.
+
+``plate_drag``: the origami plate dragged from flat at 10, 30 and 50 mm/s (see its README.md for provenance,
+columns and sign convention), in the format `finrft.fit.read_drag` reads.
+"""
+
+from __future__ import annotations
+
+from importlib import resources
+from pathlib import Path
+
+
+def plate_drag_dir() -> Path:
+    """The folder of the plate-drag measurements (README.md and origami_v{10,30,50}.csv)."""
+    return Path(str(resources.files(__name__) / "plate_drag"))
+

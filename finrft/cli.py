@@ -109,6 +109,7 @@ def _add_test(p: argparse.ArgumentParser, *, drag: bool) -> None:
     if drag:
         o.add_argument("--forces-csv", metavar="FILE.csv", help="append the steady force on the plate (normal and "
                        "tangential, N) at this angle of attack to a CSV, for finrft fit-rft (rigid plate only)")
+    _add_max_error(p)
 
 
 def _add_max_error(p: argparse.ArgumentParser) -> None:

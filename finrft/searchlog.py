@@ -11,7 +11,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import h5py
 import numpy as np
 
 from .files import atomic_path
@@ -48,6 +47,7 @@ class Series:
 
 def write(path: str | Path, attrs: dict[str, Any], datasets: dict[str, Dataset]) -> None:
     """Replace ``path`` with a log of root ``attrs`` and ``datasets`` (each with its units and description)."""
+    import h5py  # here, not at the top: `import finrft` stays light
     with atomic_path(path) as tmp, h5py.File(tmp, "w", track_order=True) as f:
         f.attrs.update(attrs)
         for name, d in datasets.items():
@@ -63,6 +63,7 @@ def _plain(value: Any) -> Any:
 
 def read(path: str | Path, schema: str) -> tuple[dict[str, Any], dict[str, Dataset]]:
     """A log's root attributes and datasets; SceneError naming the command to use when it is another kind."""
+    import h5py
     noun, _ = _KINDS[schema]
     datasets: dict[str, Dataset] = {}
 

@@ -1,6 +1,11 @@
 """The native plugin: built and loaded, the same trajectories as the Python coupling, thread-safe, strict about
 its config; and the batch API, which must give the single runs' results."""
 
+import json
+import shutil
+import subprocess
+import sys
+
 import mujoco
 import numpy as np
 import pytest
@@ -16,6 +21,30 @@ from finrft.simulate import simulate
 def test_plugin_is_built_and_loaded():
     assert native.available(), native._status["error"]
     assert native.resolve_backend("native") == "native"
+    assert native.built_for() == mujoco.mj_version()
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux") or shutil.which("readelf") is None,
+                    reason="reads the ELF dynamic section")
+def test_library_embeds_no_absolute_path():
+    dynamic = subprocess.run(["readelf", "-d", str(native.library_path())], capture_output=True, text=True,
+                             check=True).stdout
+    paths = [line.split("[", 1)[1].rstrip("]") for line in dynamic.splitlines()
+             if "(RPATH)" in line or "(RUNPATH)" in line]
+    assert paths == ["$ORIGIN/../mujoco"]
+    assert f"[libmujoco.so.{mujoco.mj_versionString()}]" in dynamic
+
+
+def test_mujoco_version_mismatch_falls_back_with_one_line(monkeypatch, capsys):
+    for key, value in {"loaded": None, "error": "", "advice": "", "warned": False}.items():
+        monkeypatch.setitem(native._status, key, value)
+    monkeypatch.setattr(mujoco, "mj_version", lambda: 4001000)
+    monkeypatch.setattr(mujoco, "mj_loadPluginLibrary", lambda path: pytest.fail("loaded a mismatched plugin"))
+    assert main(["drag", "--distance", "5", "--json"]) == 0
+    out, err = capsys.readouterr()
+    assert err == (f"finrft: warning: the native RFT plugin was built for MuJoCo {mujoco.mj_versionString()} but "
+                   f"MuJoCo 4.1.0 is installed; using the Python backend (reinstall finrft to rebuild it)\n")
+    assert json.loads(out.splitlines()[-1])["backend"] == "python"
 
 
 @pytest.fixture(scope="module")
@@ -92,6 +121,7 @@ def test_batch_equals_single_runs(paper):
 def test_unavailable_plugin_falls_back_once(monkeypatch, paper):
     monkeypatch.setitem(native._status, "loaded", False)
     monkeypatch.setitem(native._status, "error", "library not built")
+    monkeypatch.setitem(native._status, "advice", "")
     monkeypatch.setitem(native._status, "warned", False)
     with pytest.warns(RuntimeWarning, match="library not built") as record:
         runs = [simulate(paper, Drive(stroke=0.01)) for _ in range(2)]

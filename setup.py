@@ -67,9 +67,9 @@ class BuildPlugin(build_ext):
                 # plugin's import of mujoco.dll to the module already loaded.
                 ext.extra_objects.append(str(windows_import_library(self.compiler, include, Path(self.build_temp),
                                                                     self.plat_name)))
-                ext.extra_compile_args += ["/O2"]
                 continue
-            ext.extra_compile_args += ["-O2", "-std=c99", "-Wall", "-Wextra", "-Wno-unused-parameter"]
+            # -g0 overrides Python's -g: debug information would carry the build directory (MuJoCo ships none).
+            ext.extra_compile_args += ["-O2", "-g0", "-std=c99", "-Wall", "-Wextra", "-Wno-unused-parameter"]
             if sys.platform == "darwin":
                 ext.extra_objects.append(str(root / f"libmujoco.{native.version_text(version)}.dylib"))
                 ext.extra_link_args += ["-Wl,-rpath,@loader_path/../mujoco",

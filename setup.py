@@ -79,6 +79,8 @@ class BuildPlugin(build_ext):
                 ext.extra_link_args += ["-lm", "-Wl,-rpath,$ORIGIN/../mujoco"]
         if self.compiler.compiler_type != "msvc":
             self.compiler.set_executable("linker_so", plugin_linker(self.compiler.linker_so))
+        # A library left in build/ by an earlier install may be for another MuJoCo: always compile (one file).
+        self.force = True
         super().build_extensions()
 
     def get_export_symbols(self, ext):

@@ -2,8 +2,9 @@
 
 The plugin is a plain shared library, not a Python extension module: MuJoCo loads it and it registers itself. It is
 linked the way MuJoCo's own plugins are, against the library the `mujoco` wheel ships (libmujoco.so.X.Y.Z on Linux,
-libmujoco.X.Y.Z.dylib on macOS, mujoco.dll on Windows), and finds it at run time relative to itself, because finrft/
-and mujoco/ are installed side by side: no path of the build machine ends up in the library.
+libmujoco.X.Y.Z.dylib on macOS, mujoco.dll on Windows), and at run time binds to the one `import mujoco` loaded or
+finds it relative to itself (finrft/ and mujoco/ are installed side by side): no path of the build machine ends up
+in the library.
 """
 
 import importlib.util
@@ -71,6 +72,9 @@ class BuildPlugin(build_ext):
             # -g0 overrides Python's -g: debug information would carry the build directory (MuJoCo ships none).
             ext.extra_compile_args += ["-O2", "-g0", "-std=c99", "-Wall", "-Wextra", "-Wno-unused-parameter"]
             if sys.platform == "darwin":
+                # The plugin records libmujoco's install name, @rpath/mujoco.framework/.../libmujoco.X.Y.Z.dylib,
+                # which dyld matches to the library `import mujoco` has loaded, as for MuJoCo's own plugins in the
+                # wheel; the rpath finds the file should a release name it @rpath/libmujoco.X.Y.Z.dylib instead.
                 ext.extra_objects.append(str(root / f"libmujoco.{native.version_text(version)}.dylib"))
                 ext.extra_link_args += ["-Wl,-rpath,@loader_path/../mujoco",
                                         f"-Wl,-install_name,@rpath/{native.LIBRARY}"]

@@ -11,12 +11,14 @@ library.
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import importlib
 import re
 import sys
 import warnings
 from pathlib import Path
+from typing import Iterator
 
 # Named as MuJoCo's own plugins are on each platform.
 LIBRARY = {"win32": "finrft_rft.dll", "darwin": "libfinrft_rft.dylib"}.get(sys.platform, "libfinrft_rft.so")
@@ -33,7 +35,7 @@ def built_for() -> int:
     it to ask would already bind it to the installed MuJoCo."""
     found = re.search(rb"finrft_mujoco_header=(\d+)", library_path().read_bytes())
     if found is None:
-        raise OSError(f"{library_path()} does not say which MuJoCo it was built for")
+        raise OSError(f"{library_path()} does not say which MuJoCo it was built for: reinstall finrft to rebuild it")
     return int(found.group(1))
 
 
@@ -42,12 +44,29 @@ def version_text(version: int) -> str:
     return f"{version // 1_000_000}.{version // 1000 % 1000}.{version % 1000}"
 
 
+def _mujoco():
+    # While `import mujoco` runs `load`, importing mujoco would be circular: use what is loaded.
+    return sys.modules.get("mujoco") or importlib.import_module("mujoco")
+
+
+@contextlib.contextmanager
+def captured_warnings(messages: list[str]) -> Iterator[None]:
+    """Collect MuJoCo's warnings, which would otherwise go to stdout and to MUJOCO_LOG.TXT in the working
+    directory, so that an error can quote them."""
+    mujoco = _mujoco()
+    previous = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(messages.append)
+    try:
+        yield
+    finally:
+        mujoco.set_mju_user_warning(previous)
+
+
 def load() -> bool:
     """Register the plugin with MuJoCo; True when it is available."""
     if _status["loaded"] is None:
         try:
-            # While `import mujoco` runs this, importing mujoco here would be circular: use what is loaded.
-            mujoco = sys.modules.get("mujoco") or importlib.import_module("mujoco")
+            mujoco = _mujoco()
             path = library_path()
             if not path.is_file():
                 raise OSError(f"{path} does not exist (the package was installed without building it)")
@@ -60,10 +79,14 @@ def load() -> bool:
                                      f"{version_text(installed)} is installed")
                 return False
             loader = getattr(mujoco, "mj_loadPluginLibrary", None)
-            if loader is not None:
-                loader(str(path))
-            else:
-                ctypes.CDLL(str(path))  # its constructor registers the plugin
+            messages: list[str] = []
+            with captured_warnings(messages):  # from 4.0.1 MuJoCo warns, not raises, when a library will not load
+                if loader is not None:
+                    loader(str(path))
+                else:
+                    ctypes.CDLL(str(path))  # its constructor registers the plugin
+            if messages:
+                raise OSError(messages[0].strip())
             _status["loaded"] = True
         except Exception as exc:  # a broken plugin must never break `import mujoco`
             _status.update(loaded=False, error=f"the native RFT plugin could not be loaded ({exc})")

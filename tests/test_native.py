@@ -125,6 +125,24 @@ def test_batch_equals_single_runs(paper):
     assert not np.allclose(many[0].segment_angle, many[2].segment_angle)  # the jobs did differ
 
 
+def test_library_that_warns_on_loading_is_not_used_and_leaves_no_log(monkeypatch, tmp_path):
+    for key, value in {"loaded": None, "error": "", "advice": "", "warned": False}.items():
+        monkeypatch.setitem(native._status, key, value)
+    monkeypatch.chdir(tmp_path)
+
+    def warning_loader(path):  # MuJoCo 4.0.1 warns rather than raises when a library will not load
+        m = mujoco.MjModel.from_xml_string("<mujoco><worldbody><body><joint/><geom size='.1'/></body></worldbody>"
+                                           "</mujoco>")
+        d = mujoco.MjData(m)
+        d.qvel[0] = 1e20
+        mujoco.mj_step(m, d)  # a real MuJoCo warning: an unstable state
+
+    monkeypatch.setattr(mujoco, "mj_loadPluginLibrary", warning_loader)
+    assert not native.available()
+    assert "Nan, Inf or huge value in QVEL" in native._status["error"]
+    assert not (tmp_path / "MUJOCO_LOG.TXT").exists()
+
+
 def test_unavailable_plugin_falls_back_once(monkeypatch, paper):
     monkeypatch.setitem(native._status, "loaded", False)
     monkeypatch.setitem(native._status, "error", "library not built")

@@ -6,10 +6,8 @@ segment count and sizes, masses and inertias, hinge spring/damper/stop, and the 
 
 from __future__ import annotations
 
-import contextlib
 from dataclasses import dataclass
 from importlib import resources
-from typing import Iterator
 
 import mujoco
 import numpy as np
@@ -60,17 +58,6 @@ class PlateModel:
     hinge_qpos: np.ndarray     # (H,) qpos address of each hinge: H = segments, or 0 for a rigid plate
     hinge_dof: np.ndarray      # (H,)
     groups: tuple[ForceGroup, ...]  # the segments' RFT (one group)
-
-
-@contextlib.contextmanager
-def captured_warnings(messages: list[str]) -> Iterator[None]:
-    """Collect MuJoCo's warnings, which would otherwise go to stderr, so that an error can quote them."""
-    previous = mujoco.get_mju_user_warning()
-    mujoco.set_mju_user_warning(messages.append)
-    try:
-        yield
-    finally:
-        mujoco.set_mju_user_warning(previous)
 
 
 def mjcf_path(name: str = "plate.xml"):
@@ -176,7 +163,7 @@ def _new_spec(file: str, sim: Sim) -> mujoco.MjSpec:
 
 def _compile(spec: mujoco.MjSpec) -> mujoco.MjModel:
     try:
-        with captured_warnings([]):
+        with native.captured_warnings([]):
             return spec.compile()
     except ValueError as exc:  # e.g. the plugin's init rejecting its config: quote its line, which names the key
         lines = str(exc).strip().splitlines()

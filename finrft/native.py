@@ -1,45 +1,95 @@
-"""The native RFT plugin (plugins/finrft_rft.c, built by ``pip install``): locating and loading it once.
+"""The native RFT plugin (plugins/finrft_rft.c, built by ``pip install``): locating, checking and loading it once.
 
 MuJoCo calls `load` through the ``mujoco.plugins`` entry point whenever it is imported, in every process, and
 finrft calls it again before it builds a model; loading twice is harmless. It never raises: when the library is
-missing or will not load, `available` is False, finrft says so once and uses the Python coupling instead.
+missing, was built for another MuJoCo, or will not load, `available` is False, finrft says so once and uses the
+Python coupling instead.
+
+setup.py reads this file on its own to name the library and its build record, so it imports only the standard
+library.
 """
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
+import importlib
+import re
 import sys
 import warnings
 from pathlib import Path
+from typing import Iterator
 
-LIBRARY = "libfinrft_rft.so"
+# Named as MuJoCo's own plugins are on each platform.
+LIBRARY = {"win32": "finrft_rft.dll", "darwin": "libfinrft_rft.dylib"}.get(sys.platform, "libfinrft_rft.so")
 PLUGIN = "finrft.rft"
-_status: dict[str, object] = {"loaded": None, "error": "", "warned": False}
+_status: dict[str, object] = {"loaded": None, "error": "", "advice": "", "warned": False}
 
 
 def library_path() -> Path:
     return Path(__file__).with_name(LIBRARY)
 
 
+def built_for() -> int:
+    """The MuJoCo header version (mjVERSION_HEADER) the library was compiled against, read from the file: loading
+    it to ask would already bind it to the installed MuJoCo."""
+    found = re.search(rb"finrft_mujoco_header=(\d+)", library_path().read_bytes())
+    if found is None:
+        raise OSError(f"{library_path()} does not say which MuJoCo it was built for: reinstall finrft to rebuild it")
+    return int(found.group(1))
+
+
+def version_text(version: int) -> str:
+    """MuJoCo's version number as text: 4002001 -> 4.2.1 (SUPERMAJOR * 1e6 + MAJOR * 1e3 + MINOR_OR_PATCH)."""
+    return f"{version // 1_000_000}.{version // 1000 % 1000}.{version % 1000}"
+
+
+def _mujoco():
+    # While `import mujoco` runs `load`, importing mujoco would be circular: use what is loaded.
+    return sys.modules.get("mujoco") or importlib.import_module("mujoco")
+
+
+@contextlib.contextmanager
+def captured_warnings(messages: list[str]) -> Iterator[None]:
+    """Collect MuJoCo's warnings, which would otherwise go to stdout and to MUJOCO_LOG.TXT in the working
+    directory, so that an error can quote them."""
+    mujoco = _mujoco()
+    previous = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(messages.append)
+    try:
+        yield
+    finally:
+        mujoco.set_mju_user_warning(previous)
+
+
 def load() -> bool:
     """Register the plugin with MuJoCo; True when it is available."""
     if _status["loaded"] is None:
-        path = library_path()
         try:
+            mujoco = _mujoco()
+            path = library_path()
             if not path.is_file():
                 raise OSError(f"{path} does not exist (the package was installed without building it)")
-            # While `import mujoco` runs this, importing mujoco here would be circular: use what is loaded.
-            mujoco = sys.modules.get("mujoco")
-            if mujoco is None:
-                import mujoco
+            # MuJoCo may change its ABI in any release (and names its library file by version), so only the exact
+            # version the plugin was compiled against can load it; checked first, as loading would fail obscurely.
+            built, installed = built_for(), mujoco.mj_version()
+            if built != installed:
+                _status.update(loaded=False, advice=" (reinstall finrft to rebuild it)",
+                               error=f"the native RFT plugin was built for MuJoCo {version_text(built)} but MuJoCo "
+                                     f"{version_text(installed)} is installed")
+                return False
             loader = getattr(mujoco, "mj_loadPluginLibrary", None)
-            if loader is not None:
-                loader(str(path))
-            else:
-                ctypes.CDLL(str(path))  # its constructor registers the plugin
+            messages: list[str] = []
+            with captured_warnings(messages):  # from 4.0.1 MuJoCo warns, not raises, when a library will not load
+                if loader is not None:
+                    loader(str(path))
+                else:
+                    ctypes.CDLL(str(path))  # its constructor registers the plugin
+            if messages:
+                raise OSError(messages[0].strip())
             _status["loaded"] = True
         except Exception as exc:  # a broken plugin must never break `import mujoco`
-            _status["loaded"], _status["error"] = False, str(exc)
+            _status.update(loaded=False, error=f"the native RFT plugin could not be loaded ({exc})")
     return bool(_status["loaded"])
 
 
@@ -52,7 +102,7 @@ def resolve_backend(requested: str) -> str:
     if requested == "native" and not available():
         if not _status["warned"]:
             _status["warned"] = True
-            warnings.warn(f"the native RFT plugin could not be loaded ({_status['error']}); using the Python "
-                          f"backend", RuntimeWarning, stacklevel=2)
+            warnings.warn(f"{_status['error']}; using the Python backend{_status['advice']}", RuntimeWarning,
+                          stacklevel=2)
         return "python"
     return requested

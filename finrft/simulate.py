@@ -21,7 +21,8 @@ from .convergence import (ErrorLimits, SimulationUnstable, check_resolution, che
 from .coupling import PythonCoupling, SegmentForces, installed
 from .drive import Drive
 from .integrate import NOT_CONVERGED, STEP_TOO_SMALL, Stepper, stepper
-from .models import build_plate, captured_warnings
+from .models import build_plate
+from .native import captured_warnings
 from .scene import Scene
 
 _BAD_STATE = (mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL)

@@ -479,6 +479,12 @@ static int newton_solve(const Segments* s, Newton* w, const mjtNum* qvel, const 
 #define FINRFT_EXPORT __attribute__((visibility("default")))
 #endif
 
+// The MuJoCo header version this library was compiled against, whose ABI it fits, as text that finrft/native.py
+// reads from the file: it must know before loading the library whether the installed MuJoCo can load it.
+#define FINRFT_TEXT(x) #x
+#define FINRFT_VALUE_TEXT(x) FINRFT_TEXT(x)
+FINRFT_EXPORT const char finrft_mujoco_header[] = "finrft_mujoco_header=" FINRFT_VALUE_TEXT(mjVERSION_HEADER);
+
 // Where Newton's method finds no root (forces that feed energy in, such as f_par < 0, can leave the implicit
 // equation without one near v), the newton method halves the step, down to dt / 2^NEWTON_HALVINGS.
 #define NEWTON_HALVINGS 10

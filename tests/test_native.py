@@ -1,6 +1,12 @@
 """The native plugin: built and loaded, the same trajectories as the Python coupling, thread-safe, strict about
 its config; and the batch API, which must give the single runs' results."""
 
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
 import mujoco
 import numpy as np
 import pytest
@@ -16,6 +22,36 @@ from finrft.simulate import simulate
 def test_plugin_is_built_and_loaded():
     assert native.available(), native._status["error"]
     assert native.resolve_backend("native") == "native"
+    assert native.built_for() == mujoco.mj_version()
+
+
+def test_library_names_no_build_directory():
+    # Debug information, for one, would record where the sources were compiled.
+    root = Path(__file__).resolve().parents[1]
+    assert str(root).encode() not in native.library_path().read_bytes()
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux") or shutil.which("readelf") is None,
+                    reason="reads the ELF dynamic section")
+def test_library_finds_mujoco_relative_to_itself():
+    dynamic = subprocess.run(["readelf", "-d", str(native.library_path())], capture_output=True, text=True,
+                             check=True).stdout
+    paths = [line.split("[", 1)[1].rstrip("]") for line in dynamic.splitlines()
+             if "(RPATH)" in line or "(RUNPATH)" in line]
+    assert paths == ["$ORIGIN/../mujoco"]
+    assert f"[libmujoco.so.{mujoco.mj_versionString()}]" in dynamic
+
+
+def test_mujoco_version_mismatch_falls_back_with_one_line(monkeypatch, capsys):
+    for key, value in {"loaded": None, "error": "", "advice": "", "warned": False}.items():
+        monkeypatch.setitem(native._status, key, value)
+    monkeypatch.setattr(mujoco, "mj_version", lambda: 4001000)
+    monkeypatch.setattr(mujoco, "mj_loadPluginLibrary", lambda path: pytest.fail("loaded a mismatched plugin"))
+    assert main(["drag", "--distance", "5", "--json"]) == 0
+    out, err = capsys.readouterr()
+    assert err == (f"finrft: warning: the native RFT plugin was built for MuJoCo {mujoco.mj_versionString()} but "
+                   f"MuJoCo 4.1.0 is installed; using the Python backend (reinstall finrft to rebuild it)\n")
+    assert json.loads(out.splitlines()[-1])["backend"] == "python"
 
 
 @pytest.fixture(scope="module")
@@ -89,9 +125,28 @@ def test_batch_equals_single_runs(paper):
     assert not np.allclose(many[0].segment_angle, many[2].segment_angle)  # the jobs did differ
 
 
+def test_library_that_warns_on_loading_is_not_used_and_leaves_no_log(monkeypatch, tmp_path):
+    for key, value in {"loaded": None, "error": "", "advice": "", "warned": False}.items():
+        monkeypatch.setitem(native._status, key, value)
+    monkeypatch.chdir(tmp_path)
+
+    def warning_loader(path):  # MuJoCo 4.0.1 warns rather than raises when a library will not load
+        m = mujoco.MjModel.from_xml_string("<mujoco><worldbody><body><joint/><geom size='.1'/></body></worldbody>"
+                                           "</mujoco>")
+        d = mujoco.MjData(m)
+        d.qvel[0] = 1e20
+        mujoco.mj_step(m, d)  # a real MuJoCo warning: an unstable state
+
+    monkeypatch.setattr(mujoco, "mj_loadPluginLibrary", warning_loader)
+    assert not native.available()
+    assert "Nan, Inf or huge value in QVEL" in native._status["error"]
+    assert not (tmp_path / "MUJOCO_LOG.TXT").exists()
+
+
 def test_unavailable_plugin_falls_back_once(monkeypatch, paper):
     monkeypatch.setitem(native._status, "loaded", False)
     monkeypatch.setitem(native._status, "error", "library not built")
+    monkeypatch.setitem(native._status, "advice", "")
     monkeypatch.setitem(native._status, "warned", False)
     with pytest.warns(RuntimeWarning, match="library not built") as record:
         runs = [simulate(paper, Drive(stroke=0.01)) for _ in range(2)]

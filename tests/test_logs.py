@@ -152,7 +152,7 @@ def test_ctrl_c_without_a_log(monkeypatch, capsys):
     def interrupt(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr("finrft.optimize.swim", interrupt)
+    monkeypatch.setattr(sys.modules["finrft.optimize"], "swim", interrupt)  # finrft.optimize is the function
     assert main(["optimize", "--workers", "1"]) == 130
     assert capsys.readouterr().err == ("finrft: interrupted; nothing was logged (--out LOG.h5 makes a run "
                                        "resumable)\n")

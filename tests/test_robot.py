@@ -47,22 +47,28 @@ def test_half_model_equals_full_model_for_a_symmetric_gait(quick, drag_law):
 
 
 def test_backends_agree_on_the_robot(quick):
+    # Step for step, at a step too coarse for an accurate eta (estimated 1 point): the twins, not eta, are tested.
     scene = quick.replace(**{"sim.dt": 2e-4})
-    native, python = swim(scene, 1), swim(scene.replace(**{"sim.backend": "python"}), 1)
+    native, python = (swim(s, 1, max_error=None) for s in (scene, scene.replace(**{"sim.backend": "python"})))
     assert native.backend == "native" and python.backend == "python"
     np.testing.assert_allclose(native.body_y, python.body_y, atol=1e-9)
     np.testing.assert_allclose(native.hinge_angle, python.hinge_angle, atol=1e-9)
 
 
-def test_position_servo_tracks_the_gait(paper):
-    # The servo's position feedback is explicit: with the arm's real inertia it needs a step of 0.1 ms.
-    scene = preset("physical", RobotScene).replace(**{"robot.servo": "position", "robot.servo_kp": 200.0,
-                                                      "sim.dt": 1e-4})
-    run = swim(scene, 1)
-    g = scene.gait
-    assert run.arm_angle.max() == pytest.approx(g.theta1, abs=np.radians(3))
-    assert run.arm_angle[-1] == pytest.approx(g.theta2, abs=np.radians(3))
-    assert np.abs(run.servo_torque).max() > 0
+def test_position_servo_tracks_the_gait():
+    # The servo's position feedback is explicit: with the arm's real inertia it needs a step of 0.1 ms. Against
+    # the prescribed servo (the gait followed exactly, its torque read from the drive's momentum): the arm within
+    # 3 deg at every sample (1.2 deg measured), and, away from the reversals, the same mean torque per stroke
+    # within 2 % (0.3 % measured): the servo does the work the gait needs.
+    scene = preset("physical", RobotScene).replace(**{"sim.dt": 1e-4})
+    servo = swim(scene.replace(**{"robot.servo": "position", "robot.servo_kp": 200.0}), 1)
+    exact = swim(scene, 1)
+    assert np.degrees(np.abs(servo.arm_angle - exact.arm_angle)).max() < 3.0
+    ts = exact.stroke_time
+    for k, sign in ((0, 1), (1, -1)):
+        inside = (exact.time > k * ts + 0.2) & (exact.time < (k + 1) * ts - 0.2)
+        assert sign * exact.servo_torque[inside].mean() > 0.5  # N m: the sand loads the arm against its sweep
+        assert servo.servo_torque[inside].mean() == pytest.approx(exact.servo_torque[inside].mean(), rel=0.02)
 
 
 def test_paper_table_pattern(capsys):
@@ -76,9 +82,9 @@ def test_paper_table_pattern(capsys):
     assert script["Rigid fin"] < 0.3 * script["Optimized"]
 
 
-def test_optimizer_is_reproducible_and_resumes(quick, tmp_path):
+def test_optimizer_is_reproducible_and_resumes(paper, tmp_path):
     variables = [Variable("gait.theta1", 0.5, 1.5), Variable("gait.theta2", -1.5, -0.5)]
-    scene = quick.replace(**{"sim.dt": 4e-4})
+    scene = paper
     first = optimize(scene, variables=variables, budget=12, seed=7, log=tmp_path / "a.h5", workers=1)
     again = optimize(scene, variables=variables, budget=12, seed=7, workers=2)
     assert first.best == again.best and first.cost == again.cost
@@ -103,10 +109,10 @@ def test_optimizer_is_reproducible_and_resumes(quick, tmp_path):
         np.testing.assert_array_equal(f["x"][()], log["x"])
 
 
-def test_dask_executor_gives_the_local_result(quick):
+def test_dask_executor_gives_the_local_result(paper):
     distributed = pytest.importorskip("dask.distributed")
     variables = [Variable("gait.theta1", 0.5, 1.5)]
-    scene = quick.replace(**{"sim.dt": 4e-4})
+    scene = paper
     local = optimize(scene, variables=variables, budget=6, seed=3, workers=1)
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, host="127.0.0.1", dashboard_address=None,
                                   processes=True) as cluster, distributed.Client(cluster) as client:

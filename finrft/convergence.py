@@ -177,10 +177,13 @@ def require_finite(values: dict[str, Any], what: str) -> None:
 
 
 def check_resolution(stroke_time: float, dt: float, what: str = "stroke") -> int:
-    """The whole steps a stroke takes; SceneError when dt cannot resolve it: longer than the stroke, or rounding
-    the stroke to whole steps would change its length by more than 1 %."""
-    if dt > stroke_time:
-        raise SceneError(f"sim.dt = {dt:g} s is longer than a {what} ({stroke_time:.4g} s): reduce sim.dt")
+    """The whole steps a stroke takes; SceneError when dt cannot resolve it: fewer than MIN_STROKE_STEPS steps
+    (a step longer than the stroke among them), or rounding the stroke to whole steps would change its length by
+    more than 1 %."""
+    if dt > stroke_time / MIN_STROKE_STEPS:
+        longer = "is longer than" if dt > stroke_time else f"leaves fewer than {MIN_STROKE_STEPS} steps in"
+        raise SceneError(f"sim.dt = {dt:g} s {longer} a {what} of {stroke_time:.4g} s: use sim.dt <= "
+                         f"{stroke_time / MIN_STROKE_STEPS:.3g} s")
     steps = round(stroke_time / dt)
     if abs(steps * dt - stroke_time) > 0.01 * stroke_time:
         raise SceneError(f"sim.dt = {dt:g} s does not resolve a {what} of {stroke_time:.4g} s: in {steps} whole "

@@ -41,10 +41,14 @@ def _motion(run: Run) -> tuple[str, str, str, str]:
     return "rotation", "rad", "drive_torque", "N m"
 
 
-def _provenance(scene: Any, summary: dict[str, Any]) -> dict[str, str]:
-    """What every result file stores about how it was made."""
+def _provenance(scene: Any, summary: dict[str, Any]) -> dict[str, Any]:
+    """What every result file stores about how it was made, and the run's own error estimate (finrft.convergence),
+    one attribute per quantity, the unit in its name: error_estimate_angle_deg, ..._force_N, ..._eta_points."""
+    estimate = {f"error_estimate_{key}": value for key, value in (summary.get("error_estimate") or {}).items()}
+    if estimate:
+        estimate["error_companion"] = summary["error_companion"]
     return {"scene_toml": to_toml(scene), "scene_json": json.dumps(scene.to_dict()),
-            "summary_json": json.dumps(summary), **provenance()}
+            "summary_json": json.dumps(summary), **provenance(), **estimate}
 
 
 def _write_series(path: str | Path, time: np.ndarray, series: list[tuple[str, np.ndarray, str, str]],

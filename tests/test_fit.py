@@ -48,13 +48,27 @@ def test_fit_cli_writes_a_scene_drag_accepts(tmp_path, capsys, truth):
 
 
 def test_paper_procedure_on_the_measurements():
-    # The paper's fit (damping only, k = 0.209) against the three measured speeds: it runs, and its error is
-    # what it is with the preset's 1 kg m^2 inertias; fitting k, b, f_perp, f_par on two speeds must predict
-    # the third to 3 degrees (README).
+    # The paper's fit (damping only, k = 0.209) against the three measured speeds. With the preset's 1 kg m^2
+    # inertias the plate cannot bend as fast as the measured one at any damping: the fit runs to the lowest
+    # damping allowed and stays 7, 22 and 33 deg off (the README's table).
     data = [read_drag(f"{DATA}/origami_v{v}.csv") for v in (10, 30, 50)]
     result = fit(preset("paper"), data, resolve_params(["b"]), budget=20, seed=1, workers=2)
-    assert set(result.rmse_deg) == {"origami_v10", "origami_v30", "origami_v50"}
-    assert all(np.isfinite(list(result.rmse_deg.values())))
+    assert result.search.best["plate.damping"] == pytest.approx(0.01, rel=0.01)  # its lower bound
+    rmse = [result.rmse_deg[f"origami_v{v}"] for v in (10, 30, 50)]
+    np.testing.assert_allclose(rmse, [7.1, 22.2, 33.0], atol=0.1)
+    assert max(result.error_estimate_deg.values()) < 0.05  # the fit's own numerics are not the misfit
+
+
+@pytest.mark.slow
+def test_four_parameter_fit_predicts_the_unseen_speed():
+    # k, b, f_perp and f_par fitted with physical inertias on 10 and 50 mm/s predict the 30 mm/s measurement
+    # to within 3 deg RMS (README: 2.6 deg), better than the paper's damping-only fit does on the data it fits.
+    data = {v: read_drag(f"{DATA}/origami_v{v}.csv") for v in (10, 30, 50)}
+    variables = resolve_params(["k", "b", "f_perp", "f_par"], {"plate.damping": (1e-4, 100.0)})
+    result = fit(preset("physical"), [data[10], data[50]], variables, validate=[data[30]], budget=300, seed=1,
+                 workers=2)
+    assert result.validate_rmse_deg["origami_v30"] < 3.0
+    assert max(result.rmse_deg.values()) < 3.5
 
 
 def test_rft_identification_closes_the_loop(tmp_path, capsys):

@@ -1,11 +1,12 @@
 """Every run estimates its own discretisation error, and a result whose error exceeds a limit is never returned.
 
 The estimate repeats the whole run at another resolution, a companion run, and compares the two at the same
-instants. The companion normally takes steps COARSER = 4 times longer (the adaptive method: a tolerance 16 times
-looser and a largest step 4 times longer, as its steps grow with the square root of the tolerance), which costs
-about a quarter of the run. Every method converges at least at first order in the step over a run with stroke
-reversals (the drive's velocity jumps there), so by Richardson's argument the run's own error is about
-|run - companion| / (4 - 1): for a method of higher order this overestimates. Where the coarse companion would
+instants. The companion normally takes steps COARSER = 5 times longer (the adaptive method: a tolerance 25 times
+looser and a largest step 5 times longer, as its steps grow with the square root of the tolerance) and records a
+quarter of the run's instants, which with its own model costs about a quarter of the run (`finrft bench`). Every
+method converges at least at first order in the step over a run with stroke reversals (the drive's velocity jumps
+there), so by Richardson's argument the run's own error is about
+|run - companion| / (5 - 1): for a method of higher order this overestimates. Where the coarse companion would
 resolve a stroke in fewer than MIN_STROKE_STEPS steps, cannot run (it goes unstable, or its Newton solve fails),
 or gives an estimate above the limit, a fine companion takes steps half as long instead and the error is
 |run - companion| / (1 - 1/2): a coarse companion can be outside the range where the error falls with the step
@@ -20,17 +21,18 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass
 import time
+from dataclasses import dataclass
 from typing import Any, Callable, Protocol, TypeVar
 
 import numpy as np
 
 from .scene import SceneError
 
-COARSER = 4
+COARSER = 5
 FINER = 0.5
 MIN_STROKE_STEPS = 8
+COMPARE_EVERY = 4
 
 
 class SimulationFailed(RuntimeError):
@@ -77,6 +79,7 @@ class Checked(Protocol):
 
 
 R = TypeVar("R", bound=Checked)
+M = TypeVar("M")
 
 
 def _companion(scene: Any, ratio: float, record_interval: float) -> tuple[Any, str]:
@@ -113,9 +116,10 @@ def checked(run_once: Callable[[Any, Callable[[float], None] | None, bool], R], 
     start = time.perf_counter()
     every = record_every(sim.dt, sim.record_dt)
     tail = None if progress is None else lambda f: progress(0.8 + 0.2 * f)
-    # The adaptive companion keeps the time grid; a coarse one samples where both grids meet.
-    coarse = (every if sim.method == "adaptive" else math.lcm(every, COARSER)) * sim.dt
-    ratios = [(FINER, every * sim.dt)]
+    # A companion records every COMPARE_EVERY-th instant the run records (the adaptive one keeps the time grid, a
+    # coarse one samples where both grids meet): its samples are much of its cost, and they bound its steps.
+    coarse = COMPARE_EVERY * (every if sim.method == "adaptive" else math.lcm(every, COARSER)) * sim.dt
+    ratios = [(FINER, COMPARE_EVERY * every * sim.dt)]
     if sim.method == "adaptive" or run.stroke_time >= MIN_STROKE_STEPS * COARSER * sim.dt:
         ratios.insert(0, (COARSER, coarse))
     for n, (ratio, interval) in enumerate(ratios, start=1):
@@ -136,6 +140,18 @@ def checked(run_once: Callable[[Any, Callable[[float], None] | None, bool], R], 
         raise InaccurateResult(f"the estimated discretisation error is too large ({', '.join(over)}; from a "
                                f"companion run at {label}): {advice(scene)}, or raise the limit (--max-error)")
     return run
+
+
+def per_step(build: Callable[[Any], M]) -> Callable[[Any], M]:
+    """``build(scene)`` once per time step: a model depends on the numerics only through the step, so the adaptive
+    method's companion (another tolerance on the same step) reuses the run's model."""
+    models: dict[float, M] = {}
+
+    def model(scene: Any) -> M:
+        if scene.sim.dt not in models:
+            models[scene.sim.dt] = build(scene)
+        return models[scene.sim.dt]
+    return model
 
 
 def paired(time: np.ndarray, other: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -17,11 +17,11 @@ import mujoco
 import numpy as np
 
 from .convergence import (ErrorLimits, SimulationUnstable, check_resolution, checked,
-                          max_difference, paired, record_every, require_finite)
+                          max_difference, paired, per_step, record_every, require_finite)
 from .coupling import PythonCoupling, SegmentForces, installed
 from .drive import Drive
 from .integrate import NOT_CONVERGED, STEP_TOO_SMALL, Stepper, stepper
-from .models import build_plate
+from .models import PlateModel, build_plate
 from .native import captured_warnings
 from .scene import Scene
 
@@ -263,14 +263,16 @@ def simulate(scene: Scene, drive: Drive, *, progress: Callable[[float], None] | 
     companion run: see finrft.convergence). Raises SimulationUnstable rather than return a diverged run, and
     InaccurateResult when the estimate exceeds ``max_error`` (None: report it only). ``estimate_error=False``
     skips the estimate, for studies that measure the error themselves."""
-    if not estimate_error:
-        return _simulate(scene, drive, progress, False)
-    return checked(lambda s, p, companion: _simulate(s, drive, p, companion), scene, progress, max_error)
-
-
-def _simulate(scene: Scene, drive: Drive, progress: Callable[[float], None] | None, companion: bool) -> Run:
     start = time.perf_counter()
-    plate = build_plate(scene, drive.kind, drive.attack_deg)
+    model = per_step(lambda s: build_plate(s, drive.kind, drive.attack_deg))
+    if not estimate_error:
+        return _simulate(scene, drive, progress, False, model(scene), start)
+    return checked(lambda s, p, companion: _simulate(s, drive, p, companion, model(s), time.perf_counter()), scene,
+                   progress, max_error)
+
+
+def _simulate(scene: Scene, drive: Drive, progress: Callable[[float], None] | None, companion: bool,
+              plate: PlateModel, start: float) -> Run:
     m = plate.model
     d = mujoco.MjData(m)
     forces = SegmentForces(plate.groups[0])

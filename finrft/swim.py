@@ -15,8 +15,7 @@ from typing import Any, Callable
 import mujoco
 import numpy as np
 
-from .convergence import (ErrorLimits, SimulationFailed, checked, max_difference, paired,
-                          require_finite)
+from .convergence import ErrorLimits, SimulationFailed, checked, max_difference, paired, per_step, require_finite
 from .coupling import PythonCoupling, installed
 from .drive import Drive
 from .integrate import stepper
@@ -113,15 +112,16 @@ def swim(scene: RobotScene, cycles: int = 1, *, progress: Callable[[float], None
     return a diverged run, SimulationFailed when eta is undefined (a power stroke that does not move the body
     forward), and InaccurateResult when the estimate exceeds ``max_error`` (None: report it only).
     ``estimate_error=False`` skips the estimate, for studies that measure the error themselves."""
-    if not estimate_error:
-        return _swim(scene, cycles, progress, False)
-    return checked(lambda s, p, companion: _swim(s, cycles, p, companion), scene, progress, max_error)
-
-
-def _swim(scene: RobotScene, cycles: int, progress: Callable[[float], None] | None,
-          companion: bool) -> SwimRun:
     start = time.perf_counter()
-    robot = build_robot(scene)
+    model = per_step(build_robot)
+    if not estimate_error:
+        return _swim(scene, cycles, progress, False, model(scene), start)
+    return checked(lambda s, p, companion: _swim(s, cycles, p, companion, model(s), time.perf_counter()), scene,
+                   progress, max_error)
+
+
+def _swim(scene: RobotScene, cycles: int, progress: Callable[[float], None] | None, companion: bool,
+          robot: RobotModel, start: float) -> SwimRun:
     m = robot.model
     d = mujoco.MjData(m)
     drive = gait_drive(scene, cycles)

@@ -5,6 +5,7 @@ import re
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 import tomllib
 
@@ -16,6 +17,10 @@ import pytest
 from finrft import rft
 from finrft.cli import main
 from finrft.scene import RobotScene, preset, to_toml
+
+# Subprocesses run outside the repository: from its root `python -m finrft` would import the source tree, which
+# holds neither the built plugin nor the packaged models, instead of the installed package.
+OUTSIDE = tempfile.gettempdir()
 
 FAST = ["--set", "sim.dt=0.001", "--distance", "30"]
 
@@ -170,7 +175,8 @@ def test_table_law_from_a_scene_file_matches_the_paper_law(tmp_path, capsys):
 
 
 def test_python_dash_m_entry_point():
-    done = subprocess.run([sys.executable, "-m", "finrft", "rotate", "--help"], capture_output=True, text=True)
+    done = subprocess.run([sys.executable, "-m", "finrft", "rotate", "--help"], capture_output=True, text=True,
+                          cwd=OUTSIDE)
     assert done.returncode == 0 and "degrees/s" in done.stdout
 
 
@@ -264,7 +270,7 @@ def test_scene_dump_with_a_scene_file_is_refused(capsys):
 
 def _run_cli(*argv: str, **options) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", "finrft", *argv], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, **options)
+                            stderr=subprocess.PIPE, text=True, cwd=OUTSIDE, **options)
 
 
 def test_closed_stdout_is_no_traceback():
@@ -278,8 +284,8 @@ def test_closed_stdout_is_no_traceback():
 def test_interrupt_is_one_line_and_exit_130():
     code = ("import sys; from finrft.cli import main; print('ready', flush=True); "
             "sys.exit(main(sys.argv[1:]))")
-    run = subprocess.Popen([sys.executable, "-c", code, "drag", "--distance", "100000"], stdout=subprocess.PIPE,
-                           stderr=subprocess.PIPE, text=True)
+    run = subprocess.Popen([sys.executable, "-c", code, "drag", "--distance", "100000"], cwd=OUTSIDE,
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     assert run.stdout.readline() == "ready\n"
     time.sleep(0.5)
     run.send_signal(signal.SIGINT)
@@ -312,7 +318,7 @@ def test_preset_help_states_what_the_presets_hold(capsys, command, cls):
 
 def test_swim_help_defaults_are_the_presets():
     text = " ".join(subprocess.run([sys.executable, "-m", "finrft", "swim", "--help"], capture_output=True,
-                                   text=True).stdout.split())
+                                   text=True, cwd=OUTSIDE).stdout.split())
     options = text[text.index("options:"):]
     stated = {key: float(re.search(rf"{flag} [A-Z_]+ .*?default: the scene's, (-?\d+)", options).group(1))
               for flag, key in (("--theta1", "theta1"), ("--theta2", "theta2"), ("--omega", "omega"),

@@ -41,8 +41,9 @@ def _generations(log: Path) -> int:
 def _interrupt(argv: list[str], log: Path, sig: int, workers_too: bool = False) -> subprocess.CompletedProcess:
     """Run ``finrft argv`` and send it ``sig`` once its log holds two generations (to its whole process group,
     as a terminal's Ctrl-C, with ``workers_too``)."""
+    # Outside the repository: from its root `python -m finrft` would import the source tree, not the installed package.
     proc = subprocess.Popen([sys.executable, "-m", "finrft", *argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, start_new_session=True)
+                            text=True, start_new_session=True, cwd=log.parent)
     deadline = time.monotonic() + 60
     while _generations(log) < 2 and proc.poll() is None and time.monotonic() < deadline:
         time.sleep(0.01)

@@ -65,12 +65,22 @@ class ErrorLimits:
                 if key in estimate and not estimate[key] <= limit]
 
 
+@dataclass(kw_only=True)
+class Estimated:
+    """The error estimate a result carries, filled by `checked`."""
+
+    error_estimate: dict[str, float] | None = None  # quantity (its unit in the name) -> estimate; None: not made
+    error_companion: str = ""                       # the companion run the estimate came from
+    error_wall_s: float = 0.0                       # the companion run's wall time
+
+
 class Checked(Protocol):
     """What a result offers the check: its scene, its shortest stroke, and its differences from a companion."""
 
     scene: Any
     error_estimate: dict[str, float] | None
     error_companion: str
+    error_wall_s: float
 
     @property
     def stroke_time(self) -> float: ...
@@ -103,16 +113,28 @@ def record_every(dt: float, record_dt: float) -> int:
     return max(1, round(record_dt / dt))
 
 
-def checked(run_once: Callable[[Any, Callable[[float], None] | None, bool], R], scene: Any,
-            progress: Callable[[float], None] | None = None, limits: ErrorLimits | None = ErrorLimits()) -> R:
-    """``run_once(scene, progress, companion)`` with ``error_estimate`` filled from a companion run;
-    InaccurateResult when it exceeds ``limits`` (None: report only). A companion (``companion`` True) records the
-    state only, at instants the run records too, and takes no chatter probe: its comparison with the run is the
-    check. A coarse companion can leave the range where the error falls with the step (an explicit feedback
-    that needs the run's step, a stroke barely resolved): an estimate above the limit is confirmed by the fine
-    companion before the run is refused."""
+def checked(build: Callable[[Any], M], run_once: Callable[[Any, M, Callable[[float], None] | None, bool], R],
+            scene: Any, progress: Callable[[float], None] | None = None,
+            limits: ErrorLimits | None = ErrorLimits(), estimate: bool = True) -> R:
+    """``run_once(scene, build(scene), progress, companion)`` with ``error_estimate`` filled from a companion run;
+    InaccurateResult when it exceeds ``limits`` (None: report only); ``estimate=False``: the run alone.
+
+    A companion (``companion`` True) records the state only, at instants the run records too, and takes no chatter
+    probe: its comparison with the run is the check. A model depends on the numerics only through the step, so
+    the adaptive method's companion (another tolerance on the same step) reuses the run's. A coarse companion can
+    leave the range where the error falls with the step (an explicit feedback that needs the run's step, a stroke
+    barely resolved): an estimate above the limit is confirmed by the fine companion before the run is refused."""
+    models: dict[float, M] = {}
+
+    def once(scene: Any, progress: Callable[[float], None] | None, companion: bool) -> R:
+        if scene.sim.dt not in models:
+            models[scene.sim.dt] = build(scene)
+        return run_once(scene, models[scene.sim.dt], progress, companion)
+
+    if not estimate:
+        return once(scene, progress, False)
     sim = scene.sim
-    run = run_once(scene, None if progress is None else lambda f: progress(0.8 * f), False)
+    run = once(scene, None if progress is None else lambda f: progress(0.8 * f), False)
     start = time.perf_counter()
     every = record_every(sim.dt, sim.record_dt)
     tail = None if progress is None else lambda f: progress(0.8 + 0.2 * f)
@@ -125,7 +147,7 @@ def checked(run_once: Callable[[Any, Callable[[float], None] | None, bool], R], 
     for n, (ratio, interval) in enumerate(ratios, start=1):
         companion, label = _companion(scene, ratio, interval)
         try:
-            other = run_once(companion, tail, True)
+            other = once(companion, tail, True)
         except (SimulationFailed, SceneError):
             if n < len(ratios):
                 continue
@@ -140,18 +162,6 @@ def checked(run_once: Callable[[Any, Callable[[float], None] | None, bool], R], 
         raise InaccurateResult(f"the estimated discretisation error is too large ({', '.join(over)}; from a "
                                f"companion run at {label}): {advice(scene)}, or raise the limit (--max-error)")
     return run
-
-
-def per_step(build: Callable[[Any], M]) -> Callable[[Any], M]:
-    """``build(scene)`` once per time step: a model depends on the numerics only through the step, so the adaptive
-    method's companion (another tolerance on the same step) reuses the run's model."""
-    models: dict[float, M] = {}
-
-    def model(scene: Any) -> M:
-        if scene.sim.dt not in models:
-            models[scene.sim.dt] = build(scene)
-        return models[scene.sim.dt]
-    return model
 
 
 def paired(time: np.ndarray, other: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -16,8 +16,8 @@ from typing import Any, Callable, Sequence
 import mujoco
 import numpy as np
 
-from .convergence import (ErrorLimits, SimulationUnstable, check_resolution, checked,
-                          max_difference, paired, per_step, record_every, require_finite)
+from .convergence import (ErrorLimits, Estimated, SimulationUnstable, check_resolution, checked,
+                          max_difference, paired, record_every, require_finite)
 from .coupling import PythonCoupling, SegmentForces, installed
 from .drive import Drive
 from .integrate import NOT_CONVERGED, STEP_TOO_SMALL, Stepper, stepper
@@ -29,7 +29,7 @@ _BAD_STATE = (mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_BADQPOS
 
 
 @dataclass
-class Run:
+class Run(Estimated):
     """Results of one plate test, SI units. Drag: metres and newtons; rotate: radians and newton-metres."""
 
     scene: Scene
@@ -46,9 +46,6 @@ class Run:
     wall_s: float
     backend: str = "python"
     steps_rejected: int = 0        # the adaptive method's rejected steps, and newton's halved ones
-    error_estimate: dict[str, float] | None = None  # see finrft.convergence; None when not estimated
-    error_companion: str = ""                       # the companion run the estimate came from
-    error_wall_s: float = 0.0                       # the companion run's wall time
 
     @property
     def stroke_time(self) -> float:
@@ -263,16 +260,14 @@ def simulate(scene: Scene, drive: Drive, *, progress: Callable[[float], None] | 
     companion run: see finrft.convergence). Raises SimulationUnstable rather than return a diverged run, and
     InaccurateResult when the estimate exceeds ``max_error`` (None: report it only). ``estimate_error=False``
     skips the estimate, for studies that measure the error themselves."""
+    return checked(lambda s: build_plate(s, drive.kind, drive.attack_deg),
+                   lambda s, plate, p, companion: _simulate(s, drive, plate, p, companion), scene, progress,
+                   max_error, estimate_error)
+
+
+def _simulate(scene: Scene, drive: Drive, plate: PlateModel, progress: Callable[[float], None] | None,
+              companion: bool) -> Run:
     start = time.perf_counter()
-    model = per_step(lambda s: build_plate(s, drive.kind, drive.attack_deg))
-    if not estimate_error:
-        return _simulate(scene, drive, progress, False, model(scene), start)
-    return checked(lambda s, p, companion: _simulate(s, drive, p, companion, model(s), time.perf_counter()), scene,
-                   progress, max_error)
-
-
-def _simulate(scene: Scene, drive: Drive, progress: Callable[[float], None] | None, companion: bool,
-              plate: PlateModel, start: float) -> Run:
     m = plate.model
     d = mujoco.MjData(m)
     forces = SegmentForces(plate.groups[0])

@@ -15,7 +15,7 @@ from typing import Any, Callable
 import mujoco
 import numpy as np
 
-from .convergence import ErrorLimits, SimulationFailed, checked, max_difference, paired, per_step, require_finite
+from .convergence import ErrorLimits, Estimated, SimulationFailed, checked, max_difference, paired, require_finite
 from .coupling import PythonCoupling, installed
 from .drive import Drive
 from .integrate import stepper
@@ -25,7 +25,7 @@ from .simulate import Prescribed, schedule, step_through
 
 
 @dataclass
-class SwimRun:
+class SwimRun(Estimated):
     """Results of a swim, SI units; arm and fin quantities are the right side's."""
 
     scene: RobotScene
@@ -40,9 +40,6 @@ class SwimRun:
     wall_s: float
     backend: str
     steps_rejected: int = 0    # the adaptive method's rejected steps, and newton's halved ones
-    error_estimate: dict[str, float] | None = None  # see finrft.convergence; None when not estimated
-    error_companion: str = ""                       # the companion run the estimate came from
-    error_wall_s: float = 0.0                       # the companion run's wall time
 
     @property
     def cycle_time(self) -> float:
@@ -112,16 +109,13 @@ def swim(scene: RobotScene, cycles: int = 1, *, progress: Callable[[float], None
     return a diverged run, SimulationFailed when eta is undefined (a power stroke that does not move the body
     forward), and InaccurateResult when the estimate exceeds ``max_error`` (None: report it only).
     ``estimate_error=False`` skips the estimate, for studies that measure the error themselves."""
+    return checked(build_robot, lambda s, robot, p, companion: _swim(s, cycles, robot, p, companion), scene,
+                   progress, max_error, estimate_error)
+
+
+def _swim(scene: RobotScene, cycles: int, robot: RobotModel, progress: Callable[[float], None] | None,
+          companion: bool) -> SwimRun:
     start = time.perf_counter()
-    model = per_step(build_robot)
-    if not estimate_error:
-        return _swim(scene, cycles, progress, False, model(scene), start)
-    return checked(lambda s, p, companion: _swim(s, cycles, p, companion, model(s), time.perf_counter()), scene,
-                   progress, max_error)
-
-
-def _swim(scene: RobotScene, cycles: int, progress: Callable[[float], None] | None, companion: bool,
-          robot: RobotModel, start: float) -> SwimRun:
     m = robot.model
     d = mujoco.MjData(m)
     drive = gait_drive(scene, cycles)

@@ -251,8 +251,15 @@ def _midpoints(lo: float, hi: float, n: int) -> np.ndarray:
     return lo + (hi - lo) * (np.arange(n) + 0.5) / n
 
 
-def _count(length: float, h: float, least: int = 1) -> int:
-    return max(least, math.ceil(length / h - 1e-9))
+def _count(length: float, h: float, multiple: int = 1) -> int:
+    """Cells of size at most h along a length, a multiple of ``multiple``."""
+    return multiple * max(1, math.ceil(length / h / multiple - 1e-9))
+
+
+# Azimuthal cells come in multiples of 4 and polar bands in pairs, so that cell edges, never element centres, lie
+# on the planes through the geom's axes: there a face stops leading a motion along an axis, and a centre on the
+# edge would lead or not by rounding.
+AZIMUTH = 4
 
 
 def _box(size: np.ndarray, h: float):
@@ -275,12 +282,12 @@ def _bands(axes: np.ndarray, theta0: float, theta1: float, z: float, h: float):
     bands of equal polar angle, each split into azimuthal cells about h long."""
     a, b, c = axes
     reach = max(axes)
-    bands = _count(reach * (theta1 - theta0), h)
+    bands = _count(reach * (theta1 - theta0), h, 2)
     edges = np.linspace(theta0, theta1, bands + 1)
     parts = []
     for lo, hi in zip(edges[:-1], edges[1:]):
         theta = 0.5 * (lo + hi)
-        n = _count(2 * np.pi * reach * np.sin(theta), h, least=3)
+        n = _count(2 * np.pi * reach * np.sin(theta), h, AZIMUTH)
         phi = _midpoints(0.0, 2 * np.pi, n)
         unit = np.column_stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi),
                                 np.full(n, np.cos(theta))])
@@ -293,7 +300,7 @@ def _bands(axes: np.ndarray, theta0: float, theta1: float, z: float, h: float):
 
 def _side(r: float, half: float, h: float):
     """A cylinder's side, radius r, from -half to half along z."""
-    n, m = _count(2 * np.pi * r, h, least=3), _count(2 * half, h)
+    n, m = _count(2 * np.pi * r, h, AZIMUTH), _count(2 * half, h)
     phi, z = np.meshgrid(_midpoints(0.0, 2 * np.pi, n), _midpoints(-half, half, m), indexing="ij")
     normal = np.column_stack([np.cos(phi.ravel()), np.sin(phi.ravel()), np.zeros(n * m)])
     centre = normal * r + np.column_stack([np.zeros((n * m, 2)), z.ravel()])
@@ -307,7 +314,7 @@ def _disk(r: float, z: float, facing: float, h: float):
     parts = []
     for lo, hi in zip(edges[:-1], edges[1:]):
         mid = 0.5 * (lo + hi)
-        n = _count(2 * np.pi * mid, h, least=3)
+        n = _count(2 * np.pi * mid, h, AZIMUTH)
         phi = _midpoints(0.0, 2 * np.pi, n)
         centre = np.column_stack([mid * np.cos(phi), mid * np.sin(phi), np.full(n, z)])
         normal = np.tile([0.0, 0.0, facing], (n, 1))

@@ -10,8 +10,10 @@ passive-force callback that `Attached.installed` sets for a block and then resto
 Elements: a box's faces are cut into rectangles, a cylinder's side into rectangles and its caps into ring
 sectors, spheres, ellipsoids and a capsule's ends into bands of equal polar angle split in azimuth, a mesh's
 triangles into equal sub-triangles; all about ``element_size`` across, each with the exact area of its cell (on
-an ellipsoid, the area at the cell's centre). Each element acts at its cell's centre: forces converge as the square
-of the element size where the surface crosses elements or curves.
+an ellipsoid, the area at the cell's centre). Each element acts at its cell's centre, so the force on a flat face is
+exact while the depth is linear over it; where the free surface cuts elements the error falls as the square of the
+element size, and where the edge of a curved face's leading part cuts elements (the stress jumps there) between
+first and second order.
 """
 
 from __future__ import annotations

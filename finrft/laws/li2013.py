@@ -11,7 +11,7 @@ A plate element of area dA at depth |z| below the free surface, moving in the ve
 (the non-zero terms of the paper's discrete Fourier fit), zeta the medium's scale (alpha_z of a horizontal plate
 pushed straight down, in N/cm^3 for the generic coefficients, whose values at (0, +pi/2) sum to 1).
 
-Conventions (the paper's Fig. 2A), checked against the physics rather than taken on trust: z points up; the plate
+Conventions (drawn in the paper's Fig. 2A), fixed here by the fit's own values and the physics: z points up; the plate
 moves towards -x when gamma = 0, so alpha_x > 0 resists the horizontal motion (alpha_x(pi/2, 0) = 0.370 N/cm^3 on
 a vertical plate); gamma is the angle of the velocity below the horizontal (gamma > 0 moving down:
 alpha_z(0, +pi/2) = 1.000, alpha_z(0, -pi/2) = -0.250 on extraction); beta is the plate's angle, positive when

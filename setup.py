@@ -83,7 +83,7 @@ class BuildPlugin(build_ext):
                 ext.extra_link_args += ["-lm", "-Wl,-rpath,$ORIGIN/../mujoco"]
         if self.compiler.compiler_type != "msvc":
             self.compiler.set_executable("linker_so", plugin_linker(self.compiler.linker_so))
-        # A library left in build/ by an earlier install may be for another MuJoCo: always compile (one file).
+        # A library left in build/ by an earlier install may be for another MuJoCo: always compile (two files).
         self.force = True
         super().build_extensions()
 
@@ -106,6 +106,6 @@ def plugin_linker(python_linker: list[str]) -> list[str]:
 
 
 setup(
-    ext_modules=[Extension("finrft.libfinrft_rft", sources=["plugins/finrft_rft.c"])],
+    ext_modules=[Extension("finrft.libfinrft_rft", sources=["plugins/finrft_rft.c", "plugins/finrft_li2013.c"])],
     cmdclass={"build_ext": BuildPlugin},
 )

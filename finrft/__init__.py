@@ -15,14 +15,15 @@ The API, by topic:
 - plate tests: `Drive`, `simulate` -> `Run`; `SimulationUnstable` when a run blows up or chatters
 - the robot: `swim` -> `SwimRun`; the paper's Table I with `table_scenes` and `table_rows`
 - many runs on all cores: `run_many` (plate tests), `map_jobs` (any module-level function), `local_executor`
+- RFT on any MuJoCo model: `attach` (the Li, Zhang & Goldman 2013 law on the named bodies of an MjSpec)
 - fitting plate parameters to measured drags: `read_drag`, `resolve_params`, `fit` -> `Fit`
 - optimising the robot's gait: `optimize`, `Variable`
 - files: `write_h5`, `write_rrd` (a plate run), `write_swim_h5`, `write_swim_rrd` (a swim); they load h5py and
   rerun on first use, not on ``import finrft``
 
-The functions `simulate`, `swim`, `fit` and `optimize` share their names with the modules that define them
-(``finrft.simulate`` ...): here the names are the functions; import other names from those modules by their full
-path (``from finrft.fit import simulated_drag``).
+The functions `attach`, `simulate`, `swim`, `fit` and `optimize` share their names with the modules that define
+them (``finrft.simulate`` ...): here the names are the functions; import other names from those modules by their
+full path (``from finrft.fit import simulated_drag``).
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from __future__ import annotations
 from importlib import import_module
 from typing import Any
 
+from .attach import attach
 from .batch import local_executor, map_jobs, run_many
 from .drive import Drive
 from .fit import Fit, fit, read_drag, resolve_params
@@ -41,8 +43,8 @@ from .swim import SwimRun, swim, table_rows, table_scenes
 _RECORDING = ("write_h5", "write_rrd", "write_swim_h5", "write_swim_rrd")
 
 __all__ = ["Drive", "Fit", "RobotScene", "Run", "Scene", "SceneError", "SimulationUnstable", "SwimRun", "Variable",
-           "fit", "load_scene", "local_executor", "map_jobs", "optimize", "preset", "read_drag", "resolve_params",
-           "run_many", "simulate", "swim", "table_rows", "table_scenes", "to_toml", *_RECORDING]
+           "attach", "fit", "load_scene", "local_executor", "map_jobs", "optimize", "preset", "read_drag",
+           "resolve_params", "run_many", "simulate", "swim", "table_rows", "table_scenes", "to_toml", *_RECORDING]
 
 
 def __getattr__(name: str) -> Any:

@@ -619,7 +619,10 @@ FINRFT_EXPORT int finrft_adaptive_advance(const mjModel* m, mjData* d, mjtNum du
   return failed;
 }
 
+void finrft_register_surface(void);  // plugins/finrft_li2013.c
+
 mjPLUGIN_LIB_INIT(finrft_rft) {
+  finrft_register_surface();
   mjpPlugin plugin;
   mjp_defaultPlugin(&plugin);
   plugin.name = "finrft.rft";

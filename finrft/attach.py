@@ -1,0 +1,350 @@
+"""RFT on any MuJoCo model: `attach` cuts the geoms of named bodies of a user's `mujoco.MjSpec` into surface
+elements and gives them a granular resistive force law, before the spec is compiled.
+
+Each element below the free surface (z < surface_z, gravity along -z) that leads the motion (outward normal .
+velocity > 0) takes the law's stress times its depth and area (`finrft.laws.li2013.element_forces`). The force
+appears where MuJoCo's passive forces appear, ``data.qfrc_passive``: from the native plugin ``finrft.surface``
+(plugins/finrft_li2013.c, one instance per body, the elements in its config) or, with the Python backend, from a
+passive-force callback that `Attached.installed` sets for a block and then restores.
+
+Elements: a box's faces are cut into rectangles, a cylinder's side into rectangles and its caps into ring
+sectors, spheres, ellipsoids and a capsule's ends into bands of equal polar angle split in azimuth, a mesh's
+triangles into equal sub-triangles; all about ``element_size`` across, each with the exact area of its cell (on
+an ellipsoid, the area at the cell's centre). Each element acts at its cell's centre, so the force on a flat face is
+exact while the depth is linear over it; where the free surface cuts elements the error falls as the square of the
+element size, and where the edge of a curved face's leading part cuts elements (the stress jumps there) between
+first and second order.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+from dataclasses import dataclass, field
+from typing import Iterator, Sequence
+
+import mujoco
+import numpy as np
+
+from . import coupling, native
+from .laws import li2013
+from .scene import SceneError
+
+LAWS = ("li2013",)
+BACKENDS = ("native", "python")
+PLUGIN = "finrft.surface"
+# More elements than this make the plugin's config and every passive-force evaluation needlessly large.
+MAX_ELEMENTS = 100_000
+
+_G = mujoco.mjtGeom
+SUPPORTED = {int(_G.mjGEOM_BOX): "box", int(_G.mjGEOM_CAPSULE): "capsule", int(_G.mjGEOM_CYLINDER): "cylinder",
+             int(_G.mjGEOM_SPHERE): "sphere", int(_G.mjGEOM_ELLIPSOID): "ellipsoid", int(_G.mjGEOM_MESH): "mesh"}
+
+
+@dataclass(frozen=True, eq=False)
+class Surface:
+    """The elements of one body, in its frame: centres (N, 3, m), outward unit normals (N, 3), areas (N, m^2)."""
+
+    body: str
+    centre: np.ndarray
+    normal: np.ndarray
+    area: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class Attached:
+    """What `attach` added to a spec: the law and medium, and each body's surface elements."""
+
+    law: str
+    zeta: float
+    surface_z: float
+    element_size: float
+    backend: str               # the backend in use: "native" (plugin instances in the spec) or "python"
+    coefficients: li2013.Coefficients
+    surfaces: tuple[Surface, ...] = field(repr=False)
+
+    @property
+    def elements(self) -> dict[str, int]:
+        """The number of elements per body."""
+        return {s.body: len(s.area) for s in self.surfaces}
+
+    def callback(self, model: mujoco.MjModel) -> "SurfaceForces":
+        """The Python backend's passive-force callback for the compiled model."""
+        return SurfaceForces(self, model)
+
+    @contextlib.contextmanager
+    def installed(self, model: mujoco.MjModel) -> Iterator[None]:
+        """A block in which MuJoCo applies the forces: with the Python backend, the callback is installed for
+        the block (compile every model first: MuJoCo's compiler cannot run Python callbacks); with the native
+        plugin, nothing needs installing."""
+        if self.backend == "native":
+            yield
+            return
+        with coupling.installed(self.callback(model)):
+            yield
+
+
+class SurfaceForces:
+    """The Python backend: every element's force, summed per body into one force and one torque about the body's
+    origin and added to ``qfrc_passive``, as the native plugin does."""
+
+    def __init__(self, attached: Attached, model: mujoco.MjModel) -> None:
+        self.attached = attached
+        self.bodies = [(model.body(s.body).id, s) for s in attached.surfaces]
+        self._twist = np.zeros(6)
+
+    def element_forces(self, m: mujoco.MjModel, d: mujoco.MjData, body: int, surface: Surface
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        """Each element's force (N, 3) and its arm from the body's origin (N, 3), world frame."""
+        a = self.attached
+        rotation = d.xmat[body].reshape(3, 3)
+        arm = surface.centre @ rotation.T
+        normal = surface.normal @ rotation.T
+        mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_BODY, body, self._twist, 0)
+        velocity = self._twist[3:] + np.cross(self._twist[:3], arm)
+        depth = a.surface_z - (d.xpos[body, 2] + arm[:, 2])
+        return li2013.element_forces(normal, velocity, depth, surface.area, a.zeta, a.coefficients), arm
+
+    def __call__(self, m: mujoco.MjModel, d: mujoco.MjData) -> None:
+        for body, surface in self.bodies:
+            force, arm = self.element_forces(m, d, body, surface)
+            mujoco.mj_applyFT(m, d, force.sum(axis=0), np.cross(arm, force).sum(axis=0), d.xpos[body], body,
+                              d.qfrc_passive)
+
+
+def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str, law: str = "li2013", zeta: float = 1.0,
+           surface_z: float = 0.0, element_size: float = 0.005, backend: str = "native",
+           coefficients: li2013.Coefficients = li2013.GENERIC) -> Attached:
+    """Add granular RFT to the named bodies of ``spec`` (before it is compiled).
+
+    ``law``: ``li2013`` (`finrft.laws.li2013`) with ``coefficients`` (default: the generic medium) scaled by
+    ``zeta``; ``surface_z``: height of the free surface, m; ``element_size``: the elements' size, m;
+    ``backend``: ``native`` (falls back to ``python``, with a warning, when the plugin cannot be loaded) or
+    ``python`` (then run the model inside ``Attached.installed``). Raises `SceneError` on bad input.
+    """
+    names = [bodies] if isinstance(bodies, str) else list(bodies)
+    _check(names, law, zeta, surface_z, element_size, backend)
+    backend = native.resolve_backend(backend)
+    model = spec.copy().compile()
+    surfaces = []
+    for name in names:
+        if spec.body(name) is None:
+            raise SceneError(f"attach: the model has no body named {name!r}")
+        body = model.body(name).id
+        if backend == "native" and model.body_plugin[body] >= 0:
+            raise SceneError(f"attach: body {name!r} already has a plugin (a body takes one)")
+        surfaces.append(_surface(model, name, body, element_size))
+    total = sum(len(s.area) for s in surfaces)
+    if total > MAX_ELEMENTS:
+        raise SceneError(f"attach: element_size = {element_size:g} m gives {total} elements, more than "
+                         f"{MAX_ELEMENTS}: use a larger element_size")
+    attached = Attached(law, float(zeta), float(surface_z), float(element_size), backend, coefficients,
+                        tuple(surfaces))
+    if backend == "native":
+        spec.activate_plugin(PLUGIN)
+        for surface in surfaces:
+            _bind(spec, attached, surface)
+    return attached
+
+
+def _check(names: list[str], law: str, zeta: float, surface_z: float, element_size: float, backend: str) -> None:
+    if law not in LAWS:
+        raise SceneError(f"attach: law must be one of {', '.join(LAWS)}, got {law!r}")
+    if backend not in BACKENDS:
+        raise SceneError(f"attach: backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
+    if not names:
+        raise SceneError("attach: name at least one body")
+    if len(set(names)) != len(names):
+        raise SceneError("attach: a body is named twice")
+    if not (math.isfinite(zeta) and zeta > 0):
+        raise SceneError(f"attach: zeta must be > 0, got {zeta!r}")
+    if not math.isfinite(surface_z):
+        raise SceneError(f"attach: surface_z must be finite, got {surface_z!r}")
+    if not (math.isfinite(element_size) and element_size > 0):
+        raise SceneError(f"attach: element_size must be > 0 m, got {element_size!r}")
+
+
+def _bind(spec: mujoco.MjSpec, attached: Attached, surface: Surface) -> None:
+    elements = np.column_stack([surface.centre, surface.normal, surface.area])
+    instance = spec.add_plugin(name=f"finrft_surface_{surface.body}", plugin_name=PLUGIN, active=True)
+    instance.config = {
+        "law": attached.law,
+        "coefficients": " ".join(map(repr, attached.coefficients.values())),
+        "zeta": repr(attached.zeta),
+        "surface_z": repr(attached.surface_z),
+        "elements": " ".join(map(repr, elements.ravel().tolist())),  # repr: the Python backend's exact numbers
+    }
+    body = spec.body(surface.body)
+    body.plugin = instance
+    body.plugin.name = instance.name
+    body.plugin.active = True
+
+
+def _surface(model: mujoco.MjModel, name: str, body: int, h: float) -> Surface:
+    geoms = np.flatnonzero(model.geom_bodyid == body)
+    if not len(geoms):
+        raise SceneError(f"attach: body {name!r} has no geoms to cut into elements")
+    for g in geoms:
+        if int(model.geom_type[g]) not in SUPPORTED:
+            kind = mujoco.mjtGeom(model.geom_type[g]).name.removeprefix("mjGEOM_").lower()
+            raise SceneError(f"attach: geom {model.geom(g).name or int(g)!r} of body {name!r} is a {kind}; RFT takes "
+                             f"{', '.join(SUPPORTED.values())}")
+    estimate = sum(_area(model, g) for g in geoms) / h ** 2
+    if estimate > MAX_ELEMENTS:
+        raise SceneError(f"attach: element_size = {h:g} m gives about {estimate:.3g} elements on body {name!r}, "
+                         f"more than {MAX_ELEMENTS}: use a larger element_size")
+    parts = []
+    for g in geoms:
+        centre, normal, area = _geom_elements(model, g, h)
+        rotation = np.empty(9)
+        mujoco.mju_quat2Mat(rotation, model.geom_quat[g])
+        rotation = rotation.reshape(3, 3)
+        parts.append((centre @ rotation.T + model.geom_pos[g], normal @ rotation.T, area))
+    centre, normal, area = (np.concatenate(p) for p in zip(*parts))
+    return Surface(name, centre, normal, area)
+
+
+def _mesh(model: mujoco.MjModel, g: int) -> tuple[np.ndarray, np.ndarray]:
+    """A mesh geom's triangles (T, 3, 3), in its frame."""
+    mesh = model.geom_dataid[g]
+    vert = model.mesh_vert[model.mesh_vertadr[mesh]:model.mesh_vertadr[mesh] + model.mesh_vertnum[mesh]]
+    face = model.mesh_face[model.mesh_faceadr[mesh]:model.mesh_faceadr[mesh] + model.mesh_facenum[mesh]]
+    return vert[face].astype(float)
+
+
+def _area(model: mujoco.MjModel, g: int) -> float:
+    """A geom's surface area (for an ellipsoid, an upper bound)."""
+    size, kind = model.geom_size[g], int(model.geom_type[g])
+    if kind == _G.mjGEOM_BOX:
+        a, b, c = size
+        return 8 * (a * b + b * c + c * a)
+    if kind == _G.mjGEOM_MESH:
+        t = _mesh(model, g)
+        return 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1).sum()
+    if kind in (_G.mjGEOM_SPHERE, _G.mjGEOM_ELLIPSOID):
+        return 4 * np.pi * max(size if kind == _G.mjGEOM_ELLIPSOID else size[:1]) ** 2
+    r, half = size[0], size[1]
+    return 4 * np.pi * r * half + (4 if kind == _G.mjGEOM_CAPSULE else 2) * np.pi * r ** 2
+
+
+def _geom_elements(model: mujoco.MjModel, g: int, h: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    size, kind = model.geom_size[g], int(model.geom_type[g])
+    if kind == _G.mjGEOM_BOX:
+        return _box(size, h)
+    if kind == _G.mjGEOM_SPHERE:
+        return _bands(np.full(3, size[0]), 0.0, np.pi, 0.0, h)
+    if kind == _G.mjGEOM_ELLIPSOID:
+        return _bands(size, 0.0, np.pi, 0.0, h)
+    if kind == _G.mjGEOM_MESH:
+        return _triangles(_mesh(model, g), h)
+    r, half = size[0], size[1]
+    if kind == _G.mjGEOM_CYLINDER:
+        ends = [_disk(r, half, 1.0, h), _disk(r, -half, -1.0, h)]
+    else:
+        ends = [_bands(np.full(3, r), 0.0, np.pi / 2, half, h), _bands(np.full(3, r), np.pi / 2, np.pi, -half, h)]
+    return _join([_side(r, half, h), *ends])
+
+
+def _join(parts):
+    return tuple(np.concatenate(p) for p in zip(*parts))
+
+
+def _midpoints(lo: float, hi: float, n: int) -> np.ndarray:
+    return lo + (hi - lo) * (np.arange(n) + 0.5) / n
+
+
+def _count(length: float, h: float, multiple: int = 1) -> int:
+    """Cells of size at most h along a length, a multiple of ``multiple``."""
+    return multiple * max(1, math.ceil(length / h / multiple - 1e-9))
+
+
+# Azimuthal cells come in multiples of 4 and polar bands in pairs, so that cell edges, never element centres, lie
+# on the planes through the geom's axes: there a face stops leading a motion along an axis, and a centre on the
+# edge would lead or not by rounding.
+AZIMUTH = 4
+
+
+def _box(size: np.ndarray, h: float):
+    parts = []
+    for k in range(3):
+        i, j = [a for a in range(3) if a != k]
+        ni, nj = _count(2 * size[i], h), _count(2 * size[j], h)
+        u, v = np.meshgrid(_midpoints(-size[i], size[i], ni), _midpoints(-size[j], size[j], nj), indexing="ij")
+        for sign in (1.0, -1.0):
+            centre = np.zeros((ni * nj, 3))
+            centre[:, i], centre[:, j], centre[:, k] = u.ravel(), v.ravel(), sign * size[k]
+            normal = np.zeros((ni * nj, 3))
+            normal[:, k] = sign
+            parts.append((centre, normal, np.full(ni * nj, 4 * size[i] * size[j] / (ni * nj))))
+    return _join(parts)
+
+
+def _bands(axes: np.ndarray, theta0: float, theta1: float, z: float, h: float):
+    """An ellipsoid with semi-axes ``axes`` between polar angles theta0 and theta1, shifted by z along its axis:
+    bands of equal polar angle, each split into azimuthal cells about h long."""
+    a, b, c = axes
+    reach = max(axes)
+    bands = _count(reach * (theta1 - theta0), h, 2)
+    edges = np.linspace(theta0, theta1, bands + 1)
+    parts = []
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        theta = 0.5 * (lo + hi)
+        n = _count(2 * np.pi * reach * np.sin(theta), h, AZIMUTH)
+        phi = _midpoints(0.0, 2 * np.pi, n)
+        unit = np.column_stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi),
+                                np.full(n, np.cos(theta))])
+        normal = unit / axes
+        normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+        stretch = np.linalg.norm(unit * np.array([b * c, a * c, a * b]), axis=1)
+        parts.append((unit * axes + [0.0, 0.0, z], normal, (np.cos(lo) - np.cos(hi)) * 2 * np.pi / n * stretch))
+    return _join(parts)
+
+
+def _side(r: float, half: float, h: float):
+    """A cylinder's side, radius r, from -half to half along z."""
+    n, m = _count(2 * np.pi * r, h, AZIMUTH), _count(2 * half, h)
+    phi, z = np.meshgrid(_midpoints(0.0, 2 * np.pi, n), _midpoints(-half, half, m), indexing="ij")
+    normal = np.column_stack([np.cos(phi.ravel()), np.sin(phi.ravel()), np.zeros(n * m)])
+    centre = normal * r + np.column_stack([np.zeros((n * m, 2)), z.ravel()])
+    return centre, normal, np.full(n * m, 2 * np.pi * r * 2 * half / (n * m))
+
+
+def _disk(r: float, z: float, facing: float, h: float):
+    """A disk of radius r at height z, its normal along facing * z: rings split into sectors about h long."""
+    rings = _count(r, h)
+    edges = np.linspace(0.0, r, rings + 1)
+    parts = []
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        mid = 0.5 * (lo + hi)
+        n = _count(2 * np.pi * mid, h, AZIMUTH)
+        phi = _midpoints(0.0, 2 * np.pi, n)
+        centre = np.column_stack([mid * np.cos(phi), mid * np.sin(phi), np.full(n, z)])
+        normal = np.tile([0.0, 0.0, facing], (n, 1))
+        parts.append((centre, normal, np.full(n, np.pi * (hi ** 2 - lo ** 2) / n)))
+    return _join(parts)
+
+
+def _triangles(t: np.ndarray, h: float):
+    """Triangles (T, 3, 3), counter-clockwise seen from outside, each cut into m^2 equal triangles with m such
+    that their edges are at most h."""
+    e1, e2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
+    cross = np.cross(e1, e2)
+    double_area = np.linalg.norm(cross, axis=1)
+    keep = double_area > 0
+    t, e1, e2, cross, double_area = t[keep], e1[keep], e2[keep], cross[keep], double_area[keep]
+    longest = np.max(np.linalg.norm(t - np.roll(t, 1, axis=1), axis=2), axis=1)
+    cuts = np.maximum(1, np.ceil(longest / h - 1e-9)).astype(int)
+    parts = []
+    for m in np.unique(cuts):
+        # barycentric centroids of the m^2 sub-triangles: m(m+1)/2 pointing up, m(m-1)/2 down
+        i, j = np.meshgrid(np.arange(m), np.arange(m), indexing="ij")
+        up = i + j <= m - 1
+        down = i + j <= m - 2
+        s = np.concatenate([(i[up] + 1 / 3) / m, (i[down] + 2 / 3) / m])
+        u = np.concatenate([(j[up] + 1 / 3) / m, (j[down] + 2 / 3) / m])
+        pick = cuts == m
+        centre = (t[pick, 0, None] + s[None, :, None] * e1[pick, None] + u[None, :, None] * e2[pick, None])
+        normal = np.repeat((cross[pick] / double_area[pick, None])[:, None], len(s), axis=1)
+        area = np.repeat(0.5 * double_area[pick, None] / m ** 2, len(s), axis=1)
+        parts.append((centre.reshape(-1, 3), normal.reshape(-1, 3), area.ravel()))
+    return _join(parts)

@@ -1,0 +1,1 @@
+"""Granular resistive force laws as pure numpy functions in SI units, one module per law."""

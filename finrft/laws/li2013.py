@@ -1,0 +1,121 @@
+"""The granular RFT law of Li, Zhang & Goldman, "A terradynamics of legged locomotion on granular media",
+Science 339:1408 (2013), in SI units: stresses per unit depth in N/m^3 (1 N/cm^3 = 1e6 N/m^3).
+
+A plate element of area dA at depth |z| below the free surface, moving in the vertical x-z plane, feels
+
+    dF_x = alpha_x(beta, gamma) |z| dA,    dF_z = alpha_z(beta, gamma) |z| dA,
+
+    alpha_z = zeta (A00 + A10 cos 2b + B11 sin(2b + g) + B01 sin g + B-11 sin(-2b + g))
+    alpha_x = zeta (C11 cos(2b + g) + C01 cos g + C-11 cos(-2b + g) + D10 sin 2b)
+
+(the non-zero terms of the paper's discrete Fourier fit), zeta the medium's scale (alpha_z of a horizontal plate
+pushed straight down, in N/cm^3 for the generic coefficients, whose values at (0, +pi/2) sum to 1).
+
+Conventions (drawn in the paper's Fig. 2A), fixed here by the fit's own values and the physics: z points up; the plate
+moves towards -x when gamma = 0, so alpha_x > 0 resists the horizontal motion (alpha_x(pi/2, 0) = 0.370 N/cm^3 on
+a vertical plate); gamma is the angle of the velocity below the horizontal (gamma > 0 moving down:
+alpha_z(0, +pi/2) = 1.000, alpha_z(0, -pi/2) = -0.250 on extraction); beta is the plate's angle, positive when
+its lower face looks down and forward (towards -x): the lower face's normal is (-sin beta, -cos beta) in (x, z).
+With these signs the stress on every element is dissipative: alpha_x cos gamma + alpha_z sin gamma > 0 over the
+whole range for the generic coefficients.
+
+Outside beta, gamma in [-pi/2, pi/2]: beta is the same plate after a half turn (period pi); a velocity with a +x
+component is the mirror image x -> -x of one in range: beta -> -beta, gamma -> pi - gamma (or -pi - gamma), and
+alpha_x changes sign. Public codes differ from the paper's fit in two ways this module avoids: sin on the C terms
+(cos on D10), and sin(-2b + g) on C-11.
+"""
+
+from __future__ import annotations
+
+from dataclasses import astuple, dataclass
+
+import numpy as np
+
+N_PER_CM3 = 1e6  # N/m^3 in one N/cm^3
+
+
+@dataclass(frozen=True)
+class Coefficients:
+    """The fit's nine non-zero Fourier coefficients, N/m^3 (B_11 and C_11 are the paper's B_-11, C_-11)."""
+
+    A00: float
+    A10: float
+    B11: float
+    B01: float
+    B_11: float
+    C11: float
+    C01: float
+    C_11: float
+    D10: float
+
+    @classmethod
+    def per_cm3(cls, *values: float) -> "Coefficients":
+        """From values in N/cm^3, in the order of the fields."""
+        return cls(*(v * N_PER_CM3 for v in values))
+
+    def values(self) -> tuple[float, ...]:
+        return astuple(self)
+
+
+# Generic coefficients of Li et al. 2013 (their Table S2), as transcribed identically by independent public codes;
+# scaled by zeta = alpha_z(0, pi/2) of the medium in N/cm^3.
+GENERIC = Coefficients.per_cm3(0.206, 0.169, 0.212, 0.358, 0.055, -0.124, 0.253, 0.007, 0.088)
+# Poppy seeds, loosely (LP) and closely (CP) packed, used with zeta = 1. Unverified: transcribed from third-party
+# code, not checked against the paper's Table S2.
+POPPY_SEEDS_LP = Coefficients.per_cm3(0.051, 0.047, 0.053, 0.083, 0.020, -0.026, 0.057, 0.000, 0.025)
+POPPY_SEEDS_CP = Coefficients.per_cm3(0.094, 0.092, 0.092, 0.151, 0.035, -0.039, 0.086, 0.018, 0.046)
+
+
+def alpha(beta, gamma, zeta: float = 1.0, coefficients: Coefficients = GENERIC) -> tuple[np.ndarray, np.ndarray]:
+    """(alpha_x, alpha_z) in N/m^3 for plate angles beta and velocity angles gamma (radians, any values)."""
+    beta = np.asarray(beta, dtype=float)
+    gamma = np.asarray(gamma, dtype=float)
+    gamma = np.where(np.abs(gamma) > np.pi, np.arctan2(np.sin(gamma), np.cos(gamma)), gamma)
+    mirrored = np.abs(gamma) > np.pi / 2
+    gamma = np.where(mirrored, np.copysign(np.pi, gamma) - gamma, gamma)
+    beta = np.where(mirrored, -beta, beta)
+    beta = beta - np.pi * np.round(beta / np.pi)
+    a00, a10, b11, b01, b_11, c11, c01, c_11, d10 = coefficients.values()
+    alpha_z = (a00 + a10 * np.cos(2 * beta) + b11 * np.sin(2 * beta + gamma) + b01 * np.sin(gamma)
+               + b_11 * np.sin(-2 * beta + gamma))
+    alpha_x = (c11 * np.cos(2 * beta + gamma) + c01 * np.cos(gamma) + c_11 * np.cos(-2 * beta + gamma)
+               + d10 * np.sin(2 * beta))
+    return zeta * np.where(mirrored, -alpha_x, alpha_x), zeta * alpha_z
+
+
+# Below this fraction of the speed, a velocity's horizontal part is taken as none (the motion is vertical).
+VERTICAL = 1e-12
+
+
+def element_forces(normal: np.ndarray, velocity: np.ndarray, depth: np.ndarray, area: np.ndarray,
+                   zeta: float = 1.0, coefficients: Coefficients = GENERIC) -> np.ndarray:
+    """The force (N, 3), world frame, z up, on surface elements with outward unit normals (N, 3), velocities
+    (N, 3, m/s), depths below the free surface (N, m; <= 0 above it) and areas (N, m^2).
+
+    Each element is a plate in the vertical plane of its velocity: r = the horizontal direction of the velocity
+    (if the velocity is vertical, that of the normal; if both are vertical, any: the force is then vertical).
+    The normal's projection n_p onto that plane gives beta, the velocity gives gamma, and the element takes
+    alpha |z| dA |n_p|: |n_p| dA is the element's share of the plane's slices, as when the 2D law is integrated
+    over a body's width, so a face parallel to the plane of motion takes nothing. Only leading elements (n . v > 0)
+    below the surface feel the medium.
+    """
+    normal = np.asarray(normal, dtype=float)
+    velocity = np.asarray(velocity, dtype=float)
+    horizontal = np.hypot(velocity[..., 0], velocity[..., 1])
+    moving_sideways = horizontal > VERTICAL * np.linalg.norm(velocity, axis=-1)
+    normal_sideways = np.hypot(normal[..., 0], normal[..., 1])
+    reference = np.where(moving_sideways[..., None], velocity, normal)[..., :2]
+    length = np.where(moving_sideways, horizontal, normal_sideways)
+    r = np.where((length > 0)[..., None], reference / np.where(length > 0, length, 1.0)[..., None], [1.0, 0.0])
+    n_r = np.einsum("...i,...i", normal[..., :2], r)
+    n_z = normal[..., 2]
+    v_r = np.einsum("...i,...i", velocity[..., :2], r)
+    beta = np.arctan2(-n_r, n_z)  # the paper's x axis is -r
+    gamma = np.arctan2(-velocity[..., 2], v_r)
+    alpha_x, alpha_z = alpha(beta, gamma, zeta, coefficients)
+    leading = (np.einsum("...i,...i", normal, velocity) > 0) & (np.asarray(depth) > 0)
+    scale = np.where(leading, np.asarray(area) * np.asarray(depth) * np.hypot(n_r, n_z), 0.0)
+    force = np.empty(normal.shape)
+    force[..., :2] = -(scale * alpha_x)[..., None] * r
+    force[..., 2] = scale * alpha_z
+    return force

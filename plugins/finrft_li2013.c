@@ -1,0 +1,224 @@
+// finrft.surface: a MuJoCo engine plugin (passive force) applying the granular RFT law of Li, Zhang & Goldman
+// 2013 to the surface elements of a body. The C twin of finrft/laws/li2013.py and of the Python backend in
+// finrft/attach.py: same formulas, same folding, same choice of plane.
+//
+// One instance per body (finrft.attach makes them). Config, all required:
+//   law           "li2013"
+//   coefficients  the fit's nine coefficients A00 A10 B11 B01 B-11 C11 C01 C-11 D10, N/m^3
+//   zeta          > 0, the medium's scale
+//   surface_z     m, height of the free surface (gravity along -z)
+//   elements      "cx cy cz nx ny nz area ..." per element: centre and outward unit normal in the body frame, m^2
+//
+// No static state: everything lives in the per-mjData struct, so instances and threads never share memory; the
+// compute callback allocates nothing.
+
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include <mujoco/mujoco.h>
+
+#if defined(_WIN32)
+#define FINRFT_LI2013_EXPORT __declspec(dllexport)
+#else
+#define FINRFT_LI2013_EXPORT __attribute__((visibility("default")))
+#endif
+
+#define NCOEF 9
+// Below this fraction of the speed, a velocity's horizontal part is taken as none (as VERTICAL in li2013.py).
+#define VERTICAL 1e-12
+
+// (alpha_x, alpha_z), N/m^3, for any beta and gamma: see finrft/laws/li2013.py for the signs and the folding.
+FINRFT_LI2013_EXPORT void finrft_li2013_alpha(const double coef[NCOEF], double zeta, double beta, double gamma,
+                                              double out[2]) {
+  if (fabs(gamma) > mjPI) gamma = atan2(sin(gamma), cos(gamma));
+  int mirrored = fabs(gamma) > mjPI / 2;
+  if (mirrored) {
+    gamma = copysign(mjPI, gamma) - gamma;
+    beta = -beta;
+  }
+  beta -= mjPI * nearbyint(beta / mjPI);
+  double az = coef[0] + coef[1] * cos(2 * beta) + coef[2] * sin(2 * beta + gamma) + coef[3] * sin(gamma) +
+              coef[4] * sin(-2 * beta + gamma);
+  double ax = coef[5] * cos(2 * beta + gamma) + coef[6] * cos(gamma) + coef[7] * cos(-2 * beta + gamma) +
+              coef[8] * sin(2 * beta);
+  out[0] = zeta * (mirrored ? -ax : ax);
+  out[1] = zeta * az;
+}
+
+// The force on one element (world frame, z up): outward unit normal n, velocity v, depth below the surface,
+// area. As element_forces in li2013.py.
+FINRFT_LI2013_EXPORT void finrft_li2013_element_force(const double coef[NCOEF], double zeta, const double n[3],
+                                                      const double v[3], double depth, double area,
+                                                      double force[3]) {
+  force[0] = force[1] = force[2] = 0;
+  if (!(depth > 0) || !(n[0] * v[0] + n[1] * v[1] + n[2] * v[2] > 0)) return;
+  double horizontal = hypot(v[0], v[1]);
+  double r[2] = {1, 0};
+  if (horizontal > VERTICAL * sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])) {
+    r[0] = v[0] / horizontal;
+    r[1] = v[1] / horizontal;
+  } else {
+    double sideways = hypot(n[0], n[1]);
+    if (sideways > 0) {
+      r[0] = n[0] / sideways;
+      r[1] = n[1] / sideways;
+    }
+  }
+  double n_r = n[0] * r[0] + n[1] * r[1];
+  double v_r = v[0] * r[0] + v[1] * r[1];
+  double a[2];
+  finrft_li2013_alpha(coef, zeta, atan2(-n_r, n[2]), atan2(-v[2], v_r), a);
+  double scale = area * depth * hypot(n_r, n[2]);
+  force[0] = -scale * a[0] * r[0];
+  force[1] = -scale * a[0] * r[1];
+  force[2] = scale * a[1];
+}
+
+typedef struct {
+  double coef[NCOEF];
+  double zeta, surface_z;
+  int body;
+  int n;
+  double* element;  // n x 7: centre, normal (body frame), area
+} SurfaceData;
+
+static const char* kSurfaceAttributes[] = {"law", "coefficients", "zeta", "surface_z", "elements"};
+
+static void surface_free(SurfaceData* p) {
+  if (!p) return;
+  free(p->element);
+  free(p);
+}
+
+// Parse whitespace-separated finite numbers; returns the count, or -1 on anything else. values may be NULL to
+// count only.
+static int read_numbers(const char* text, double* values, int capacity) {
+  int count = 0;
+  const char* cursor = text;
+  for (;;) {
+    char* end = NULL;
+    double value = strtod(cursor, &end);
+    if (end == cursor) break;
+    if (!isfinite(value)) return -1;
+    if (values && count < capacity) values[count] = value;
+    count++;
+    cursor = end;
+  }
+  while (*cursor == ' ' || *cursor == '\t' || *cursor == '\n') cursor++;
+  return *cursor ? -1 : count;
+}
+
+static int read_scalar(const mjModel* m, int instance, const char* key, double* out) {
+  const char* text = mj_getPluginConfig(m, instance, key);
+  if (!text || read_numbers(text, out, 1) != 1) {
+    mju_warning("finrft.surface: config '%s' must be one number", key);
+    return -1;
+  }
+  return 0;
+}
+
+static int surface_init(const mjModel* m, mjData* d, int instance) {
+  const char* law = mj_getPluginConfig(m, instance, "law");
+  if (!law || strcmp(law, "li2013")) {
+    mju_warning("finrft.surface: config 'law' must be 'li2013', got '%s'", law ? law : "");
+    return -1;
+  }
+  SurfaceData* p = (SurfaceData*)calloc(1, sizeof(SurfaceData));
+  if (!p) return -1;
+  const char* coef = mj_getPluginConfig(m, instance, "coefficients");
+  if (!coef || read_numbers(coef, p->coef, NCOEF) != NCOEF) {
+    mju_warning("finrft.surface: config 'coefficients' must hold %d numbers (N/m^3)", NCOEF);
+    surface_free(p);
+    return -1;
+  }
+  if (read_scalar(m, instance, "zeta", &p->zeta) || read_scalar(m, instance, "surface_z", &p->surface_z)) {
+    surface_free(p);
+    return -1;
+  }
+  if (!(p->zeta > 0)) {
+    mju_warning("finrft.surface: config 'zeta' must be > 0");
+    surface_free(p);
+    return -1;
+  }
+  p->body = -1;
+  for (int b = 0; b < m->nbody; b++) {
+    if (m->body_plugin[b] != instance) continue;
+    if (p->body >= 0) {
+      mju_warning("finrft.surface: an instance serves one body");
+      surface_free(p);
+      return -1;
+    }
+    p->body = b;
+  }
+  const char* text = mj_getPluginConfig(m, instance, "elements");
+  int count = text ? read_numbers(text, NULL, 0) : -1;
+  if (p->body < 0 || count <= 0 || count % 7) {
+    mju_warning("finrft.surface: config 'elements' must hold 7 numbers per element (centre, normal, area) and "
+                "the instance must be bound to one body");
+    surface_free(p);
+    return -1;
+  }
+  p->n = count / 7;
+  p->element = (double*)malloc(count * sizeof(double));
+  if (!p->element) {
+    surface_free(p);
+    return -1;
+  }
+  read_numbers(text, p->element, count);
+  d->plugin_data[instance] = (uintptr_t)p;
+  return 0;
+}
+
+static int surface_nstate(const mjModel* m, int instance) {
+  return 0;
+}
+
+static void surface_destroy(mjData* d, int instance) {
+  surface_free((SurfaceData*)d->plugin_data[instance]);
+  d->plugin_data[instance] = 0;
+}
+
+static void surface_reset(const mjModel* m, mjtNum* plugin_state, void* plugin_data, int instance) {}
+
+// Every element's force, summed into one force and one torque about the body's origin, applied once.
+static void surface_compute(const mjModel* m, mjData* d, int instance, int capability_bit) {
+  if (!(capability_bit & mjPLUGIN_PASSIVE)) return;
+  const SurfaceData* p = (const SurfaceData*)d->plugin_data[instance];
+  if (!p) return;
+  const mjtNum* origin = d->xpos + 3 * p->body;
+  const mjtNum* R = d->xmat + 9 * p->body;
+  mjtNum twist[6], total[3] = {0, 0, 0}, torque[3] = {0, 0, 0};
+  mj_objectVelocity(m, d, mjOBJ_BODY, p->body, twist, 0);
+  for (int i = 0; i < p->n; i++) {
+    const double* e = p->element + 7 * i;
+    mjtNum arm[3], normal[3], v[3], f[3], moment[3];
+    mju_mulMatVec3(arm, R, e);
+    mju_mulMatVec3(normal, R, e + 3);
+    double depth = p->surface_z - (origin[2] + arm[2]);
+    if (!(depth > 0)) continue;
+    mju_cross(v, twist, arm);
+    mju_addTo3(v, twist + 3);
+    finrft_li2013_element_force(p->coef, p->zeta, normal, v, depth, e[6], f);
+    mju_addTo3(total, f);
+    mju_cross(moment, arm, f);
+    mju_addTo3(torque, moment);
+  }
+  mj_applyFT(m, d, total, torque, origin, p->body, d->qfrc_passive);
+}
+
+void finrft_register_surface(void) {
+  mjpPlugin plugin;
+  mjp_defaultPlugin(&plugin);
+  plugin.name = "finrft.surface";
+  plugin.capabilityflags |= mjPLUGIN_PASSIVE;
+  plugin.nattribute = sizeof(kSurfaceAttributes) / sizeof(kSurfaceAttributes[0]);
+  plugin.attributes = kSurfaceAttributes;
+  plugin.nstate = surface_nstate;
+  plugin.init = surface_init;
+  plugin.destroy = surface_destroy;
+  plugin.reset = surface_reset;
+  plugin.compute = surface_compute;
+  mjp_registerPlugin(&plugin);
+}

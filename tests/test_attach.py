@@ -1,0 +1,214 @@
+"""finrft.attach: RFT on the bodies of any MjSpec, checked against closed forms (a vertical plate dragged, a
+horizontal plate pushed down), a quadrature of the law over a sphere, symmetry and dissipation; the native
+plugin against the Python backend; bad input."""
+
+import mujoco
+import numpy as np
+import pytest
+from scipy import integrate
+
+import finrft
+from finrft.attach import MAX_ELEMENTS, attach
+from finrft.laws import li2013
+from finrft.scene import SceneError
+
+CM3 = li2013.N_PER_CM3
+RNG = np.random.default_rng(1408)
+
+
+def body_xml(geoms: str, joint: str = '<joint type="slide" axis="1 0 0"/>', pos: str = "0 0 0") -> str:
+    return f"""<mujoco><option gravity="0 0 0"/>
+      <asset><mesh name="cube" vertex="-.01 -.01 -.01  .01 -.01 -.01  -.01 .01 -.01  .01 .01 -.01
+                                       -.01 -.01 .01  .01 -.01 .01  -.01 .01 .01  .01 .01 .01"/></asset>
+      <worldbody><body name="probe" pos="{pos}">{joint}{geoms}</body></worldbody></mujoco>"""
+
+
+def passive(xml: str, qvel, qpos=None, backend: str = "native", **kwargs) -> tuple[np.ndarray, finrft.attach]:
+    """qfrc_passive of the probe at a state, with RFT attached to it."""
+    spec = mujoco.MjSpec.from_string(xml)
+    attached = attach(spec, ["probe"], backend=backend, **kwargs)
+    assert attached.backend == backend
+    model = spec.compile()
+    data = mujoco.MjData(model)
+    if qpos is not None:
+        data.qpos[:] = qpos
+    data.qvel[:] = qvel
+    with attached.installed(model):
+        mujoco.mj_forward(model, data)
+    return data.qfrc_passive.copy(), attached
+
+
+PLATE = '<geom type="box" size="0.0005 0.02 0.03" pos="0 0 {z}" mass="1"/>'  # 4 cm wide, 6 cm deep, 1 mm thick
+
+
+@pytest.mark.parametrize("backend", ["native", "python"])
+def test_vertical_plate_dragged_normal_to_its_face(backend):
+    # alpha_x(90 deg, 0) w H^2 / 2 = 0.370 N/cm^3 x 4 cm x 18 cm^2 = 26.64 N against the motion
+    force, attached = passive(body_xml(PLATE.format(z=-0.03)), [0.1], backend=backend)
+    assert force[0] == pytest.approx(-26.64, rel=0.03)
+    # the depth is linear over the face, which the midpoint rule integrates exactly at any element size
+    assert force[0] == pytest.approx(-26.64, rel=1e-9)
+    assert attached.elements == {"probe": 232}
+
+
+def test_element_size_convergence_where_the_surface_cuts_elements():
+    # The plate's top 7.3 mm above the surface: elements straddle it. The midpoint rule misses at most h^2 / 8 of
+    # the depth integral per unit width there: the error is bounded by alpha_x w h^2 / 8, second order in h.
+    top = 0.0073
+    exact = -0.370 * CM3 * 0.04 * (0.06 - top) ** 2 / 2
+    for h in (0.008, 0.004, 0.002, 0.001):
+        force, _ = passive(body_xml(PLATE.format(z=top - 0.03)), [0.1], element_size=h)
+        assert abs(force[0] - exact) <= 0.370 * CM3 * 0.04 * h ** 2 / 8 * (1 + 1e-9)
+        assert abs(force[0] / exact - 1) < 0.03
+
+
+def sphere_drag(radius: float) -> float:
+    """The law integrated over the leading, submerged quarter of a sphere centred on the surface, moving along
+    +x at 0.1 m/s: the x force, by adaptive quadrature."""
+    def integrand(theta, phi):
+        n = np.array([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)])
+        force = li2013.element_forces(n[None], [[0.1, 0, 0]], [-radius * n[2]], [radius ** 2 * np.sin(theta)])
+        return force[0, 0]
+    return integrate.dblquad(integrand, -np.pi / 2, np.pi / 2, np.pi / 2, np.pi, epsabs=1e-10, epsrel=1e-10)[0]
+
+
+def test_sphere_converges_to_the_integrated_law():
+    # Moving along an axis, the leading face's edge falls on cell edges: second order in h (errors 0.86 %, 0.32 %,
+    # 0.22 %, 0.055 %, 0.014 % at 8, 5, 4, 2, 1 mm). Cells cut by that edge make it first to second order.
+    exact = sphere_drag(0.03)
+    errors = {}
+    for h in (0.005, 0.004, 0.002, 0.001):
+        force, _ = passive(body_xml('<geom type="sphere" size="0.03" mass="1"/>'), [0.1], element_size=h)
+        errors[h] = abs(force[0] / exact - 1)
+    assert errors[0.005] < 0.01
+    assert errors[0.002] < errors[0.004] / 3 and errors[0.001] < errors[0.002] / 3
+
+
+def test_sphere_dragged_sideways_feels_no_lateral_force():
+    joint = '<joint type="free"/>'
+    for geom in ('<geom type="sphere" size="0.03" mass="1"/>', '<geom type="capsule" size="0.01 0.02" mass="1"/>'):
+        force, _ = passive(body_xml(geom, joint, pos="0 0 -0.01"), [0.1, 0, 0, 0, 0, 0])
+        assert force[0] < 0 and force[2] > 0
+        assert abs(force[1]) < 1e-9 * abs(force[0])
+        assert max(abs(force[3]), abs(force[5])) < 1e-9 * abs(force[0])  # mirror y -> -y: no roll or yaw
+        # any horizontal direction: drag along -v, lateral force from the cells' layout only
+        direction = np.array([np.cos(0.7), np.sin(0.7), 0.0])
+        force, _ = passive(body_xml(geom, joint, pos="0 0 -0.01"), [*0.1 * direction, 0, 0, 0])
+        lateral = np.cross(direction, force[:3])[2]
+        assert force[:3] @ direction < 0 and abs(lateral) < 0.02 * abs(force[:3] @ direction)
+
+
+@pytest.mark.parametrize("zeta", [1.0, 0.4])
+def test_horizontal_plate_pushed_down(zeta):
+    # alpha_z(0, 90 deg) = zeta x 1.000 N/cm^3, at 5 cm depth on 4 cm x 6 cm: zeta x 120 N up (the plate's
+    # bottom face at 5 cm; its edges move parallel to themselves and take nothing)
+    xml = body_xml('<geom type="box" size="0.02 0.03 0.0005" pos="0 0 -0.0495" mass="1"/>',
+                   '<joint type="slide" axis="0 0 1"/>')
+    for backend in ("native", "python"):
+        force, _ = passive(xml, [-0.05], backend=backend, zeta=zeta)
+        assert force[0] == pytest.approx(zeta * 120.0, rel=1e-9)
+
+
+def test_mesh_cube_feels_what_the_box_feels():
+    joint = '<joint type="free"/>'
+    velocity = [0.05, -0.02, -0.03, 0, 0, 0]
+    box, _ = passive(body_xml('<geom type="box" size=".01 .01 .01" mass="1"/>', joint, pos="0 0 -0.03"), velocity)
+    mesh, attached = passive(body_xml('<geom type="mesh" mesh="cube" mass="1"/>', joint, pos="0 0 -0.03"), velocity)
+    assert np.abs(box[:3]).max() > 1
+    # the depth integrand is linear on every face: both tessellations integrate the force exactly (MuJoCo keeps
+    # mesh vertices in single precision); the torque's integrand is quadratic: equal to the elements' accuracy
+    np.testing.assert_allclose(mesh[:3], box[:3], rtol=1e-6)
+    np.testing.assert_allclose(mesh[3:], box[3:], rtol=0.05, atol=0.01 * np.abs(box[3:]).max())
+
+
+MIXED = """<geom type="box" size=".02 .01 .005" mass=".1"/>
+           <geom type="capsule" fromto="0 0 0 .03 .02 -.03" size=".006"/>
+           <geom type="sphere" size=".012" pos="-.02 .01 -.01"/>
+           <geom type="cylinder" size=".008 .015" pos="0 -.02 -.02" euler="30 60 0"/>
+           <geom type="ellipsoid" size=".015 .008 .01" pos=".02 -.01 .01" euler="10 0 40"/>
+           <geom type="mesh" mesh="cube" pos="-.01 -.02 .01" euler="0 45 0"/>"""
+
+
+def random_state(rng):
+    quat = rng.normal(size=4)
+    qpos = np.concatenate([[0.01, -0.02, rng.uniform(-0.03, 0.01)], quat / np.linalg.norm(quat)])
+    return qpos, rng.normal(scale=[0.1, 0.1, 0.1, 3, 3, 3])
+
+
+def test_native_equals_python_on_a_multi_geom_body():
+    xml = body_xml(MIXED, '<joint type="free"/>')
+    for _ in range(5):
+        qpos, qvel = random_state(RNG)
+        native, attached = passive(xml, qvel, qpos, element_size=0.003)
+        python, _ = passive(xml, qvel, qpos, backend="python", element_size=0.003)
+        assert np.abs(native).max() > 0.1 and sum(attached.elements.values()) > 500
+        np.testing.assert_allclose(native, python, rtol=1e-9, atol=1e-9 * np.abs(python).max())
+
+
+def test_total_force_on_closed_bodies_dissipates():
+    # The power of the RFT force, qfrc_passive . qvel = sum of F_i . v_i, for random poses and twists
+    xml = body_xml(MIXED, '<joint type="free"/>')
+    spec = mujoco.MjSpec.from_string(xml)
+    attach(spec, ["probe"], element_size=0.004)
+    model = spec.compile()
+    data = mujoco.MjData(model)
+    powers = []
+    for _ in range(200):
+        data.qpos[:], data.qvel[:] = random_state(RNG)
+        mujoco.mj_forward(model, data)
+        powers.append(data.qfrc_passive @ data.qvel)
+    assert max(powers) <= 0 and min(powers) < -1e-3
+
+
+def test_a_body_above_the_surface_feels_nothing():
+    force, _ = passive(body_xml(MIXED, '<joint type="free"/>', pos="0 0 0.2"), RNG.normal(size=6))
+    assert not force.any()
+    # the surface height moves with surface_z
+    force, _ = passive(body_xml(MIXED, '<joint type="free"/>', pos="0 0 0.2"), [0, 0, -0.1, 0, 0, 0],
+                       surface_z=0.25)
+    assert force[2] > 1
+
+
+def test_rollout_threads_share_nothing():
+    from mujoco import rollout
+    spec = mujoco.MjSpec.from_string(body_xml(MIXED, '<joint type="free"/>'))
+    attach(spec, ["probe"], element_size=0.004)
+    model = spec.compile()
+    states = []
+    for _ in range(4):
+        qpos, qvel = random_state(RNG)
+        states.append(np.concatenate([[0.0], qpos, qvel]))
+    state0 = np.array(states)
+    datas = [mujoco.MjData(model) for _ in range(2)]
+    threaded, _ = rollout.rollout(model, datas, state0, nstep=20)
+    single, _ = rollout.rollout(model, datas[:1], state0, nstep=20)
+    np.testing.assert_array_equal(threaded, single)
+    assert np.isfinite(threaded).all()
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"bodies": ["nobody"]}, "no body named 'nobody'"),
+    ({"bodies": ["empty"]}, "body 'empty' has no geoms"),
+    ({"bodies": ["floor"]}, "is a plane"),
+    ({"bodies": ["probe", "probe"]}, "named twice"),
+    ({"bodies": []}, "at least one body"),
+    ({"element_size": 0.0}, "element_size must be > 0"),
+    ({"element_size": -1e-3}, "element_size must be > 0"),
+    ({"element_size": 1e-5}, f"more than {MAX_ELEMENTS}"),
+    ({"zeta": 0.0}, "zeta must be > 0"),
+    ({"zeta": float("nan")}, "zeta must be > 0"),
+    ({"law": "maladen2009"}, "law must be one of li2013"),
+    ({"backend": "gpu"}, "backend must be one of"),
+])
+def test_bad_input_names_the_problem(kwargs, message):
+    spec = mujoco.MjSpec.from_string("""<mujoco><worldbody><body name="floor"><geom type="plane" size="1 1 1"/>
+      </body><body name="empty"/><body name="probe"><geom size=".01"/></body></worldbody></mujoco>""")
+    with pytest.raises(SceneError, match=message):
+        attach(spec, **{"bodies": ["probe"], **kwargs})
+
+
+def test_a_body_takes_one_plugin():
+    spec = mujoco.MjSpec.from_string(body_xml('<geom size=".01"/>'))
+    attach(spec, ["probe"])
+    with pytest.raises(SceneError, match="already has a plugin"):
+        attach(spec, ["probe"])

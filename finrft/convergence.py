@@ -152,7 +152,7 @@ def checked(build: Callable[[Any], M], run_once: Callable[[Any, M, Callable[[flo
             if n < len(ratios):
                 continue
             raise
-        run.error_estimate = {key: value / abs(ratio - 1) for key, value in run.differences(other).items()}
+        run.error_estimate = {key: float(value / abs(ratio - 1)) for key, value in run.differences(other).items()}
         run.error_companion = label
         over = [] if limits is None else limits.exceeded(run.error_estimate)
         if not over or n == len(ratios):

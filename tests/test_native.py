@@ -12,9 +12,10 @@ import numpy as np
 import pytest
 from mujoco import rollout
 
-from finrft import batch, models, native, rft
+from finrft import batch, models, native
 from finrft.cli import main
 from finrft.drive import Drive
+from finrft.laws.table import ForceTable, write_table
 from finrft.scene import SceneError
 from finrft.simulate import simulate
 
@@ -59,8 +60,7 @@ def table_csv(tmp_path_factory):
     # A table that is not the paper law (a flattened sine), so the table path is exercised on its own.
     path = tmp_path_factory.mktemp("rft") / "forces.csv"
     attack = np.linspace(0.0, 90.0, 7)
-    rft.write_table(path, rft.ForceTable(attack, 1.2 * np.sin(np.radians(attack)) ** 0.5,
-                                         -0.3 * np.cos(np.radians(attack))))
+    write_table(path, ForceTable(attack, 1.2 * np.sin(np.radians(attack)) ** 0.5, -0.3 * np.cos(np.radians(attack))))
     return str(path)
 
 

@@ -65,11 +65,7 @@ Counts = ctypes.c_int64 * 2  # steps taken, steps rejected: the native functions
 
 def stepper(m: mujoco.MjModel, sim: Sim, backend: str, groups: Sequence[ForceGroup]) -> Stepper:
     """The step function for a model: MuJoCo's step, or the implicit or adaptive method (native or numpy)."""
-    if sim.method == "explicit":
-        return Explicit(m)
-    if sim.method in ("implicit", "newton"):
-        return Implicit(m, 1 if sim.method == "implicit" else NEWTON_ITERATIONS, backend, groups)
-    return Adaptive(m, sim, backend, groups)
+    return METHODS[sim.method](m, sim, backend, groups)
 
 
 class _Counted:
@@ -298,3 +294,12 @@ class PythonImplicit:
         mujoco.mj_integratePos(m, d.qpos, d.qvel, dt)
         d.time += dt
         return 0
+
+
+# The methods by name, the choices of ``sim.method``: each makes its stepper from (model, sim, backend, groups).
+METHODS: dict[str, Callable[[mujoco.MjModel, Sim, str, Sequence[ForceGroup]], Stepper]] = {
+    "explicit": lambda m, sim, backend, groups: Explicit(m),
+    "implicit": lambda m, sim, backend, groups: Implicit(m, 1, backend, groups),
+    "newton": lambda m, sim, backend, groups: Implicit(m, NEWTON_ITERATIONS, backend, groups),
+    "adaptive": lambda m, sim, backend, groups: Adaptive(m, sim, backend, groups),
+}

@@ -91,7 +91,7 @@ class Sim:
                      "with the RFT force linearised in velocity; newton: implicitfast with the RFT force at the new "
                      "velocity, solved by Newton's method (stable and accurate at large steps on light segments); "
                      "adaptive: implicit steps sized by an error estimate (dt is then the grid of reversals and samples)",
-                     choices=("explicit", "implicit", "newton", "adaptive"))
+                     choices=lambda: tuple(_methods()))
     max_step: float = _f(1e-3, "s", "adaptive method: largest step", minimum=0.0)
     tolerance: float = _f(1e-4, "", "adaptive method: error per step, relative (absolute below 1e-3)", minimum=0.0,
                           maximum=0.1, why_maximum="a looser step-doubling test accepts steps of any error")
@@ -154,6 +154,12 @@ class _Sections:
             section, name = split_key(type(self), key)
             data[section][name] = value
         return scene_from_dict(data, type(self))
+
+
+def _methods():
+    from .integrate import METHODS  # finrft.integrate imports the scene
+
+    return METHODS
 
 
 def _check_sim(sim: Sim) -> None:

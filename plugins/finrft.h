@@ -8,12 +8,16 @@
 #ifndef FINRFT_H_
 #define FINRFT_H_
 
+#include <math.h>
+
 #include <mujoco/mujoco.h>
 
 #if !defined(FINRFT_LAWS) || !defined(FINRFT_UNSTABLE) || !defined(FINRFT_STEP_TOO_SMALL) || \
     !defined(FINRFT_NOT_CONVERGED) || !defined(FINRFT_ARENA_FULL)
 #error "build the plugin with setup.py (pip install .): it defines the law list and the return codes"
 #endif
+
+#define FINRFT_PLUGIN "finrft.rft"
 
 #if defined(_WIN32)
 #define FINRFT_EXPORT __declspec(dllexport)
@@ -35,16 +39,26 @@ typedef struct {
                 mjtNum force[3]);
 } FinrftLaw;
 
-// The inputs of every law: tanh(|v| / v_reg), and the direction cosines v^.x^ and v^.y^ (0 at rest).
-void finrft_components(mjtNum v_reg, const mjtNum v[3], const mjtNum x[3], const mjtNum y[3], mjtNum* ramp,
-                       mjtNum* vx, mjtNum* vy);
+// The inputs of every law: tanh(|v| / v_reg), and the direction cosines v^.x^ and v^.y^ (0 at rest). Inline,
+// as it is on the steps' hot path.
+static inline void finrft_components(mjtNum v_reg, const mjtNum v[3], const mjtNum x[3], const mjtNum y[3],
+                                     mjtNum* ramp, mjtNum* vx, mjtNum* vy) {
+  mjtNum speed = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+  mjtNum safe = speed > 0 ? speed : 1;
+  *ramp = tanh(speed / v_reg);
+  *vx = (v[0] * x[0] + v[1] * x[1] + v[2] * x[2]) / safe;
+  *vy = (v[0] * y[0] + v[1] * y[1] + v[2] * y[2]) / safe;
+}
 
 // A required config value as one finite number; 0, or -1 after a warning naming the key.
 int finrft_read_number(const mjModel* m, int instance, const char* key, mjtNum* out);
 
 // The penalty stop on a hinge deflection q (rad) from its rest angle: the torque -k (q + |q|) q, and into *slope
 // (when not NULL) its derivative in q.
-mjtNum finrft_stop_torque(mjtNum q, mjtNum k, mjtNum* slope);
+static inline mjtNum finrft_stop_torque(mjtNum q, mjtNum k, mjtNum* slope) {
+  if (slope) *slope = q > 0 ? -4 * k * q : 0;
+  return -k * (q + fabs(q)) * q;
+}
 
 // An instance of the plugin: one force group's law, the segments it acts on and the hinges carrying its stop.
 typedef struct {
@@ -59,8 +73,6 @@ typedef struct {
   int* hinge_dof;
 } FinrftInstance;
 
-// The instances of the plugin in a model (NULL for another plugin's instance or one not initialised).
-const FinrftInstance* finrft_instance(const mjModel* m, const mjData* d, int instance);
 
 // A segment's axis x and normal y (world frame): its site's x and y axes.
 void finrft_site_axes(const mjData* d, int site, mjtNum x[3], mjtNum y[3]);

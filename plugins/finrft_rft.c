@@ -45,20 +45,6 @@ static int nattribute;
 #define FINRFT_VALUE_TEXT(x) FINRFT_TEXT(x)
 FINRFT_EXPORT const char finrft_mujoco_header[] = "finrft_mujoco_header=" FINRFT_VALUE_TEXT(mjVERSION_HEADER);
 
-void finrft_components(mjtNum v_reg, const mjtNum v[3], const mjtNum x[3], const mjtNum y[3], mjtNum* ramp,
-                       mjtNum* vx, mjtNum* vy) {
-  mjtNum speed = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
-  mjtNum safe = speed > 0 ? speed : 1;
-  *ramp = tanh(speed / v_reg);
-  *vx = (v[0] * x[0] + v[1] * x[1] + v[2] * x[2]) / safe;
-  *vy = (v[0] * y[0] + v[1] * y[1] + v[2] * y[2]) / safe;
-}
-
-mjtNum finrft_stop_torque(mjtNum q, mjtNum k, mjtNum* slope) {
-  if (slope) *slope = q > 0 ? -4 * k * q : 0;
-  return -k * (q + fabs(q)) * q;
-}
-
 int finrft_read_number(const mjModel* m, int instance, const char* key, mjtNum* out) {
   const char* text = mj_getPluginConfig(m, instance, key);
   if (!text || !text[0]) {
@@ -80,12 +66,6 @@ void finrft_site_axes(const mjData* d, int s, mjtNum x[3], mjtNum y[3]) {
   const mjtNum* R = d->site_xmat + 9 * s;
   x[0] = R[0]; x[1] = R[3]; x[2] = R[6];
   y[0] = R[1]; y[1] = R[4]; y[2] = R[7];
-}
-
-const FinrftInstance* finrft_instance(const mjModel* m, const mjData* d, int instance) {
-  int slot = -1;
-  mjp_getPlugin("finrft.rft", &slot);
-  return m->plugin[instance] == slot ? (const FinrftInstance*)d->plugin_data[instance] : NULL;
 }
 
 static void free_instance(FinrftInstance* p) {
@@ -221,7 +201,7 @@ mjPLUGIN_LIB_INIT(finrft_rft) {
   }
   mjpPlugin plugin;
   mjp_defaultPlugin(&plugin);
-  plugin.name = "finrft.rft";
+  plugin.name = FINRFT_PLUGIN;
   plugin.capabilityflags |= mjPLUGIN_PASSIVE;
   plugin.nattribute = nattribute;
   plugin.attributes = attributes;

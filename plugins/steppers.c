@@ -60,8 +60,10 @@ static int workspace_make(const mjModel* m, mjData* d, Workspace* ws, int extra,
   int nv = m->nv;
   s->ninst = s->n = s->nstop = 0;
   s->nv = nv;
+  int slot = -1;
+  mjp_getPlugin(FINRFT_PLUGIN, &slot);
   for (int i = 0; i < m->nplugin; i++) {
-    const FinrftInstance* p = finrft_instance(m, d, i);
+    const FinrftInstance* p = m->plugin[i] == slot ? (const FinrftInstance*)d->plugin_data[i] : NULL;
     if (!p) continue;
     s->ninst++;
     s->n += p->nseg;
@@ -79,8 +81,7 @@ static int workspace_make(const mjModel* m, mjData* d, Workspace* ws, int extra,
   s->stop_k = mj_stackAllocNum(d, s->nstop + 1);
   s->stop_q = mj_stackAllocNum(d, s->nstop + 1);
   for (int i = 0, k = 0; i < m->nplugin; i++) {
-    const FinrftInstance* p = finrft_instance(m, d, i);
-    if (p) s->inst[k++] = p;
+    if (m->plugin[i] == slot && d->plugin_data[i]) s->inst[k++] = (const FinrftInstance*)d->plugin_data[i];
   }
   Newton* w = &ws->w;
   mjtNum** squares[] = {&w->matrix, &w->jacobian, &w->slope};

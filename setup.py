@@ -1,4 +1,5 @@
-"""Build the native RFT plugin (plugins/finrft_rft.c) against the headers and library of the `mujoco` package.
+"""Build the native RFT plugin (plugins/: the plugin, its laws and its steppers) against the headers and library of
+the `mujoco` package.
 
 The plugin is a plain shared library, not a Python extension module: MuJoCo loads it and it registers itself. It is
 linked the way MuJoCo's own plugins are, against the library the `mujoco` wheel ships (libmujoco.so.X.Y.Z on Linux,
@@ -70,7 +71,9 @@ class BuildPlugin(build_ext):
                                                                     self.plat_name)))
                 continue
             # -g0 overrides Python's -g: debug information would carry the build directory (MuJoCo ships none).
-            ext.extra_compile_args += ["-O2", "-g0", "-std=c99", "-Wall", "-Wextra", "-Wno-unused-parameter"]
+            # Hidden by default: the C files share functions among themselves, the library exports only FINRFT_EXPORT.
+            ext.extra_compile_args += ["-O2", "-g0", "-std=c99", "-Wall", "-Wextra", "-Wno-unused-parameter",
+                                       "-fvisibility=hidden"]
             if sys.platform == "darwin":
                 # The plugin records libmujoco's install name, @rpath/mujoco.framework/.../libmujoco.X.Y.Z.dylib,
                 # which dyld matches to the library `import mujoco` has loaded, as for MuJoCo's own plugins in the
@@ -83,7 +86,7 @@ class BuildPlugin(build_ext):
                 ext.extra_link_args += ["-lm", "-Wl,-rpath,$ORIGIN/../mujoco"]
         if self.compiler.compiler_type != "msvc":
             self.compiler.set_executable("linker_so", plugin_linker(self.compiler.linker_so))
-        # A library left in build/ by an earlier install may be for another MuJoCo: always compile (two files).
+        # A library left in build/ by an earlier install may be for another MuJoCo: always compile (a few files).
         self.force = True
         super().build_extensions()
 
@@ -105,7 +108,19 @@ def plugin_linker(python_linker: list[str]) -> list[str]:
     return ["-dynamiclib" if arg == "-bundle" else arg for arg in kept]
 
 
+def plugin_extension() -> Extension:
+    """The library: the segment plugin, the steppers, every segment law in plugins/laws/ (which the plugin finds by
+    the list of names given as FINRFT_LAWS) and the surface plugin of finrft.attach; the steppers' return codes
+    come from finrft/native.py."""
+    laws = sorted(Path("plugins", "laws").glob("*.c"))
+    macros = [("FINRFT_LAWS", "".join(f"X({law.stem})" for law in laws))]
+    macros += [(f"FINRFT_{code.name}", str(int(code))) for code in native.Code]
+    return Extension("finrft.libfinrft_rft", sources=["plugins/finrft_rft.c", "plugins/steppers.c",
+                                                      "plugins/finrft_li2013.c", *(law.as_posix() for law in laws)],
+                     depends=["plugins/finrft.h"], define_macros=macros)
+
+
 setup(
-    ext_modules=[Extension("finrft.libfinrft_rft", sources=["plugins/finrft_rft.c", "plugins/finrft_li2013.c"])],
+    ext_modules=[plugin_extension()],
     cmdclass={"build_ext": BuildPlugin},
 )

@@ -657,7 +657,7 @@ def _fit(args: argparse.Namespace) -> int:
 
 def _fit_rft(args: argparse.Namespace) -> int:
     from .fit import identify_rft, read_forces, rft_fragment
-    from .rft import write_table
+    from .laws.table import write_table
     scene = _resolve_scene(args)
     table_path = args.table or (str(Path(args.out).with_suffix(".csv")) if args.out else None)
     _check_output(args.out, ".toml", "--out", args.force)

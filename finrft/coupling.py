@@ -1,10 +1,10 @@
 """The coupling of RFT to MuJoCo.
 
 `SegmentForces` evaluates the RFT force on every segment from MuJoCo's kinematics (the velocity of each segment's
-midpoint site and the site's frame), with the pure laws of `finrft.rft`. `PythonCoupling` is the ``python``
-backend: a passive-force callback that adds those forces and the penalty stop torque to ``qfrc_passive`` each time
-MuJoCo evaluates passive forces (once per step, four times under RK4). The ``native`` backend does the same in the
-C plugin (plugins/finrft_rft.c), bound to the model in `finrft.models`.
+midpoint site and the site's frame), with the pure laws of `finrft.laws`. `PythonCoupling` is the ``python``
+backend: a passive-force callback that adds those forces and the penalty stop torque (`penalty_stop`) to
+``qfrc_passive`` each time MuJoCo evaluates passive forces (once per step, four times under RK4). The ``native``
+backend does the same in the C plugin (plugins/finrft_rft.c), bound to the model in `finrft.models`.
 
 MuJoCo's callback is process-global; `installed` sets it for the duration of a run and restores the previous one.
 """
@@ -17,7 +17,7 @@ from typing import Callable, Iterator, Sequence
 import mujoco
 import numpy as np
 
-from . import rft
+from . import laws
 from .models import ForceGroup
 
 Callback = Callable[[mujoco.MjModel, mujoco.MjData], None]
@@ -27,7 +27,7 @@ class SegmentForces:
     """The RFT force on each segment of a force group (N, 3), world frame, for MuJoCo's current kinematics."""
 
     def __init__(self, group: ForceGroup) -> None:
-        self.law = rft.force_law(group.rft)
+        self.law = laws.bind(group.rft)
         self.sites = group.sites
         self.bodies = group.bodies
         self.roots = None  # the bodies' root bodies, known once a model is seen
@@ -70,6 +70,12 @@ class SegmentForces:
         return self.force
 
 
+def penalty_stop(deflection: np.ndarray, stiffness: float) -> tuple[np.ndarray, np.ndarray]:
+    """The penalty stop on hinge deflections d (rad) from the rest angle: the torque -k (d + |d|) d (nothing on the
+    soft side, a stiffening spring on the other) and its derivative in d."""
+    return -stiffness * (deflection + np.abs(deflection)) * deflection, -4 * stiffness * np.maximum(deflection, 0)
+
+
 class PythonCoupling:
     """The ``python`` backend: each group's RFT on its midpoint sites, and its hinges' penalty stop (deflection
     from the spring's rest angle, as in the native plugin)."""
@@ -86,8 +92,7 @@ class PythonCoupling:
                                   d.qfrc_passive)
             if group.stop_stiffness > 0 and len(group.hinge_dof):
                 deflection = d.qpos[group.hinge_qpos] - m.qpos_spring[group.hinge_qpos]
-                d.qfrc_passive[group.hinge_dof] -= group.stop_stiffness * (deflection + np.abs(deflection)) \
-                    * deflection
+                d.qfrc_passive[group.hinge_dof] += penalty_stop(deflection, group.stop_stiffness)[0]
 
 
 @contextlib.contextmanager

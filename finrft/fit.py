@@ -22,7 +22,7 @@ from . import batch, searchlog
 from .convergence import ErrorLimits, SimulationFailed
 from .drive import Drive
 from .optimize import Search, Variable, cmaes, read_log, si_units
-from .rft import ForceTable
+from .laws.table import ForceTable
 from .scene import RFT, Scene, SceneError, field_of, scene_from_dict, split_key, to_toml
 from .simulate import Run, simulate
 

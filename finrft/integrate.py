@@ -5,7 +5,7 @@
 - ``implicit``: a linearly implicit step, MuJoCo's implicitfast with the RFT force's velocity Jacobian added:
   (M - dt D) qacc' = M qacc, D = joint damping + affine actuator bias + sum_i J_i^T dF_i/dv J_i, then
   activations, qvel += dt qacc', positions and time as MuJoCo advances them. dF/dv comes from central
-  differences of the same law. Native (plugins/finrft_rft.c, finrft_implicit_step) or numpy, the same formulas.
+  differences of the same law. Native (plugins/steppers.c, finrft_implicit_step) or numpy, the same formulas.
 - ``newton``: backward Euler in the RFT force: the velocity change dv solves
   (M - dt D') dv = dt (f(v) - F(v) + F(v + dv)), D' without the RFT term, f every force MuJoCo computed at v.
   A rate-independent law is nearly a step function of the velocity's direction, so on light segments the
@@ -17,8 +17,9 @@
   ``sim.max_step``; the accepted state is extrapolated, 2 (two halves) - (one step), which cancels the implicit
   step's first-order error. ``sim.dt`` is then only the time grid of reversals and recorded samples.
 
-A stepper advances ``n`` steps of ``sim.dt`` and returns 0, nonzero when the state stopped being finite,
-STEP_TOO_SMALL when the adaptive step fell below 1e-9 s, or NOT_CONVERGED when Newton's method did not. It counts
+A stepper advances ``n`` steps of ``sim.dt`` and returns 0 or a `finrft.native.Code`: UNSTABLE when the state
+stopped being finite, STEP_TOO_SMALL when the adaptive step fell below 1e-9 s, NOT_CONVERGED when Newton's method
+did not converge, ARENA_FULL when the native step's workspace does not fit on the mjData stack. It counts
 the steps it has taken and rejected: a fixed step takes exactly the steps asked for, unless Newton's method halves
 one (one rejected, two taken); the adaptive method takes its accepted steps and rejects those over the tolerance.
 """
@@ -31,12 +32,12 @@ from typing import Callable, Protocol, Sequence
 import mujoco
 import numpy as np
 
-from . import native, rft
+from . import laws, native
+from .coupling import penalty_stop
 from .models import ForceGroup
+from .native import Code
 from .scene import Sim
 
-STEP_TOO_SMALL = 2  # the native library's codes too
-NOT_CONVERGED = 3
 NEWTON_ITERATIONS = 50
 NEWTON_TOLERANCE = 1e-10
 NEWTON_HALVINGS = 10
@@ -64,11 +65,7 @@ Counts = ctypes.c_int64 * 2  # steps taken, steps rejected: the native functions
 
 def stepper(m: mujoco.MjModel, sim: Sim, backend: str, groups: Sequence[ForceGroup]) -> Stepper:
     """The step function for a model: MuJoCo's step, or the implicit or adaptive method (native or numpy)."""
-    if sim.method == "explicit":
-        return Explicit(m)
-    if sim.method in ("implicit", "newton"):
-        return Implicit(m, 1 if sim.method == "implicit" else NEWTON_ITERATIONS, backend, groups)
-    return Adaptive(m, sim, backend, groups)
+    return METHODS[sim.method](m, sim, backend, groups)
 
 
 class _Counted:
@@ -153,7 +150,7 @@ class Adaptive(_Counted):
             mujoco.mj_getState(m, d, self._halves, spec)
             error = np.max(np.abs(self._full[span] - self._halves[span]) / (1e-3 + np.abs(self._halves[span])))
             if failed or not np.isfinite(error):
-                return failed or 1
+                return failed or Code.UNSTABLE
             if error <= self.tolerance:
                 self._halves[span] += self._halves[span] - self._full[span]
                 mujoco.mj_setState(m, d, self._halves, spec)
@@ -164,7 +161,7 @@ class Adaptive(_Counted):
                 self.h = step * max(0.2, 0.9 * np.sqrt(self.tolerance / error))
                 self.counts[1] += 1
                 if self.h < 1e-9:
-                    return STEP_TOO_SMALL
+                    return Code.STEP_TOO_SMALL
         return 0
 
 
@@ -173,7 +170,7 @@ class PythonImplicit:
 
     def __init__(self, m: mujoco.MjModel, groups: Sequence[ForceGroup]) -> None:
         self.m = m
-        self.laws = [(rft.force_law(g.rft), g) for g in groups if len(g.sites)]
+        self.laws = [(laws.bind(g.rft), g) for g in groups if len(g.sites)]
         self.damping = np.diag(m.dof_damping)
         servo = [a for a in range(m.nu) if m.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT
                  and m.actuator_biastype[a] == mujoco.mjtBias.mjBIAS_AFFINE]
@@ -217,10 +214,10 @@ class PythonImplicit:
                 dfdv = np.swapaxes((up - down) / (2 * h.sum(axis=2, keepdims=True)), 1, 2)  # (k, force, v)
                 jacobian += np.einsum("kin,kij,kjm->nm", jacp, dfdv, jacp)
         for stiffness, dofs, deflection in stops:
-            q = deflection + ahead * u[dofs]
-            force[dofs] -= stiffness * (q + np.abs(q)) * q
+            torque, stiffening = penalty_stop(deflection + ahead * u[dofs], stiffness)
+            force[dofs] += torque
             if slope:
-                jacobian[dofs, dofs] -= 4 * stiffness * np.maximum(q, 0) * ahead
+                jacobian[dofs, dofs] += stiffening * ahead
         return force, jacobian
 
     def velocity_change(self, d: mujoco.MjData, dt: float, iterations: int) -> np.ndarray | None:
@@ -275,7 +272,7 @@ class PythonImplicit:
         dv = self.velocity_change(d, dt, iterations)
         if dv is None:
             if iterations == 1 or halvings == NEWTON_HALVINGS:
-                return NOT_CONVERGED
+                return Code.NOT_CONVERGED
             if counts is not None:
                 counts[1] += 1
             return (self.step(d, dt / 2, iterations, halvings + 1, counts)
@@ -292,8 +289,17 @@ class PythonImplicit:
         if counts is not None:
             counts[0] += 1
         if not np.all(np.isfinite(d.qvel)):
-            return 1
+            return Code.UNSTABLE
         d.qacc_warmstart[:] = d.qacc
         mujoco.mj_integratePos(m, d.qpos, d.qvel, dt)
         d.time += dt
         return 0
+
+
+# The methods by name, the choices of ``sim.method``: each makes its stepper from (model, sim, backend, groups).
+METHODS: dict[str, Callable[[mujoco.MjModel, Sim, str, Sequence[ForceGroup]], Stepper]] = {
+    "explicit": lambda m, sim, backend, groups: Explicit(m),
+    "implicit": lambda m, sim, backend, groups: Implicit(m, 1, backend, groups),
+    "newton": lambda m, sim, backend, groups: Implicit(m, NEWTON_ITERATIONS, backend, groups),
+    "adaptive": lambda m, sim, backend, groups: Adaptive(m, sim, backend, groups),
+}

@@ -12,7 +12,7 @@ from importlib import resources
 import mujoco
 import numpy as np
 
-from . import native, rft
+from . import laws, native
 from .scene import RFT, Chain, RobotScene, Scene, SceneError, Sim
 
 INTEGRATORS = {
@@ -76,13 +76,7 @@ def initial_heading(drive: str, attack_deg: float) -> float:
 
 def plugin_config(law: RFT, stop_stiffness: float) -> dict[str, str]:
     """The native plugin's config for one force group: the same law and penalty stop as the Python coupling."""
-    config = {"law": law.law, "f_perp": repr(law.f_perp), "f_par": repr(law.f_par), "v_reg": repr(law.v_reg),
-              "stop_stiffness": repr(stop_stiffness)}
-    if law.law == "table":
-        table = rft.read_table(law.table)
-        config["table"] = " ".join(repr(float(x)) for row in zip(table.attack_deg, table.f_perp, table.f_par)
-                                   for x in row)
-    return config
+    return {**laws.plugin_config(law), "stop_stiffness": repr(stop_stiffness)}
 
 
 def penalty_stiffness(chain: Chain) -> float:

@@ -1,18 +1,20 @@
-"""The native RFT plugin (plugins/finrft_rft.c, built by ``pip install``): locating, checking and loading it once.
+"""The native RFT plugin (plugins/, built by ``pip install``): locating, checking and loading it once, and the codes
+its steppers return.
 
 MuJoCo calls `load` through the ``mujoco.plugins`` entry point whenever it is imported, in every process, and
 finrft calls it again before it builds a model; loading twice is harmless. It never raises: when the library is
 missing, was built for another MuJoCo, or will not load, `available` is False, finrft says so once and uses the
 Python coupling instead.
 
-setup.py reads this file on its own to name the library and its build record, so it imports only the standard
-library.
+setup.py reads this file on its own to name the library and its build record and to give the return codes to the
+C compiler, so it imports only the standard library.
 """
 
 from __future__ import annotations
 
 import contextlib
 import ctypes
+import enum
 import importlib
 import re
 import sys
@@ -23,6 +25,17 @@ from typing import Iterator
 # Named as MuJoCo's own plugins are on each platform.
 LIBRARY = {"win32": "finrft_rft.dll", "darwin": "libfinrft_rft.dylib"}.get(sys.platform, "libfinrft_rft.so")
 PLUGIN = "finrft.rft"
+
+
+class Code(enum.IntEnum):
+    """What a stepper returns besides 0 (done), the native ones (FINRFT_UNSTABLE, ...) and their numpy twins."""
+
+    UNSTABLE = 1        # the state stopped being finite
+    STEP_TOO_SMALL = 2  # the adaptive step fell below 1e-9 s
+    NOT_CONVERGED = 3   # Newton's method found no root, even at the smallest step
+    ARENA_FULL = 4      # the native step's workspace does not fit on the mjData stack
+
+
 _status: dict[str, object] = {"loaded": None, "error": "", "advice": "", "warned": False}
 
 

@@ -8,24 +8,51 @@ come from the principle of virtual work, derived by hand: with segment midpoints
     A_kj = I_k delta_kj + l^2 cos(phi_k - phi_j) sum_i m_i c_ik c_ij
     Q_k  = sum_i F_i . c_ik l e_perp(phi_k) + tau_k - tau_(k+1)
 
-with F_i the RFT force (the same law as `finrft.rft`) and tau_k the torque of hinge k on segment k. A reversal
-of the drive changes P' at once; the segments then take the impulse ``A dphi' = -sum_i m_i c_ik l e_perp . dP'``.
+with F_i the RFT force (the paper law) and tau_k the torque of hinge k on segment k. A reversal of the drive
+changes P' at once; the segments then take the impulse ``A dphi' = -sum_i m_i c_ik l e_perp . dP'``.
 It serves as the test oracle for the MuJoCo model (hinged plates; the origami stop as the penalty spring).
 The half robot is solved the same way, in the body's slide and the fin's absolute angles (`solve_robot`).
+
+It shares no code with what it checks: from finrft it takes only plain data, a scene and a drive, and writes
+out on its own the law, the penalty stop and the robot's parts (its arm's and body's drag, its gait).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from . import rft
 from .drive import Drive
-from .models import arm_law, body_law, body_share, initial_heading
-from .scene import Scene
-from .swim import gait_drive
+
+if TYPE_CHECKING:
+    from .scene import RFT, RobotScene, Scene
+
+
+def _paper_law(f_perp: float, f_par: float, v_reg: float) -> Callable[[np.ndarray, np.ndarray, np.ndarray],
+                                                                      np.ndarray]:
+    """The paper's law on points moving at v (k, 3), axis e and normal n (k, 3): normal and tangential parts
+    f_perp sin(attack), f_par cos(attack) against the motion, faded in over tanh(|v| / v_reg)."""
+    def law(v, e, n):
+        speed = np.sqrt(np.sum(v * v, axis=1))
+        unit = v / np.maximum(speed, 1e-300)[:, None]
+        normal = np.sum(unit * n, axis=1)
+        along = np.sum(unit * e, axis=1)
+        return -np.tanh(speed / v_reg)[:, None] * (f_perp * normal[:, None] * n + f_par * along[:, None] * e)
+    return law
+
+
+def _scene_law(rft: RFT):
+    if rft.law != "paper":
+        raise ValueError("the reference solves the paper law (rft.law = 'paper')")
+    return _paper_law(rft.f_perp, rft.f_par, rft.v_reg)
+
+
+def _stop(deflection, stiffness: float):
+    """The penalty stop's torque on hinge deflections from the rest angle: k d^2 pushing back when d > 0."""
+    return np.where(deflection > 0, -2 * stiffness * deflection ** 2, 0.0)
 
 
 @dataclass(frozen=True)
@@ -58,9 +85,10 @@ class _Chain:
         self.inertia = np.full(n, p.segment_inertia)
         self.mcc = np.einsum("i,ik,ij->kj", self.m, self.c, self.c)  # sum_i m_i c_ik c_ij
         self.mc = self.m[:, None] * self.c                            # m_i c_ik
-        self.law = rft.force_law(scene.rft)
+        self.law = _scene_law(scene.rft)
         self.penalty = p.kind == "origami"
-        self.heading = initial_heading(drive.kind, drive.attack_deg)
+        # a drag at angle of attack theta to +y starts with the plate at 90 deg - theta
+        self.heading = np.radians(90.0 - drive.attack_deg) if drive.kind == "drag" else 0.0
 
     def rod(self, t: float, omega_sign: float):
         """Rod angle psi, tip velocity and tip acceleration at t (constant speed within a stroke)."""
@@ -77,7 +105,7 @@ class _Chain:
         deflection = q - self.p.springref
         tau = -self.p.stiffness * deflection - self.p.damping * dq
         if self.penalty:
-            tau -= self.p.stop_stiffness * (deflection + np.abs(deflection)) * deflection
+            tau += _stop(deflection, self.p.stop_stiffness)
         return tau
 
     def accelerations(self, t: float, phi, dphi, sign: float):
@@ -167,7 +195,7 @@ class _HalfRobot:
     is prescribed. Point masses j (body, arm centre, segment midpoints) at r_j(q, psi), with J_j = dr_j/dq and
     w_j = dr_j/dpsi:  M q'' = Q - sum_j m_j J_j^T (J_j' q' + w_j' psi'),  M = sum_j m_j J_j^T J_j + diag(I)."""
 
-    def __init__(self, scene, drive: Drive) -> None:
+    def __init__(self, scene: RobotScene, drive: Drive) -> None:
         f, a = scene.fin, scene.arm
         if scene.robot.model != "half" or scene.robot.servo != "prescribed":
             raise ValueError("the reference solves the half robot with a prescribed servo")
@@ -175,14 +203,16 @@ class _HalfRobot:
             raise ValueError("the reference models the origami stop as the penalty spring (fin.stop = 'penalty')")
         self.scene, self.drive, self.n, self.l, self.L = scene, drive, f.segments, f.segment_length, a.length
         self.c = np.tril(np.ones((self.n, self.n)), -1) + 0.5 * np.eye(self.n)
-        self.m_body = body_share(scene) * scene.body.mass
+        share = 0.5  # the half robot carries half the body's mass and drag
+        self.m_body = share * scene.body.mass
         self.m_arm = a.mass_base + a.linear_density * a.length
         self.m_seg = f.segment_mass
         self.inertia = np.full(self.n, f.segment_inertia)
-        self.fin_law = rft.force_law(scene.rft)
-        self.arm_law = rft.force_law(arm_law(scene))
-        self.body_law = rft.force_law(body_law(scene))
-        self.stroke_drag = body_share(scene) * scene.body.drag
+        self.fin_law = _scene_law(scene.rft)
+        # the arm: the paper law, its normal coefficient growing with the arm's length; the body: isotropic drag
+        self.arm_law = _paper_law(a.f_perp_base + a.f_perp_per_length * a.length, a.f_par, scene.rft.v_reg)
+        self.body_law = _paper_law(share * scene.body.drag, share * scene.body.drag, scene.body.v_reg)
+        self.stroke_drag = share * scene.body.drag
         self.rigid = f.kind == "rigid"
         self.penalty = f.stop_stiffness if f.kind == "origami" else 0.0
 
@@ -223,8 +253,7 @@ class _HalfRobot:
         f = self.scene.fin
         tau = -f.stiffness * (q - f.springref) - f.damping * dq
         if self.penalty:
-            deflection = q - f.springref
-            tau -= self.penalty * (deflection + np.abs(deflection)) * deflection
+            tau += _stop(q - f.springref, self.penalty)
         gen = np.einsum("jak,ja->k", J, force - mass[:, None] * bias)
         gen[1:] += tau - np.r_[tau[1:], 0.0]
         M = np.einsum("j,jak,jal->kl", mass, J, J)
@@ -236,9 +265,11 @@ class _HalfRobot:
         return np.linalg.solve(M, -np.einsum("j,jak,ja->k", mass, J, w * jump))
 
 
-def solve_robot(scene, cycles: int, times: np.ndarray, *, rtol: float = 1e-9, atol: float = 1e-12) -> RobotSolution:
+def solve_robot(scene: RobotScene, cycles: int, times: np.ndarray, *, rtol: float = 1e-9,
+                atol: float = 1e-12) -> RobotSolution:
     """Integrate the half robot's flap cycles with Radau; the same start and reversals as finrft.swim."""
-    drive = gait_drive(scene, cycles)
+    g = scene.gait  # the arm swings from theta2 up to theta1 and back at omega
+    drive = Drive(kind="rotate", speed=g.omega, stroke=g.theta1 - g.theta2, cycles=cycles, start=g.theta2)
     robot = _HalfRobot(scene, drive)
     n, ts = robot.n, drive.stroke_time
     if robot.rigid:

@@ -14,15 +14,17 @@ import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
+
+from . import laws
 
 
 class SceneError(ValueError):
     """A scene file, preset or override that cannot be used; the message names the key and what is allowed."""
 
 
-def _f(default: Any, unit: str, doc: str, *, choices: tuple[str, ...] = (), minimum: float | None = None,
-       exclusive: bool = True, maximum: float | None = None, why_maximum: str = "") -> Any:
+def _f(default: Any, unit: str, doc: str, *, choices: tuple[str, ...] | Callable[[], tuple[str, ...]] = (),
+       minimum: float | None = None, exclusive: bool = True, maximum: float | None = None, why_maximum: str = "") -> Any:
     return field(default=default, metadata={"unit": unit, "doc": doc, "choices": choices, "minimum": minimum,
                                             "exclusive": exclusive, "maximum": maximum, "why_maximum": why_maximum})
 
@@ -70,7 +72,7 @@ class Plate(Chain):
 @dataclass(frozen=True)
 class RFT:
     law: str = _f("paper", "", "paper: direction-cosine law; table: F_perp(theta), F_par(theta) from a CSV",
-                  choices=("paper", "table"))
+                  choices=laws.names)
     f_perp: float = _f(1.2, "N", "normal force coefficient per segment (paper law); < 0 would pull the plate along",
                        minimum=0.0, exclusive=False)
     f_par: float = _f(-0.2, "N", "tangential force coefficient per segment (paper law; < 0 feeds energy in)")
@@ -89,7 +91,7 @@ class Sim:
                      "with the RFT force linearised in velocity; newton: implicitfast with the RFT force at the new "
                      "velocity, solved by Newton's method (stable and accurate at large steps on light segments); "
                      "adaptive: implicit steps sized by an error estimate (dt is then the grid of reversals and samples)",
-                     choices=("explicit", "implicit", "newton", "adaptive"))
+                     choices=lambda: tuple(_methods()))
     max_step: float = _f(1e-3, "s", "adaptive method: largest step", minimum=0.0)
     tolerance: float = _f(1e-4, "", "adaptive method: error per step, relative (absolute below 1e-3)", minimum=0.0,
                           maximum=0.1, why_maximum="a looser step-doubling test accepts steps of any error")
@@ -152,6 +154,12 @@ class _Sections:
             section, name = split_key(type(self), key)
             data[section][name] = value
         return scene_from_dict(data, type(self))
+
+
+def _methods():
+    from .integrate import METHODS  # finrft.integrate imports the scene
+
+    return METHODS
 
 
 def _check_sim(sim: Sim) -> None:
@@ -248,11 +256,13 @@ def _check(section: str, f: dataclasses.Field, value: Any) -> Any:
             raise SceneError(f"{key} must be a whole number, got {value!r}")
     elif not isinstance(value, str):
         raise SceneError(f"{key} must be a string, got {value!r}")
-    if meta["choices"]:
+    # a callable: the choices of a registry, whose modules may import the scene
+    choices = meta["choices"]() if callable(meta["choices"]) else meta["choices"]
+    if choices:
         # Names match whatever their case, so MuJoCo's own spellings (Euler, RK4) name the schema's choices.
-        canonical = {choice.lower(): choice for choice in meta["choices"]}
+        canonical = {choice.lower(): choice for choice in choices}
         if value.lower() not in canonical:
-            raise SceneError(f"{key} = {value!r} is not allowed: use one of {', '.join(meta['choices'])}")
+            raise SceneError(f"{key} = {value!r} is not allowed: use one of {', '.join(choices)}")
         value = canonical[value.lower()]
     low = meta["minimum"]
     if low is not None and (value <= low if meta["exclusive"] else value < low):

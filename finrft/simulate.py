@@ -20,9 +20,9 @@ from .convergence import (ErrorLimits, Estimated, SimulationUnstable, check_reso
                           max_difference, paired, record_every, require_finite)
 from .coupling import PythonCoupling, SegmentForces, installed
 from .drive import Drive
-from .integrate import NOT_CONVERGED, STEP_TOO_SMALL, Stepper, stepper
+from .integrate import Stepper, stepper
 from .models import PlateModel, build_plate
-from .native import captured_warnings
+from .native import Code, captured_warnings
 from .scene import Scene
 
 _BAD_STATE = (mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL)
@@ -158,11 +158,15 @@ class Prescribed:
 
 def unstable(scene: Any, t: float, messages: list[str], code: int = 1) -> SimulationUnstable:
     sim = scene.sim
-    if code == STEP_TOO_SMALL:
+    if code == Code.STEP_TOO_SMALL:
         return SimulationUnstable(
             f"the adaptive step fell below 1e-9 s at t = {t:.4g} s (tolerance {sim.tolerance:g}): raise "
             f"sim.tolerance or rft.v_reg, or use sim.method = 'newton'")
-    if code == NOT_CONVERGED:
+    if code == Code.ARENA_FULL:
+        return SimulationUnstable(
+            f"the native step's workspace does not fit in MuJoCo's arena at t = {t:.4g} s: use sim.backend = "
+            f"'python'")
+    if code == Code.NOT_CONVERGED:
         return SimulationUnstable(
             f"Newton's method of the implicit step did not converge at t = {t:.4g} s (dt = {sim.dt:g} s): reduce "
             f"sim.dt or raise rft.v_reg")

@@ -14,7 +14,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from finrft import rft
+from finrft.laws.table import paper_table, write_table
 from finrft.cli import main
 from finrft.scene import RobotScene, preset, to_toml
 
@@ -162,7 +162,7 @@ def test_a_wrong_integrator_lists_the_choices(capsys):
 
 def test_table_law_from_a_scene_file_matches_the_paper_law(tmp_path, capsys):
     # The paper law written as a fine table must give the same drag: two laws, one result.
-    rft.write_table(tmp_path / "forces.csv", rft.paper_table(1.2, -0.2, samples=1801))
+    write_table(tmp_path / "forces.csv", paper_table(1.2, -0.2, samples=1801))
     text = to_toml(preset("paper")).replace('law = "paper"', 'law = "table"')
     scene = tmp_path / "table.toml"
     scene.write_text(text.replace('table = ""', 'table = "forces.csv"'))  # relative to the scene file

@@ -10,7 +10,7 @@ import pytest
 from finrft.fit import fit, read_drag, read_forces, resolve_params, simulated_drag, write_drag
 from finrft.cli import main
 from finrft.data import plate_drag_dir
-from finrft.rft import read_table
+from finrft.laws.table import read_table
 from finrft.scene import SceneError, load_scene, preset
 
 DATA = plate_drag_dir()

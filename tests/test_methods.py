@@ -5,7 +5,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from finrft import integrate, models, reference
+from finrft import integrate, models, native, reference
 from finrft.drive import Drive
 from finrft.scene import SceneError, preset
 from finrft.simulate import simulate
@@ -143,3 +143,18 @@ def test_chatter_stops_the_run_loudly():
     from finrft.simulate import SimulationUnstable
     with pytest.raises(SimulationUnstable, match=r"chatters at t = .* dt = 0.0001 s: use sim.method = 'newton'"):
         simulate(preset("physical").replace(**{"sim.method": "explicit", "sim.dt": 1e-4}), LIGHT_DRIVE)
+
+
+@pytest.mark.parametrize("method", ["newton", "adaptive"])
+def test_native_step_too_big_for_the_arena_says_so_and_leaves_the_state(method):
+    # The native step's workspace (3 nv x nv matrices and the segments' Jacobians, ~180 kB here) lives on the mjData
+    # stack: an arena too small for it must give ARENA_FULL before anything moves, not a MuJoCo error.
+    scene = preset("physical").replace(**{"plate.segments": 60, "sim.method": method})
+    native.load()
+    for memory, code in ((150_000, native.Code.ARENA_FULL), (400_000, 0)):
+        spec = models.plate_spec(scene, backend="native")
+        spec.memory = memory
+        m = spec.compile()
+        d = mujoco.MjData(m)
+        assert integrate.stepper(m, scene.sim, "native", [])(d, 5) == code
+        assert d.time == (0.0 if code else pytest.approx(5 * scene.sim.dt))

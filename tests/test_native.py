@@ -2,6 +2,7 @@
 its config; and the batch API, which must give the single runs' results."""
 
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -12,9 +13,10 @@ import numpy as np
 import pytest
 from mujoco import rollout
 
-from finrft import batch, models, native, rft
+from finrft import batch, models, native
 from finrft.cli import main
 from finrft.drive import Drive
+from finrft.laws.table import ForceTable, write_table
 from finrft.scene import SceneError
 from finrft.simulate import simulate
 
@@ -59,8 +61,7 @@ def table_csv(tmp_path_factory):
     # A table that is not the paper law (a flattened sine), so the table path is exercised on its own.
     path = tmp_path_factory.mktemp("rft") / "forces.csv"
     attack = np.linspace(0.0, 90.0, 7)
-    rft.write_table(path, rft.ForceTable(attack, 1.2 * np.sin(np.radians(attack)) ** 0.5,
-                                         -0.3 * np.cos(np.radians(attack))))
+    write_table(path, ForceTable(attack, 1.2 * np.sin(np.radians(attack)) ** 0.5, -0.3 * np.cos(np.radians(attack))))
     return str(path)
 
 
@@ -152,3 +153,70 @@ def test_unavailable_plugin_falls_back_once(monkeypatch, paper):
         runs = [simulate(paper, Drive(stroke=0.01)) for _ in range(2)]
     assert len(record) == 1
     assert all(run.backend == "python" for run in runs)
+
+
+# Counts heap calls between count_start() and count_stop() when preloaded (glibc's own allocator underneath).
+ALLOCATION_COUNTER = r"""
+#include <stddef.h>
+extern void* __libc_malloc(size_t);
+extern void* __libc_calloc(size_t, size_t);
+extern void* __libc_realloc(void*, size_t);
+extern void* __libc_memalign(size_t, size_t);
+extern void __libc_free(void*);
+static volatile long calls = -1;
+static void count(void) { if (calls >= 0) calls++; }
+void* malloc(size_t n) { count(); return __libc_malloc(n); }
+void* calloc(size_t n, size_t size) { count(); return __libc_calloc(n, size); }
+void* realloc(void* p, size_t n) { count(); return __libc_realloc(p, n); }
+void* aligned_alloc(size_t align, size_t n) { count(); return __libc_memalign(align, n); }
+int posix_memalign(void** out, size_t align, size_t n) { count(); *out = __libc_memalign(align, n); return *out ? 0 : 12; }
+void free(void* p) { if (p) count(); __libc_free(p); }
+void count_start(void) { calls = 0; }
+long count_stop(void) { long c = calls; calls = -1; return c; }
+"""
+
+ALLOCATION_RUN = r"""
+import ctypes, json, sys
+import mujoco
+from finrft import integrate, models
+from finrft.scene import RobotScene, preset
+counter = ctypes.CDLL(sys.argv[1])
+counter.count_stop.restype = ctypes.c_long
+out = {}
+for method in ("implicit", "newton", "adaptive"):
+    scene = preset("physical", RobotScene).replace(**{"sim.method": method, "sim.max_step": 1e-3})
+    robot = models.build_robot(scene)
+    d = mujoco.MjData(robot.model)
+    d.qpos[robot.servo_qpos] = scene.gait.theta2
+    d.qvel[robot.servo_dof] = scene.gait.omega
+    advance = integrate.stepper(robot.model, scene.sim, "native", robot.groups)
+    assert advance(d, 10) == 0  # ctypes and MuJoCo set up what they keep
+    for n in (1, 300):
+        # the library's function itself, its arguments made beforehand: nothing of Python's is counted
+        if method == "adaptive":
+            h = ctypes.c_double(advance.h)
+            args = (robot.model._address, d._address, n * scene.sim.dt, advance.max_step, advance.tolerance,
+                    ctypes.byref(h), advance.counts)
+        else:
+            args = (robot.model._address, d._address, n, advance.iterations, advance.counts)
+        counter.count_start()
+        code = advance._native(*args)
+        out[f"{method}/{n}"] = counter.count_stop()
+        assert code == 0
+print(json.dumps(out))
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux") or shutil.which("gcc") is None,
+                    reason="interposes glibc's allocator")
+def test_native_steps_allocate_nothing(tmp_path):
+    # Every heap call of the process during a call of the native steppers is counted: none, however many steps.
+    (tmp_path / "counter.c").write_text(ALLOCATION_COUNTER)
+    subprocess.run(["gcc", "-shared", "-fPIC", "-O1", "-o", str(tmp_path / "counter.so"), str(tmp_path / "counter.c")],
+                   check=True)
+    counter = str(tmp_path / "counter.so")
+    done = subprocess.run([sys.executable, "-c", ALLOCATION_RUN, counter], capture_output=True, text=True,
+                          env={**os.environ, "LD_PRELOAD": counter}, check=True)
+    counts = json.loads(done.stdout.splitlines()[-1])
+    for method in ("implicit", "newton", "adaptive"):
+        assert counts[f"{method}/300"] == counts[f"{method}/1"] == 0, counts

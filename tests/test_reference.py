@@ -1,11 +1,15 @@
 """MuJoCo against an independent solution of the same equations of motion (finrft.reference: hand-derived
 planar chain in absolute angles, integrated by scipy's Radau at rtol 1e-10)."""
 
+import ast
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 from finrft import reference
 from finrft.drive import Drive
+from finrft.scene import preset
 from finrft.simulate import simulate
 
 
@@ -41,3 +45,14 @@ def test_light_soft_plate_matches_reference(paper):
     assert angle < 0.1
     assert force < 3e-3 * run.peak_drive_force
     assert np.degrees(np.abs(run.hinge_angle).max()) > 20.0
+
+
+def test_reference_shares_no_code_with_what_it_checks():
+    # Only plain data from finrft (the drive and, for type hints, the scene); the law, the stop, the robot's parts
+    # are written out anew there.
+    tree = ast.parse(Path(reference.__file__).read_text())
+    imported = {node.module for node in ast.walk(tree) if isinstance(node, ast.ImportFrom) and node.level}
+    imported |= {alias.name for node in ast.walk(tree) if isinstance(node, ast.Import) for alias in node.names}
+    assert imported <= {"drive", "scene", "numpy", "scipy.integrate", "dataclasses", "typing", "__future__"}, imported
+    with pytest.raises(ValueError, match="paper law"):
+        reference.solve(preset("paper").replace(**{"rft.law": "table", "rft.table": "forces.csv"}), Drive(), [0.0])

@@ -1,10 +1,16 @@
-"""The RFT laws against their closed forms and each other."""
+"""The RFT laws against their closed forms and each other, the registry that finds them, and each law's C twin
+against its numpy source of truth."""
 
+import sys
+
+import mujoco
 import numpy as np
 import pytest
 
-from finrft import rft
-from finrft.scene import SceneError
+from finrft import laws, models
+from finrft.coupling import PythonCoupling, installed
+from finrft.laws import paper, table
+from finrft.scene import SceneError, preset
 
 F_PERP, F_PAR, V_REG = 1.2, -0.2, 1e-3
 
@@ -15,6 +21,10 @@ def frames(angle):
     return x, y
 
 
+def paper_force(v, x, y):
+    return paper.force(v, x, y, V_REG, f_perp=F_PERP, f_par=F_PAR)
+
+
 @pytest.mark.parametrize("attack_deg", [0.0, 15.0, 45.0, 60.0, 90.0])
 def test_paper_law_closed_form(attack_deg):
     # A segment along x moving at angle of attack theta: normal part f_perp sin(theta), tangential f_par cos(theta).
@@ -22,7 +32,7 @@ def test_paper_law_closed_form(attack_deg):
     speed = 0.03
     v = speed * np.array([[np.cos(theta), np.sin(theta), 0.0]])
     x, y = frames(np.zeros(1))
-    force = rft.paper_force(v, x, y, F_PERP, F_PAR, V_REG)[0]
+    force = paper_force(v, x, y)[0]
     ramp = np.tanh(speed / V_REG)
     np.testing.assert_allclose(force, -ramp * np.array([F_PAR * np.cos(theta), F_PERP * np.sin(theta), 0]),
                                atol=1e-15)
@@ -32,40 +42,100 @@ def test_paper_law_is_odd_in_velocity_and_vanishes_at_rest():
     rng = np.random.default_rng(1)
     v = rng.normal(size=(50, 3)) * 0.01
     x, y = frames(rng.uniform(-np.pi, np.pi, 50))
-    forward = rft.paper_force(v, x, y, F_PERP, F_PAR, V_REG)
-    np.testing.assert_allclose(rft.paper_force(-v, x, y, F_PERP, F_PAR, V_REG), -forward, atol=1e-15)
-    assert np.all(rft.paper_force(np.zeros((3, 3)), x[:3], y[:3], F_PERP, F_PAR, V_REG) == 0.0)
+    forward = paper_force(v, x, y)
+    np.testing.assert_allclose(paper_force(-v, x, y), -forward, atol=1e-15)
+    assert np.all(paper_force(np.zeros((3, 3)), x[:3], y[:3]) == 0.0)
 
 
 def test_regularisation_ramp():
     x, y = frames(np.zeros(1))
     for speed in (1e-5, 1e-3, 5e-3):
-        force = rft.paper_force(np.array([[0.0, speed, 0.0]]), x, y, F_PERP, F_PAR, V_REG)[0]
+        force = paper_force(np.array([[0.0, speed, 0.0]]), x, y)[0]
         assert force[1] == pytest.approx(-F_PERP * np.tanh(speed / V_REG), rel=1e-12)
 
 
 def test_table_of_the_paper_law_reproduces_it():
     # Linear interpolation of sin/cos sampled every 0.25 deg is exact to ~1e-5 relative.
-    table = rft.paper_table(F_PERP, F_PAR, samples=361)
+    forces = table.paper_table(F_PERP, F_PAR, samples=361)
     rng = np.random.default_rng(2)
     v = rng.normal(size=(200, 3)) * 0.02
     v[:, 2] = 0.0
     x, y = frames(rng.uniform(-np.pi, np.pi, 200))
-    np.testing.assert_allclose(rft.table_force(v, x, y, table, V_REG), rft.paper_force(v, x, y, F_PERP, F_PAR, V_REG),
-                               atol=2e-5)
+    np.testing.assert_allclose(table.force(v, x, y, V_REG, table=forces), paper_force(v, x, y), atol=2e-5)
 
 
 def test_table_round_trip_and_bad_tables(tmp_path):
-    table = rft.paper_table(F_PERP, F_PAR, samples=19)
+    forces = table.paper_table(F_PERP, F_PAR, samples=19)
     path = tmp_path / "forces.csv"
-    rft.write_table(path, table)
-    back = rft.read_table(path)
-    np.testing.assert_array_equal(back.f_perp, table.f_perp)
-    np.testing.assert_array_equal(back.attack_deg, table.attack_deg)
+    table.write_table(path, forces)
+    back = table.read_table(path)
+    np.testing.assert_array_equal(back.f_perp, forces.f_perp)
+    np.testing.assert_array_equal(back.attack_deg, forces.attack_deg)
 
     (tmp_path / "cols.csv").write_text("angle,a,b\n0,1,2\n90,1,2\n")
     (tmp_path / "short.csv").write_text("attack_deg,f_perp_N,f_par_N\n0,0,1\n45,1,1\n")
     (tmp_path / "text.csv").write_text("attack_deg,f_perp_N,f_par_N\n0,x,1\n90,1,1\n")
     for name in ("cols.csv", "short.csv", "text.csv", "missing.csv"):
         with pytest.raises(SceneError):
-            rft.read_table(tmp_path / name)
+            table.read_table(tmp_path / name)
+
+
+@pytest.fixture
+def extra_laws(tmp_path, monkeypatch):
+    """The registry with two more modules beside its own: a segment law and a module of another kind."""
+    (tmp_path / "viscous.py").write_text(
+        "KIND = 'segment'\n"
+        "def parameters(rft):\n    return {'f_perp': rft.f_perp}\n"
+        "def force(v, x_axis, y_axis, v_reg, f_perp):\n    return -f_perp * v / v_reg\n")
+    (tmp_path / "surface.py").write_text("KIND = 'surface'\ndef force_at_depth(depth):\n    return depth\n")
+    monkeypatch.setattr(laws, "__path__", [*laws.__path__, str(tmp_path)])
+    laws._registry.cache_clear()
+    yield
+    laws._registry.cache_clear()
+    for name in ("viscous", "surface"):
+        sys.modules.pop(f"finrft.laws.{name}", None)
+
+
+def test_registry_finds_the_laws_by_name_and_skips_other_modules(extra_laws):
+    assert laws.names() == ("paper", "table", "viscous")
+    scene = preset("paper").replace(**{"rft.law": "viscous", "rft.f_perp": 2.0})  # the scene's choices follow
+    v = np.array([[0.0, 1e-3, 0.0]])
+    np.testing.assert_allclose(laws.bind(scene.rft)(v, *frames(np.zeros(1))), -2.0 * v / scene.rft.v_reg)
+    assert laws.plugin_config(scene.rft) == {"law": "viscous", "v_reg": repr(scene.rft.v_reg), "f_perp": "2.0"}
+    with pytest.raises(SceneError, match="use one of paper, table, viscous"):
+        preset("paper").replace(**{"rft.law": "surface"})
+
+
+# Parameters of each registered law for the twin test (a table that is not the paper law's, so that the table
+# path is exercised on its own).
+def _examples(tmp_path):
+    attack = np.linspace(0.0, 90.0, 7)
+    path = tmp_path / "forces.csv"
+    table.write_table(path, table.ForceTable(attack, 1.2 * np.sin(np.radians(attack)) ** 0.5,
+                                             -0.3 * np.cos(np.radians(attack))))
+    return {"paper": {"rft.f_perp": 1.3, "rft.f_par": -0.4}, "table": {"rft.table": str(path)}}
+
+
+def test_every_law_has_a_c_twin_giving_the_same_forces(tmp_path):
+    examples = _examples(tmp_path)
+    assert set(examples) == set(laws.names()), "every registered law needs its twin test here"
+    rng = np.random.default_rng(5)
+    for name, values in examples.items():
+        scene = preset("physical").replace(**{"rft.law": name, "plate.segments": 6, **values})
+        native = models.build_plate(scene.replace(**{"sim.backend": "native"}))
+        python = models.build_plate(scene.replace(**{"sim.backend": "python"}))
+        assert native.backend == "native"
+        m_native, m_python = native.model, python.model
+        d_native, d_python = mujoco.MjData(m_native), mujoco.MjData(m_python)
+        for trial in range(50):
+            qpos = np.r_[0.0, rng.uniform(-0.6, 0.6, m_native.nq - 1)]  # hinges both ways: the stop engaged
+            qvel = rng.normal(size=m_native.nv) * rng.choice([1e-4, 1e-3, 1e-1]) * (trial > 0)  # first: at rest
+            for m, d in ((m_native, d_native), (m_python, d_python)):
+                d.qpos[:], d.qvel[:] = qpos, qvel
+            mujoco.mj_forward(m_native, d_native)
+            with installed(PythonCoupling(python.groups)):
+                mujoco.mj_forward(m_python, d_python)
+            scale = np.abs(d_python.qfrc_passive).max()
+            np.testing.assert_allclose(d_native.qfrc_passive, d_python.qfrc_passive, rtol=0, atol=1e-12 * scale,
+                                       err_msg=f"law {name}")
+        assert np.abs(d_python.qfrc_passive).max() > 0

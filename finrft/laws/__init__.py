@@ -1,1 +1,74 @@
-"""Granular resistive force laws as pure numpy functions in SI units, one module per law."""
+"""The registry of force laws: each law is one module here, found by its name.
+
+A segment law (module-level ``KIND = "segment"``) gives the granular resistive force on rigid segments, the single
+source of truth of its formula; its C twin is ``plugins/laws/NAME.c``, which the native plugin finds by the same
+name. Its module provides
+
+- ``parameters(rft) -> dict``: the keyword arguments of ``force`` from a scene's ``[rft]`` section (read once: the
+  table law reads its CSV here);
+- ``force(v, x_axis, y_axis, v_reg, **parameters) -> (N, 3)``, pure numpy: the force (N, world frame) on N segments
+  from their midpoint velocities ``v`` (N, 3), their unit axes ``x_axis`` (N, 3) and in-plane normals ``y_axis``
+  (N, 3); every law fades out below the speed ``v_reg`` (the implicit methods difference it on that scale);
+- optionally ``config(parameters) -> dict[str, str]``: its keys of the native plugin's config, when they are not
+  its parameters' numbers written out.
+
+Modules of another KIND (a surface law, say) live here too and are not segment laws.
+"""
+
+from __future__ import annotations
+
+import functools
+import importlib
+import pkgutil
+from types import ModuleType
+from typing import Any, Callable
+
+import numpy as np
+
+SEGMENT = "segment"  # the KIND of a segment law
+
+Law = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+
+
+@functools.cache
+def _registry() -> dict[str, ModuleType]:
+    modules = (importlib.import_module(f"{__name__}.{info.name}") for info in pkgutil.iter_modules(__path__)
+               if not info.name.startswith("_"))
+    return {module.__name__.rpartition(".")[2]: module for module in modules if getattr(module, "KIND", "") == SEGMENT}
+
+
+def names() -> tuple[str, ...]:
+    """The segment laws, by name."""
+    return tuple(sorted(_registry()))
+
+
+def module(name: str) -> ModuleType:
+    """The module of a segment law."""
+    return _registry()[name]
+
+
+def bind(rft: Any) -> Law:
+    """The law a scene's ``[rft]`` section selects, with its parameters, as ``f(v, x_axis, y_axis) -> (N, 3)``."""
+    law = module(rft.law)
+    params, v_reg = law.parameters(rft), rft.v_reg
+    return lambda v, x, y: law.force(v, x, y, v_reg, **params)
+
+
+def plugin_config(rft: Any) -> dict[str, str]:
+    """The native plugin's config keys of a scene's law: its name, v_reg and its own parameters."""
+    law = module(rft.law)
+    params = law.parameters(rft)
+    own = law.config(params) if hasattr(law, "config") else {key: repr(float(value)) for key, value in params.items()}
+    return {"law": rft.law, "v_reg": repr(rft.v_reg), **own}
+
+
+def components(v: np.ndarray, x_axis: np.ndarray, y_axis: np.ndarray,
+               v_reg: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What every law starts from: the ramp tanh(|v| / v_reg) and the direction cosines v^.x^ and v^.y^ (0 at
+    rest)."""
+    speed = np.linalg.norm(v, axis=-1)
+    safe = np.where(speed > 0.0, speed, 1.0)
+    ramp = np.tanh(speed / v_reg)
+    vx = np.einsum("...i,...i->...", v, x_axis) / safe
+    vy = np.einsum("...i,...i->...", v, y_axis) / safe
+    return ramp, vx, vy

@@ -1,19 +1,11 @@
-"""Granular resistive force theory (RFT): the force the medium exerts on one rigid segment.
+"""Law ``table``: the magnitudes looked up per angle of attack theta (the acute angle between the segment and its
+motion, 0..90 degrees), interpolated linearly::
 
-These pure functions are the single source of truth for the force laws; the MuJoCo couplings (the Python passive
-callback and the native plugin) evaluate exactly these formulas.
+    F = -tanh(|v| / v_reg) * ( F_perp(theta) sgn(v^.y^) y^ + F_par(theta) sgn(v^.x^) x^ )
 
-Conventions, for N segments at once: ``v`` (N, 3) is the velocity of each segment's midpoint, ``x_axis`` (N, 3)
-the unit vector along the segment and ``y_axis`` (N, 3) its in-plane normal, all in the world frame. The angle of
-attack theta is the acute angle between the segment and its direction of motion, in [0, 90] degrees.
-
-Law ``paper``::
-
-    F = -tanh(|v| / v_reg) * ( f_perp (v^.y^) y^ + f_par (v^.x^) x^ ),   v^ = v / |v|
-
-Law ``table``: the same with the magnitudes looked up per angle of attack,
-``F = -tanh(|v|/v_reg) * ( F_perp(theta) sgn(v^.y^) y^ + F_par(theta) sgn(v^.x^) x^ )``; the paper law is the
-table F_perp = f_perp sin(theta), F_par = f_par cos(theta).
+which is how RFT is identified from rigid-plate drags; the paper law is the table F_perp = f_perp sin(theta),
+F_par = f_par cos(theta). The table is a CSV with columns attack_deg, f_perp_N, f_par_N. The C twin is
+plugins/laws/table.c.
 """
 
 from __future__ import annotations
@@ -21,11 +13,14 @@ from __future__ import annotations
 import csv
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from .scene import RFT, SceneError
+from ..scene import SceneError
+from . import components
 
+KIND = "segment"
 TABLE_COLUMNS = ("attack_deg", "f_perp_N", "f_par_N")
 
 
@@ -38,26 +33,20 @@ class ForceTable:
     f_par: np.ndarray
 
 
-def _components(v: np.ndarray, x_axis: np.ndarray, y_axis: np.ndarray, v_reg: float):
-    speed = np.linalg.norm(v, axis=-1)
-    safe = np.where(speed > 0.0, speed, 1.0)
-    ramp = np.tanh(speed / v_reg)
-    vx = np.einsum("...i,...i->...", v, x_axis) / safe
-    vy = np.einsum("...i,...i->...", v, y_axis) / safe
-    return ramp, vx, vy
+def parameters(rft: Any) -> dict[str, ForceTable]:
+    return {"table": read_table(rft.table)}
 
 
-def paper_force(v: np.ndarray, x_axis: np.ndarray, y_axis: np.ndarray,
-                f_perp: float, f_par: float, v_reg: float) -> np.ndarray:
-    """The direction-cosine law of the paper's model, regularised by tanh(|v|/v_reg); (N, 3) newtons."""
-    ramp, vx, vy = _components(v, x_axis, y_axis, v_reg)
-    return -ramp[..., None] * (f_perp * vy[..., None] * y_axis + f_par * vx[..., None] * x_axis)
+def config(params: dict[str, ForceTable]) -> dict[str, str]:
+    """The plugin's ``table``: attack_deg f_perp_N f_par_N triples."""
+    table = params["table"]
+    return {"table": " ".join(repr(float(x)) for row in zip(table.attack_deg, table.f_perp, table.f_par)
+                              for x in row)}
 
 
-def table_force(v: np.ndarray, x_axis: np.ndarray, y_axis: np.ndarray, table: ForceTable,
-                v_reg: float) -> np.ndarray:
-    """The tabulated law: magnitudes interpolated linearly in the angle of attack; (N, 3) newtons."""
-    ramp, vx, vy = _components(v, x_axis, y_axis, v_reg)
+def force(v: np.ndarray, x_axis: np.ndarray, y_axis: np.ndarray, v_reg: float, table: ForceTable) -> np.ndarray:
+    """(N, 3) newtons."""
+    ramp, vx, vy = components(v, x_axis, y_axis, v_reg)
     attack = np.arctan2(np.abs(vy), np.abs(vx))
     samples = np.radians(table.attack_deg)
     perp = np.interp(attack, samples, table.f_perp)
@@ -99,11 +88,3 @@ def paper_table(f_perp: float, f_par: float, samples: int = 91) -> ForceTable:
     attack_deg = np.linspace(0.0, 90.0, samples)
     attack = np.radians(attack_deg)
     return ForceTable(attack_deg, f_perp * np.sin(attack), f_par * np.cos(attack))
-
-
-def force_law(params: RFT):
-    """The law a scene selects, as ``f(v, x_axis, y_axis) -> (N, 3)``; a table is read once, here."""
-    if params.law == "table":
-        table = read_table(params.table)
-        return lambda v, x, y: table_force(v, x, y, table, params.v_reg)
-    return lambda v, x, y: paper_force(v, x, y, params.f_perp, params.f_par, params.v_reg)

@@ -1,0 +1,80 @@
+// Declarations shared by the plugin (finrft_rft.c), the force laws (laws/*.c) and the steppers (steppers.c).
+//
+// setup.py defines, from the Python sources of truth:
+//   FINRFT_LAWS                 X(paper)X(table)...: every file in plugins/laws/, by name (laws/NAME.c defines
+//                               `const FinrftLaw finrft_law_NAME`)
+//   FINRFT_UNSTABLE, ...        the steppers' return codes, finrft.native.Code
+
+#ifndef FINRFT_H_
+#define FINRFT_H_
+
+#include <math.h>
+
+#include <mujoco/mujoco.h>
+
+#if !defined(FINRFT_LAWS) || !defined(FINRFT_UNSTABLE) || !defined(FINRFT_STEP_TOO_SMALL) || \
+    !defined(FINRFT_NOT_CONVERGED) || !defined(FINRFT_ARENA_FULL)
+#error "build the plugin with setup.py (pip install .): it defines the law list and the return codes"
+#endif
+
+#define FINRFT_PLUGIN "finrft.rft"
+
+#if defined(_WIN32)
+#define FINRFT_EXPORT __declspec(dllexport)
+#else
+#define FINRFT_EXPORT __attribute__((visibility("default")))
+#endif
+
+// A segment force law: F (world frame, N) on one segment from its midpoint velocity v and its axis x and in-plane
+// normal y (unit vectors, world frame). Every law fades out below the speed v_reg (m/s, > 0), which the plugin
+// reads for all laws; the implicit steps difference a law on that scale. The twin of finrft/laws/NAME.py.
+typedef struct {
+  const char* name;           // the value of config `law`
+  const char* const* keys;    // the config keys of its own parameters
+  int nkeys;
+  // Its parameters from an instance's config, or NULL after a mju_warning that names the key.
+  void* (*create)(const mjModel* m, int instance);
+  void (*destroy)(void* params);
+  void (*force)(const void* params, mjtNum v_reg, const mjtNum v[3], const mjtNum x[3], const mjtNum y[3],
+                mjtNum force[3]);
+} FinrftLaw;
+
+// The inputs of every law: tanh(|v| / v_reg), and the direction cosines v^.x^ and v^.y^ (0 at rest). Inline,
+// as it is on the steps' hot path.
+static inline void finrft_components(mjtNum v_reg, const mjtNum v[3], const mjtNum x[3], const mjtNum y[3],
+                                     mjtNum* ramp, mjtNum* vx, mjtNum* vy) {
+  mjtNum speed = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+  mjtNum safe = speed > 0 ? speed : 1;
+  *ramp = tanh(speed / v_reg);
+  *vx = (v[0] * x[0] + v[1] * x[1] + v[2] * x[2]) / safe;
+  *vy = (v[0] * y[0] + v[1] * y[1] + v[2] * y[2]) / safe;
+}
+
+// A required config value as one finite number; 0, or -1 after a warning naming the key.
+int finrft_read_number(const mjModel* m, int instance, const char* key, mjtNum* out);
+
+// The penalty stop on a hinge deflection q (rad) from its rest angle: the torque -k (q + |q|) q, and into *slope
+// (when not NULL) its derivative in q.
+static inline mjtNum finrft_stop_torque(mjtNum q, mjtNum k, mjtNum* slope) {
+  if (slope) *slope = q > 0 ? -4 * k * q : 0;
+  return -k * (q + fabs(q)) * q;
+}
+
+// An instance of the plugin: one force group's law, the segments it acts on and the hinges carrying its stop.
+typedef struct {
+  const FinrftLaw* law;
+  void* params;
+  mjtNum v_reg, stop_stiffness;
+  int nseg;
+  int* site;
+  int* body;
+  int nhinge;
+  int* hinge_qpos;
+  int* hinge_dof;
+} FinrftInstance;
+
+
+// A segment's axis x and normal y (world frame): its site's x and y axes.
+void finrft_site_axes(const mjData* d, int site, mjtNum x[3], mjtNum y[3]);
+
+#endif  // FINRFT_H_

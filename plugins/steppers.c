@@ -1,0 +1,351 @@
+// The time-stepping methods of finrft (the twins of finrft/integrate.py), called through ctypes:
+//   finrft_implicit_step     the "implicit" and "newton" methods
+//   finrft_adaptive_advance  the "adaptive" method
+// They return 0 or a code of finrft.native.Code (FINRFT_UNSTABLE, ...). A step allocates nothing on the heap: its
+// workspace lives on the mjData stack (mj_markStack ... mj_freeStack), sized once per call.
+//
+// The implicit and newton methods. MuJoCo's implicitfast step treats the joint damping D (and the velocity
+// derivative of affine actuator bias) implicitly; on top of that the RFT force is taken at the new velocity: the
+// velocity change dv solves
+//     G(dv) = (M - dt D) dv - dt (f(v) - F(v) + F(v + dv)) = 0,
+// f every force MuJoCo computed at v, F the RFT force summed over every segment of every finrft.rft instance,
+// F(u) = sum_i J_i^T F_i(J_i u). A rate-independent law is a near-discontinuity in velocity, so a linearisation
+// at v (the first Newton iterate: the "implicit" method) overshoots on light segments; the "newton" method
+// iterates, with a backtracking line search on |G|, to the root, the penalty stops taken at the new positions.
+// dF_i/dv comes from central differences of the same law, so no law needs a derivative of its own. Then, as
+// MuJoCo's implicitfast: activations, qvel += dv, positions, time.
+
+#include <math.h>
+#include <stdint.h>
+
+#include <mujoco/mujoco.h>
+
+#include "finrft.h"
+
+#define NEWTON_TOLERANCE 1e-10
+// Where Newton's method finds no root (forces that feed energy in, such as f_par < 0, can leave the implicit
+// equation without one near v), the newton method halves the step, down to dt / 2^NEWTON_HALVINGS.
+#define NEWTON_HALVINGS 10
+
+// The forces the implicit methods take at the new velocity: every RFT segment of the model (its instance, site
+// Jacobian and axes at the current positions) and every penalty stop (its hinge and deflection now).
+typedef struct {
+  int ninst, n, nv, nstop;
+  const FinrftInstance** inst;  // ninst
+  const FinrftInstance** law;   // n: each segment's instance
+  mjtNum* jacp;                 // n x 3 x nv
+  mjtNum* axes;                 // n x 6: x axis, then normal y
+  int* stop_dof;                // nstop
+  mjtNum* stop_k;               // nstop, N m/rad
+  mjtNum* stop_q;               // nstop, deflection from the rest angle
+} Segments;
+
+// Workspace of the Newton solve, all of size nv or nv x nv.
+typedef struct {
+  mjtNum *matrix, *jacobian, *slope, *other, *force, *dv, *step, *g, *trial, *candidate, *u;
+} Newton;
+
+typedef struct {
+  Segments segments;
+  Newton w;
+  mjtNum* rhs;
+  int64_t* counts;  // NULL, or where to add the steps taken and rejected (halved by the newton method)
+} Workspace;
+
+// The workspace of a model's steps, and `extra` more numbers (NULL when not wanted), on the mjData stack (after
+// mj_markStack); FINRFT_ARENA_FULL, before allocating anything, when the stack cannot hold it beside what
+// MuJoCo's own functions have needed of it.
+static int workspace_make(const mjModel* m, mjData* d, Workspace* ws, int extra, mjtNum** extra_out) {
+  Segments* s = &ws->segments;
+  int nv = m->nv;
+  s->ninst = s->n = s->nstop = 0;
+  s->nv = nv;
+  int slot = -1;
+  mjp_getPlugin(FINRFT_PLUGIN, &slot);
+  for (int i = 0; i < m->nplugin; i++) {
+    const FinrftInstance* p = m->plugin[i] == slot ? (const FinrftInstance*)d->plugin_data[i] : NULL;
+    if (!p) continue;
+    s->ninst++;
+    s->n += p->nseg;
+    if (p->stop_stiffness > 0) s->nstop += p->nhinge;
+  }
+  size_t numbers = 3 * (size_t)s->n * nv + 6 * (size_t)s->n + 2 * (size_t)s->nstop + 3 * (size_t)nv * nv +
+                   12 * (size_t)nv + extra;
+  size_t bytes = numbers * sizeof(mjtNum) + (s->ninst + s->n) * sizeof(void*) + s->nstop * sizeof(int) + 1024;
+  if (bytes + d->maxuse_stack > d->narena - d->pstack - d->parena) return FINRFT_ARENA_FULL;
+  s->inst = (const FinrftInstance**)mj_stackAllocByte(d, (s->ninst + 1) * sizeof(void*), sizeof(void*));
+  s->law = (const FinrftInstance**)mj_stackAllocByte(d, (s->n + 1) * sizeof(void*), sizeof(void*));
+  s->jacp = mj_stackAllocNum(d, 3 * (size_t)s->n * nv + 1);
+  s->axes = mj_stackAllocNum(d, 6 * (size_t)s->n + 1);
+  s->stop_dof = mj_stackAllocInt(d, s->nstop + 1);
+  s->stop_k = mj_stackAllocNum(d, s->nstop + 1);
+  s->stop_q = mj_stackAllocNum(d, s->nstop + 1);
+  for (int i = 0, k = 0; i < m->nplugin; i++) {
+    if (m->plugin[i] == slot && d->plugin_data[i]) s->inst[k++] = (const FinrftInstance*)d->plugin_data[i];
+  }
+  Newton* w = &ws->w;
+  mjtNum** squares[] = {&w->matrix, &w->jacobian, &w->slope};
+  mjtNum** vectors[] = {&w->other, &w->force, &w->dv, &w->step, &w->g, &w->trial, &w->candidate, &w->u, &ws->rhs};
+  for (int i = 0; i < 3; i++) *squares[i] = mj_stackAllocNum(d, (size_t)nv * nv + 1);
+  for (int i = 0; i < 9; i++) *vectors[i] = mj_stackAllocNum(d, nv + 1);
+  if (extra_out) *extra_out = mj_stackAllocNum(d, extra);
+  ws->counts = NULL;
+  return 0;
+}
+
+// Fill in the Jacobians, axes and deflections at the current positions (after mj_forward).
+static void segments_update(const mjModel* m, mjData* d, Segments* s) {
+  int i = 0, h = 0;
+  for (int j = 0; j < s->ninst; j++) {
+    const FinrftInstance* p = s->inst[j];
+    for (int k = 0; k < p->nseg; k++, i++) {
+      s->law[i] = p;
+      finrft_site_axes(d, p->site[k], s->axes + 6 * i, s->axes + 6 * i + 3);
+      mj_jacSite(m, d, s->jacp + 3 * (size_t)s->nv * i, NULL, p->site[k]);
+    }
+    for (int k = 0; p->stop_stiffness > 0 && k < p->nhinge; k++, h++) {
+      s->stop_dof[h] = p->hinge_dof[k];
+      s->stop_k[h] = p->stop_stiffness;
+      s->stop_q[h] = d->qpos[p->hinge_qpos[k]] - m->qpos_spring[p->hinge_qpos[k]];
+    }
+  }
+}
+
+// dF/dv (3 x 3, row-major) of one segment at velocity v, by central differences.
+static void segment_jacobian(const FinrftInstance* p, const mjtNum v[3], const mjtNum x[3], const mjtNum y[3],
+                             mjtNum jac[9]) {
+  mjtNum h = 1e-6 * (sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]) + p->v_reg);
+  for (int k = 0; k < 3; k++) {
+    mjtNum up[3] = {v[0], v[1], v[2]}, down[3] = {v[0], v[1], v[2]}, fu[3], fd[3];
+    up[k] += h;
+    down[k] -= h;
+    p->law->force(p->params, p->v_reg, up, x, y, fu);
+    p->law->force(p->params, p->v_reg, down, x, y, fd);
+    for (int r = 0; r < 3; r++) jac[3 * r + k] = (fu[r] - fd[r]) / (2 * h);
+  }
+}
+
+// At generalised velocity u: the RFT force plus the penalty stops' torque at the deflection they reach after
+// `ahead` seconds at u (nv), and, when slope is not NULL, its derivative in u (nv x nv).
+static void segments_force(const Segments* s, const mjtNum* u, mjtNum ahead, mjtNum* force, mjtNum* slope) {
+  int nv = s->nv;
+  mju_zero(force, nv);
+  if (slope) mju_zero(slope, nv * nv);
+  for (int i = 0; i < s->n; i++) {
+    const FinrftInstance* p = s->law[i];
+    const mjtNum* jac = s->jacp + 3 * (size_t)nv * i;
+    const mjtNum *x = s->axes + 6 * i, *y = s->axes + 6 * i + 3;
+    mjtNum v[3], f[3], c[9], cj[3];
+    mju_mulMatVec(v, jac, u, 3, nv);
+    p->law->force(p->params, p->v_reg, v, x, y, f);
+    for (int col = 0; col < nv; col++) force[col] += jac[col] * f[0] + jac[nv + col] * f[1] + jac[2 * nv + col] * f[2];
+    if (!slope) continue;
+    segment_jacobian(p, v, x, y, c);
+    for (int col = 0; col < nv; col++) {
+      for (int r = 0; r < 3; r++) cj[r] = c[3 * r] * jac[col] + c[3 * r + 1] * jac[nv + col] + c[3 * r + 2] * jac[2 * nv + col];
+      for (int row = 0; row < nv; row++) {
+        slope[row * nv + col] += jac[row] * cj[0] + jac[nv + row] * cj[1] + jac[2 * nv + row] * cj[2];
+      }
+    }
+  }
+  for (int h = 0; h < s->nstop; h++) {
+    int dof = s->stop_dof[h];
+    mjtNum stiffening;
+    force[dof] += finrft_stop_torque(s->stop_q[h] + ahead * u[dof], s->stop_k[h], &stiffening);
+    if (slope) slope[dof * nv + dof] += stiffening * ahead;
+  }
+}
+
+// Solve a dense n x n system in place by Gaussian elimination with partial pivoting; 0 on success.
+static int solve_dense(mjtNum* a, mjtNum* b, int n) {
+  for (int c = 0; c < n; c++) {
+    int pivot = c;
+    for (int r = c + 1; r < n; r++) if (fabs(a[r * n + c]) > fabs(a[pivot * n + c])) pivot = r;
+    if (a[pivot * n + c] == 0) return -1;
+    if (pivot != c) {
+      for (int k = 0; k < n; k++) {
+        mjtNum t = a[c * n + k]; a[c * n + k] = a[pivot * n + k]; a[pivot * n + k] = t;
+      }
+      mjtNum t = b[c]; b[c] = b[pivot]; b[pivot] = t;
+    }
+    for (int r = c + 1; r < n; r++) {
+      mjtNum f = a[r * n + c] / a[c * n + c];
+      if (f == 0) continue;
+      for (int k = c; k < n; k++) a[r * n + k] -= f * a[c * n + k];
+      b[r] -= f * b[c];
+    }
+  }
+  for (int r = n - 1; r >= 0; r--) {
+    for (int k = r + 1; k < n; k++) b[r] -= a[r * n + k] * b[k];
+    b[r] /= a[r * n + r];
+  }
+  return 0;
+}
+
+// G(dv) into out: matrix dv - dt (other + F(qvel + dv)), the stops dt ahead; returns |G|.
+static mjtNum newton_residual(const Segments* s, Newton* w, const mjtNum* qvel, const mjtNum* dv, mjtNum dt,
+                              mjtNum* out) {
+  int nv = s->nv;
+  for (int i = 0; i < nv; i++) w->u[i] = qvel[i] + dv[i];
+  segments_force(s, w->u, dt, w->force, NULL);
+  mju_mulMatVec(out, w->matrix, dv, nv, nv);
+  for (int i = 0; i < nv; i++) out[i] -= dt * (w->other[i] + w->force[i]);
+  return mju_norm(out, nv);
+}
+
+// The velocity change of one step into w->dv; rhs = M qacc at v. With iterations == 1 the linearly implicit step
+// in the RFT force (the first Newton iterate, no line search, stops as MuJoCo computed them); otherwise the root
+// of G, with the stops' torque taken at the new positions too, by Newton's method, or FINRFT_NOT_CONVERGED.
+static int newton_solve(const Segments* s, Newton* w, const mjtNum* qvel, const mjtNum* rhs, mjtNum dt,
+                        int iterations) {
+  int nv = s->nv;
+  mjtNum ahead = iterations > 1 ? dt : 0;
+  segments_force(s, qvel, ahead, w->force, w->slope);
+  // other: every force but F, taken out at the stops' present deflection (w->trial is free until the search)
+  if (ahead > 0) segments_force(s, qvel, 0, w->trial, NULL);
+  const mjtNum* now = ahead > 0 ? w->trial : w->force;
+  for (int i = 0; i < nv; i++) w->other[i] = rhs[i] - now[i];
+  for (int i = 0; i < nv; i++) {
+    w->dv[i] = 0;
+    w->g[i] = -dt * (w->other[i] + w->force[i]);
+  }
+  mjtNum norm = mju_norm(w->g, nv);
+  for (int it = 0; it < iterations; it++) {
+    for (int i = 0; i < nv * nv; i++) w->jacobian[i] = w->matrix[i] - dt * w->slope[i];
+    for (int i = 0; i < nv; i++) w->step[i] = -w->g[i];
+    if (solve_dense(w->jacobian, w->step, nv)) return FINRFT_NOT_CONVERGED;
+    if (iterations == 1) {
+      mju_copy(w->dv, w->step, nv);
+      return 0;
+    }
+    mjtNum alpha = 1, trial_norm;
+    for (;;) {
+      for (int i = 0; i < nv; i++) w->candidate[i] = w->dv[i] + alpha * w->step[i];
+      trial_norm = newton_residual(s, w, qvel, w->candidate, dt, w->trial);
+      if (trial_norm <= (1 - 1e-4 * alpha) * norm || alpha < 1e-6) break;
+      alpha /= 2;
+    }
+    mjtNum change = 0, scale = 0;
+    for (int i = 0; i < nv; i++) {
+      w->dv[i] += alpha * w->step[i];
+      w->g[i] = w->trial[i];
+      change = mju_max(change, fabs(alpha * w->step[i]));
+      scale = mju_max(scale, fabs(qvel[i] + w->dv[i]));
+    }
+    norm = trial_norm;
+    if (change <= NEWTON_TOLERANCE * (1 + scale)) return 0;
+    for (int i = 0; i < nv; i++) w->u[i] = qvel[i] + w->dv[i];
+    segments_force(s, w->u, dt, w->force, w->slope);
+  }
+  return FINRFT_NOT_CONVERGED;
+}
+
+// One implicit step of size dt; 0, FINRFT_UNSTABLE when the state stopped being finite, or FINRFT_NOT_CONVERGED.
+static int implicit_step(const mjModel* m, mjData* d, mjtNum dt, int iterations, Workspace* ws, int halvings) {
+  int nv = m->nv;
+  Newton* w = &ws->w;
+  mj_forward(m, d);
+  mj_mulM(m, d, ws->rhs, d->qacc);
+  mj_fullM(m, d, w->matrix);
+  for (int i = 0; i < nv; i++) w->matrix[i * nv + i] += dt * m->dof_damping[i];
+  for (int a = 0; a < m->nu; a++) {
+    if (m->actuator_trntype[a] != mjTRN_JOINT || m->actuator_biastype[a] != mjBIAS_AFFINE) continue;
+    int dof = m->jnt_dofadr[m->actuator_trnid[2 * a]];
+    mjtNum gear = m->actuator_gear[6 * a];
+    w->matrix[dof * nv + dof] -= dt * gear * gear * m->actuator_biasprm[mjNBIAS * a + 2];
+  }
+  segments_update(m, d, &ws->segments);
+  if (newton_solve(&ws->segments, w, d->qvel, ws->rhs, dt, iterations)) {
+    if (iterations == 1 || halvings == NEWTON_HALVINGS) return FINRFT_NOT_CONVERGED;
+    if (ws->counts) ws->counts[1]++;
+    int failed = implicit_step(m, d, dt / 2, iterations, ws, halvings + 1);
+    return failed ? failed : implicit_step(m, d, dt / 2, iterations, ws, halvings + 1);
+  }
+  for (int a = 0; a < m->nu; a++) {
+    int adr = m->actuator_actadr[a];
+    if (adr < 0) continue;
+    for (int j = adr; j < adr + m->actuator_actnum[a]; j++) {
+      d->act[j] += dt * d->act_dot[j];
+      if (m->actuator_actlimited[a]) {
+        d->act[j] = mju_clip(d->act[j], m->actuator_actrange[2 * a], m->actuator_actrange[2 * a + 1]);
+      }
+    }
+  }
+  int failed = 0;
+  for (int i = 0; i < nv; i++) {
+    d->qvel[i] += w->dv[i];
+    if (!isfinite(d->qvel[i])) failed = FINRFT_UNSTABLE;
+  }
+  if (ws->counts) ws->counts[0]++;
+  mju_copy(d->qacc_warmstart, d->qacc, nv);
+  mj_integratePos(m, d->qpos, d->qvel, dt);
+  d->time += dt;
+  return failed;
+}
+
+// nstep implicit steps of size dt; 0 or the first failure's code.
+static int implicit_steps(const mjModel* m, mjData* d, int nstep, mjtNum dt, int iterations, Workspace* ws) {
+  int failed = 0;
+  for (int step = 0; step < nstep && !failed; step++) failed = implicit_step(m, d, dt, iterations, ws, 0);
+  return failed;
+}
+
+// The implicit (iterations == 1) and newton methods: nstep steps of the model's time step. counts (or NULL):
+// the steps taken (a halved step counts as two) and rejected (halved) are added to counts[0] and counts[1].
+FINRFT_EXPORT int finrft_implicit_step(const mjModel* m, mjData* d, int nstep, int iterations, int64_t* counts) {
+  Workspace ws;
+  mj_markStack(d);
+  int failed = workspace_make(m, d, &ws, 0, NULL);
+  ws.counts = counts;
+  if (!failed) failed = implicit_steps(m, d, nstep, m->opt.timestep, iterations, &ws);
+  mj_freeStack(d);
+  return failed;
+}
+
+// The adaptive method: implicit steps over `duration` seconds, each accepted when one step of h and two of h/2
+// agree to `tol` (max over qpos, qvel of |difference| / (1e-3 + |value|)). The accepted positions and velocities
+// are extrapolated, 2 (two halves) - (one step), which cancels the first-order error of the implicit step. The
+// step grows or shrinks by 0.9 sqrt(tol / error) (within 0.2x..2x), never above hmax; *h carries it over calls.
+// counts (or NULL): the steps accepted and rejected are added to counts[0] and counts[1].
+// Returns 0, FINRFT_UNSTABLE, FINRFT_STEP_TOO_SMALL when the step falls below 1e-9 s, or another failure's code.
+FINRFT_EXPORT int finrft_adaptive_advance(const mjModel* m, mjData* d, mjtNum duration, mjtNum hmax, mjtNum tol,
+                                          mjtNum* h, int64_t* counts) {
+  const int spec = mjSTATE_INTEGRATION;
+  int size = mj_stateSize(m, spec);
+  Workspace ws;
+  mjtNum* states = NULL;
+  mj_markStack(d);
+  int failed = workspace_make(m, d, &ws, 3 * size, &states);
+  mjtNum *start = states, *full = states + size, *halves = states + 2 * size;
+  mjtNum end = d->time + duration;
+  // the slice of the integration state holding qpos and qvel (after time)
+  int first = 1, count = m->nq + m->nv;
+  while (!failed && d->time < end - 1e-12) {
+    mjtNum step = mju_min(mju_min(*h, hmax), end - d->time);
+    mj_getState(m, d, start, spec);
+    failed = implicit_steps(m, d, 1, step, 1, &ws);
+    mj_getState(m, d, full, spec);
+    mj_setState(m, d, start, spec);
+    failed = failed ? failed : implicit_steps(m, d, 2, step / 2, 1, &ws);
+    mj_getState(m, d, halves, spec);
+    mjtNum error = 0;
+    for (int i = first; i < first + count; i++) {
+      error = mju_max(error, fabs(full[i] - halves[i]) / (1e-3 + fabs(halves[i])));
+    }
+    if (failed || !isfinite(error)) {
+      failed = failed ? failed : FINRFT_UNSTABLE;
+    } else if (error <= tol) {
+      for (int i = first; i < first + count; i++) halves[i] += halves[i] - full[i];
+      mj_setState(m, d, halves, spec);
+      *h = mju_min(hmax, step * mju_min(2.0, 0.9 * sqrt(tol / mju_max(error, 1e-300))));
+      if (counts) counts[0]++;
+    } else {
+      mj_setState(m, d, start, spec);
+      *h = step * mju_max(0.2, 0.9 * sqrt(tol / error));
+      if (counts) counts[1]++;
+      if (*h < 1e-9) failed = FINRFT_STEP_TOO_SMALL;
+    }
+  }
+  mj_freeStack(d);
+  return failed;
+}

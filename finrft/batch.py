@@ -82,9 +82,19 @@ def pool_for(executor: Executor | None = None, workers: int | None = None) -> It
     pool = local_executor(workers)
     try:
         yield pool
-    finally:
-        # After an error or Ctrl-C, jobs not started yet are dropped, not run.
-        pool.shutdown(cancel_futures=True)
+    except BaseException:
+        # After an error or Ctrl-C, stop at once: drop the jobs not started and end the running ones (a gait can
+        # take seconds; waiting for them also raced with the workers' pipes). ProcessPoolExecutor gains
+        # terminate_workers only in Python 3.14.
+        terminate = getattr(pool, "terminate_workers", None)
+        if terminate is not None:
+            terminate()
+        else:
+            for process in list((getattr(pool, "_processes", None) or {}).values()):
+                process.terminate()
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    pool.shutdown()
 
 
 def run_many(jobs: Sequence[Job], **options) -> list[Run]:

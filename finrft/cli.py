@@ -50,7 +50,8 @@ def _number(unit: str, *, minimum: float = 0.0, inclusive: bool = False, integer
             raise argparse.ArgumentTypeError(f"expected a {'whole ' if integer else ''}number ({unit}), got "
                                              f"'{text}'") from None
         if not math.isfinite(value) or (value < minimum if inclusive else value <= minimum):
-            raise argparse.ArgumentTypeError(f"must be {'>=' if inclusive else '>'} {minimum:g} {unit}, got {text}")
+            raise argparse.ArgumentTypeError(f"must be {'>=' if inclusive else '>'} {minimum:g}{' ' if unit else ''}"
+                                             f"{unit}, got {text}")
         return value
     return parse
 
@@ -65,12 +66,13 @@ ROBOT_PRESETS_HELP = ("built-in robot scene when no --scene is given (default: p
 
 
 def _add_quiet(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--quiet", action="store_true", help="no progress bar and no summary text (files and --json "
-                   "are still written)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar and no summary text (what was asked "
+                   "for, files or JSON, is still written)")
 
 
 def _add_json(p: argparse.ArgumentParser, what: str) -> None:
-    p.add_argument("--json", action="store_true", help=f"print {what} as JSON on the last line of stdout (SI units)")
+    p.add_argument("--json", action="store_true", help=f"print {what} as JSON on the last line of stdout (each key "
+                   "names its unit: SI, or _deg, _mm where the key says so)")
 
 
 def _add_force(p: argparse.ArgumentParser) -> None:
@@ -342,7 +344,7 @@ def build_parser() -> argparse.ArgumentParser:
     model = kinds.add_parser("modelling", help="what each modelling choice costs and changes",
                              description="Measure planar against 3D chains, rigid plates as one body against "
                              "welded segments, MuJoCo limit against penalty stops, and the half against the full "
-                             "robot: the largest change in segment angle (deg), drive force (%% of its peak) or "
+                             "robot: the largest change in segment angle (deg), drive force (% of its peak) or "
                              "efficiency (points), and the wall-time ratio. About 10 s.")
     fitb = kinds.add_parser("fit", help="a 4-parameter plate fit over three drag files",
                             description="Time a fit of k, b, f_perp and f_par of the paper plate over three drag "
@@ -507,6 +509,11 @@ def _run_test(args: argparse.Namespace) -> int:
         from .fit import append_forces, check_forces_header, plate_forces
         if scene.plate.kind != "rigid":
             raise UsageError("--forces-csv needs a rigid plate (--plate rigid)")
+        if drive.cycles is not None:
+            raise UsageError("--forces-csv records the steady force of one stroke out: leave out --cycles")
+        if drive.speed < 3 * scene.rft.v_reg:
+            raise UsageError(f"--forces-csv needs a drag faster than 3 x rft.v_reg ({3e3 * scene.rft.v_reg:g} mm/s), "
+                             f"where the rate-independent force is reached: got {1e3 * drive.speed:g} mm/s")
         _check_output(forces_csv, ".csv", "--forces-csv", args.force, append=True)
         check_forces_header(forces_csv)
     with _progress(args, 1, args.command, "%") as bar:

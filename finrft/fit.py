@@ -23,7 +23,7 @@ from .convergence import ErrorLimits, SimulationFailed
 from .drive import Drive
 from .optimize import Search, Variable, cmaes, read_log, si_units
 from .laws.table import ForceTable
-from .scene import RFT, Scene, SceneError, field_of, scene_from_dict, split_key, to_toml
+from .scene import RFT, Scene, SceneError, field_of, read_text, scene_from_dict, split_key, to_toml
 from .simulate import Run, simulate
 
 # Short names for the paper's parameters, and default bounds (SI).
@@ -58,10 +58,7 @@ class DragData:
 def read_drag(path: str | Path) -> DragData:
     """Read and check a drag data file; SceneError naming the file and line on any problem."""
     path = Path(path)
-    try:
-        lines = path.read_text().splitlines()
-    except OSError as exc:
-        raise SceneError(f"cannot read data file {path}: {exc.strerror}") from None
+    lines = read_text(path, "data file").splitlines()
     body = [(n, line) for n, line in enumerate(lines, start=1) if line.strip() and not line.startswith("#")]
     if not body:
         raise SceneError(f"{path}: no data")
@@ -91,6 +88,8 @@ def read_drag(path: str | Path) -> DragData:
     displacement = np.array([r["displacement_mm"] for _, r in rows]) / 1e3
     line = np.polyfit(time, displacement, 1)
     speed = float(line[0])
+    if np.ptp(displacement) == 0:
+        raise SceneError(f"{path}: displacement_mm does not change: the plate is not dragged")
     if speed <= 0:
         raise SceneError(f"{path}: displacement_mm must grow with time (a drag along +y)")
     if not SPEEDS[0] <= speed <= SPEEDS[1]:
@@ -130,6 +129,9 @@ def resolve_params(names: Sequence[str], bounds: dict[str, tuple[float, float]] 
     """Fitted parameters from names (aliases b, k, f_perp, f_par, or any numeric plate-scene key) and bounds
     (keyed by either); SceneError for bounds of a parameter that is not fitted."""
     keys = [ALIASES.get(name, name) for name in names]
+    twice = sorted({k for k in keys if keys.count(k) > 1})
+    if twice:
+        raise SceneError(f"{', '.join(twice)} listed twice in the fitted parameters")
     bounds = {ALIASES.get(k, k): span for k, span in (bounds or {}).items()}
     stray = [k for k in bounds if k not in keys]
     if stray:
@@ -139,7 +141,7 @@ def resolve_params(names: Sequence[str], bounds: dict[str, tuple[float, float]] 
     for key in keys:
         split_key(Scene, key)
         if field_of(Scene, key).type not in ("float", float):
-            raise SceneError(f"{key} is not a number and cannot be fitted")
+            raise SceneError(f"{key} is not a real-valued key (a whole number or a choice) and cannot be fitted")
         low, high = bounds.get(key, DEFAULT_BOUNDS.get(key, (None, None)))
         if low is None:
             raise SceneError(f"{key} has no default bounds: give them with --bounds {key}=LOW:HIGH")
@@ -299,7 +301,7 @@ def append_forces(path: str | Path, row: dict[str, float]) -> None:
     from .files import atomic_path
     check_forces_header(path)
     path = Path(path)
-    text = path.read_text() if path.exists() else ""
+    text = read_text(path, "forces file") if path.exists() else ""
     text = (text if text.endswith("\n") else text + "\n") if text.strip() else ",".join(FORCE_COLUMNS) + "\n"
     with atomic_path(path) as tmp:
         tmp.write_text(text + ",".join(repr(float(row[k])) for k in FORCE_COLUMNS) + "\n")
@@ -308,7 +310,7 @@ def append_forces(path: str | Path, row: dict[str, float]) -> None:
 def check_forces_header(path: str | Path) -> None:
     """SceneError unless ``path`` is new, empty, or a forces CSV `append_forces` can add to."""
     path = Path(path)
-    lines = [line for line in (path.read_text().splitlines() if path.is_file() else [])
+    lines = [line for line in (read_text(path, "forces file").splitlines() if path.is_file() else [])
              if line.strip() and not line.startswith("#")]
     header = ",".join(FORCE_COLUMNS)
     if lines and lines[0] != header:
@@ -321,25 +323,22 @@ def read_forces(path: str | Path) -> np.ndarray:
     merged); SceneError naming the file and line on any problem, and for repeated angles whose forces differ or
     angles that cannot identify both coefficients."""
     path = Path(path)
-    try:
-        with path.open(newline="") as handle:
-            reader = csv.DictReader(line for line in handle if not line.startswith("#"))
-            if reader.fieldnames is None or any(c not in reader.fieldnames for c in FORCE_COLUMNS):
-                raise SceneError(f"{path}: columns must include {', '.join(FORCE_COLUMNS)}")
-            rows: dict[float, tuple[int, list[float]]] = {}
-            for n, row in enumerate(reader, start=2):
-                try:
-                    values = [float(row[c]) for c in FORCE_COLUMNS]
-                except (TypeError, ValueError):
-                    raise SceneError(f"{path}:{n}: every value must be a number") from None
-                if not all(math.isfinite(v) for v in values) or not 0 <= values[0] <= 90:
-                    raise SceneError(f"{path}:{n}: values must be finite, attack_deg within 0..90")
-                if values[0] in rows and rows[values[0]][1] != values:
-                    raise SceneError(f"{path}:{n}: attack {values[0]:g} deg again (line {rows[values[0]][0]}) with "
-                                     f"other forces: keep one row per angle")
-                rows.setdefault(values[0], (n, values))
-    except OSError as exc:
-        raise SceneError(f"cannot read forces file {path}: {exc.strerror}") from None
+    lines = read_text(path, "forces file").splitlines()
+    reader = csv.DictReader(line for line in lines if not line.startswith("#"))
+    if reader.fieldnames is None or any(c not in reader.fieldnames for c in FORCE_COLUMNS):
+        raise SceneError(f"{path}: columns must include {', '.join(FORCE_COLUMNS)}")
+    rows: dict[float, tuple[int, list[float]]] = {}
+    for n, row in enumerate(reader, start=2):
+        try:
+            values = [float(row[c]) for c in FORCE_COLUMNS]
+        except (TypeError, ValueError):
+            raise SceneError(f"{path}:{n}: every value must be a number") from None
+        if not all(math.isfinite(v) for v in values) or not 0 <= values[0] <= 90:
+            raise SceneError(f"{path}:{n}: values must be finite, attack_deg within 0..90")
+        if values[0] in rows and rows[values[0]][1] != values:
+            raise SceneError(f"{path}:{n}: attack {values[0]:g} deg again (line {rows[values[0]][0]}) with "
+                             f"other forces: keep one row per angle")
+        rows.setdefault(values[0], (n, values))
     if not rows:
         raise SceneError(f"{path}: no data")
     attack = np.array(list(rows))
@@ -360,6 +359,9 @@ def identify_rft(forces: np.ndarray, segments: int, v_reg: float, speed: float) 
     sin, cos = np.sin(np.radians(deg)), np.cos(np.radians(deg))
     f_perp = float(perp @ sin / (sin @ sin)) if sin @ sin > 0 else 0.0
     f_par = float(par @ cos / (cos @ cos)) if cos @ cos > 0 else 0.0
+    if f_perp < 0:
+        raise SceneError(f"the normal forces push the plate along its motion (f_perp = {f_perp:.3g} N < 0): forces "
+                         f"from finrft drag --forces-csv are those of a stroke out along +y; check their sign")
     if deg[0] > 0:
         deg, perp, par = np.r_[0.0, deg], np.r_[perp[0], perp], np.r_[par[0], par]
     if deg[-1] < 90:

@@ -75,7 +75,7 @@ def check_variables(scene: RobotScene, variables: Sequence[Variable]) -> None:
     for v in variables:
         f = field_of(RobotScene, v.key)
         if f.type not in ("float", float):
-            raise SceneError(f"{v.key} is not a number and cannot be searched")
+            raise SceneError(f"{v.key} is not a real-valued key (a whole number or a choice) and cannot be searched")
         if v.key in seen:
             raise SceneError(f"{v.key} is listed twice")
         seen.add(v.key)

@@ -155,6 +155,8 @@ def measurements(data_dir: str | Path | None = None) -> list[DragData]:
     """The drags of Figure 3: every CSV in ``data_dir`` (default: the measurements shipped with finrft);
     SceneError when there are none, so that a report never goes without its figure."""
     folder = Path(data_dir) if data_dir is not None else plate_drag_dir()
+    if not folder.is_dir():
+        raise SceneError(f"--data {folder} is not a folder: give the folder that holds the drag CSV files")
     files = sorted(folder.glob("*.csv"))
     if not files:
         raise SceneError(f"no drag data (*.csv) in {folder}: the model-against-experiment figure needs it")

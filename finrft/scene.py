@@ -298,6 +298,16 @@ def scene_from_dict(data: Mapping[str, Any], cls: type = Scene):
     return cls(**parts)
 
 
+def read_text(path: str | Path, what: str) -> str:
+    """A text file's contents; SceneError naming the file when it cannot be read or is not UTF-8 text."""
+    try:
+        return Path(path).read_text(encoding="utf-8")
+    except OSError as exc:
+        raise SceneError(f"cannot read {what} {path}: {exc.strerror or exc}") from None
+    except UnicodeDecodeError:
+        raise SceneError(f"{what} {path} is not a text file (UTF-8)") from None
+
+
 def _read_toml(text: str, origin: str) -> dict[str, Any]:
     try:
         return tomllib.loads(text)
@@ -323,11 +333,7 @@ def load_scene(path: str | Path | None = None, *, preset_name: str = "paper",
         scene = preset(preset_name, cls)
     else:
         path = Path(path)
-        try:
-            text = path.read_text()
-        except OSError as exc:
-            raise SceneError(f"cannot read scene file {path}: {exc.strerror}") from None
-        data = _read_toml(text, str(path))
+        data = _read_toml(read_text(path, "scene file"), str(path))
         table = data.get("rft", {}).get("table") if isinstance(data.get("rft"), dict) else None
         if isinstance(table, str) and table and not Path(table).is_absolute():
             data["rft"]["table"] = str(path.parent / table)

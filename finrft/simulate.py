@@ -16,7 +16,7 @@ from typing import Any, Callable, Sequence
 import mujoco
 import numpy as np
 
-from .convergence import (ErrorLimits, Estimated, SimulationUnstable, check_resolution, checked,
+from .convergence import (ErrorLimits, Estimated, SimulationUnstable, check_resolution, check_size, checked,
                           max_difference, paired, record_every, require_finite)
 from .coupling import PythonCoupling, SegmentForces, installed
 from .drive import Drive
@@ -189,8 +189,10 @@ def schedule(drive: Drive, dt: float, record_dt: float) -> tuple[int, np.ndarray
     SceneError when dt cannot resolve a stroke."""
     check_resolution(drive.stroke_time, dt)
     steps = max(1, round(drive.duration / dt))
+    every = record_every(dt, record_dt)
+    check_size(steps, steps // every + 1, dt, drive.duration)
     starts = np.array([round(k * drive.stroke_time / dt) for k in range(drive.strokes)])
-    samples = np.unique(np.r_[np.arange(0, steps, record_every(dt, record_dt)), steps])
+    samples = np.unique(np.r_[np.arange(0, steps, every), steps])
     return steps, starts, samples
 
 

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from ..scene import SceneError
+from ..scene import SceneError, read_text
 from . import components
 
 KIND = "segment"
@@ -57,11 +57,8 @@ def force(v: np.ndarray, x_axis: np.ndarray, y_axis: np.ndarray, v_reg: float, t
 def read_table(path: str | Path) -> ForceTable:
     """Read a force table CSV (columns attack_deg, f_perp_N, f_par_N; angles increasing over 0..90 degrees)."""
     path = Path(path)
-    try:
-        with path.open(newline="") as handle:
-            rows = list(csv.DictReader(line for line in handle if not line.startswith("#")))
-    except OSError as exc:
-        raise SceneError(f"cannot read RFT table {path}: {exc.strerror}") from None
+    lines = read_text(path, "RFT table").splitlines()
+    rows = list(csv.DictReader(line for line in lines if not line.startswith("#")))
     if not rows or any(c not in rows[0] for c in TABLE_COLUMNS):
         raise SceneError(f"RFT table {path} needs the columns {', '.join(TABLE_COLUMNS)}")
     try:

@@ -1,7 +1,9 @@
 """MuJoCo models built from the MJCF files in ``mjcf/`` and a scene.
 
-The MJCF file describes the paper's plate and is edited through MjSpec (never by string edits) to apply a scene:
-segment count and sizes, masses and inertias, hinge spring/damper/stop, and the drive.
+``plate.xml`` and ``robot.xml`` hold the plate's rod and the robot's body and arms; ``segment.xml`` holds one
+segment on its hinge, attached N times in series (MjSpec attach) to make the plate's chain and each fin. The specs
+are edited through MjSpec (never by string edits) to apply a scene: segment count and sizes, masses and inertias,
+hinge spring/damper/stop, and the drive. Indices come from the objects attach returns, not from names.
 """
 
 from __future__ import annotations
@@ -83,58 +85,69 @@ def penalty_stiffness(chain: Chain) -> float:
     return chain.stop_stiffness if chain.kind == "origami" and chain.stop == "penalty" else 0.0
 
 
-def _configure_chain(spec: mujoco.MjSpec, chain: Chain, dt: float) -> None:
-    """Apply a chain's hinge and segment parameters to the file's ``hinge`` and ``segment`` default classes."""
-    seg_geom = spec.find_default("segment").geom
-    seg_geom.size = [chain.segment_length / 2, seg_geom.size[1], seg_geom.size[2]]
-    hinge = spec.find_default("hinge").joint
-    hinge.stiffness = [chain.stiffness, 0, 0]
-    hinge.springref = chain.springref
-    hinge.damping = [chain.damping, 0, 0]
-    if chain.kind == "origami" and chain.stop == "limit":
+@dataclass(frozen=True)
+class AttachedChain:
+    """A chain's segments as attached to a spec: their bodies and their hinges about z (none for a rigid chain).
+    After compiling, their ``id`` is the index in the model."""
+
+    bodies: list[mujoco.MjsBody]
+    hinges: list[mujoco.MjsJoint]
+
+
+def _segment_spec(chain: Chain, dt: float, spatial: bool, hinged: bool) -> mujoco.MjSpec:
+    """mjcf/segment.xml with a chain's segment: length, mass and inertia, hinge spring/damper/stop; without its
+    hinge unless ``hinged``; ``spatial``: also free to turn about its own x and y axes (joints ``bendx``,
+    ``bendy``)."""
+    spec = mujoco.MjSpec.from_file(str(mjcf_path("segment.xml")))
+    half = chain.segment_length / 2
+    body = spec.body("segment")
+    body.mass, body.ipos, body.inertia = chain.segment_mass, [half, 0, 0], [chain.segment_inertia] * 3
+    geom = spec.geom("segment")
+    geom.size, geom.pos = [half, geom.size[1], geom.size[2]], [half, 0, 0]
+    spec.site("midpoint").pos = [half, 0, 0]
+    spec.frame("tip").pos = [chain.segment_length, 0, 0]
+    hinge = spec.joint("hinge")
+    if not hinged:
+        spec.delete(hinge)
+    elif chain.kind == "origami" and chain.stop == "limit":
         hinge.range = [-np.pi, chain.springref]
         hinge.solref_limit = [max(LIMIT_TIMECONST, 2 * dt), 1.0]
         hinge.solimp_limit = list(LIMIT_IMPEDANCE)
     else:
         hinge.limited = mujoco.mjtLimited.mjLIMITED_FALSE
+    hinge.stiffness = [chain.stiffness, 0, 0]
+    hinge.springref = chain.springref
+    hinge.damping = [chain.damping, 0, 0]
+    for axis in ("x", "y") if spatial else ():
+        body.add_joint(name=f"bend{axis}", type=mujoco.mjtJoint.mjJNT_HINGE,
+                       axis=[float(axis == "x"), float(axis == "y"), 0.0])
+    return spec
 
 
-def _add_chain(spec: mujoco.MjSpec, parent: mujoco.MjsBody, chain: Chain, offset: float,
-               prefix: str = "", spatial: bool = False, welded: bool = False) -> list[mujoco.MjsBody]:
-    """Segments ``{prefix}seg{i}`` in series from ``offset`` along the parent's x axis, on hinges
-    ``{prefix}hinge{i}``; a rigid chain is one body ``{prefix}plate`` carrying every segment, unless ``welded``:
-    then hinged segments held by weld constraints. ``spatial``: each segment also turns freely about its own x
-    and y axes (hinges ``{prefix}bend{i}x``, ``{prefix}bend{i}y``)."""
-    half = chain.segment_length / 2
-    segment = spec.find_default("segment")
-    if chain.kind == "rigid" and not welded:
-        body = parent.add_body(name=f"{prefix}plate", pos=[offset, 0, 0])
-        centres = [half + i * chain.segment_length for i in range(chain.segments)]
-        com = float(np.mean(centres))
-        body.mass, body.ipos = chain.segments * chain.segment_mass, [com, 0, 0]
-        body.inertia = [sum(chain.segment_inertia + chain.segment_mass * (c - com) ** 2 for c in centres)] * 3
-        for i, c in enumerate(centres, start=1):
-            body.add_geom(segment, name=f"{prefix}seg{i}", pos=[c, 0, 0])
-            body.add_site(name=f"{prefix}seg{i}", pos=[c, 0, 0])
-        return [body]
-    bodies, pos = [], [offset, 0, 0]
+def _attach_chain(spec: mujoco.MjSpec, mount: mujoco.MjsFrame, chain: Chain, dt: float, prefix: str,
+                  spatial: bool = False, welded: bool = False) -> AttachedChain:
+    """Attach ``chain.segments`` copies of the segment in series, the first at ``mount``, each next one at the
+    tip of the one before; copy i is named with ``prefix`` (not empty: MuJoCo warns that the model could not be
+    saved) and the suffix i (``{prefix}segment{i}``, ``{prefix}hinge{i}``, ``{prefix}midpoint{i}``). A rigid
+    chain has no hinges (its segments are fixed to each other), unless ``welded``: then its hinges are held by weld
+    constraints."""
+    welded = welded and chain.kind == "rigid"
+    hinged = welded or chain.kind != "rigid"
+    segment = _segment_spec(chain, dt, spatial, hinged)
+    parent = mount.parent  # the body that carries the mount
+    attached = AttachedChain([], [])
     for i in range(1, chain.segments + 1):
-        body = parent.add_body(name=f"{prefix}seg{i}", pos=pos)
-        body.mass, body.ipos, body.inertia = chain.segment_mass, [half, 0, 0], [chain.segment_inertia] * 3
-        for axis in ("x", "y") if spatial else ():
-            body.add_joint(name=f"{prefix}bend{i}{axis}", type=mujoco.mjtJoint.mjJNT_HINGE,
-                           axis=[float(axis == "x"), float(axis == "y"), 0.0])
-        body.add_joint(spec.find_default("hinge"), name=f"{prefix}hinge{i}")
+        body = mount.attach_body(segment.copy().body("segment"), prefix, str(i))
+        if hinged:
+            attached.hinges.append(body.joints[0])  # the file's hinge; the bends come after it
         if welded:
             weld = spec.add_equality(type=mujoco.mjtEq.mjEQ_WELD, objtype=mujoco.mjtObj.mjOBJ_BODY,
                                      name1=parent.name, name2=body.name)
             weld.solref = [LIMIT_TIMECONST, 1.0]
             weld.solimp = list(LIMIT_IMPEDANCE)
-        body.add_geom(segment, name=f"{prefix}seg{i}", pos=[half, 0, 0])
-        body.add_site(name=f"{prefix}seg{i}", pos=[half, 0, 0])
-        bodies.append(body)
-        parent, pos = body, [chain.segment_length, 0, 0]
-    return bodies
+        attached.bodies.append(body)
+        parent, mount = body, body.frames[0]  # the copy's frame "tip"
+    return attached
 
 
 def _bind(spec: mujoco.MjSpec, name: str, law: RFT, stop_stiffness: float, bodies: list[mujoco.MjsBody]) -> None:
@@ -165,9 +178,10 @@ def _compile(spec: mujoco.MjSpec) -> mujoco.MjModel:
         raise SceneError(f"MuJoCo rejected the model: {reason}") from None
 
 
-def _group(model: mujoco.MjModel, name: str, law: RFT, stop_stiffness: float, body_names: list[str]) -> ForceGroup:
-    """A force group of a compiled model: every site on the named bodies, and their hinges."""
-    ids = [model.body(b).id for b in body_names]
+def _group(model: mujoco.MjModel, name: str, law: RFT, stop_stiffness: float,
+           bodies: list[mujoco.MjsBody]) -> ForceGroup:
+    """A force group of a compiled model: every site on the given (compiled) bodies, and their hinges."""
+    ids = [b.id for b in bodies]
     sites = np.array([s for s in range(model.nsite) if model.site_bodyid[s] in ids], dtype=int)
     hinges = [j for j in range(model.njnt) if model.jnt_bodyid[j] in ids  # hinges about z, as the plugin's
               and model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE and abs(model.jnt_axis[j, 2]) > 0.5]
@@ -176,20 +190,30 @@ def _group(model: mujoco.MjModel, name: str, law: RFT, stop_stiffness: float, bo
                       np.array([model.jnt_dofadr[j] for j in hinges], dtype=int))
 
 
-def plate_spec(scene: Scene, drive: str = "drag", attack_deg: float = 90.0,
-               backend: str = "python") -> mujoco.MjSpec:
-    """The plate's MjSpec for a scene: drive ``drag`` (base slides along +y, the plate at angle of attack
-    ``attack_deg`` to the motion) or ``rotate`` (the rod turns about z through its base); with backend
-    ``native`` the RFT plugin is bound to the segments."""
+def _addresses(model: mujoco.MjModel, joints: list[mujoco.MjsJoint]) -> tuple[np.ndarray, np.ndarray]:
+    """The qpos and dof addresses of compiled joints."""
+    ids = [j.id for j in joints]
+    return model.jnt_qposadr[ids].astype(int), model.jnt_dofadr[ids].astype(int)
+
+
+@dataclass(frozen=True)
+class _Plate:
+    spec: mujoco.MjSpec
+    drive: mujoco.MjsJoint
+    chain: AttachedChain
+
+
+def _plate(scene: Scene, drive: str, attack_deg: float, backend: str) -> _Plate:
     if drive not in DRIVES:
         raise ValueError(f"drive must be one of {DRIVES}, got {drive!r}")
     p = scene.plate
     spec = _new_spec("plate.xml", scene.sim)
     rod = spec.body("rod")
-    spec.delete(spec.body("seg1"))
     rod.mass, rod.ipos = p.rod_mass, [p.rod_length / 2, 0, 0]
     rod.inertia = [p.rod_inertia] * 3
     spec.geom("rod").fromto = [0, 0, 0, p.rod_length, 0, 0]
+    mount = spec.frame("chain")
+    mount.pos = [p.rod_length, 0, 0]
 
     joint = spec.joint("drive")
     heading = initial_heading(drive, attack_deg)
@@ -199,10 +223,10 @@ def plate_spec(scene: Scene, drive: str = "drag", attack_deg: float = 90.0,
     else:
         joint.type = mujoco.mjtJoint.mjJNT_HINGE
         joint.axis = [0, 0, 1]
-    _configure_chain(spec, p, scene.sim.dt)
-    segments = _add_chain(spec, rod, p, p.rod_length, spatial=p.chain == "spatial", welded=p.rigid_as == "welds")
+    chain = _attach_chain(spec, mount, p, scene.sim.dt, "plate_", spatial=p.chain == "spatial",
+                          welded=p.rigid_as == "welds")
     if backend == "native":
-        _bind(spec, "sand", scene.rft, penalty_stiffness(p), segments)
+        _bind(spec, "sand", scene.rft, penalty_stiffness(p), chain.bodies)
 
     # Everything the drive moves, seen from the drive: total mass (slide) or inertia about the base (hinge).
     lumps = [(p.rod_mass, p.rod_inertia, p.rod_length / 2)] + [
@@ -210,28 +234,34 @@ def plate_spec(scene: Scene, drive: str = "drag", attack_deg: float = 90.0,
     moved = sum(m for m, _, _ in lumps) if drive == "drag" else sum(i + m * r * r for m, i, r in lumps)
     joint.armature = ARMATURE_RATIO * moved
     spec.modelname = f"finrft {p.kind} plate ({drive})"
-    return spec
+    return _Plate(spec, joint, chain)
+
+
+def plate_spec(scene: Scene, drive: str = "drag", attack_deg: float = 90.0,
+               backend: str = "python") -> mujoco.MjSpec:
+    """The plate's MjSpec for a scene: drive ``drag`` (base slides along +y, the plate at angle of attack
+    ``attack_deg`` to the motion) or ``rotate`` (the rod turns about z through its base); with backend
+    ``native`` the RFT plugin is bound to the segments."""
+    return _plate(scene, drive, attack_deg, backend).spec
 
 
 def build_plate(scene: Scene, drive: str = "drag", attack_deg: float = 90.0) -> PlateModel:
     """Compile the plate model for a scene and collect its indices."""
     backend = native.resolve_backend(scene.sim.backend)
-    model = _compile(plate_spec(scene, drive, attack_deg, backend))
-    p = scene.plate
-    one_body = p.kind == "rigid" and p.rigid_as == "body"
-    bodies = ["plate"] if one_body else [f"seg{i}" for i in range(1, p.segments + 1)]
-    group = _group(model, "sand", scene.rft, penalty_stiffness(p), bodies)
-    drive_id = model.joint("drive").id
-    hinge_ids = [] if one_body else [model.joint(f"hinge{i}").id for i in range(1, p.segments + 1)]
+    plate = _plate(scene, drive, attack_deg, backend)
+    model = _compile(plate.spec)
+    group = _group(model, "sand", scene.rft, penalty_stiffness(scene.plate), plate.chain.bodies)
+    (drive_qpos,), (drive_dof,) = _addresses(model, [plate.drive])
+    hinge_qpos, hinge_dof = _addresses(model, plate.chain.hinges)
     return PlateModel(
         model=model,
         backend=backend,
         drive=drive,
-        drive_dof=int(model.jnt_dofadr[drive_id]),
-        drive_qpos=int(model.jnt_qposadr[drive_id]),
-        armature=float(model.dof_armature[model.jnt_dofadr[drive_id]]),
-        hinge_qpos=np.array([model.jnt_qposadr[j] for j in hinge_ids], dtype=int),
-        hinge_dof=np.array([model.jnt_dofadr[j] for j in hinge_ids], dtype=int),
+        drive_dof=int(drive_dof),
+        drive_qpos=int(drive_qpos),
+        armature=float(model.dof_armature[drive_dof]),
+        hinge_qpos=hinge_qpos,
+        hinge_dof=hinge_dof,
         groups=(group,),
     )
 
@@ -274,8 +304,18 @@ def body_law(scene: RobotScene) -> RFT:
     return RFT(law="paper", f_perp=drag, f_par=drag, v_reg=scene.body.v_reg)
 
 
-def robot_spec(scene: RobotScene, backend: str = "python") -> mujoco.MjSpec:
-    """The robot's MjSpec for a scene (see mjcf/robot.xml)."""
+@dataclass(frozen=True)
+class _Robot:
+    spec: mujoco.MjSpec
+    travel: mujoco.MjsJoint
+    body: mujoco.MjsBody
+    arms: list[mujoco.MjsBody]            # per side
+    servos: list[mujoco.MjsJoint]
+    actuators: list[mujoco.MjsActuator]   # position servos, per side (empty when prescribed)
+    fins: list[AttachedChain]
+
+
+def _robot(scene: RobotScene, backend: str) -> _Robot:
     spec = _new_spec("robot.xml", scene.sim)
     r, a, fin = scene.robot, scene.arm, scene.fin
     sides = ("r",) if r.model == "half" else ("r", "l")
@@ -283,71 +323,78 @@ def robot_spec(scene: RobotScene, backend: str = "python") -> mujoco.MjSpec:
         spec.delete(spec.body("l_arm"))
     body = spec.body("body")
     body.mass = body_share(scene) * scene.body.mass
-    _configure_chain(spec, fin, scene.sim.dt)
     arm_mass = a.mass_base + a.linear_density * a.length
     # What a servo turns, about its pivot: the arm and the fin laid straight out.
     moved = a.inertia + arm_mass * (a.length / 2) ** 2 + sum(
         fin.segment_inertia + fin.segment_mass * (a.length + (i + 0.5) * fin.segment_length) ** 2
         for i in range(fin.segments))
-    arms, segments = [], []
+    robot = _Robot(spec, spec.joint("travel"), body, [], [], [], [])
     for side in sides:
         arm = spec.body(f"{side}_arm")
-        spec.delete(spec.body(f"{side}_seg1"))
         arm.pos = [a.pivot if side == "r" else -a.pivot, 0, 0]
         arm.mass, arm.ipos, arm.inertia = arm_mass, [a.length / 2, 0, 0], [a.inertia] * 3
         spec.geom(f"{side}_arm").fromto = [0, 0, 0, a.length, 0, 0]
         spec.site(f"{side}_arm").pos = [a.length / 2, 0, 0]
-        segments += _add_chain(spec, arm, fin, a.length, prefix=f"{side}_")
-        arms.append(arm)
+        mount = spec.frame(f"{side}_fin")
+        mount.pos = [a.length, 0, 0]
+        robot.fins.append(_attach_chain(spec, mount, fin, scene.sim.dt, f"{side}_"))
+        robot.arms.append(arm)
         servo = spec.joint(f"{side}_servo")
+        robot.servos.append(servo)
         if r.servo == "prescribed":
             servo.armature = ARMATURE_RATIO * moved
         else:
-            servo.armature = 0.0
-            actuator = spec.add_actuator(name=f"{side}_servo", target=f"{side}_servo",
-                                         trntype=mujoco.mjtTrn.mjTRN_JOINT)
+            actuator = spec.add_actuator(name=f"{side}_servo", target=servo.name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
             actuator.set_to_intvelocity(kp=r.servo_kp, dampratio=1.0)
             actuator.actlimited = mujoco.mjtLimited.mjLIMITED_TRUE
             actuator.actrange = [scene.gait.theta2, scene.gait.theta1]
+            robot.actuators.append(actuator)
     if backend == "native":
-        _bind(spec, "fin_sand", scene.rft, penalty_stiffness(fin), segments)
-        _bind(spec, "arm_sand", arm_law(scene), 0.0, arms)
+        _bind(spec, "fin_sand", scene.rft, penalty_stiffness(fin), _fin_bodies(robot))
+        _bind(spec, "arm_sand", arm_law(scene), 0.0, robot.arms)
         if scene.body.drag_law == "velocity":
             _bind(spec, "body_sand", body_law(scene), 0.0, [body])
     spec.modelname = f"finrft robot ({r.model}, {fin.kind} fins)"
-    return spec
+    return robot
+
+
+def _fin_bodies(robot: _Robot) -> list[mujoco.MjsBody]:
+    return [b for fin in robot.fins for b in fin.bodies]
+
+
+def robot_spec(scene: RobotScene, backend: str = "python") -> mujoco.MjSpec:
+    """The robot's MjSpec for a scene (see mjcf/robot.xml)."""
+    return _robot(scene, backend).spec
 
 
 def build_robot(scene: RobotScene) -> RobotModel:
     """Compile the robot model for a scene and collect its indices."""
     backend = native.resolve_backend(scene.sim.backend)
-    model = _compile(robot_spec(scene, backend))
+    robot = _robot(scene, backend)
+    model = _compile(robot.spec)
     fin = scene.fin
     sides = ("r",) if scene.robot.model == "half" else ("r", "l")
-    fin_bodies = {s: [f"{s}_plate"] if fin.kind == "rigid" else [f"{s}_seg{i}" for i in range(1, fin.segments + 1)]
-                  for s in sides}
-    groups = [_group(model, "fin_sand", scene.rft, penalty_stiffness(fin), sum(fin_bodies.values(), [])),
-              _group(model, "arm_sand", arm_law(scene), 0.0, [f"{s}_arm" for s in sides])]
+    groups = [_group(model, "fin_sand", scene.rft, penalty_stiffness(fin), _fin_bodies(robot)),
+              _group(model, "arm_sand", arm_law(scene), 0.0, robot.arms)]
     if scene.body.drag_law == "velocity":
-        groups.append(_group(model, "body_sand", body_law(scene), 0.0, ["body"]))
-    travel = model.joint("travel")
-    servos = [model.joint(f"{s}_servo") for s in sides]
-    hinges = [[model.joint(f"{s}_hinge{i}") for i in range(1, fin.segments + 1)] if fin.kind != "rigid" else []
-              for s in sides]
+        groups.append(_group(model, "body_sand", body_law(scene), 0.0, [robot.body]))
+    (travel_qpos,), (travel_dof,) = _addresses(model, [robot.travel])
+    servo_qpos, servo_dof = _addresses(model, robot.servos)
+    hinges = [_addresses(model, chain.hinges) for chain in robot.fins]
     prescribed = scene.robot.servo == "prescribed"
     return RobotModel(
         model=model,
         backend=backend,
         sides=sides,
-        travel_qpos=int(travel.qposadr[0]),
-        travel_dof=int(travel.dofadr[0]),
-        body=model.body("body").id,
-        servo_qpos=np.array([j.qposadr[0] for j in servos], dtype=int),
-        servo_dof=np.array([j.dofadr[0] for j in servos], dtype=int),
-        armature=float(model.dof_armature[servos[0].dofadr[0]]) if prescribed else 0.0,
-        actuators=np.array([] if prescribed else [model.actuator(f"{s}_servo").id for s in sides], dtype=int),
-        fin_hinge_qpos=np.array([[j.qposadr[0] for j in side] for side in hinges], dtype=int).reshape(len(sides), -1),
-        fin_hinge_dof=np.array([[j.dofadr[0] for j in side] for side in hinges], dtype=int).reshape(len(sides), -1),
-        fin_sites=np.array([[model.site(f"{s}_seg{i}").id for i in range(1, fin.segments + 1)] for s in sides]),
+        travel_qpos=int(travel_qpos),
+        travel_dof=int(travel_dof),
+        body=robot.body.id,
+        servo_qpos=servo_qpos,
+        servo_dof=servo_dof,
+        armature=float(model.dof_armature[servo_dof[0]]) if prescribed else 0.0,
+        actuators=np.array([u.id for u in robot.actuators], dtype=int),
+        fin_hinge_qpos=np.array([q for q, _ in hinges], dtype=int).reshape(len(sides), -1),
+        fin_hinge_dof=np.array([d for _, d in hinges], dtype=int).reshape(len(sides), -1),
+        fin_sites=np.array([[b.sites[0].id for b in chain.bodies] for chain in robot.fins]),
         groups=tuple(groups),
     )

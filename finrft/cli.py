@@ -26,7 +26,8 @@ from . import scene as scenes
 from .convergence import ErrorLimits, SimulationFailed
 from .drive import Drive
 from .files import atomic_path
-from .simulate import Run, simulate
+from .experiment import Result
+from .simulate import simulate
 
 
 class UsageError(Exception):
@@ -474,7 +475,7 @@ def _steps(summary: dict[str, Any]) -> str:
     return f"{summary['steps']} steps taken ({summary['steps_rejected']} rejected)"
 
 
-def _describe(run: Run, summary: dict[str, Any]) -> str:
+def _describe(run: Result, summary: dict[str, Any]) -> str:
     """A human-readable summary in the paper's units."""
     q, u = run.quantity, run.unit
     sim = run.scene.sim
@@ -548,9 +549,9 @@ def _swim(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
     if args.out or args.rrd:
         from . import record
         if args.out:
-            record.write_swim_h5(run, args.out)
+            record.write_h5(run, args.out)
         if args.rrd:
-            record.write_swim_rrd(run, args.rrd)
+            record.write_rrd(run, args.rrd)
     _say(args, f"{scene.robot.model} robot, {scene.fin.kind} fin, theta1 {summary['theta1_deg']:g} deg, theta2 "
          f"{summary['theta2_deg']:g} deg, arm {summary['arm_length_mm']:g} mm, omega {summary['omega_deg_s']:g} "
          f"deg/s, {scene.sim.method} method (dt {scene.sim.dt:g} s, {run.backend}): {_steps(summary)} in "

@@ -12,14 +12,15 @@ The API, by topic:
 
 - scenes: `Scene` (a plate test), `RobotScene` (the robot), `preset`, `load_scene` (TOML file and overrides),
   `to_toml`, `SceneError`
-- plate tests: `Drive`, `simulate` -> `Run`; `SimulationUnstable` when a run blows up or chatters
-- the robot: `swim` -> `SwimRun`; the paper's Table I with `table_scenes` and `table_rows`
+- experiments: `run(experiment, scene)` -> `Result` runs any `Experiment` (finrft.experiment): `PlateTest`,
+  `Swim`; `SimulationUnstable` when a run blows up or chatters
+- plate tests: `Drive`, `simulate` (`run` of a `PlateTest`)
+- the robot: `swim` (`run` of a `Swim`); the paper's Table I with `table_scenes` and `table_rows`
 - many runs on all cores: `run_many` (plate tests), `map_jobs` (any module-level function), `local_executor`
 - RFT on any MuJoCo model: `attach` (the Li, Zhang & Goldman 2013 law on the named bodies of an MjSpec)
 - fitting plate parameters to measured drags: `read_drag`, `resolve_params`, `fit` -> `Fit`
 - optimising the robot's gait: `optimize`, `Variable`
-- files: `write_h5`, `write_rrd` (a plate run), `write_swim_h5`, `write_swim_rrd` (a swim); they load h5py and
-  rerun on first use, not on ``import finrft``
+- files: `write_h5`, `write_rrd` (any result); they load h5py and rerun on first use, not on ``import finrft``
 
 The functions `attach`, `simulate`, `swim`, `fit` and `optimize` share their names with the modules that define
 them (``finrft.simulate`` ...): here the names are the functions; import other names from those modules by their
@@ -37,14 +38,15 @@ from .drive import Drive
 from .fit import Fit, fit, read_drag, resolve_params
 from .optimize import Variable, optimize
 from .scene import RobotScene, Scene, SceneError, load_scene, preset, to_toml
-from .simulate import Run, SimulationUnstable, simulate
-from .swim import SwimRun, swim, table_rows, table_scenes
+from .experiment import Experiment, Result, run
+from .simulate import PlateTest, SimulationUnstable, simulate
+from .swim import Swim, swim, table_rows, table_scenes
 
-_RECORDING = ("write_h5", "write_rrd", "write_swim_h5", "write_swim_rrd")
+_RECORDING = ("write_h5", "write_rrd")
 
-__all__ = ["Drive", "Fit", "RobotScene", "Run", "Scene", "SceneError", "SimulationUnstable", "SwimRun", "Variable",
-           "attach", "fit", "load_scene", "local_executor", "map_jobs", "optimize", "preset", "read_drag",
-           "resolve_params", "run_many", "simulate", "swim", "table_rows", "table_scenes", "to_toml", *_RECORDING]
+__all__ = ["Drive", "Experiment", "Fit", "PlateTest", "Result", "RobotScene", "Scene", "SceneError",
+           "SimulationUnstable", "Swim", "Variable", "attach", "fit", "load_scene", "local_executor", "map_jobs", "optimize", "preset", "read_drag",
+           "resolve_params", "run", "run_many", "simulate", "swim", "table_rows", "table_scenes", "to_toml", *_RECORDING]
 
 
 def __getattr__(name: str) -> Any:

@@ -20,14 +20,15 @@ from typing import Callable, Iterator, Sequence, TypeVar
 
 from .drive import Drive
 from .scene import Scene
-from .simulate import Run, simulate
+from .experiment import Result
+from .simulate import simulate
 
 Job = tuple[Scene, Drive]
 T = TypeVar("T")
 R = TypeVar("R")
 
 
-def _run(job: Job) -> Run:
+def _run(job: Job) -> Result:
     return simulate(*job)
 
 
@@ -97,6 +98,6 @@ def pool_for(executor: Executor | None = None, workers: int | None = None) -> It
     pool.shutdown()
 
 
-def run_many(jobs: Sequence[Job], **options) -> list[Run]:
+def run_many(jobs: Sequence[Job], **options) -> list[Result]:
     """Simulate every (scene, drive) job and return the runs in order (options as `map_jobs`)."""
     return map_jobs(_run, jobs, **options)

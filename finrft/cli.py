@@ -26,7 +26,8 @@ from . import scene as scenes
 from .convergence import ErrorLimits, SimulationFailed
 from .drive import Drive
 from .files import atomic_path
-from .simulate import Run, simulate
+from .experiment import Experiment, Result, run as run_experiment
+from .simulate import PlateTest, simulate
 
 
 class UsageError(Exception):
@@ -476,7 +477,7 @@ def _steps(summary: dict[str, Any]) -> str:
     return f"{summary['steps']} steps taken ({summary['steps_rejected']} rejected)"
 
 
-def _describe(run: Run, summary: dict[str, Any]) -> str:
+def _describe(run: Result, summary: dict[str, Any]) -> str:
     """A human-readable summary in the paper's units."""
     q, u = run.quantity, run.unit
     sim = run.scene.sim
@@ -516,17 +517,11 @@ def _run_test(args: argparse.Namespace) -> int:
                              f"where the rate-independent force is reached: got {1e3 * drive.speed:g} mm/s")
         _check_output(forces_csv, ".csv", "--forces-csv", args.force, append=True)
         check_forces_header(forces_csv)
-    with _progress(args, 1, args.command, "%") as bar:
-        run = simulate(scene, drive, progress=bar, max_error=_limits(args))
+    run = _run(args, PlateTest(drive), scene)
     if forces_csv:
         append_forces(forces_csv, plate_forces(run))
     summary = run.summary()
-    if args.out or args.rrd:
-        from . import record  # h5py and rerun load only when a file is asked for
-        if args.out:
-            record.write_h5(run, args.out)
-        if args.rrd:
-            record.write_rrd(run, args.rrd)
+    _write(args, run)
     _say(args, _describe(run, summary))
     for flag, path in (("HDF5", args.out), ("rerun recording", args.rrd), ("forces", forces_csv)):
         if path:
@@ -545,19 +540,29 @@ def _json(value: Any) -> str:
         raise SimulationFailed("the result holds a NaN or infinite value: nothing is reported") from None
 
 
+def _run(args: argparse.Namespace, experiment: Experiment, scene: Any) -> Result:
+    """Run any experiment with the options every run takes (--max-error, the progress bar)."""
+    with _progress(args, 1, experiment.name, "%") as bar:
+        return run_experiment(experiment, scene, progress=bar, max_error=_limits(args))
+
+
+def _write(args: argparse.Namespace, result: Result) -> None:
+    """The files --out and --rrd ask for, of any experiment's result."""
+    if args.out or args.rrd:
+        from . import record  # h5py and rerun load only when a file is asked for
+        if args.out:
+            record.write_h5(result, args.out)
+        if args.rrd:
+            record.write_rrd(result, args.rrd)
+
+
 def _swim(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
-    from .swim import swim
+    from .swim import Swim
     _check_output(args.out, ".h5", "--out", args.force)
     _check_output(args.rrd, ".rrd", "--rrd", args.force)
-    with _progress(args, 1, "swim", "%") as bar:
-        run = swim(scene, args.cycles, progress=bar, max_error=_limits(args))
+    run = _run(args, Swim(args.cycles), scene)
     summary = run.summary()
-    if args.out or args.rrd:
-        from . import record
-        if args.out:
-            record.write_swim_h5(run, args.out)
-        if args.rrd:
-            record.write_swim_rrd(run, args.rrd)
+    _write(args, run)
     _say(args, f"{scene.robot.model} robot, {scene.fin.kind} fin, theta1 {summary['theta1_deg']:g} deg, theta2 "
          f"{summary['theta2_deg']:g} deg, arm {summary['arm_length_mm']:g} mm, omega {summary['omega_deg_s']:g} "
          f"deg/s, {scene.sim.method} method (dt {scene.sim.dt:g} s, {run.backend}): {_steps(summary)} in "

@@ -22,9 +22,10 @@ from . import batch, searchlog
 from .convergence import ErrorLimits, SimulationFailed
 from .drive import Drive
 from .optimize import Search, Variable, cmaes, read_log, si_units
+from .experiment import Result
 from .laws.table import ForceTable
 from .scene import RFT, Scene, SceneError, field_of, read_text, scene_from_dict, split_key, to_toml
-from .simulate import Run, simulate
+from .simulate import simulate
 
 # Short names for the paper's parameters, and default bounds (SI).
 ALIASES = {"b": "plate.damping", "k": "plate.stiffness", "f_perp": "rft.f_perp", "f_par": "rft.f_par"}
@@ -160,7 +161,7 @@ def simulated_angles(scene: Scene, data: DragData, max_error: ErrorLimits | None
     return _angles_at(simulate(scene, drag_for(data), max_error=max_error), data.time)
 
 
-def _angles_at(run: Run, time: np.ndarray) -> np.ndarray:
+def _angles_at(run: Result, time: np.ndarray) -> np.ndarray:
     """A run's segment angles (deg, T x N) interpolated at ``time``."""
     return np.column_stack([np.interp(time, run.time, np.degrees(a)) for a in run.segment_angle.T])
 
@@ -283,7 +284,7 @@ def plot(fitted: Scene, files: Sequence[tuple[DragData, str]], path: str | Path)
 FORCE_COLUMNS = ("attack_deg", "force_normal_N", "force_tangential_N")
 
 
-def plate_forces(run: Run) -> dict[str, float]:
+def plate_forces(run: Result) -> dict[str, float]:
     """The medium's steady force on a rigid plate, decomposed along the plate's normal (the +y side at 90 deg
     attack) and its axis: the mean over the second half of the run, the first being any start-up."""
     heading = math.radians(90.0 - run.drive.attack_deg)

@@ -17,14 +17,14 @@ from typing import Callable, Iterator
 
 import numpy as np
 
-from . import batch, record
+from . import batch, record, views
 from .convergence import ErrorLimits
 from .data import plate_drag_dir
 from .drive import Drive
+from .experiment import Result
 from .fit import DragData, fit, read_drag, resolve_params, simulated_angles
 from .optimize import optimize
 from .scene import RobotScene, Scene, SceneError, preset
-from .simulate import Run
 from .swim import PAPER_TABLE, swim, swim_job, table_markdown, table_rows, table_scenes
 
 COLORS = {"rigid": "black", "soft": "tab:blue", "origami": "tab:red"}
@@ -53,7 +53,7 @@ def _timed(timings: dict[str, float], name: str) -> Iterator[None]:
     timings[name] = time.perf_counter() - start
 
 
-def _strokes(run: Run, first_cycle: int):
+def _strokes(run: Result, first_cycle: int):
     """(stroke index, sample mask) for every stroke from ``first_cycle`` (0-based) on."""
     ts = run.drive.stroke_time
     for k in range(2 * first_cycle, run.drive.strokes):
@@ -118,7 +118,7 @@ def flapping(out: Path, quick: bool, workers: int | None) -> str:
     grid = fig.add_gridspec(2, 4)
     for i, ((kind, amplitude), run) in enumerate(zip(shapes, runs)):
         ax = fig.add_subplot(grid[0, i])
-        points = record.plate_points(run)
+        points = views.plate_points(run)
         second = np.flatnonzero((run.time >= 2 * run.drive.stroke_time - 1e-9))
         index = second[np.linspace(0, len(second) - 1, 16).astype(int)]
         colors = plt.cm.viridis(np.linspace(0, 1, len(index)))
@@ -226,7 +226,7 @@ def robot(out: Path, quick: bool, workers: int | None) -> str:
                       on_generation=lambda g, values, extras, es: generations.append((values, extras["eta"])))
     best = swim(scene.replace(**search.best), 1)
     error = best.error_estimate["eta_points"]
-    record.write_swim_rrd(best, out / "robot_optimum.rrd")
+    record.write_rrd(best, out / "robot_optimum.rrd")
     record.write_optimization_rrd(out / "optimization.rrd",
                                   [(np.c_[np.degrees(v[:, :2]), 1e3 * v[:, 2:]], e) for v, e in generations],
                                   [v.key for v in search.variables], best)

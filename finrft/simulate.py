@@ -9,18 +9,19 @@ would give it (computed with the plate's own mass matrix). `step_through` and `P
 
 from __future__ import annotations
 
-import time
+import dataclasses
+import json
 from dataclasses import dataclass
 from typing import Any, Callable, Sequence
 
 import mujoco
 import numpy as np
 
-from .convergence import (ErrorLimits, Estimated, SimulationUnstable, check_resolution, check_size, checked,
-                          max_difference, paired, record_every, require_finite)
-from .coupling import PythonCoupling, SegmentForces, installed
+from .convergence import ErrorLimits, SimulationUnstable, check_resolution, check_size, record_every
+from .coupling import SegmentForces
 from .drive import Drive
-from .integrate import Stepper, stepper
+from .experiment import Compared, Plot, Quantity, Result, run
+from .integrate import Stepper
 from .models import PlateModel, build_plate
 from .native import Code, captured_warnings
 from .scene import Scene
@@ -28,37 +29,27 @@ from .scene import Scene
 _BAD_STATE = (mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL)
 
 
-@dataclass
-class Run(Estimated):
-    """Results of one plate test, SI units. Drag: metres and newtons; rotate: radians and newton-metres."""
+SIGN_CONVENTION = (
+    "A drag moves the base along +y; a rotation turns the rod about +z through the base. Angles are positive "
+    "counter-clockwise about +z. The drive force (torque) is what the drive applies to the plate, along +y "
+    "(about +z).")
 
-    scene: Scene
+
+@dataclass(frozen=True)
+class PlateTest:
+    """The paper's plate tests as an experiment (finrft.experiment): the base dragged along +y or the rod turned
+    about z by a `Drive`. Its result's series, SI units (drag: metres and newtons; rotate: radians and newton-metres):
+    ``displacement`` (or ``rotation``), ``segment_angle`` and ``hinge_angle`` (T, N), ``drive_force`` (or
+    ``drive_torque``), ``rft_force`` (T, N, 3) and ``stroke_impulse`` per stroke; also offered as
+    ``run.displacement`` and ``run.drive_force`` whatever the test, with ``run.peak_drive_force``."""
+
     drive: Drive
-    time: np.ndarray               # (T,) s
-    displacement: np.ndarray       # (T,) base displacement along +y (m) or rod rotation about z (rad)
-    segment_angle: np.ndarray      # (T, N) rad, change of each segment's absolute orientation since t = 0
-    hinge_angle: np.ndarray        # (T, N) rad, hinge angles (zero for a rigid plate)
-    drive_force: np.ndarray        # (T,) N or N m that the drive applies to the plate along +y / about +z
-    rft_force: np.ndarray          # (T, N, 3) N, RFT force on each segment, world frame
-    stroke_impulse: np.ndarray     # (strokes,) integral of the drive force over each stroke (N s or N m s)
-    peak_drive_force: float        # max |drive force| over the recorded samples
-    steps: int                     # steps taken (the adaptive method's accepted steps)
-    wall_s: float
-    backend: str = "python"
-    steps_rejected: int = 0        # the adaptive method's rejected steps, and newton's halved ones
+    schema = "finrft.run/1"
+    sign_convention = SIGN_CONVENTION
 
     @property
-    def stroke_time(self) -> float:
-        return self.drive.stroke_time
-
-    def differences(self, other: Run) -> dict[str, float]:
-        """Largest differences from a run of the same test at another resolution, at the same instants: segment
-        and hinge angles (deg) and the per-stroke mean drive load (N or N m)."""
-        i, j = paired(self.time, other.time)
-        angles = max(max_difference(self.segment_angle[i], other.segment_angle[j]),
-                     max_difference(self.hinge_angle[i], other.hinge_angle[j]))
-        stroke_load = max_difference(self.stroke_impulse, other.stroke_impulse) / self.drive.stroke_time
-        return {"angle_deg": float(np.degrees(angles)), f"{self.quantity}_{self.unit}": stroke_load}
+    def name(self) -> str:
+        return self.drive.kind
 
     @property
     def quantity(self) -> str:
@@ -68,7 +59,49 @@ class Run(Estimated):
     def unit(self) -> str:
         return "N" if self.drive.kind == "drag" else "Nm"
 
-    def cycle_table(self) -> list[dict[str, float]]:
+    def build(self, scene: Scene) -> PlateModel:
+        return build_plate(scene, self.drive.kind, self.drive.attack_deg)
+
+    def drive_for(self, scene: Scene) -> Drive:
+        return self.drive
+
+    def quantities(self, scene: Scene) -> dict[str, Quantity]:
+        drag = self.drive.kind == "drag"
+        motion = "displacement" if drag else "rotation"
+        load = "drive_force" if drag else "drive_torque"
+        return {
+            motion: Quantity("m" if drag else "rad", "base displacement along +y" if drag else "rod rotation about +z",
+                             plot=Plot(f"drive/{motion}", motion.capitalize() + (" (mm)" if drag else " (deg)"),
+                                       motion, "mm" if drag else "deg")),
+            "segment_angle": Quantity("rad", "change of each segment's absolute orientation since t = 0",
+                                      plot=Plot("angles/segment", "Segment angles (deg)", "segment", "deg", "seg")),
+            "hinge_angle": Quantity("rad", "hinge angles, segment i relative to the body before it",
+                                    plot=Plot("angles/hinge", "Hinge angles (deg)", "hinge", "deg", "hinge")),
+            load: Quantity("N" if drag else "N m", "force (torque) the drive applies to the plate",
+                           plot=Plot("drive/force" if drag else "drive/torque",
+                                     "Drive force (N)" if drag else "Drive torque (N m)",
+                                     "drive force" if drag else "drive torque")),
+            "rft_force": Quantity("N", "resistive force of the medium on each segment, at its midpoint",
+                                  attrs={"frame": "world"}),
+            "stroke_impulse": Quantity("N s" if drag else "N m s", "integral of the drive load over each stroke",
+                                       per="stroke"),
+        }
+
+    def compared(self, scene: Scene) -> tuple[Compared, ...]:
+        """Segment and hinge angles (deg) and the per-stroke mean drive load (N or N m)."""
+        return (Compared("angle_deg", ("segment_angle", "hinge_angle"), float(np.degrees(1.0))),
+                Compared(f"{self.quantity}_{self.unit}", ("stroke_impulse",), 1 / self.drive.stroke_time))
+
+    def start(self, scene: Scene, plate: PlateModel, d: mujoco.MjData, companion: bool) -> _PlateTrial:
+        return _PlateTrial(self, scene, plate, d, companion)
+
+    def check(self, result: Result) -> None:
+        pass
+
+    def attrs(self) -> dict[str, Any]:
+        return {"drive_json": json.dumps(dataclasses.asdict(self.drive))}
+
+    def cycle_table(self, run: Result) -> list[dict[str, float]]:
         """Per out-and-back cycle: mean drive force/torque in the recovery (out) and power (back) strokes and the
         net impulse the medium gives the plate (minus the drive's), positive along +y / about +z."""
         if self.drive.cycles is None:
@@ -76,32 +109,21 @@ class Run(Estimated):
         q, u, ts = self.quantity, self.unit, self.drive.stroke_time
         rows = []
         for c in range(self.drive.cycles):
-            out, back = self.stroke_impulse[2 * c], self.stroke_impulse[2 * c + 1]
+            out, back = run.stroke_impulse[2 * c], run.stroke_impulse[2 * c + 1]
             rows.append({f"mean_recovery_{q}_{u}": float(out / ts), f"mean_power_{q}_{u}": float(back / ts),
                          f"net_impulse_{u}s": float(-(out + back))})
         return rows
 
-    def summary(self) -> dict[str, Any]:
-        """The figures `finrft ... --json` prints, as plain Python numbers."""
+    def summary(self, run: Result) -> dict[str, Any]:
         q, u = self.quantity, self.unit
         out: dict[str, Any] = {
             "test": self.drive.kind,
-            "plate": self.scene.plate.kind,
-            "final_segment_angle_deg": np.degrees(self.segment_angle[-1]).tolist(),
-            "final_hinge_angle_deg": np.degrees(self.hinge_angle[-1]).tolist(),
-            f"peak_drive_{q}_{u}": float(self.peak_drive_force),
-            "steps": int(self.steps),
-            "steps_rejected": int(self.steps_rejected),
-            "sim_time_s": float(self.time[-1]),
-            "wall_s": float(self.wall_s),
-            "backend": self.backend,
-            "integrator": self.scene.sim.integrator,
-            "dt": float(self.scene.sim.dt),
+            "plate": run.scene.plate.kind,
+            "final_segment_angle_deg": np.degrees(run.segment_angle[-1]).tolist(),
+            "final_hinge_angle_deg": np.degrees(run.hinge_angle[-1]).tolist(),
+            f"peak_drive_{q}_{u}": float(run.peak_drive_force),
         }
-        if self.error_estimate is not None:
-            out["error_estimate"] = dict(self.error_estimate)
-            out["error_companion"] = self.error_companion
-        cycles = self.cycle_table()
+        cycles = self.cycle_table(run)
         if cycles:
             later = cycles[1:] or cycles
             out["first_cycle"] = cycles[0]
@@ -110,6 +132,54 @@ class Run(Estimated):
                 out[key] = float(np.mean([row[key] for row in later]))
             out["cycles_averaged"] = f"{2 if len(cycles) > 1 else 1}..{len(cycles)}"
         return out
+
+    def draw(self, rec: Any, run: Result, times: Any, prefix: str) -> list[Any]:
+        from .views import draw_plate
+        return draw_plate(rec, run, times, prefix)
+
+
+class _PlateTrial:
+    """One plate test on one MjData: the base on its prescribed profile, the plate's state and loads read."""
+
+    def __init__(self, test: PlateTest, scene: Scene, plate: PlateModel, d: mujoco.MjData, companion: bool) -> None:
+        self.test, self.scene, self.plate = test, scene, plate
+        m = plate.model
+        self.base = Prescribed([plate.drive_dof], [plate.drive_qpos], plate.armature, test.drive)
+        self.forces = SegmentForces(plate.groups[0])
+        self.on_stroke = lambda k: self.base.start_stroke(m, d, k)
+        self.watch = list(plate.hinge_dof)
+        n, hinges = scene.plate.segments, plate.hinge_qpos
+
+        def hinge(d: mujoco.MjData) -> np.ndarray:
+            q = np.zeros(n)
+            q[:len(hinges)] = d.qpos[hinges]
+            return q
+
+        def snapshot(d: mujoco.MjData) -> np.ndarray:
+            cvel, offset, frame = np.zeros((n, 6)), np.zeros((n, 3)), np.zeros((n, 3, 3))
+            self.forces.snapshot(m, d, cvel, offset, frame)
+            return np.concatenate([cvel, offset, frame.reshape(n, 9)], axis=1)
+
+        self.reads = {"x": lambda d: d.qpos[plate.drive_qpos], "hinge": hinge}
+        if not companion:
+            self.reads.update(load=lambda d: self.base.load(d)[0], snapshot=snapshot)
+
+    def finish(self, d: mujoco.MjData, readings: dict[str, np.ndarray]) -> tuple[dict[str, np.ndarray],
+                                                                                    dict[str, float]]:
+        self.base.finish(d)
+        x, q = readings["x"], readings["hinge"]
+        segment_angle = np.cumsum(q, axis=1)
+        if self.test.drive.kind == "rotate":
+            segment_angle += x[:, None]
+        load = readings.get("load", np.zeros(len(x)))
+        snap = readings.get("snapshot")
+        rft = (np.zeros((*q.shape, 3)) if snap is None else
+               self.forces.recorded(snap[..., :6], snap[..., 6:9], snap[..., 9:].reshape(*q.shape, 3, 3)))
+        names = list(self.test.quantities(self.scene))
+        # displacement and drive_force name the rotation and the torque too: the names callers use for any test
+        series = {names[0]: x, "segment_angle": segment_angle, "hinge_angle": q, names[3]: load, "rft_force": rft,
+                  "stroke_impulse": self.base.impulse, "displacement": x, "drive_force": load}
+        return series, {"peak_drive_force": float(np.max(np.abs(load)))}
 
 
 class Prescribed:
@@ -261,56 +331,9 @@ def step_through(m: mujoco.MjModel, d: mujoco.MjData, scene: Any, advance: Stepp
 
 
 def simulate(scene: Scene, drive: Drive, *, progress: Callable[[float], None] | None = None,
-             max_error: ErrorLimits | None = ErrorLimits(), estimate_error: bool = True) -> Run:
-    """Simulate one plate test, with an estimate of its discretisation error (``run.error_estimate``, from a
-    companion run: see finrft.convergence). Raises SimulationUnstable rather than return a diverged run, and
-    InaccurateResult when the estimate exceeds ``max_error`` (None: report it only). ``estimate_error=False``
-    skips the estimate, for studies that measure the error themselves."""
-    return checked(lambda s: build_plate(s, drive.kind, drive.attack_deg),
-                   lambda s, plate, p, companion: _simulate(s, drive, plate, p, companion), scene, progress,
-                   max_error, estimate_error)
-
-
-def _simulate(scene: Scene, drive: Drive, plate: PlateModel, progress: Callable[[float], None] | None,
-              companion: bool) -> Run:
-    start = time.perf_counter()
-    m = plate.model
-    d = mujoco.MjData(m)
-    forces = SegmentForces(plate.groups[0])
-    callback = PythonCoupling(plate.groups) if plate.backend == "python" else None
-    dt = scene.sim.dt
-    steps, starts, samples = schedule(drive, dt, scene.sim.record_dt)
-    base = Prescribed([plate.drive_dof], [plate.drive_qpos], plate.armature, drive)
-
-    n = scene.plate.segments
-    rec_x = np.zeros(len(samples))
-    rec_q = np.zeros((len(samples), n))
-    rec_f = np.zeros(len(samples))
-    rec_cvel = np.zeros((len(samples), n, 6))
-    rec_offset = np.zeros((len(samples), n, 3))
-    rec_frame = np.zeros((len(samples), n, 3, 3))
-    hinges = plate.hinge_qpos
-
-    def record(i: int) -> None:
-        rec_x[i] = d.qpos[plate.drive_qpos]
-        rec_q[i, :len(hinges)] = d.qpos[hinges]
-        if not companion:
-            rec_f[i] = base.load(d)[0]
-            forces.snapshot(m, d, rec_cvel[i], rec_offset[i], rec_frame[i])
-
-    advance = stepper(m, scene.sim, plate.backend, plate.groups)
-    with installed(callback):
-        step_through(m, d, scene, advance, steps, starts, samples, lambda k: base.start_stroke(m, d, k), record,
-                     progress, () if companion else plate.hinge_dof, forward=not companion)
-    base.finish(d)
-
-    segment_angle = np.cumsum(rec_q, axis=1)
-    if drive.kind == "rotate":
-        segment_angle += rec_x[:, None]
-    run = Run(scene=scene, drive=drive, time=samples * dt, displacement=rec_x, segment_angle=segment_angle,
-              hinge_angle=rec_q, drive_force=rec_f, rft_force=forces.recorded(rec_cvel, rec_offset, rec_frame),
-              stroke_impulse=base.impulse, peak_drive_force=float(np.max(np.abs(rec_f))), steps=advance.taken,
-              wall_s=time.perf_counter() - start, backend=plate.backend, steps_rejected=advance.rejected)
-    require_finite({"displacement": rec_x, "segment_angle": segment_angle, "drive_force": rec_f,
-                    "rft_force": run.rft_force, "stroke_impulse": base.impulse}, f"{drive.kind} at dt {dt:g} s")
-    return run
+             max_error: ErrorLimits | None = ErrorLimits(), estimate_error: bool = True) -> Result:
+    """Simulate one plate test: `experiment.run` of `PlateTest(drive)`, with an estimate of its discretisation
+    error (``run.error_estimate``, from a companion run: see finrft.convergence). Raises SimulationUnstable rather
+    than return a diverged run, and InaccurateResult when the estimate exceeds ``max_error`` (None: report it
+    only). ``estimate_error=False`` skips the estimate, for studies that measure the error themselves."""
+    return run(PlateTest(drive), scene, progress=progress, max_error=max_error, estimate_error=estimate_error)

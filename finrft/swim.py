@@ -8,85 +8,107 @@ eta = (D1 - D2) / D1. The robot starts at rest, arm and fin at theta2, the arm t
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 from typing import Any, Callable
 
 import mujoco
 import numpy as np
 
-from .convergence import ErrorLimits, Estimated, SimulationFailed, checked, max_difference, paired, require_finite
-from .coupling import PythonCoupling, installed
+from .convergence import ErrorLimits, SimulationFailed
 from .drive import Drive
-from .integrate import stepper
+from .experiment import Compared, Plot, Quantity, Result, run
 from .models import RobotModel, body_share, build_robot
 from .scene import RobotScene
-from .simulate import Prescribed, schedule, step_through
+from .simulate import Prescribed
 
 
-@dataclass
-class SwimRun(Estimated):
-    """Results of a swim, SI units; arm and fin quantities are the right side's."""
+SIGN_CONVENTION = (
+    "Forward is +y, along the body's slide. The right arm's angle is 0 pointing sideways (+x) and +90 deg pointing "
+    "forward; fin hinge angles are negative when the fin folds. The servo torque is what the servo applies to its "
+    "arm about +z.")
 
-    scene: RobotScene
-    cycles: int
-    time: np.ndarray           # (T,) s
-    body_y: np.ndarray         # (T,) m, body position along the travel axis (+y forward)
-    arm_angle: np.ndarray      # (T,) rad, right arm (0 sideways, +pi/2 forward)
-    hinge_angle: np.ndarray    # (T, N) rad, right fin hinges (zeros for a rigid fin)
-    servo_torque: np.ndarray   # (T,) N m, what the right servo applies to its arm
-    stroke_y: np.ndarray       # (2 cycles + 1,) m, body position at the start of each stroke and at the end
-    steps: int                 # steps taken (the adaptive method's accepted steps)
-    wall_s: float
-    backend: str
-    steps_rejected: int = 0    # the adaptive method's rejected steps, and newton's halved ones
 
-    @property
-    def cycle_time(self) -> float:
-        g = self.scene.gait
-        return 2 * (g.theta1 - g.theta2) / g.omega
+@dataclass(frozen=True)
+class Swim:
+    """``cycles`` flap cycles of the robot from rest, as an experiment (finrft.experiment). Its result's series,
+    SI units, arm and fin quantities the right side's: ``body_y`` (T,), ``arm_angle`` (T,), ``hinge_angle``
+    (T, N), ``servo_torque`` (T,), ``stroke_y`` per stroke and at the end, ``eta`` per cycle; ``run.cycle_time``."""
 
-    @property
-    def stroke_time(self) -> float:
-        return self.cycle_time / 2
+    cycles: int = 1
+    name = "swim"
+    schema = "finrft.swim/1"
+    sign_convention = SIGN_CONVENTION
 
-    def differences(self, other: SwimRun) -> dict[str, float]:
-        """Largest differences from a swim at another resolution: arm and fin hinge angles (deg) at the same
-        instants, eta per cycle (points) and the body's position at the stroke ends (mm)."""
-        i, j = paired(self.time, other.time)
-        angles = max(max_difference(self.arm_angle[i], other.arm_angle[j]),
-                     max_difference(self.hinge_angle[i], other.hinge_angle[j]))
-        eta = [max_difference(np.array([a["eta"]]), np.array([b["eta"]]))
-               for a, b in zip(self.cycle_table(), other.cycle_table())]
-        return {"angle_deg": float(np.degrees(angles)), "eta_points": 100 * max(eta),
-                "body_mm": 1e3 * max_difference(self.stroke_y, other.stroke_y)}
+    def build(self, scene: RobotScene) -> RobotModel:
+        return build_robot(scene)
 
-    def cycle_table(self) -> list[dict[str, float]]:
+    def drive_for(self, scene: RobotScene) -> Drive:
+        return gait_drive(scene, self.cycles)
+
+    def quantities(self, scene: RobotScene) -> dict[str, Quantity]:
+        return {
+            "body_y": Quantity("m", "body position along the travel axis (+y forward)",
+                               plot=Plot("motion/body_y", "Body position (mm)", "body y", "mm")),
+            "arm_angle": Quantity("rad", "right arm angle (0 sideways, +pi/2 forward)",
+                                  plot=Plot("motion/arm", "Arm angle (deg)", "arm angle", "deg")),
+            "hinge_angle": Quantity("rad", "right fin hinge angles",
+                                    plot=Plot("hinges", "Fin hinges (deg)", "hinge", "deg", "hinge")),
+            "servo_torque": Quantity("N m", "torque the right servo applies to its arm",
+                                     plot=Plot("servo/torque", "Servo torque (N m)", "servo torque")),
+            "stroke_y": Quantity("m", "body position at the start of each stroke, and at the end", per="stroke"),
+            "eta": Quantity("1", "swimming efficiency (D1 - D2) / D1 of each flap cycle", per="cycle"),
+        }
+
+    def compared(self, scene: RobotScene) -> tuple[Compared, ...]:
+        """Arm and fin hinge angles (deg) at the same instants, eta per cycle (points) and the body's position at
+        the stroke ends (mm)."""
+        return (Compared("angle_deg", ("arm_angle", "hinge_angle"), float(np.degrees(1.0))),
+                Compared("eta_points", ("eta",), 100.0), Compared("body_mm", ("stroke_y",), 1e3))
+
+    def start(self, scene: RobotScene, robot: RobotModel, d: mujoco.MjData, companion: bool) -> _SwimTrial:
+        return _SwimTrial(self, scene, robot, d, companion)
+
+    def check(self, run: Result) -> None:
+        if not np.all(np.isfinite(run.stroke_y)):
+            return  # the finite check names it
+        for c, row in enumerate(self.cycle_table(run), start=1):
+            if not row["D1_mm"] > 0:
+                raise SimulationFailed(f"swim at dt {run.scene.sim.dt:g} s: eta is undefined in cycle {c}: its "
+                                       f"power stroke moved the body {row['D1_mm']:+.3g} mm, not forward")
+
+    def attrs(self) -> dict[str, Any]:
+        return {"cycles": self.cycles}
+
+    def cycle_table(self, run: Result) -> list[dict[str, float]]:
         """Per flap cycle: D2 (back in recovery), D1 (forward in the power stroke), eta, net distance and speed."""
-        rows = []
-        for c in range(self.cycles):
-            y0, y1, y2 = (float(y) for y in self.stroke_y[2 * c: 2 * c + 3])
-            back, forward = y0 - y1, y2 - y1
-            rows.append({"D1_mm": 1e3 * forward, "D2_mm": 1e3 * back,
-                         "eta": (forward - back) / forward if forward > 0 else float("nan"),
-                         "net_mm": 1e3 * (y2 - y0), "net_speed_mm_s": 1e3 * (y2 - y0) / self.cycle_time})
-        return rows
+        return _cycle_rows(run.stroke_y, self.cycles, run.cycle_time)
 
-    def summary(self) -> dict[str, Any]:
-        """The figures `finrft swim --json` prints: the last cycle's, and per-cycle lists; plain Python numbers."""
-        rows = self.cycle_table()
-        g = self.scene.gait
+    def summary(self, run: Result) -> dict[str, Any]:
+        """The last cycle's figures, and per-cycle lists."""
+        rows = self.cycle_table(run)
+        scene = run.scene
+        g = scene.gait
         out: dict[str, Any] = dict(rows[-1])
         out.update({f"{key}_per_cycle": [row[key] for row in rows] for key in rows[-1]})
         out.update(theta1_deg=float(np.degrees(g.theta1)), theta2_deg=float(np.degrees(g.theta2)),
-                   arm_length_mm=1e3 * self.scene.arm.length, omega_deg_s=float(np.degrees(g.omega)),
-                   fin=self.scene.fin.kind, model=self.scene.robot.model, cycles=int(self.cycles),
-                   steps=int(self.steps), steps_rejected=int(self.steps_rejected), sim_time_s=float(self.time[-1]),
-                   wall_s=float(self.wall_s), backend=self.backend, integrator=self.scene.sim.integrator,
-                   dt=float(self.scene.sim.dt))
-        if self.error_estimate is not None:
-            out.update(error_estimate=dict(self.error_estimate), error_companion=self.error_companion)
+                   arm_length_mm=1e3 * scene.arm.length, omega_deg_s=float(np.degrees(g.omega)),
+                   fin=scene.fin.kind, model=scene.robot.model, cycles=int(self.cycles))
         return out
+
+    def draw(self, rec: Any, run: Result, times: Any, prefix: str) -> list[Any]:
+        from .views import draw_robot
+        return draw_robot(rec, run, times, prefix)
+
+
+def _cycle_rows(stroke_y: np.ndarray, cycles: int, cycle_time: float) -> list[dict[str, float]]:
+    rows = []
+    for c in range(cycles):
+        y0, y1, y2 = (float(y) for y in stroke_y[2 * c: 2 * c + 3])
+        back, forward = y0 - y1, y2 - y1
+        rows.append({"D1_mm": 1e3 * forward, "D2_mm": 1e3 * back,
+                     "eta": (forward - back) / forward if forward > 0 else float("nan"),
+                     "net_mm": 1e3 * (y2 - y0), "net_speed_mm_s": 1e3 * (y2 - y0) / cycle_time})
+    return rows
 
 
 def gait_drive(scene: RobotScene, cycles: int) -> Drive:
@@ -102,75 +124,66 @@ def _stroke_drag(robot: RobotModel, scene: RobotScene, d: mujoco.MjData, k: int)
     d.xfrc_applied[robot.body, 1] = -drag if k % 2 == 0 else drag
 
 
-def swim(scene: RobotScene, cycles: int = 1, *, progress: Callable[[float], None] | None = None,
-         max_error: ErrorLimits | None = ErrorLimits(), estimate_error: bool = True) -> SwimRun:
-    """Simulate ``cycles`` flap cycles from rest, with an estimate of the discretisation error
-    (``run.error_estimate``, from a companion run: see finrft.convergence). Raises SimulationUnstable rather than
-    return a diverged run, SimulationFailed when eta is undefined (a power stroke that does not move the body
-    forward), and InaccurateResult when the estimate exceeds ``max_error`` (None: report it only).
-    ``estimate_error=False`` skips the estimate, for studies that measure the error themselves."""
-    return checked(build_robot, lambda s, robot, p, companion: _swim(s, cycles, robot, p, companion), scene,
-                   progress, max_error, estimate_error)
+class _SwimTrial:
+    """One swim on one MjData. The paper's start: body at rest, arm and fin at theta2, the arm turning at omega,
+    the fin still at rest in the world (its first hinge turns back at omega)."""
 
+    def __init__(self, swim: Swim, scene: RobotScene, robot: RobotModel, d: mujoco.MjData, companion: bool) -> None:
+        self.swim, self.scene, self.robot, self.d = swim, scene, robot, d
+        self.drive = gait_drive(scene, swim.cycles)
+        self.prescribed = scene.robot.servo == "prescribed"
+        self.servos = Prescribed(robot.servo_dof, robot.servo_qpos, robot.armature, self.drive)
+        d.qpos[robot.servo_qpos] = scene.gait.theta2
+        d.qvel[robot.servo_dof] = scene.gait.omega
+        if robot.fin_hinge_dof.shape[1]:
+            d.qvel[robot.fin_hinge_dof[:, 0]] = -scene.gait.omega
+        if not self.prescribed:
+            d.act[:] = scene.gait.theta2
+        self.stroke_y = np.zeros(self.drive.strokes + 1)
+        n, hinges = scene.fin.segments, robot.fin_hinge_qpos[0]
 
-def _swim(scene: RobotScene, cycles: int, robot: RobotModel, progress: Callable[[float], None] | None,
-          companion: bool) -> SwimRun:
-    start = time.perf_counter()
-    m = robot.model
-    d = mujoco.MjData(m)
-    drive = gait_drive(scene, cycles)
-    steps, starts, samples = schedule(drive, scene.sim.dt, scene.sim.record_dt)
-    prescribed = scene.robot.servo == "prescribed"
-    servos = Prescribed(robot.servo_dof, robot.servo_qpos, robot.armature, drive)
-    callback = PythonCoupling(robot.groups) if robot.backend == "python" else None
+        def hinge(d: mujoco.MjData) -> np.ndarray:
+            q = np.zeros(n)
+            q[:len(hinges)] = d.qpos[hinges]
+            return q
 
-    # The paper's start: body at rest, arm and fin at theta2, the arm turning at omega, the fin still at rest
-    # in the world (its first hinge turns back at omega).
-    d.qpos[robot.servo_qpos] = scene.gait.theta2
-    d.qvel[robot.servo_dof] = scene.gait.omega
-    if robot.fin_hinge_dof.shape[1]:
-        d.qvel[robot.fin_hinge_dof[:, 0]] = -scene.gait.omega
-    if not prescribed:
-        d.act[:] = scene.gait.theta2
-    stroke_y = np.zeros(drive.strokes + 1)
-    n = scene.fin.segments
-    rec = {"y": np.zeros(len(samples)), "arm": np.zeros(len(samples)), "hinge": np.zeros((len(samples), n)),
-           "torque": np.zeros(len(samples))}
-    hinges = robot.fin_hinge_qpos[0]
+        def torque(d: mujoco.MjData) -> float:
+            return self.servos.load(d)[0] if self.prescribed else d.actuator_force[robot.actuators[0]]
 
-    def on_stroke(k: int) -> None:
-        stroke_y[k] = d.qpos[robot.travel_qpos]
-        if prescribed:
-            servos.start_stroke(m, d, k)
-        else:
-            d.ctrl[robot.actuators] = drive.stroke_velocity(k)
-        if scene.body.drag_law == "stroke":
-            _stroke_drag(robot, scene, d, k)
-
-    def on_sample(i: int) -> None:
-        rec["y"][i] = d.qpos[robot.travel_qpos]
-        rec["arm"][i] = d.qpos[robot.servo_qpos[0]]
-        rec["hinge"][i, :len(hinges)] = d.qpos[hinges]
+        self.reads = {"body_y": lambda d: d.qpos[robot.travel_qpos], "arm_angle": lambda d: d.qpos[robot.servo_qpos[0]],
+                      "hinge_angle": hinge}
         if not companion:
-            rec["torque"][i] = servos.load(d)[0] if prescribed else d.actuator_force[robot.actuators[0]]
+            self.reads["servo_torque"] = torque
+        self.watch = [robot.travel_dof, *robot.fin_hinge_dof.ravel(), *([] if self.prescribed else robot.servo_dof)]
 
-    advance = stepper(m, scene.sim, robot.backend, robot.groups)
-    with installed(callback):
-        free = [] if companion else [robot.travel_dof, *robot.fin_hinge_dof.ravel(),
-                                     *([] if prescribed else robot.servo_dof)]
-        step_through(m, d, scene, advance, steps, starts, samples, on_stroke, on_sample, progress, free,
-                     forward=not companion)
-    stroke_y[-1] = d.qpos[robot.travel_qpos]
-    run = SwimRun(scene=scene, cycles=cycles, time=samples * scene.sim.dt, body_y=rec["y"], arm_angle=rec["arm"],
-                  hinge_angle=rec["hinge"], servo_torque=rec["torque"], stroke_y=stroke_y, steps=advance.taken,
-                  wall_s=time.perf_counter() - start, backend=robot.backend, steps_rejected=advance.rejected)
-    what = f"swim at dt {scene.sim.dt:g} s"
-    require_finite({**rec, "stroke_y": stroke_y}, what)
-    for c, row in enumerate(run.cycle_table(), start=1):
-        if not row["D1_mm"] > 0:
-            raise SimulationFailed(f"{what}: eta is undefined in cycle {c}: its power stroke moved the body "
-                                   f"{row['D1_mm']:+.3g} mm, not forward")
-    return run
+    def on_stroke(self, k: int) -> None:
+        robot, d = self.robot, self.d
+        self.stroke_y[k] = d.qpos[robot.travel_qpos]
+        if self.prescribed:
+            self.servos.start_stroke(robot.model, d, k)
+        else:
+            d.ctrl[robot.actuators] = self.drive.stroke_velocity(k)
+        if self.scene.body.drag_law == "stroke":
+            _stroke_drag(robot, self.scene, d, k)
+
+    def finish(self, d: mujoco.MjData, readings: dict[str, np.ndarray]) -> tuple[dict[str, np.ndarray],
+                                                                                    dict[str, float]]:
+        self.stroke_y[-1] = d.qpos[self.robot.travel_qpos]
+        cycle_time = 2 * self.drive.stroke_time
+        eta = np.array([row["eta"] for row in _cycle_rows(self.stroke_y, self.swim.cycles, cycle_time)])
+        torque = readings.get("servo_torque", np.zeros(len(readings["body_y"])))
+        return ({**readings, "servo_torque": torque, "stroke_y": self.stroke_y, "eta": eta},
+                {"cycle_time": cycle_time})
+
+
+def swim(scene: RobotScene, cycles: int = 1, *, progress: Callable[[float], None] | None = None,
+         max_error: ErrorLimits | None = ErrorLimits(), estimate_error: bool = True) -> Result:
+    """Simulate ``cycles`` flap cycles from rest: `experiment.run` of `Swim(cycles)`, with an estimate of the
+    discretisation error (``run.error_estimate``, from a companion run: see finrft.convergence). Raises
+    SimulationUnstable rather than return a diverged run, SimulationFailed when eta is undefined (a power stroke
+    that does not move the body forward), and InaccurateResult when the estimate exceeds ``max_error`` (None:
+    report it only). ``estimate_error=False`` skips the estimate, for studies that measure the error themselves."""
+    return run(Swim(cycles), scene, progress=progress, max_error=max_error, estimate_error=estimate_error)
 
 
 # The paper's Table I: (name, theta1 deg, theta2 deg, L_a mm, fin, eta_exp %, eta_sim %, net speed mm/s exp).
@@ -191,12 +204,12 @@ def table_scenes(scene: RobotScene) -> list[RobotScene]:
             for _, t1, t2, la, fin, *_ in PAPER_TABLE]
 
 
-def table_rows(runs: list[SwimRun]) -> list[dict[str, Any]]:
+def table_rows(runs: list[Result]) -> list[dict[str, Any]]:
     """Table I rows: finrft's eta (the paper's definition), the authors' script measure |net| / D1, the
     distances and the net speed, beside the paper's figures."""
     rows = []
-    for (name, t1, t2, la, fin, eta_exp, eta_sim, speed_exp), run in zip(PAPER_TABLE, runs):
-        s = run.summary()
+    for (name, t1, t2, la, fin, eta_exp, eta_sim, speed_exp), result in zip(PAPER_TABLE, runs):
+        s = result.summary()
         rows.append({"gait": name, "theta1_deg": t1, "theta2_deg": t2, "arm_length_mm": la, "fin": fin,
                      "eta": s["eta"], "eta_script": abs(s["net_mm"]) / s["D1_mm"], "D1_mm": s["D1_mm"],
                      "D2_mm": s["D2_mm"], "net_speed_mm_s": s["net_speed_mm_s"], "paper_eta_sim": eta_sim / 100,
@@ -217,7 +230,7 @@ def table_markdown(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
-def swim_job(job: tuple[RobotScene, int, ErrorLimits | None]) -> SwimRun:
+def swim_job(job: tuple[RobotScene, int, ErrorLimits | None]) -> Result:
     """`swim` of a (scene, cycles, max_error) job: the module-level function a process pool can send to its
     workers."""
     scene, cycles, max_error = job

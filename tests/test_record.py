@@ -14,7 +14,8 @@ from finrft import record
 from finrft.drive import Drive
 from finrft.models import build_plate
 from finrft.scene import preset, to_toml
-from finrft.simulate import Run, simulate
+from finrft.experiment import Result
+from finrft.simulate import simulate
 
 DRIVES = {
     "drag": Drive(stroke=0.02),
@@ -24,7 +25,7 @@ DRIVES = {
 
 
 @pytest.fixture(scope="module")
-def runs() -> dict[str, Run]:
+def runs() -> dict[str, Result]:
     scene = preset("paper").replace(**{"sim.dt": 1e-3})
     return {name: simulate(scene, drive) for name, drive in DRIVES.items()}
 
@@ -199,8 +200,8 @@ def test_swim_recording_matches_its_hdf5(tmp_path):
 
     run = swim(preset("physical", RobotScene).replace(**{"sim.dt": 4e-4}), 1)
     h5, rrd = tmp_path / "swim.h5", tmp_path / "swim.rrd"
-    record.write_swim_h5(run, h5)
-    record.write_swim_rrd(run, rrd)
+    record.write_h5(run, h5)
+    record.write_rrd(run, rrd)
     chunks = _chunks(rrd)
     with h5py.File(h5) as f:
         time, hinges, body = f["time"][()], f["hinge_angle"][()], f["body_y"][()]

@@ -1,0 +1,217 @@
+"""One protocol for every experiment, and one way to run it.
+
+An experiment (in the spirit of dm_control's tasks) builds its model from a scene, prescribes its drive (the
+strokes, and what happens as each starts), names the series it records with their SI units, says which of them
+the error check compares, and summarises a result. `run` does the rest for any experiment: the stepping
+(`step_through`), the finite checks, the discretisation-error estimate (`convergence.checked`), and a `Result` that
+holds the named series; `record.write_h5` and `record.write_rrd` write any result. The plate tests
+(`simulate.PlateTest`) and the robot's swim (`swim.Swim`) are two experiments.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Protocol
+
+import mujoco
+import numpy as np
+
+from .convergence import ErrorLimits, Estimated, checked, max_difference, paired, require_finite
+from .coupling import PythonCoupling, installed
+from .drive import Drive
+from .integrate import stepper
+
+
+@dataclass(frozen=True)
+class Plot:
+    """How a series is shown in a rerun recording: under ``entity`` (a series of several columns: one entity
+    ``entity/{part}{i + 1}`` per column, labelled ``{label} {i + 1}``), in ``unit`` ("deg", "mm" or SI as is),
+    in a time-series view named ``title``."""
+
+    entity: str
+    title: str
+    label: str
+    unit: str = ""
+    part: str = ""
+
+
+# SI to the units the recordings show.
+DISPLAY: dict[str, Callable[[np.ndarray], np.ndarray]] = {"deg": np.degrees, "mm": lambda x: 1e3 * x}
+
+
+@dataclass(frozen=True)
+class Quantity:
+    """A recorded series: its SI unit, what it is, and what it is indexed by ("sample": one value per recorded
+    instant; "stroke", "cycle", ...: one per stroke or cycle)."""
+
+    unit: str
+    description: str
+    per: str = "sample"
+    plot: Plot | None = None
+    attrs: dict[str, str] = field(default_factory=dict)  # further HDF5 attributes of the dataset
+
+
+@dataclass(frozen=True)
+class Compared:
+    """A quantity the error check compares with a companion run: the largest difference of the named series
+    (at the instants both runs record, for per-sample series; whole, for per-stroke ones) times ``scale``,
+    reported as ``key`` (its unit in the name)."""
+
+    key: str
+    series: tuple[str, ...]
+    scale: float = 1.0
+
+
+class Trial(Protocol):
+    """One run of an experiment on one MjData: what it reads at each recorded instant, what it does as a stroke
+    starts, the dofs watched for chatter, and the series it makes of its readings when the run ends."""
+
+    reads: dict[str, Callable[[mujoco.MjData], Any]]  # readings at every recorded instant (after mj_forward)
+    watch: list[int]                                  # dofs the chatter probe watches
+
+    def on_stroke(self, k: int) -> None: ...
+
+    def finish(self, d: mujoco.MjData, readings: dict[str, np.ndarray]) -> tuple[dict[str, np.ndarray],
+                                                                                  dict[str, float]]: ...
+
+
+class Experiment(Protocol):
+    """What an experiment defines; everything else (stepping, checks, estimate, files) is generic."""
+
+    name: str               # what the experiment is, in messages: "drag", "swim", ...
+    schema: str             # the HDF5 schema name
+    sign_convention: str    # the files' statement of directions and signs
+
+    def build(self, scene: Any) -> Any:
+        """The compiled model: an object with ``model`` (MjModel), ``backend`` and ``groups`` (force groups)."""
+
+    def drive_for(self, scene: Any) -> Drive:
+        """The schedule: strokes, their length and the duration."""
+
+    def start(self, scene: Any, built: Any, d: mujoco.MjData, companion: bool) -> Trial:
+        """Put ``d`` in the initial state and return the run's trial (a companion reads the state only)."""
+
+    def quantities(self, scene: Any) -> dict[str, Quantity]:
+        """Every series a result holds, in file order."""
+
+    def compared(self, scene: Any) -> tuple[Compared, ...]:
+        """What the error check compares."""
+
+    def check(self, result: Result) -> None:
+        """Raise SimulationFailed when the run gives no result (eta undefined, say); before the finite check,
+        which a quantity undefined by design (NaN) would fail with a less helpful message."""
+
+    def cycle_table(self, result: Result) -> list[dict[str, float]]:
+        """Figures per cycle ([] for an experiment without cycles)."""
+
+    def summary(self, result: Result) -> dict[str, Any]:
+        """The experiment's own figures; `Result.summary` adds the run's."""
+
+    def attrs(self) -> dict[str, Any]:
+        """Further HDF5 root attributes (the drive, the cycles)."""
+
+    def draw(self, rec: Any, result: Result, times: Any, prefix: str) -> list[Any]:
+        """Log the experiment's 3D view to a rerun recording and return its blueprint views."""
+
+
+@dataclass
+class Result(Estimated):
+    """The results of one run of any experiment, SI units: the named series (``result.series``, also as
+    attributes: ``run.segment_angle``), the experiment's scalars (``result.values``: ``run.peak_drive_force``)
+    and its parameters (``run.drive``, ``run.cycles``), with the run's cost and error estimate."""
+
+    experiment: Any
+    scene: Any
+    time: np.ndarray                 # (T,) s
+    series: dict[str, np.ndarray]
+    values: dict[str, float]
+    steps: int                       # steps taken (the adaptive method's accepted steps)
+    wall_s: float
+    backend: str = "python"
+    steps_rejected: int = 0          # the adaptive method's rejected steps, and newton's halved ones
+
+    def __getattr__(self, name: str) -> Any:
+        # Only for names that are not fields; the guard keeps unpickling (no fields yet) from recursing.
+        if name.startswith("_") or name in ("series", "values", "experiment"):
+            raise AttributeError(name)
+        for source in (self.series, self.values):
+            if name in source:
+                return source[name]
+        if hasattr(self.experiment, name):
+            return getattr(self.experiment, name)
+        raise AttributeError(f"{type(self.experiment).__name__} result has no {name!r}")
+
+    @property
+    def quantities(self) -> dict[str, Quantity]:
+        return self.experiment.quantities(self.scene)
+
+    @property
+    def stroke_time(self) -> float:
+        return self.experiment.drive_for(self.scene).stroke_time
+
+    def differences(self, other: Result) -> dict[str, float]:
+        """Largest differences from a run of the same experiment at another resolution (`Compared`)."""
+        i, j = paired(self.time, other.time)
+        quantities = self.quantities
+        out = {}
+        for c in self.experiment.compared(self.scene):
+            out[c.key] = float(c.scale * max(
+                max_difference(self.series[s][i], other.series[s][j]) if quantities[s].per == "sample"
+                else max_difference(self.series[s], other.series[s]) for s in c.series))
+        return out
+
+    def cycle_table(self) -> list[dict[str, float]]:
+        return self.experiment.cycle_table(self)
+
+    def summary(self) -> dict[str, Any]:
+        """The figures ``finrft ... --json`` prints, as plain Python numbers."""
+        out = self.experiment.summary(self)
+        out.update(steps=int(self.steps), steps_rejected=int(self.steps_rejected), sim_time_s=float(self.time[-1]),
+                   wall_s=float(self.wall_s), backend=self.backend, integrator=self.scene.sim.integrator,
+                   dt=float(self.scene.sim.dt))
+        if self.error_estimate is not None:
+            out.update(error_estimate=dict(self.error_estimate), error_companion=self.error_companion)
+        return out
+
+
+def run(experiment: Experiment, scene: Any, *, progress: Callable[[float], None] | None = None,
+        max_error: ErrorLimits | None = ErrorLimits(), estimate_error: bool = True) -> Result:
+    """Run an experiment on a scene, with an estimate of its discretisation error (``result.error_estimate``,
+    from a companion run: see finrft.convergence). Raises SimulationUnstable rather than return a diverged run,
+    and InaccurateResult when the estimate exceeds ``max_error`` (None: report it only). ``estimate_error=False``
+    skips the estimate, for studies that measure the error themselves."""
+    return checked(experiment.build, lambda s, built, p, companion: _once(experiment, s, built, p, companion),
+                   scene, progress, max_error, estimate_error)
+
+
+def _once(experiment: Experiment, scene: Any, built: Any, progress: Callable[[float], None] | None,
+          companion: bool) -> Result:
+    from .simulate import schedule, step_through  # simulate defines the plate test on this protocol
+
+    start = time.perf_counter()
+    m = built.model
+    d = mujoco.MjData(m)
+    dt = scene.sim.dt
+    steps, starts, samples = schedule(experiment.drive_for(scene), dt, scene.sim.record_dt)
+    trial = experiment.start(scene, built, d, companion)
+    readings: dict[str, np.ndarray] = {}
+
+    def on_sample(i: int) -> None:
+        for name, read in trial.reads.items():
+            value = read(d)
+            if name not in readings:
+                readings[name] = np.zeros((len(samples), *np.shape(value)))
+            readings[name][i] = value
+
+    advance = stepper(m, scene.sim, built.backend, built.groups)
+    with installed(PythonCoupling(built.groups) if built.backend == "python" else None):
+        step_through(m, d, scene, advance, steps, starts, samples, trial.on_stroke, on_sample, progress,
+                     [] if companion else trial.watch, forward=not companion)
+    series, values = trial.finish(d, readings)
+    result = Result(experiment=experiment, scene=scene, time=samples * dt, series=series, values=values,
+                    steps=advance.taken, wall_s=time.perf_counter() - start, backend=built.backend,
+                    steps_rejected=advance.rejected)
+    experiment.check(result)
+    require_finite(series, f"{experiment.name} at dt {dt:g} s")
+    return result

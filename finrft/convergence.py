@@ -14,8 +14,9 @@ SAFETY |run - companion| / (1 - 1/2): a coarse companion can be outside the rang
 (an explicit feedback that needs the run's step), and only the fine one refuses a run.
 
 A result reports ``error_estimate``: the largest estimated error of each quantity it reports, named with its
-unit (``angle_deg``; ``force_N`` or ``torque_Nm``, the per-stroke mean drive load; ``eta_points``, ``body_mm``).
-`ErrorLimits` bounds the angles and eta; the loads are reported, not bounded, as their scale is the scene's.
+unit (``angle_deg``; ``force_N`` or ``torque_Nm``, the per-stroke mean drive load; ``eta_points``, ``body_mm``;
+``position_mm``, the bodies of a user's model). `ErrorLimits` bounds the angles, eta and those positions; the loads
+are reported, not bounded, as their scale is the scene's.
 """
 
 from __future__ import annotations
@@ -59,11 +60,12 @@ class ErrorLimits:
 
     angle_deg: float = 0.5      # any reported angle (segment, hinge)
     eta_points: float = 0.5     # the swimming efficiency, percentage points
+    position_mm: float = 0.5    # positions of the bodies of a user's model (finrft run)
 
     @classmethod
     def uniform(cls, value: float) -> ErrorLimits:
-        """The same number for every bounded quantity: degrees for angles, points for eta."""
-        return cls(angle_deg=value, eta_points=value)
+        """The same number for every bounded quantity: degrees for angles, points for eta, mm for positions."""
+        return cls(angle_deg=value, eta_points=value, position_mm=value)
 
     def exceeded(self, estimate: dict[str, float]) -> list[str]:
         """The bounded quantities of an estimate that exceed their limit, as 'name = value > limit'."""

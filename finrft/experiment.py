@@ -84,7 +84,8 @@ class Experiment(Protocol):
     sign_convention: str    # the files' statement of directions and signs
 
     def build(self, scene: Any) -> Any:
-        """The compiled model: an object with ``model`` (MjModel), ``backend`` and ``groups`` (force groups)."""
+        """The compiled model: an object with ``model`` (MjModel), ``backend`` and ``groups`` (force groups; a model
+        whose forces are not segment groups offers ``python_forces()``, its Python backend's callback)."""
 
     def drive_for(self, scene: Any) -> Drive:
         """The schedule: strokes, their length and the duration."""
@@ -185,6 +186,13 @@ def run(experiment: Experiment, scene: Any, *, progress: Callable[[float], None]
                    scene, progress, max_error, estimate_error)
 
 
+def python_forces(built: Any) -> Callable[[mujoco.MjModel, mujoco.MjData], None]:
+    """The Python backend's passive-force callback of a built model: its own (``built.python_forces()``, a model
+    with `attach`ed surfaces), or the coupling of its segment force groups."""
+    own = getattr(built, "python_forces", None)
+    return own() if own is not None else PythonCoupling(built.groups)
+
+
 def _once(experiment: Experiment, scene: Any, built: Any, progress: Callable[[float], None] | None,
           companion: bool) -> Result:
     from .simulate import schedule, step_through  # simulate defines the plate test on this protocol
@@ -205,7 +213,7 @@ def _once(experiment: Experiment, scene: Any, built: Any, progress: Callable[[fl
             readings[name][i] = value
 
     advance = stepper(m, scene.sim, built.backend, built.groups)
-    with installed(PythonCoupling(built.groups) if built.backend == "python" else None):
+    with installed(python_forces(built) if built.backend == "python" else None):
         step_through(m, d, scene, advance, steps, starts, samples, trial.on_stroke, on_sample, progress,
                      [] if companion else trial.watch, forward=not companion)
     series, values = trial.finish(d, readings)

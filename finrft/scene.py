@@ -1,7 +1,9 @@
 """The scene schema: every physical and numerical parameter of a simulation, in SI units.
 
 A plate scene is a TOML file with the sections ``[plate]``, ``[rft]`` and ``[sim]``; a robot scene has
-``[robot]``, ``[body]``, ``[arm]``, ``[fin]``, ``[rft]``, ``[gait]`` and ``[sim]``. This module is the one place
+``[robot]``, ``[body]``, ``[arm]``, ``[fin]``, ``[rft]``, ``[gait]`` and ``[sim]``; a user's model (`UserScene`)
+``[model]``, ``[medium]``, ``[drive]`` and ``[sim]``; a plate intrusion (`IntrusionScene`) ``[plate]``,
+``[medium]`` and ``[sim]``. This module is the one place
 where keys, types, units, allowed values and defaults are declared; everything else reads a validated scene.
 """
 
@@ -143,6 +145,51 @@ class Gait:
     omega: float = _f(1.1519173063162575, "rad/s", "arm angular speed", minimum=0.0)
 
 
+@dataclass(frozen=True)
+class Model:
+    path: str = _f("", "", "the MJCF file (relative to the scene file); finrft run MODEL.xml overrides it")
+    bodies: tuple[str, ...] = _f((), "", "the bodies the medium acts on (their geoms are cut into surface elements)")
+
+
+@dataclass(frozen=True)
+class Medium:
+    law: str = _f("li2013", "", "li2013: the granular RFT of Li, Zhang & Goldman 2013 on surface elements",
+                  choices=("li2013",))
+    zeta: float = _f(1.0, "", "the medium's scale: alpha_z of a horizontal plate pushed down, in N/cm^3 (the "
+                     "generic coefficients are scaled by it)", minimum=0.0)
+    surface_z: float = _f(0.0, "m", "height of the free surface (gravity along -z); the medium lies below")
+    element_size: float = _f(0.005, "m", "size of the surface elements", minimum=0.0)
+
+
+@dataclass(frozen=True)
+class JointDrive:
+    joint: str = _f("", "", "the joint moved at constant speed (slide: m, m/s; hinge: rad, rad/s); it follows the "
+                    "motion exactly (a very large armature) and the force it needs is recorded")
+    speed: float = _f(0.1, "m/s or rad/s", "speed of the joint", minimum=0.0)
+    stroke: float = _f(0.05, "m or rad", "length of one stroke", minimum=0.0)
+    cycles: int = _f(0, "", "out-and-back cycles of a triangle wave; 0: one stroke out", minimum=0, exclusive=False)
+    start: float = _f(0.0, "m or rad", "the joint's position at t = 0 (its qpos)")
+
+
+# Newton, implicit and adaptive steps take implicitly only the forces of the segment law's force groups (the
+# plugin finrft.rft); the surface elements of `attach` are not among them, so a user's model runs MuJoCo's step.
+EXPLICIT_ONLY = ("explicit",)
+
+
+@dataclass(frozen=True)
+class IntrusionPlate:
+    width: float = _f(0.025, "m", "plate width (along y, horizontal)", minimum=0.0)
+    length: float = _f(0.038, "m", "plate length (in the x-z plane, tilted by angle)", minimum=0.0)
+    thickness: float = _f(0.0005, "m", "plate thickness", minimum=0.0)
+    angle: float = _f(0.0, "rad", "beta: 0 horizontal, pi/2 vertical (cutting in edge first); positive turns the "
+                      "lower face towards -x", minimum=-math.pi / 2, exclusive=False, maximum=math.pi / 2,
+                      why_maximum="a plate's angle repeats every pi")
+    speed: float = _f(0.01, "m/s", "downward speed (the law is rate-independent)", minimum=0.0)
+    clearance: float = _f(0.002, "m", "height of the plate's lowest point above the surface at t = 0",
+                          minimum=0.0, exclusive=False)
+    depth: float = _f(0.05, "m", "depth of the plate's lowest point at the end", minimum=0.0)
+
+
 class _Sections:
     def to_dict(self) -> dict[str, dict[str, Any]]:
         return dataclasses.asdict(self)
@@ -208,6 +255,38 @@ class RobotScene(_Sections):
                              f"({math.degrees(g.theta2):g} deg)")
 
 
+@dataclass(frozen=True)
+class ExplicitSim(Sim):
+    method: str = _f("explicit", "", "explicit: MuJoCo's step (the only one here: the newton, implicit and "
+                     "adaptive steps treat only the segment law's forces implicitly, not attached surfaces)",
+                     choices=EXPLICIT_ONLY)
+
+
+@dataclass(frozen=True)
+class UserScene(_Sections):
+    """A user's MJCF model in the medium: the bodies RFT acts on, the law, a prescribed joint, the numerics."""
+
+    model: Model = field(default_factory=Model)
+    medium: Medium = field(default_factory=Medium)
+    drive: JointDrive = field(default_factory=JointDrive)
+    sim: ExplicitSim = field(default_factory=ExplicitSim)
+
+    def __post_init__(self) -> None:
+        _check_sim(self.sim)
+
+
+@dataclass(frozen=True)
+class IntrusionScene(_Sections):
+    """A thin plate pushed vertically down into the medium at an angle (Li, Zhang & Goldman 2013)."""
+
+    plate: IntrusionPlate = field(default_factory=IntrusionPlate)
+    medium: Medium = field(default_factory=Medium)
+    sim: ExplicitSim = field(default_factory=lambda: ExplicitSim(dt=1e-3, record_dt=0.01))
+
+    def __post_init__(self) -> None:
+        _check_sim(self.sim)
+
+
 def _check_table(r: RFT) -> None:
     if r.law == "table" and not r.table:
         raise SceneError("rft.law = 'table' needs rft.table, the path of a CSV with attack_deg, f_perp_N, f_par_N")
@@ -220,7 +299,8 @@ _PRESET_PREFIX = {Scene: "plate", RobotScene: "robot"}
 def sections(cls: type) -> dict[str, type]:
     """A scene class's sections and their types, in order."""
     hints = {"Plate": Plate, "RFT": RFT, "Sim": Sim, "Robot": Robot, "Body": Body, "Arm": Arm, "Chain": Chain,
-             "Gait": Gait}
+             "Gait": Gait, "Model": Model, "Medium": Medium, "JointDrive": JointDrive, "ExplicitSim": ExplicitSim,
+             "IntrusionPlate": IntrusionPlate}
     return {f.name: hints[f.type] if isinstance(f.type, str) else f.type for f in dataclasses.fields(cls)}
 
 
@@ -254,6 +334,12 @@ def _check(section: str, f: dataclasses.Field, value: Any) -> Any:
     elif f.type in ("int", int):
         if isinstance(value, bool) or not isinstance(value, int):
             raise SceneError(f"{key} must be a whole number, got {value!r}")
+    elif f.type == "tuple[str, ...]":
+        if isinstance(value, str):
+            value = [value]
+        if not isinstance(value, (list, tuple)) or not all(isinstance(v, str) and v for v in value):
+            raise SceneError(f"{key} must be a list of names, e.g. [\"box\"], got {value!r}")
+        return tuple(value)
     elif not isinstance(value, str):
         raise SceneError(f"{key} must be a string, got {value!r}")
     # a callable: the choices of a registry, whose modules may import the scene
@@ -315,6 +401,10 @@ def _read_toml(text: str, origin: str) -> dict[str, Any]:
         raise SceneError(f"{origin}: malformed TOML: {exc}") from None
 
 
+# Keys that name files, relative to the scene file that gives them.
+FILE_KEYS = (("rft", "table"), ("model", "path"))
+
+
 def preset(name: str, cls: type = Scene):
     """A built-in scene by name (see PRESETS)."""
     if name not in PRESETS[cls]:
@@ -327,16 +417,17 @@ def load_scene(path: str | Path | None = None, *, preset_name: str = "paper",
                overrides: Mapping[str, Any] | None = None, cls: type = Scene):
     """A scene from a TOML file (or the named preset when no file is given), with dotted-key overrides applied.
 
-    A relative ``rft.table`` path in a file is taken relative to that file.
+    A relative path in a file (``rft.table``, ``model.path``) is taken relative to that file.
     """
     if path is None:
         scene = preset(preset_name, cls)
     else:
         path = Path(path)
         data = _read_toml(read_text(path, "scene file"), str(path))
-        table = data.get("rft", {}).get("table") if isinstance(data.get("rft"), dict) else None
-        if isinstance(table, str) and table and not Path(table).is_absolute():
-            data["rft"]["table"] = str(path.parent / table)
+        for section, name in FILE_KEYS:
+            given = data.get(section, {}).get(name) if isinstance(data.get(section), dict) else None
+            if isinstance(given, str) and given and not Path(given).is_absolute():
+                data[section][name] = str(path.parent / given)
         scene = scene_from_dict(data, cls)
     return scene.replace(**dict(overrides or {}))
 
@@ -364,7 +455,8 @@ def to_toml(scene: Any) -> str:
         values = getattr(scene, section)
         for f in dataclasses.fields(cls):
             value = getattr(values, f.name)
-            text = json.dumps(value) if isinstance(value, str) else repr(value)
+            text = json.dumps(list(value) if isinstance(value, tuple) else value) if isinstance(
+                value, (str, tuple)) else repr(value)
             unit = f" [{f.metadata['unit']}]" if f.metadata["unit"] else ""
             lines.append(f"{f.name} = {text}  #{unit} {f.metadata['doc']}")
     return "\n".join(lines) + "\n"

@@ -92,3 +92,29 @@ def draw_robot(rec: rr.RecordingStream, run: Result, times: rr.TimeColumn, prefi
     eye = rrb.EyeControls3D(position=[0.0, 0.0, 0.6], look_target=[0.0, 0.0, 0.0], eye_up=[0.0, 1.0, 0.0])
     return [rrb.Spatial3DView(name="Robot (top view)", origin=f"{prefix}robot", eye_controls=eye,
                               line_grid=rrb.LineGrid3D(spacing=0.01))]
+
+
+def draw_bodies(rec: rr.RecordingStream, run: Result, times: rr.TimeColumn, prefix: str, position: np.ndarray,
+                force: np.ndarray, title: str) -> list[Any]:
+    """Bodies as points (T, B, 3) with the medium's force on each as an arrow, and the free surface's level."""
+    count, n = position.shape[:2]
+    low, high = position.min(axis=(0, 1)), position.max(axis=(0, 1))
+    span = float(np.max(high - low)) or 0.05
+    peak = float(np.max(np.linalg.norm(force, axis=-1), initial=0.0))
+    arrow_scale = span / 2 / peak if peak > 0 else 0.0
+    rec.log(f"{prefix}bodies", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+    rec.log(f"{prefix}bodies/origin", rr.Points3D.from_fields(colors=[[60, 60, 70]], radii=[span / 100]),
+            static=True)
+    rec.send_columns(f"{prefix}bodies/origin", indexes=[times], columns=rr.Points3D.columns(
+        positions=position.reshape(-1, 3)).partition([n] * count))
+    rec.log(f"{prefix}bodies/rft", rr.Arrows3D.from_fields(colors=[[230, 80, 20]], radii=[span / 200]), static=True)
+    rec.log(f"{prefix}bodies/rft", rr.AnyValues(arrow_scale_m_per_N=arrow_scale,
+                                                note=f"arrow length = RFT force x {arrow_scale:.4g} m/N"), static=True)
+    rec.send_columns(f"{prefix}bodies/rft", indexes=[times], columns=rr.Arrows3D.columns(
+        origins=position.reshape(-1, 3), vectors=arrow_scale * force.reshape(-1, 3)).partition([n] * count))
+    z = run.scene.medium.surface_z
+    corners = np.array([[low[0] - span, low[1] - span, z], [high[0] + span, low[1] - span, z],
+                        [high[0] + span, high[1] + span, z], [low[0] - span, high[1] + span, z],
+                        [low[0] - span, low[1] - span, z]])
+    rec.log(f"{prefix}bodies/surface", rr.LineStrips3D([corners], colors=[[200, 170, 110]]), static=True)
+    return [rrb.Spatial3DView(name=f"{title} and the medium's force", origin=f"{prefix}bodies")]

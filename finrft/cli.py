@@ -117,8 +117,8 @@ def _add_test(p: argparse.ArgumentParser, *, drag: bool) -> None:
 
 def _add_max_error(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-error", type=_number("degrees or points"), default=ErrorLimits().angle_deg,
-                   metavar="X", help="largest estimated discretisation error accepted, in degrees for angles and "
-                   "percentage points for eta (default: %(default)s); every run estimates its own from a companion "
+                   metavar="X", help="largest estimated discretisation error accepted, in degrees for angles, "
+                   "percentage points for eta and mm for positions (default: %(default)s); every run estimates its own from a companion "
                    "run at another step, and a larger one stops with exit status 1, nothing written")
 
 
@@ -240,6 +240,49 @@ def build_parser() -> argparse.ArgumentParser:
     _add_quiet(optimize)
     _add_robot(optimize)
     _add_max_error(optimize)
+
+    user = sub.add_parser("run", help="RFT on your own MuJoCo model: a joint driven through the medium",
+                          description="Attach the granular RFT of Li, Zhang & Goldman 2013 to bodies of an MJCF "
+                          "model and move one slide or hinge joint at constant speed (one stroke, or --set "
+                          "drive.cycles=N back-and-forth cycles), exactly: the joint carries a very large armature "
+                          "and the force (torque) it needs is recorded, with each attached body's position and the "
+                          "medium's force on it. The scene (SI units) has [model] (path, bodies), [medium] (law, "
+                          "zeta, surface_z, element_size), [drive] (joint, speed, stroke, cycles, start) and [sim] "
+                          "(dt, integrator, backend, record_dt; MuJoCo's explicit step only).")
+    user.add_argument("model", nargs="?", metavar="MODEL.xml", help="the MJCF file (overrides model.path)")
+    ug = user.add_argument_group("scene")
+    ug.add_argument("--scene", required=True, metavar="FILE.toml", help="user-model scene file in SI units")
+    ug.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="override a scene key in SI units, e.g. --set drive.speed=0.05 (repeatable)")
+    ug.add_argument("--backend", choices=("native", "python"), help="where the RFT force is computed (overrides "
+                    "sim.backend)")
+    _add_max_error(user)
+    user.add_argument("--out", metavar="FILE.h5", help="write the time series and the resolved scene (SI units)")
+    user.add_argument("--rrd", metavar="FILE.rrd", help="write a rerun recording; open it with 'rerun FILE.rrd'")
+    _add_force(user)
+    _add_json(user, "a summary")
+    _add_quiet(user)
+
+    intrude = sub.add_parser("intrude", help="a plate pushed vertically into the medium at several angles: the "
+                             "force-depth curves of Li, Zhang & Goldman 2013",
+                             description="Push a thin plate (plate.width x plate.length) at each angle beta "
+                             "(0 horizontal, 90 vertical, cutting in edge first) straight down into the medium at "
+                             "constant speed, from plate.clearance above the surface to plate.depth below it, and "
+                             "record the medium's vertical and horizontal force against the depth of the plate's "
+                             "lowest point.")
+    intrude.add_argument("--angles", default="0,30,60,90", metavar="DEGS",
+                         help="comma-separated plate angles in degrees, each in -90..90 (default: %(default)s)")
+    ig = intrude.add_argument_group("scene")
+    ig.add_argument("--scene", metavar="FILE.toml", help="intrusion scene file in SI units ([plate], [medium], "
+                    "[sim]; default: the schema's defaults, a 25 x 38 mm plate to 50 mm in the generic medium)")
+    ig.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="override a scene key in SI units, e.g. --set medium.zeta=0.5 (repeatable)")
+    ig.add_argument("--backend", choices=("native", "python"), help="where the RFT force is computed")
+    _add_max_error(intrude)
+    intrude.add_argument("--plot", metavar="FILE.png", help="write the force-depth curves as a figure")
+    _add_force(intrude)
+    _add_json(intrude, "each angle's summary and curve")
+    _add_quiet(intrude)
 
     table = sub.add_parser("table", help="the paper's Table I: six gaits, eta next to the paper's",
                            description="Evaluate the six gaits of the paper's Table I (one flap cycle each) and "
@@ -494,7 +537,8 @@ def _describe(run: Result, summary: dict[str, Any]) -> str:
 
 
 def _error_line(run: Any) -> str:
-    units = {"angle_deg": "deg", "force_N": "N", "torque_Nm": "N m", "eta_points": "points", "body_mm": "mm"}
+    units = {"angle_deg": "deg", "force_N": "N", "torque_Nm": "N m", "eta_points": "points", "body_mm": "mm",
+             "position_mm": "mm"}
     return (f"estimated discretisation error (companion run at {run.error_companion}): "
             + ", ".join(f"{key.rsplit('_', 1)[0]} {value:.2g} {units[key]}" for key, value in
                         run.error_estimate.items()))
@@ -573,6 +617,72 @@ def _swim(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
     _say(args, _error_line(run))
     if args.json:
         print(_json(summary))
+    return 0
+
+
+def _overrides(args: argparse.Namespace, cls: type) -> dict[str, Any]:
+    overrides = dict(scenes.parse_override(item, cls) for item in args.set)
+    if args.backend:
+        overrides["sim.backend"] = args.backend
+    return overrides
+
+
+def _user_run(args: argparse.Namespace) -> int:
+    from .user_model import UserModel
+    overrides = _overrides(args, scenes.UserScene)
+    if args.model:
+        overrides["model.path"] = args.model
+    scene = scenes.load_scene(args.scene, overrides=overrides, cls=scenes.UserScene)
+    _check_output(args.out, ".h5", "--out", args.force)
+    _check_output(args.rrd, ".rrd", "--rrd", args.force)
+    run = _run(args, UserModel.of(scene), scene)
+    summary = run.summary()
+    _write(args, run)
+    q, u = run.quantity, run.unit.replace("Nm", "N m")
+    sim = scene.sim
+    _say(args, f"{scene.model.path}: joint {scene.drive.joint} driven, RFT on {', '.join(scene.model.bodies)} "
+         f"({run.backend}; dt {sim.dt:g} s, {sim.integrator}): {_steps(summary)} in {run.wall_s:.2f} s")
+    _say(args, f"mean drive {q} per stroke: " + ", ".join(
+        f"{value:+.4g} {u}" for value in summary[f"mean_drive_{q}_{run.unit}_per_stroke"]))
+    for body, position in summary["final_body_position_mm"].items():
+        _say(args, f"{body}: final position (mm) " + ", ".join(f"{x:.2f}" for x in position))
+    _say(args, _error_line(run))
+    if args.json:
+        print(_json(summary))
+    return 0
+
+
+def _angles(text: str) -> list[float]:
+    try:
+        angles = [float(a) for a in text.split(",") if a.strip()]
+    except ValueError:
+        raise UsageError(f"--angles expects comma-separated degrees, e.g. 0,30,60,90, got '{text}'") from None
+    if not angles or not all(-90 <= a <= 90 for a in angles):
+        raise UsageError(f"--angles: each angle must be within -90..90 degrees, got '{text}'")
+    return angles
+
+
+def _intrude(args: argparse.Namespace) -> int:
+    from .intrusion import intrude, plot_curves
+    angles = _angles(args.angles)
+    overrides = _overrides(args, scenes.IntrusionScene)
+    scene = (scenes.load_scene(args.scene, overrides=overrides, cls=scenes.IntrusionScene) if args.scene else
+             scenes.scene_from_dict({}, scenes.IntrusionScene).replace(**overrides))
+    _check_output(args.plot, ".png", "--plot", args.force)
+    with _progress(args, 1, "intrude", "%") as bar:
+        runs = intrude(scene, angles, progress=bar, max_error=_limits(args))
+    if args.plot:
+        with atomic_path(args.plot) as tmp:
+            plot_curves(runs, tmp)
+    for r in runs:
+        s = r.summary()
+        _say(args, f"beta {s['angle_deg']:g} deg: at {s['final_depth_mm']:.1f} mm, vertical force "
+             f"{s['final_force_z_N']:.4g} N, horizontal {s['final_force_x_N']:+.4g} N")
+    if args.plot:
+        _say(args, f"wrote figure: {args.plot}")
+    if args.json:
+        print(_json([{**r.summary(), "depth_mm": 1e3 * r.depth, "force_z_N": r.force_z, "force_x_N": r.force_x}
+                     for r in runs]))
     return 0
 
 
@@ -856,7 +966,7 @@ def _robot(command: Callable[[argparse.Namespace, scenes.RobotScene], int]) -> C
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "drag": _run_test, "rotate": _run_test, "scene": _scene, "swim": _robot(_swim), "optimize": _robot(_optimize),
-    "table": _robot(_table), "fit": _fit, "fit-rft": _fit_rft, "report": _report, "bench": _bench}
+    "table": _robot(_table), "run": _user_run, "intrude": _intrude, "fit": _fit, "fit-rft": _fit_rft, "report": _report, "bench": _bench}
 
 
 def _main(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> int:

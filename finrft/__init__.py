@@ -13,7 +13,8 @@ The API, by topic:
 - scenes: `Scene` (a plate test), `RobotScene` (the robot), `preset`, `load_scene` (TOML file and overrides),
   `to_toml`, `SceneError`
 - experiments: `run(experiment, scene)` -> `Result` runs any `Experiment` (finrft.experiment): `PlateTest`,
-  `Swim`; `SimulationUnstable` when a run blows up or chatters
+  `Swim`, `UserModel` (a user's MJCF model, `UserScene`), `Intrusion` (a plate pushed into the medium,
+  `IntrusionScene`); `SimulationUnstable` when a run blows up or chatters
 - plate tests: `Drive`, `simulate` (`run` of a `PlateTest`)
 - the robot: `swim` (`run` of a `Swim`); the paper's Table I with `table_scenes` and `table_rows`
 - many runs on all cores: `run_many` (plate tests), `map_jobs` (any module-level function), `local_executor`
@@ -37,15 +38,17 @@ from .batch import local_executor, map_jobs, run_many
 from .drive import Drive
 from .fit import Fit, fit, read_drag, resolve_params
 from .optimize import Variable, optimize
-from .scene import RobotScene, Scene, SceneError, load_scene, preset, to_toml
+from .scene import IntrusionScene, RobotScene, Scene, SceneError, UserScene, load_scene, preset, to_toml
 from .experiment import Experiment, Result, run
+from .intrusion import Intrusion
+from .user_model import UserModel
 from .simulate import PlateTest, SimulationUnstable, simulate
 from .swim import Swim, swim, table_rows, table_scenes
 
 _RECORDING = ("write_h5", "write_rrd")
 
-__all__ = ["Drive", "Experiment", "Fit", "PlateTest", "Result", "RobotScene", "Scene", "SceneError",
-           "SimulationUnstable", "Swim", "Variable", "attach", "fit", "load_scene", "local_executor", "map_jobs", "optimize", "preset", "read_drag",
+__all__ = ["Drive", "Experiment", "Fit", "Intrusion", "IntrusionScene", "PlateTest", "Result", "RobotScene", "Scene",
+           "SceneError", "SimulationUnstable", "Swim", "UserModel", "UserScene", "Variable", "attach", "fit", "load_scene", "local_executor", "map_jobs", "optimize", "preset", "read_drag",
            "resolve_params", "run", "run_many", "simulate", "swim", "table_rows", "table_scenes", "to_toml", *_RECORDING]
 
 

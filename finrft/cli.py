@@ -629,12 +629,12 @@ def _overrides(args: argparse.Namespace, cls: type) -> dict[str, Any]:
 
 def _user_run(args: argparse.Namespace) -> int:
     from .user_model import UserModel
+    _check_output(args.out, ".h5", "--out", args.force)
+    _check_output(args.rrd, ".rrd", "--rrd", args.force)
     overrides = _overrides(args, scenes.UserScene)
     if args.model:
         overrides["model.path"] = args.model
     scene = scenes.load_scene(args.scene, overrides=overrides, cls=scenes.UserScene)
-    _check_output(args.out, ".h5", "--out", args.force)
-    _check_output(args.rrd, ".rrd", "--rrd", args.force)
     run = _run(args, UserModel.of(scene), scene)
     summary = run.summary()
     _write(args, run)
@@ -664,11 +664,11 @@ def _angles(text: str) -> list[float]:
 
 def _intrude(args: argparse.Namespace) -> int:
     from .intrusion import intrude, plot_curves
+    _check_output(args.plot, ".png", "--plot", args.force)
     angles = _angles(args.angles)
     overrides = _overrides(args, scenes.IntrusionScene)
     scene = (scenes.load_scene(args.scene, overrides=overrides, cls=scenes.IntrusionScene) if args.scene else
              scenes.scene_from_dict({}, scenes.IntrusionScene).replace(**overrides))
-    _check_output(args.plot, ".png", "--plot", args.force)
     with _progress(args, 1, "intrude", "%") as bar:
         runs = intrude(scene, angles, progress=bar, max_error=_limits(args))
     if args.plot:

@@ -5,10 +5,10 @@ The plate (width w along y, length L in the x-z plane, at angle beta: 0 horizont
 joint along -z, prescribed at constant speed from ``clearance`` above the free surface until its lowest point is
 ``depth`` below it. Fully submerged, each face leading the motion takes alpha_z(beta, pi/2) times its
 area-weighted mean depth times its area (`finrft.laws.li2013`): a horizontal plate zeta * 1 N/cm^3 * w L d; a
-tilted one alpha_z(beta, pi/2) on its lower face and alpha_z(pi/2 - beta, pi/2) on its lower edge. At beta = 90 deg
-the faces are parallel to the motion, where `attach`'s leading test (n . v > 0) is decided by rounding: one face
-leads, which gives the limit of either side, alpha_z(pi/2, pi/2) = 0.128 zeta N/cm^3 on one face plus the edge
-(tested).
+tilted one alpha_z(beta, pi/2) on its lower face and alpha_z(pi/2 - beta, pi/2) on its lower edge (a horizontal
+plate's edges move in their own plane and take nothing). At beta = 90 deg the faces are parallel to the motion,
+where `attach`'s leading test (n . v > 0) is decided by rounding: one face leads, which gives the limit from either
+side, alpha_z(pi/2, pi/2) = 0.128 zeta N/cm^3 on one face plus the edge (tested).
 """
 
 from __future__ import annotations

@@ -202,6 +202,9 @@ WRITERS = [
     (["fit-rft", "--data", "forces.csv"], "--table", "rft.csv"),
     (["report"], "--out", "report"),
     (["bench", "accuracy"], "--out", "accuracy"),
+    (["run", "model.xml", "--scene", "scene.toml"], "--out", "run.h5"),
+    (["run", "model.xml", "--scene", "scene.toml"], "--rrd", "run.rrd"),
+    (["intrude"], "--plot", "curves.png"),
 ]
 
 
@@ -332,6 +335,7 @@ def test_swim_help_defaults_are_the_presets():
 
 
 COMMANDS = [["drag"], ["rotate"], ["scene"], ["swim"], ["optimize"], ["table"], ["fit"], ["fit-rft"], ["report"],
+            ["run"], ["intrude"],
             *[["bench", kind] for kind in ("backends", "robot", "accuracy", "modelling", "fit")]]
 
 

@@ -4,6 +4,8 @@ straight down, and its figure."""
 
 import json
 import math
+import re
+from pathlib import Path
 
 import h5py
 import numpy as np
@@ -152,3 +154,13 @@ def test_intrusion_is_an_experiment_of_the_engine():
     run = finrft.run(Intrusion(), IntrusionScene().replace(**{"plate.depth": 0.01}))
     assert set(run.quantities) == {"depth", "force_z", "force_x"}
     assert run.error_estimate["force_N"] < 1e-6
+
+
+def test_the_readme_scene_runs_the_readme_plate(tmp_path, capsys):
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    (block,) = re.findall(r"^```toml\n(.*?)^```", readme, flags=re.S | re.M)
+    (tmp_path / "plate.xml").write_text(MODEL)
+    (tmp_path / "scene.toml").write_text(block)
+    assert main(["run", "--scene", str(tmp_path / "scene.toml"), "--json", "--quiet"]) == 0
+    (force,) = _last_json(capsys.readouterr().out)["mean_drive_force_N_per_stroke"]
+    assert force == pytest.approx(CLOSED_FORM, rel=0.03)

@@ -39,7 +39,8 @@ from .fit import Fit, fit, read_drag, resolve_params
 from .optimize import Variable, optimize
 from .scene import RobotScene, Scene, SceneError, load_scene, preset, to_toml
 from .experiment import Experiment, Result, run
-from .simulate import PlateTest, SimulationUnstable, simulate
+from .convergence import SimulationUnstable
+from .simulate import PlateTest, simulate
 from .swim import Swim, swim, table_rows, table_scenes
 
 _RECORDING = ("write_h5", "write_rrd")

@@ -317,7 +317,7 @@ def accuracy(out: str | Path = "accuracy", *, quick: bool = False, workers: int 
     drag (one 45 mm recovery and one power stroke) and on one flap cycle of the robot, each with the paper's and
     with physical inertias. The reference is the newton method at 2 µs (10 µs with ``quick``), checked against
     itself at twice the step and (without ``quick``) against the independent solution. A run fails when it goes unstable, non-finite, its adaptive step underflows, its
-    Newton solve finds no root, or it chatters (``simulate.CHATTER_DV``: a velocity that swings back and forth
+    Newton solve finds no root, or it chatters (``stepping.CHATTER_DV``: a velocity that swings back and forth
     every step, which stops the run)."""
     import csv
     out = Path(out)

@@ -19,7 +19,7 @@ from .drive import Drive
 from .experiment import Compared, Plot, Quantity, Result, run
 from .models import RobotModel, body_share, build_robot
 from .scene import RobotScene
-from .simulate import Prescribed
+from .stepping import Prescribed
 
 
 SIGN_CONVENTION = (

@@ -43,6 +43,8 @@ class PlateTest:
     drive: Drive
     schema = "finrft.run/1"
     sign_convention = SIGN_CONVENTION
+    shape = "segment_angle"  # the series whose angles give the plate's shape
+    load = "drive_force"     # the series of the drive's load, whatever the test
 
     @property
     def name(self) -> str:
@@ -94,6 +96,11 @@ class PlateTest:
 
     def check(self, result: Result) -> None:
         pass
+
+    def independent(self, scene: Scene, times: np.ndarray, *, rtol: float, atol: float) -> np.ndarray:
+        """The segment angles (rad) of the independent solution (finrft.reference) at ``times``."""
+        from .reference import solve  # scipy's integrators load only when asked for
+        return solve(scene, self.drive, times, rtol=rtol, atol=atol).segment_angle
 
     def attrs(self) -> dict[str, Any]:
         return {"drive_json": json.dumps(dataclasses.asdict(self.drive))}

@@ -16,7 +16,8 @@ The API, by topic:
   `Swim`; `SimulationUnstable` when a run blows up or chatters
 - plate tests: `Drive`, `simulate` (`run` of a `PlateTest`)
 - the robot: `swim` (`run` of a `Swim`); the paper's Table I with `table_scenes` and `table_rows`
-- many runs on all cores: `run_many` (plate tests), `map_jobs` (any module-level function), `local_executor`
+- many runs on all cores: `run_experiments` (any experiment), `run_many` (plate tests), `map_jobs` (any
+  module-level function), `local_executor`
 - RFT on any MuJoCo model: `attach` (the Li, Zhang & Goldman 2013 law on the named bodies of an MjSpec)
 - fitting plate parameters to measured drags: `read_drag`, `resolve_params`, `fit` -> `Fit`
 - optimising the robot's gait: `optimize`, `Variable`
@@ -33,7 +34,7 @@ from importlib import import_module
 from typing import Any
 
 from .attach import attach
-from .batch import local_executor, map_jobs, run_many
+from .batch import local_executor, map_jobs, run_experiments, run_many
 from .drive import Drive
 from .fit import Fit, fit, read_drag, resolve_params
 from .optimize import Variable, optimize
@@ -47,7 +48,7 @@ _RECORDING = ("write_h5", "write_rrd")
 
 __all__ = ["Drive", "Experiment", "Fit", "PlateTest", "Result", "RobotScene", "Scene", "SceneError",
            "SimulationUnstable", "Swim", "Variable", "attach", "fit", "load_scene", "local_executor", "map_jobs", "optimize", "preset", "read_drag",
-           "resolve_params", "run", "run_many", "simulate", "swim", "table_rows", "table_scenes", "to_toml", *_RECORDING]
+           "resolve_params", "run", "run_experiments", "run_many", "simulate", "swim", "table_rows", "table_scenes", "to_toml", *_RECORDING]
 
 
 def __getattr__(name: str) -> Any:

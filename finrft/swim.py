@@ -236,9 +236,3 @@ def table_markdown(rows: list[dict[str, Any]]) -> str:
                      f"{r['net_speed_mm_s']:.2f} | {r['paper_net_speed_exp_mm_s']:.2f} |")
     return "\n".join(lines)
 
-
-def swim_job(job: tuple[RobotScene, int, ErrorLimits | None]) -> Result:
-    """`swim` of a (scene, cycles, max_error) job: the module-level function a process pool can send to its
-    workers."""
-    scene, cycles, max_error = job
-    return swim(scene, cycles, max_error=max_error)

@@ -17,7 +17,8 @@ The API, by topic:
   `IntrusionScene`); `SimulationUnstable` when a run blows up or chatters
 - plate tests: `Drive`, `simulate` (`run` of a `PlateTest`)
 - the robot: `swim` (`run` of a `Swim`); the paper's Table I with `table_scenes` and `table_rows`
-- many runs on all cores: `run_many` (plate tests), `map_jobs` (any module-level function), `local_executor`
+- many runs on all cores: `run_experiments` (any experiment), `run_many` (plate tests), `map_jobs` (any
+  module-level function), `local_executor`
 - RFT on any MuJoCo model: `attach` (the Li, Zhang & Goldman 2013 law on the named bodies of an MjSpec)
 - fitting plate parameters to measured drags: `read_drag`, `resolve_params`, `fit` -> `Fit`
 - optimising the robot's gait: `optimize`, `Variable`
@@ -34,22 +35,24 @@ from importlib import import_module
 from typing import Any
 
 from .attach import attach
-from .batch import local_executor, map_jobs, run_many
+from .batch import local_executor, map_jobs, run_experiments, run_many
+from .convergence import SimulationUnstable
 from .drive import Drive
+from .experiment import Experiment, Result, run
 from .fit import Fit, fit, read_drag, resolve_params
+from .intrusion import Intrusion
 from .optimize import Variable, optimize
 from .scene import IntrusionScene, RobotScene, Scene, SceneError, UserScene, load_scene, preset, to_toml
-from .experiment import Experiment, Result, run
-from .intrusion import Intrusion
-from .user_model import UserModel
-from .simulate import PlateTest, SimulationUnstable, simulate
+from .simulate import PlateTest, simulate
 from .swim import Swim, swim, table_rows, table_scenes
+from .user_model import UserModel
 
 _RECORDING = ("write_h5", "write_rrd")
 
 __all__ = ["Drive", "Experiment", "Fit", "Intrusion", "IntrusionScene", "PlateTest", "Result", "RobotScene", "Scene",
-           "SceneError", "SimulationUnstable", "Swim", "UserModel", "UserScene", "Variable", "attach", "fit", "load_scene", "local_executor", "map_jobs", "optimize", "preset", "read_drag",
-           "resolve_params", "run", "run_many", "simulate", "swim", "table_rows", "table_scenes", "to_toml", *_RECORDING]
+           "SceneError", "SimulationUnstable", "Swim", "UserModel", "UserScene", "Variable", "attach", "fit",
+           "load_scene", "local_executor", "map_jobs", "optimize", "preset", "read_drag", "resolve_params", "run",
+           "run_experiments", "run_many", "simulate", "swim", "table_rows", "table_scenes", "to_toml", *_RECORDING]
 
 
 def __getattr__(name: str) -> Any:

@@ -1,11 +1,12 @@
-"""Many simulations at once on all cores: a pool of worker processes, each running `finrft.simulate.simulate`.
+"""Many runs at once on all cores: a pool of worker processes, each running `finrft.experiment.run` of any
+experiment (`run_experiments`; `run_many` for plate tests).
 
-A process pool rather than MuJoCo's threaded rollout: a plate test reverses its drive with an impulse computed
+A process pool rather than MuJoCo's threaded rollout: an experiment reverses its drive with an impulse computed
 between strokes, so its motion is not an open-loop control sequence. Every worker loads the native plugin when it
 imports MuJoCo; a result is the same, bit for bit, as the single run of the same job.
 
-Workers are spawned, and a spawned worker imports the main module again: in a script, call `run_many` and
-`map_jobs` under ``if __name__ == "__main__":`` (notebooks and the interactive prompt need nothing).
+Workers are spawned, and a spawned worker imports the main module again: in a script, call `run_experiments`,
+`run_many` and `map_jobs` under ``if __name__ == "__main__":`` (notebooks and the interactive prompt need nothing).
 """
 
 from __future__ import annotations
@@ -16,20 +17,21 @@ import os
 import signal
 from concurrent.futures import Executor, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
-from typing import Callable, Iterator, Sequence, TypeVar
+from typing import Any, Callable, Iterator, Sequence, TypeVar
 
+from .convergence import ErrorLimits
 from .drive import Drive
+from .experiment import Experiment, Result, run
 from .scene import Scene
-from .experiment import Result
-from .simulate import simulate
+from .simulate import PlateTest
 
-Job = tuple[Scene, Drive]
 T = TypeVar("T")
 R = TypeVar("R")
 
 
-def _run(job: Job) -> Result:
-    return simulate(*job)
+def _run(job: tuple[Experiment, Any, ErrorLimits | None]) -> Result:
+    experiment, scene, max_error = job
+    return run(experiment, scene, max_error=max_error)
 
 
 def default_workers() -> int:
@@ -43,7 +45,7 @@ def _ignore_interrupt() -> None:
 
 
 def local_executor(workers: int | None = None) -> ProcessPoolExecutor:
-    """A process pool for `run_many`; spawned workers, so nothing of the parent's MuJoCo state is inherited, that
+    """A process pool for `map_jobs`; spawned workers, so nothing of the parent's MuJoCo state is inherited, that
     leave Ctrl-C to the parent."""
     return ProcessPoolExecutor(max_workers=workers or default_workers(),
                                mp_context=multiprocessing.get_context("spawn"), initializer=_ignore_interrupt)
@@ -98,6 +100,13 @@ def pool_for(executor: Executor | None = None, workers: int | None = None) -> It
     pool.shutdown()
 
 
-def run_many(jobs: Sequence[Job], **options) -> list[Result]:
-    """Simulate every (scene, drive) job and return the runs in order (options as `map_jobs`)."""
-    return map_jobs(_run, jobs, **options)
+def run_experiments(jobs: Sequence[tuple[Experiment, Any]], *, max_error: ErrorLimits | None = ErrorLimits(),
+                    **options) -> list[Result]:
+    """`experiment.run` of every (experiment, scene) job with ``max_error``; the runs in order (options as
+    `map_jobs`)."""
+    return map_jobs(_run, [(experiment, scene, max_error) for experiment, scene in jobs], **options)
+
+
+def run_many(jobs: Sequence[tuple[Scene, Drive]], **options) -> list[Result]:
+    """Simulate every (scene, drive) plate test and return the runs in order (options as `run_experiments`)."""
+    return run_experiments([(PlateTest(drive), scene) for scene, drive in jobs], **options)

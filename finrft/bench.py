@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import platform
 import time
+from dataclasses import dataclass
 from datetime import date
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Protocol
 
 import mujoco
 import numpy as np
@@ -14,10 +15,11 @@ import numpy as np
 from . import batch, models
 from .drive import Drive
 from .convergence import ErrorLimits, SimulationFailed
+from .experiment import Experiment, run as run_experiment
 from .optimize import optimize
 from .scene import PRESETS, RobotScene, Scene, preset
-from .simulate import simulate
-from .swim import gait_drive, swim
+from .simulate import PlateTest, simulate
+from .swim import Swim, swim
 
 
 # progress(cases done, cases): called as each measured case of a benchmark finishes.
@@ -238,60 +240,77 @@ SAMPLE_DT = 0.03  # a whole number of every step of the grid: all runs sample th
 LIMIT = ErrorLimits().angle_deg
 
 
-def study_scenes() -> dict[str, Scene | RobotScene]:
-    """The study's scenes: the origami plate drag and one flap cycle of the robot, paper and physical presets."""
-    return {"plate, paper inertia": preset("paper"), "plate, physical inertia": preset("physical"),
-            "robot, paper": preset("paper", RobotScene), "robot, physical": preset("physical", RobotScene)}
+class Studied(Experiment, Protocol):
+    """An experiment the accuracy study measures: ``shape`` names the series of angles that give the compliant
+    part's shape, ``load`` the series of the drive's load, and ``independent`` gives the shape angles (rad) of
+    the independent solution (finrft.reference) at ``times``. A series ``eta`` (per cycle), where the
+    experiment records one, is compared too."""
+
+    shape: str
+    load: str
+
+    def independent(self, scene: Any, times: np.ndarray, *, rtol: float, atol: float) -> np.ndarray: ...
+
+
+@dataclass(frozen=True)
+class StudyCase:
+    """A scene of the study, the experiment run on it, and the grid of its adaptive runs."""
+
+    scene: Scene | RobotScene
+    experiment: Studied
+    grid: float
+
+
+def study_cases() -> dict[str, StudyCase]:
+    """The study's cases: the origami plate drag and one flap cycle of the robot, paper and physical presets. The
+    adaptive method runs on the plate's 1 ms grid and on the 10 µs grid the robot's reversals need."""
+    plate, robot = PlateTest(PLATE_DRIVE), Swim(1)
+    return {"plate, paper inertia": StudyCase(preset("paper"), plate, 1e-3),
+            "plate, physical inertia": StudyCase(preset("physical"), plate, 1e-3),
+            "robot, paper": StudyCase(preset("paper", RobotScene), robot, 1e-5),
+            "robot, physical": StudyCase(preset("physical", RobotScene), robot, 1e-5)}
 
 
 def _label(method: str, integrator: str) -> str:
     return f"{method} ({integrator})" if method == "explicit" else method
 
 
-def _trial(job: Scene | RobotScene | tuple[Scene | RobotScene, bool]) -> dict[str, Any]:
-    """One setting of the study: angles (deg) at SAMPLE_DT samples, the mean of the drive's load (the plate's
-    drive force, the robot's servo torque) per stroke, the robot's efficiency, wall time, the run's own error
-    estimate (finrft.convergence; ``estimate``: False to skip it); or how it failed."""
-    scene, estimate = job if isinstance(job, tuple) else (job, True)
+def _trial(job: tuple[Studied, Scene | RobotScene, bool]) -> dict[str, Any]:
+    """One setting of the study: the experiment's shape angles (deg) at SAMPLE_DT samples, the mean of its drive's
+    load per stroke, its first cycle's eta (NaN without one), wall time, the run's own error estimate
+    (finrft.convergence; skipped when the job's last item is False); or how it failed."""
+    experiment, scene, estimate = job
     start = time.perf_counter()
     try:
         with np.errstate(over="ignore", invalid="ignore"):  # a diverging run is reported, not warned about
-            if isinstance(scene, RobotScene):
-                run = swim(scene, 1, max_error=None, estimate_error=estimate)
-                angles, load, eta = run.hinge_angle, run.servo_torque, run.cycle_table()[0]["eta"]
-                reversal = gait_drive(scene, 1).stroke_time
-            else:
-                run = simulate(scene, PLATE_DRIVE, max_error=None, estimate_error=estimate)
-                angles, load, eta = run.segment_angle, run.drive_force, float("nan")
-                reversal = PLATE_DRIVE.stroke_time
+            run = run_experiment(experiment, scene, max_error=None, estimate_error=estimate)
     except SimulationFailed as exc:
         text = str(exc)
         failure = ("chatter" if "chatters" in text else "step underflow" if "fell below" in text
                    else "no root" if "did not converge" in text else "eta undefined" if "undefined" in text
                    else "unstable")
         return {"failure": failure, "detail": text, "wall_s": time.perf_counter() - start}
-    angles = np.degrees(angles)
+    angles, load = np.degrees(run.series[experiment.shape]), run.series[experiment.load]
+    eta = float(run.series["eta"][0]) if "eta" in run.series else float("nan")
     if not np.all(np.isfinite(angles)):
         return {"failure": "non-finite", "wall_s": run.wall_s}
     # Samples strictly inside each stroke: at a reversal the load is an impulse, its sampled value arbitrary.
-    bounds = [0.0, reversal, run.time[-1]]
+    bounds = [0.0, run.stroke_time, run.time[-1]]
     means = [float(np.mean(load[(run.time > a + 1e-9) & (run.time < b - 1e-9)])) for a, b in zip(bounds, bounds[1:])]
     return {"failure": "", "time": run.time, "angles": angles, "load": np.asarray(means), "eta": eta,
             "wall_s": run.wall_s, "estimate": run.error_estimate or {}}
 
 
-def _independent(job: tuple[Scene | RobotScene, np.ndarray]) -> np.ndarray:
-    """The independent solution (finrft.reference, Radau at rtol 1e-7) of a study scene: its angles (deg) at
-    ``times``."""
-    from . import reference
-    scene, times = job
-    if isinstance(scene, RobotScene):
-        return np.degrees(reference.solve_robot(scene, 1, times, rtol=1e-7, atol=1e-10).hinge_angle)
-    return np.degrees(reference.solve(scene, PLATE_DRIVE, times, rtol=1e-7, atol=1e-10).segment_angle)
+def _independent(job: tuple[Studied, Scene | RobotScene, np.ndarray]) -> np.ndarray:
+    """The independent solution (finrft.reference, Radau at rtol 1e-7) of a study case: its shape angles (deg)
+    at ``times``."""
+    experiment, scene, times = job
+    return np.degrees(experiment.independent(scene, times, rtol=1e-7, atol=1e-10))
 
 
-def _settings(base: Scene | RobotScene, quick: bool, python: bool) -> list[tuple[dict[str, Any], Any]]:
-    """(CSV fields, scene) for every setting of one scene at one v_reg."""
+def _settings(case: StudyCase, base: Scene | RobotScene, quick: bool,
+              python: bool) -> list[tuple[dict[str, Any], Any]]:
+    """(CSV fields, scene) for every setting of one case's scene ``base`` at one v_reg."""
     out = []
     steps = (1e-4, 1e-3) if quick else STEPS
     for backend in ("native", "python") if python else ("native",):
@@ -302,12 +321,12 @@ def _settings(base: Scene | RobotScene, quick: bool, python: bool) -> list[tuple
                 fields = {"backend": backend, "method": _label(method, integrator), "dt": dt, "tolerance": ""}
                 out.append((fields, base.replace(**{"sim.backend": backend, "sim.method": method,
                                                     "sim.integrator": integrator, "sim.dt": dt})))
-        # The adaptive method on the scene's grid (the robot's reversals need 10 µs), largest step 10 ms.
-        grid = 1e-5 if isinstance(base, RobotScene) else 1e-3
+        # The adaptive method on the case's grid, largest step 10 ms.
         for tolerance in ((1e-2,) if quick else TOLERANCES) if backend == "native" else ():
-            fields = {"backend": backend, "method": "adaptive", "dt": grid, "tolerance": tolerance}
-            out.append((fields, base.replace(**{"sim.backend": backend, "sim.method": "adaptive", "sim.dt": grid,
-                                                "sim.max_step": 1e-2, "sim.tolerance": tolerance})))
+            fields = {"backend": backend, "method": "adaptive", "dt": case.grid, "tolerance": tolerance}
+            out.append((fields, base.replace(**{"sim.backend": backend, "sim.method": "adaptive",
+                                                "sim.dt": case.grid, "sim.max_step": 1e-2,
+                                                "sim.tolerance": tolerance})))
     return out
 
 
@@ -317,7 +336,7 @@ def accuracy(out: str | Path = "accuracy", *, quick: bool = False, workers: int 
     drag (one 45 mm recovery and one power stroke) and on one flap cycle of the robot, each with the paper's and
     with physical inertias. The reference is the newton method at 2 µs (10 µs with ``quick``), checked against
     itself at twice the step and (without ``quick``) against the independent solution. A run fails when it goes unstable, non-finite, its adaptive step underflows, its
-    Newton solve finds no root, or it chatters (``simulate.CHATTER_DV``: a velocity that swings back and forth
+    Newton solve finds no root, or it chatters (``stepping.CHATTER_DV``: a velocity that swings back and forth
     every step, which stops the run)."""
     import csv
     out = Path(out)
@@ -325,24 +344,26 @@ def accuracy(out: str | Path = "accuracy", *, quick: bool = False, workers: int 
     rows, summary, references = [], {}, {}
     v_regs = (None,) if quick else V_REGS
     ref_dt = 1e-5 if quick else 2e-6
-    cases = len(study_scenes()) * len(v_regs) + (0 if quick else 1)  # + the independent solutions
+    cases = len(study_cases()) * len(v_regs) + (0 if quick else 1)  # + the independent solutions
     done = 0
-    for name, preset_scene in study_scenes().items():
+    for name, case in study_cases().items():
+        preset_scene, experiment = case.scene, case.experiment
         for v_reg in v_regs:
             base = preset_scene.replace(**{"sim.record_dt": SAMPLE_DT})
             if v_reg is not None:
                 base = base.replace(**{"rft.v_reg": v_reg})
             reg = base.rft.v_reg
             default = v_reg is None or np.isclose(v_reg, preset_scene.rft.v_reg)
-            ref, check = batch.map_jobs(_trial, [(base.replace(**{"sim.method": "newton", "sim.integrator":
-                                                                  "implicitfast", "sim.dt": dt}), False)
+            ref, check = batch.map_jobs(_trial, [(experiment, base.replace(**{"sim.method": "newton",
+                                                                              "sim.integrator": "implicitfast",
+                                                                              "sim.dt": dt}), False)
                                                  for dt in (ref_dt, 2 * ref_dt)], workers=workers)
             if ref["failure"] or check["failure"]:
                 raise RuntimeError(f"the reference of {name} failed: {ref.get('detail', ref['failure'])}")
             self_error = float(np.abs(ref["angles"] - check["angles"]).max())
-            settings = _settings(base, quick, python=default)
+            settings = _settings(case, base, quick, python=default)
             log(f"{name}, v_reg {reg:g} m/s: {len(settings)} runs")
-            results = batch.map_jobs(_trial, [scene for _, scene in settings], workers=workers)
+            results = batch.map_jobs(_trial, [(experiment, scene, True) for _, scene in settings], workers=workers)
             for (fields, _), result in zip(settings, results):
                 row = {"scene": name, "v_reg": reg, **fields, "failure": result["failure"],
                        "angle_error_deg": float("nan"), "force_error_pct": float("nan"),
@@ -364,13 +385,13 @@ def accuracy(out: str | Path = "accuracy", *, quick: bool = False, workers: int 
                 summary[name] = {limit: min((r for r in ok if r["angle_error_deg"] <= limit),
                                             key=lambda r: r["wall_s"], default=None) for limit in (0.1, 1.0)}
                 summary[name]["reference"] = (ref_dt, self_error)
-                references[name] = (base, ref)
+                references[name] = (experiment, base, ref)
             done += 1
             _tick(progress, done, cases)
     if not quick:
         log("independent solutions of the references (Radau)")
-        jobs = [(base, ref["time"]) for base, ref in references.values()]
-        for (name, (_, ref)), angles in zip(references.items(), batch.map_jobs(_independent, jobs, workers=workers)):
+        jobs = [(experiment, base, ref["time"]) for experiment, base, ref in references.values()]
+        for (name, (*_, ref)), angles in zip(references.items(), batch.map_jobs(_independent, jobs, workers=workers)):
             summary[name]["independent"] = float(np.abs(angles - ref["angles"]).max())
         _tick(progress, cases, cases)
     with (out / "accuracy.csv").open("w", newline="") as handle:
@@ -403,7 +424,7 @@ def _accuracy_summary(rows: list[dict[str, Any]], summary: dict[str, Any]) -> st
     lines.append("")
     for name in summary:
         mine = [r for r in rows if r["scene"] == name and r["backend"] == "native"
-                and r["v_reg"] == study_scenes()[name].rft.v_reg]
+                and r["v_reg"] == study_cases()[name].scene.rft.v_reg]
         newton = next((r for r in mine if r["method"] == "newton" and np.isclose(r["dt"], 1e-3)), None)
         explicit = [r for r in mine if r["method"] == "explicit (implicitfast)" and not r["failure"]]
         if newton is None or newton["failure"] or not explicit:
@@ -419,9 +440,9 @@ def _accuracy_summary(rows: list[dict[str, Any]], summary: dict[str, Any]) -> st
               "(median) |", "|---|---:|---:|---:|---:|---:|"]
     for name in summary:
         ok = [r for r in rows if r["scene"] == name and not r["failure"]]
+        # eta's pairs are NaN for a case without cycles: dropped with the other non-finite ones
         pairs = [(r["estimated_angle_error_deg"], r["angle_error_deg"]) for r in ok]
-        if "robot" in name:
-            pairs += [(r["estimated_eta_error_pts"], r["eta_error_pts"]) for r in ok]
+        pairs += [(r["estimated_eta_error_pts"], r["eta_error_pts"]) for r in ok]
         pairs = np.array([p for p in pairs if np.all(np.isfinite(p))]).reshape(-1, 2)
         estimate, error = pairs.T
         ratio = np.median(estimate[error > 1e-6] / error[error > 1e-6]) if np.any(error > 1e-6) else float("nan")

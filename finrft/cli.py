@@ -537,11 +537,10 @@ def _describe(run: Result, summary: dict[str, Any]) -> str:
 
 
 def _error_line(run: Any) -> str:
-    units = {"angle_deg": "deg", "force_N": "N", "torque_Nm": "N m", "eta_points": "points", "body_mm": "mm",
-             "position_mm": "mm"}
+    # Any experiment's keys name their unit last (`experiment.Compared`): angle_deg, torque_Nm, eta_points, ...
     return (f"estimated discretisation error (companion run at {run.error_companion}): "
-            + ", ".join(f"{key.rsplit('_', 1)[0]} {value:.2g} {units[key]}" for key, value in
-                        run.error_estimate.items()))
+            + ", ".join(f"{what} {value:.2g} {unit.replace('Nm', 'N m')}" for (what, unit), value in
+                        ((key.rsplit("_", 1), value) for key, value in run.error_estimate.items())))
 
 
 def _run_test(args: argparse.Namespace) -> int:
@@ -687,11 +686,12 @@ def _intrude(args: argparse.Namespace) -> int:
 
 
 def _table(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
-    from .batch import map_jobs
-    from .swim import swim_job, table_markdown, table_rows, table_scenes
-    jobs = [(s, 1, _limits(args)) for s in table_scenes(scene)]
+    from .batch import run_experiments
+    from .swim import Swim, table_markdown, table_rows, table_scenes
+    jobs = [(Swim(1), s) for s in table_scenes(scene)]
     with _progress(args, len(jobs), "Table I", "gaits") as bar:
-        runs = map_jobs(swim_job, jobs, workers=args.workers, progress=bar and (lambda done, total: bar(done)))
+        runs = run_experiments(jobs, max_error=_limits(args), workers=args.workers,
+                               progress=bar and (lambda done, total: bar(done)))
     rows = table_rows(runs)
     _say(args, table_markdown(rows))
     if args.json:

@@ -3,7 +3,7 @@
 An experiment (in the spirit of dm_control's tasks) builds its model from a scene, prescribes its drive (the
 strokes, and what happens as each starts), names the series it records with their SI units, says which of them
 the error check compares, and summarises a result. `run` does the rest for any experiment: the stepping
-(`step_through`), the finite checks, the discretisation-error estimate (`convergence.checked`), and a `Result` that
+(`stepping.step_through`), the finite checks, the discretisation-error estimate (`convergence.checked`), and a `Result` that
 holds the named series; `record.write_h5` and `record.write_rrd` write any result. The plate tests
 (`simulate.PlateTest`) and the robot's swim (`swim.Swim`) are two experiments.
 """
@@ -21,6 +21,7 @@ from .convergence import ErrorLimits, Estimated, checked, max_difference, paired
 from .coupling import PythonCoupling, installed
 from .drive import Drive
 from .integrate import stepper
+from .stepping import schedule, step_through
 
 
 @dataclass(frozen=True)
@@ -195,8 +196,6 @@ def python_forces(built: Any) -> Callable[[mujoco.MjModel, mujoco.MjData], None]
 
 def _once(experiment: Experiment, scene: Any, built: Any, progress: Callable[[float], None] | None,
           companion: bool) -> Result:
-    from .simulate import schedule, step_through  # simulate defines the plate test on this protocol
-
     start = time.perf_counter()
     m = built.model
     d = mujoco.MjData(m)

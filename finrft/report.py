@@ -1,6 +1,6 @@
 """`finrft report`: the paper's results regenerated from this package, as figures, tables and recordings.
 
-Every figure comes from the public API a user would call (simulate, run_many, fit, swim, optimize).
+Every figure comes from the public API a user would call (simulate, run_many, run_experiments, fit, swim, optimize).
 ``quick`` makes a smaller version (fewer cycles, amplitudes and evaluations) for tests.
 """
 
@@ -18,14 +18,13 @@ from typing import Callable, Iterator
 import numpy as np
 
 from . import batch, record, views
-from .convergence import ErrorLimits
 from .data import plate_drag_dir
 from .drive import Drive
 from .experiment import Result
 from .fit import DragData, fit, read_drag, resolve_params, simulated_angles
 from .optimize import optimize
 from .scene import RobotScene, Scene, SceneError, preset
-from .swim import PAPER_TABLE, swim, swim_job, table_markdown, table_rows, table_scenes
+from .swim import PAPER_TABLE, Swim, swim, table_markdown, table_rows, table_scenes
 
 COLORS = {"rigid": "black", "soft": "tab:blue", "origami": "tab:red"}
 KINDS = ("rigid", "soft", "origami")
@@ -218,9 +217,9 @@ def robot(out: Path, quick: bool, workers: int | None) -> str:
     cycles = 1 if quick else 3
     gaits = table_scenes(scene)
     # Table I is the first cycle from rest, as the paper simulated it; the trajectories go on for more.
-    first = batch.map_jobs(swim_job, [(s, 1, ErrorLimits()) for s in gaits], workers=workers)
+    first = batch.run_experiments([(Swim(1), s) for s in gaits], workers=workers)
     rows = table_rows(first)
-    runs = batch.map_jobs(swim_job, [(s, cycles, ErrorLimits()) for s in gaits], workers=workers) if cycles > 1 else first
+    runs = batch.run_experiments([(Swim(cycles), s) for s in gaits], workers=workers) if cycles > 1 else first
     generations = []
     search = optimize(scene, budget=12 if quick else 300, seed=1, workers=workers,
                       on_generation=lambda g, values, extras, es: generations.append((values, extras["eta"])))

@@ -19,7 +19,7 @@ from .drive import Drive
 from .experiment import Compared, Plot, Quantity, Result, run
 from .models import RobotModel, body_share, build_robot
 from .scene import RobotScene
-from .simulate import Prescribed
+from .stepping import Prescribed
 
 
 SIGN_CONVENTION = (
@@ -38,6 +38,8 @@ class Swim:
     name = "swim"
     schema = "finrft.swim/1"
     sign_convention = SIGN_CONVENTION
+    shape = "hinge_angle"  # the series whose angles give the fin's shape
+    load = "servo_torque"  # the series of the drive's load
 
     def build(self, scene: RobotScene) -> RobotModel:
         return build_robot(scene)
@@ -78,6 +80,11 @@ class Swim:
 
     def attrs(self) -> dict[str, Any]:
         return {"cycles": self.cycles}
+
+    def independent(self, scene: RobotScene, times: np.ndarray, *, rtol: float, atol: float) -> np.ndarray:
+        """The right fin's hinge angles (rad) of the independent solution (finrft.reference) at ``times``."""
+        from .reference import solve_robot  # scipy's integrators load only when asked for
+        return solve_robot(scene, self.cycles, times, rtol=rtol, atol=atol).hinge_angle
 
     def cycle_table(self, run: Result) -> list[dict[str, float]]:
         """Per flap cycle: D2 (back in recovery), D1 (forward in the power stroke), eta, net distance and speed."""
@@ -229,9 +236,3 @@ def table_markdown(rows: list[dict[str, Any]]) -> str:
                      f"{r['net_speed_mm_s']:.2f} | {r['paper_net_speed_exp_mm_s']:.2f} |")
     return "\n".join(lines)
 
-
-def swim_job(job: tuple[RobotScene, int, ErrorLimits | None]) -> Result:
-    """`swim` of a (scene, cycles, max_error) job: the module-level function a process pool can send to its
-    workers."""
-    scene, cycles, max_error = job
-    return swim(scene, cycles, max_error=max_error)

@@ -23,7 +23,7 @@ from .drive import Drive
 from .experiment import Compared, Plot, Quantity, Result
 from .models import ARMATURE_RATIO, INTEGRATORS, _compile
 from .scene import ExplicitSim, Medium, SceneError, UserScene
-from .simulate import Prescribed
+from .stepping import Prescribed
 
 _J = mujoco.mjtJoint
 DRIVEN = {int(_J.mjJNT_SLIDE): "slide", int(_J.mjJNT_HINGE): "hinge"}

@@ -90,7 +90,7 @@ def test_methods_need_implicitfast():
 
 
 def test_adaptive_step_underflow_stops_loudly():
-    from finrft.simulate import SimulationUnstable
+    from finrft.convergence import SimulationUnstable
     scene = preset("paper").replace(**{"sim.method": "adaptive", "sim.tolerance": 1e-6, "plate.stop": "limit",
                                        "plate.segment_inertia": 2.6e-7, "plate.rod_inertia": 4e-8})
     with pytest.raises(SimulationUnstable, match="fell below 1e-9 s at t = .* raise sim.tolerance"):
@@ -140,7 +140,7 @@ def test_newton_on_light_segments_matches_reference_at_large_steps(backend):
 
 def test_chatter_stops_the_run_loudly():
     # The run that _flips shows chattering (explicit coupling, light segments, 0.1 ms) must not pass as a result.
-    from finrft.simulate import SimulationUnstable
+    from finrft.convergence import SimulationUnstable
     with pytest.raises(SimulationUnstable, match=r"chatters at t = .* dt = 0.0001 s: use sim.method = 'newton'"):
         simulate(preset("physical").replace(**{"sim.method": "explicit", "sim.dt": 1e-4}), LIGHT_DRIVE)
 

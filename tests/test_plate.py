@@ -6,8 +6,8 @@ from scipy.optimize import brentq
 
 from finrft import models
 from finrft.drive import Drive
-from finrft.convergence import InaccurateResult
-from finrft.simulate import SimulationUnstable, simulate
+from finrft.convergence import InaccurateResult, SimulationUnstable
+from finrft.simulate import simulate
 
 
 @pytest.mark.parametrize("attack_deg", [90.0, 60.0, 30.0, 0.0])

@@ -1,0 +1,165 @@
+"""Stepping any experiment through its run: drives that hold joints on a prescribed profile (`Prescribed`), the
+step schedule of a drive (`schedule`), and the loop that steps, records and stops loudly on an unstable or
+chattering run (`step_through`). `experiment.run` uses it for every experiment."""
+
+from __future__ import annotations
+
+from typing import Any, Callable, Sequence
+
+import mujoco
+import numpy as np
+
+from .convergence import SimulationUnstable, check_resolution, check_size, record_every
+from .drive import Drive
+from .integrate import Stepper
+from .native import Code, captured_warnings
+
+_BAD_STATE = (mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL)
+
+
+class Prescribed:
+    """Joints that follow a `Drive` exactly: a very large armature holds their speed within a stroke, and at
+    each reversal the rest of the system takes the impulse an ideal kinematic constraint would give it.
+
+    The drive's impulse over a stroke is exactly -armature times the change of its velocity (summed over the
+    joints), and its instantaneous force or torque is -armature * qacc.
+    """
+
+    def __init__(self, dofs: Sequence[int], qpos: Sequence[int], armature: float, drive: Drive) -> None:
+        self.dofs, self.qpos, self.armature, self.drive = list(dofs), list(qpos), armature, drive
+        self.impulse = np.zeros(drive.strokes)
+        self._stroke_velocity = np.zeros(len(self.dofs))
+        self._stroke = 0
+
+    def start_stroke(self, m: mujoco.MjModel, d: mujoco.MjData, k: int) -> None:
+        if k:
+            self._close(d)
+            d.qpos[self.qpos] = self.drive.stroke_start(k)
+            self._reverse(m, d, self.drive.stroke_velocity(k) - d.qvel[self.dofs])
+        else:
+            d.qvel[self.dofs] = self.drive.stroke_velocity(0)
+        self._stroke, self._stroke_velocity = k, d.qvel[self.dofs].copy()
+
+    def finish(self, d: mujoco.MjData) -> None:
+        self._close(d)
+
+    def load(self, d: mujoco.MjData) -> np.ndarray:
+        """What each joint's drive applies now (after mj_forward): N or N m."""
+        return -self.armature * d.qacc[self.dofs]
+
+    def _close(self, d: mujoco.MjData) -> None:
+        self.impulse[self._stroke] = -self.armature * np.sum(d.qvel[self.dofs] - self._stroke_velocity)
+
+    def _reverse(self, m: mujoco.MjModel, d: mujoco.MjData, jump: np.ndarray) -> None:
+        """Velocity jumps ``jump`` on the driven joints: M0 dq = E mu with E^T dq = jump, where M0 is the mass
+        matrix without the artificial armature."""
+        mujoco.mj_forward(m, d)
+        mass = np.zeros((m.nv, m.nv))
+        mujoco.mj_fullM(m, d, mass)
+        mass[self.dofs, self.dofs] -= self.armature
+        columns = np.linalg.solve(mass, np.eye(m.nv)[:, self.dofs])
+        d.qvel[:] += columns @ np.linalg.solve(columns[self.dofs], jump)
+
+
+def unstable(scene: Any, t: float, messages: list[str], code: int = 1) -> SimulationUnstable:
+    sim = scene.sim
+    if code == Code.STEP_TOO_SMALL:
+        return SimulationUnstable(
+            f"the adaptive step fell below 1e-9 s at t = {t:.4g} s (tolerance {sim.tolerance:g}): raise "
+            f"sim.tolerance or rft.v_reg, or use sim.method = 'newton'")
+    if code == Code.ARENA_FULL:
+        return SimulationUnstable(
+            f"the native step's workspace does not fit in MuJoCo's arena at t = {t:.4g} s: use sim.backend = "
+            f"'python'")
+    if code == Code.NOT_CONVERGED:
+        return SimulationUnstable(
+            f"Newton's method of the implicit step did not converge at t = {t:.4g} s (dt = {sim.dt:g} s): reduce "
+            f"sim.dt or raise rft.v_reg")
+    what = messages[0].rstrip(".") if messages else "the velocity became NaN or Inf"
+    advice = ("reduce sim.dt, raise the inertias or rft.v_reg, or use sim.method = 'newton'"
+              if sim.method == "explicit" else "reduce sim.dt (or sim.max_step), or raise rft.v_reg")
+    return SimulationUnstable(f"simulation went unstable at t = {t:.4g} s ({what}) with method {sim.method}, "
+                              f"integrator {sim.integrator}, dt = {sim.dt:g} s: {advice}")
+
+
+def chatter(scene: Any, t: float) -> SimulationUnstable:
+    sim = scene.sim
+    return SimulationUnstable(
+        f"the RFT force chatters at t = {t:.4g} s (it reverses every step: the segments overshoot) with method "
+        f"{sim.method}, dt = {sim.dt:g} s: use sim.method = 'newton', or reduce sim.dt")
+
+
+def schedule(drive: Drive, dt: float, record_dt: float) -> tuple[int, np.ndarray, np.ndarray]:
+    """Step count, the steps at which each stroke starts, and the steps recorded (always the first and last);
+    SceneError when dt cannot resolve a stroke."""
+    check_resolution(drive.stroke_time, dt)
+    steps = max(1, round(drive.duration / dt))
+    every = record_every(dt, record_dt)
+    check_size(steps, steps // every + 1, dt, drive.duration)
+    starts = np.array([round(k * drive.stroke_time / dt) for k in range(drive.strokes)])
+    samples = np.unique(np.r_[np.arange(0, steps, every), steps])
+    return steps, starts, samples
+
+
+# A recorded sample chatters when some watched dof's velocity, over the three steps before it, moves by more than
+# CHATTER_DV (rad/s or m/s) one way, back, and that way again: an overshoot every step (the RFT force reversing
+# each step), which no oscillation the steps resolve can do. Every PROBE_EVERY-th sample is checked (each check
+# costs three single steps); CHATTER_SAMPLES checked samples in a row stop the run.
+# Chatter swings a segment across the law's regularisation speed (v_reg ~ 1 mm/s at levers of centimetres:
+# ~0.1 rad/s); a hinge resting on a MuJoCo limit jitters by ~2e-3 rad/s, which is no chatter.
+CHATTER_DV = 1e-2
+CHATTER_SAMPLES = 3
+PROBE_EVERY = 2
+
+
+def step_through(m: mujoco.MjModel, d: mujoco.MjData, scene: Any, advance: Stepper, steps: int,
+                 starts: np.ndarray, samples: np.ndarray, on_stroke: Callable[[int], None],
+                 on_sample: Callable[[int], None], progress: Callable[[float], None] | None = None,
+                 watch: Sequence[int] = (), forward: bool = True) -> None:
+    """Step a model through a run: ``on_stroke(k)`` as stroke k starts, ``on_sample(i)`` (after mj_forward, unless
+    ``forward`` is False: then only the state is current) at recorded step ``samples[i]``; ``advance`` steps in
+    chunks in between. Stops loudly if the state blows up, or if the ``watch`` dofs chatter (fixed-step methods:
+    the three steps before every PROBE_EVERY-th sample are taken one by one and checked when the run ends)."""
+    probe = len(watch) > 0 and scene.sim.method != "adaptive"
+    # velocity[i, j]: the watched velocities 3 - j steps before sample i (j = 3: at the sample)
+    velocity = np.full((len(samples), 4, len(watch)), np.nan)
+    slot: dict[int, list[tuple[int, int]]] = {}
+    for i, s in enumerate(samples if probe else []):
+        for j in range(4 if i % PROBE_EVERY == 0 else 0):
+            slot.setdefault(int(s) - 3 + j, []).append((i, j))
+    events = np.union1d(np.union1d(samples, starts), np.array([s for s in slot if s >= 0], dtype=int))
+    stroke_of = np.searchsorted(starts, events, side="right") - 1
+    counts = d.warning.number
+    bad = [int(w) for w in _BAD_STATE]
+    messages: list[str] = []
+    sample = 0
+    with captured_warnings(messages):
+        for i, step in enumerate(events):
+            k = stroke_of[i]
+            if step == starts[k]:
+                on_stroke(k)
+            for at in slot.get(step, ()):
+                velocity[at] = d.qvel[watch]
+            if sample < len(samples) and step == samples[sample]:
+                if forward:
+                    mujoco.mj_forward(m, d)
+                on_sample(sample)
+                sample += 1
+                if progress is not None:
+                    progress(step / steps)
+            if step == steps:
+                break
+            code = advance(d, int(events[i + 1] - step))
+            if code or any(counts[w] for w in bad):
+                raise unstable(scene, d.time, messages, code or 1)
+    if probe:
+        # Samples whose three steps before lie in one stroke (a reversal jumps the velocities on purpose).
+        inside = np.searchsorted(starts, samples - 3, side="right") == np.searchsorted(starts, samples, side="right")
+        moves = np.diff(velocity, axis=1)
+        flips = np.any(np.all(np.abs(moves) > CHATTER_DV, axis=1) & np.all(moves[:, 1:] * moves[:, :-1] < 0, axis=1),
+                       axis=1) & inside
+        probed = np.arange(0, len(samples), PROBE_EVERY)
+        runs = np.convolve(flips[probed], np.ones(CHATTER_SAMPLES, int), mode="valid")
+        if np.any(runs == CHATTER_SAMPLES):
+            first = probed[int(np.argmax(runs == CHATTER_SAMPLES)) + CHATTER_SAMPLES - 1]
+            raise chatter(scene, samples[first] * scene.sim.dt)

@@ -158,9 +158,10 @@ def _add_robot(p: argparse.ArgumentParser) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="finrft", description="Compliant fins in granular media: resistive force theory (RFT) "
-                     "on MuJoCo. Command-line flags use the paper's units (mm, mm/s, degrees); scene files and "
-                     "outputs use SI units. Exit status: 0 done, 1 the simulation went unstable, 2 bad input or a file "
-                     "that cannot be written, 130 interrupted.")
+                     "on MuJoCo. Command-line flags use the paper's units (mm, mm/s, degrees); scene and HDF5 "
+                     "files use SI units, JSON keys name theirs. Every run estimates its own discretisation error. "
+                     "Exit status: 0 done, 1 the simulation went unstable or its estimated error exceeds "
+                     "--max-error, 2 bad input or a file that cannot be written, 130 interrupted.")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     drag = sub.add_parser("drag", help="drag a plate through the medium along +y (the paper's drag test)",

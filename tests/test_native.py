@@ -215,8 +215,9 @@ def test_native_steps_allocate_nothing(tmp_path):
     subprocess.run(["gcc", "-shared", "-fPIC", "-O1", "-o", str(tmp_path / "counter.so"), str(tmp_path / "counter.c")],
                    check=True)
     counter = str(tmp_path / "counter.so")
+    # From tmp_path: at the repository root, python -c would import the source tree, not the installed package.
     done = subprocess.run([sys.executable, "-c", ALLOCATION_RUN, counter], capture_output=True, text=True,
-                          env={**os.environ, "LD_PRELOAD": counter}, check=True)
+                          env={**os.environ, "LD_PRELOAD": counter}, check=True, cwd=tmp_path)
     counts = json.loads(done.stdout.splitlines()[-1])
     for method in ("implicit", "newton", "adaptive"):
         assert counts[f"{method}/300"] == counts[f"{method}/1"] == 0, counts

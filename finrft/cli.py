@@ -115,6 +115,15 @@ def _add_test(p: argparse.ArgumentParser, *, drag: bool) -> None:
     _add_max_error(p)
 
 
+def _add_run_outputs(p: argparse.ArgumentParser) -> None:
+    """The outputs of a run: HDF5, rerun, --force, --json, --quiet."""
+    p.add_argument("--out", metavar="FILE.h5", help="write the time series and the resolved scene (SI units)")
+    p.add_argument("--rrd", metavar="FILE.rrd", help="write a rerun recording; open it with 'rerun FILE.rrd'")
+    _add_force(p)
+    _add_json(p, "a summary")
+    _add_quiet(p)
+
+
 def _add_max_error(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-error", type=_number("degrees or points"), default=ErrorLimits().angle_deg,
                    metavar="X", help="largest estimated discretisation error accepted, in degrees for angles, "
@@ -215,11 +224,7 @@ def build_parser() -> argparse.ArgumentParser:
                       metavar="N", help="flap cycles (default: %(default)s); figures are the last cycle's")
     _add_robot(swim)
     _add_max_error(swim)
-    swim.add_argument("--out", metavar="FILE.h5", help="write the time series and the resolved scene (SI units)")
-    swim.add_argument("--rrd", metavar="FILE.rrd", help="write a rerun recording; open it with 'rerun FILE.rrd'")
-    _add_force(swim)
-    _add_json(swim, "a summary")
-    _add_quiet(swim)
+    _add_run_outputs(swim)
 
     optimize = sub.add_parser("optimize", help="optimise the gait with CMA-ES",
                               description="Maximise the swimming efficiency eta over one flap cycle with CMA-ES "
@@ -258,11 +263,7 @@ def build_parser() -> argparse.ArgumentParser:
     ug.add_argument("--backend", choices=("native", "python"), help="where the RFT force is computed (overrides "
                     "sim.backend)")
     _add_max_error(user)
-    user.add_argument("--out", metavar="FILE.h5", help="write the time series and the resolved scene (SI units)")
-    user.add_argument("--rrd", metavar="FILE.rrd", help="write a rerun recording; open it with 'rerun FILE.rrd'")
-    _add_force(user)
-    _add_json(user, "a summary")
-    _add_quiet(user)
+    _add_run_outputs(user)
 
     intrude = sub.add_parser("intrude", help="a plate pushed vertically into the medium at several angles: the "
                              "force-depth curves of Li, Zhang & Goldman 2013",

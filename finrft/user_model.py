@@ -1,6 +1,6 @@
 """A user's MuJoCo model in the medium, as an experiment (finrft.experiment): RFT `attach`ed to the named bodies of
 an MJCF file, one joint moved at constant speed (or as a triangle wave) exactly as the plate's base is moved
-(`simulate.Prescribed`: a very large armature, impulses at reversals), and the force that motion needs.
+(`stepping.Prescribed`: a very large armature, impulses at reversals), and the force that motion needs.
 
 `AttachedModel`, `build_attached` and `JointTrial` serve any experiment made of a spec, `attach` and a prescribed
 joint: `UserModel` (``finrft run MODEL.xml``) and `intrusion.Intrusion`.

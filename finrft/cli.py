@@ -1022,7 +1022,8 @@ def _robot(command: Callable[[argparse.Namespace, scenes.RobotScene], int]) -> C
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "drag": _run_test, "rotate": _run_test, "scene": _scene, "swim": _robot(_swim), "optimize": _robot(_optimize),
-    "table": _robot(_table), "run": _user_run, "intrude": _intrude, "medium": _medium, "law": _law, "fit": _fit, "fit-rft": _fit_rft, "report": _report, "bench": _bench}
+    "table": _robot(_table), "run": _user_run, "intrude": _intrude, "medium": _medium, "law": _law, "fit": _fit,
+    "fit-rft": _fit_rft, "report": _report, "bench": _bench}
 
 
 def _main(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> int:

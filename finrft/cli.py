@@ -253,8 +253,8 @@ def build_parser() -> argparse.ArgumentParser:
                           "drive.cycles=N back-and-forth cycles), exactly: the joint carries a very large armature "
                           "and the force (torque) it needs is recorded, with each attached body's position and the "
                           "medium's force on it. The scene (SI units) has [model] (path, bodies), [medium] (law, "
-                          "name or zeta, surface_z, element_size), [drive] (joint, speed, stroke, cycles, start) and [sim] "
-                          "(dt, integrator, backend, record_dt; MuJoCo's explicit step only).")
+                          "name or zeta, surface_z, element_size), [drive] (joint, speed, stroke, cycles, start) and "
+                          "[sim] (dt, integrator, backend, record_dt; MuJoCo's explicit step only).")
     user.add_argument("model", nargs="?", metavar="MODEL.xml", help="the MJCF file (overrides model.path)")
     ug = user.add_argument_group("scene")
     ug.add_argument("--scene", required=True, metavar="FILE.toml", help="user-model scene file in SI units")

@@ -20,6 +20,8 @@ The API, by topic:
 - many runs on all cores: `run_experiments` (any experiment), `run_many` (plate tests), `map_jobs` (any
   module-level function), `local_executor`
 - RFT on any MuJoCo model: `attach` (the Li, Zhang & Goldman 2013 law on the named bodies of an MjSpec)
+- granular media: `medium(name)`, one of the catalogue of named media (every one: ``finrft.media.media()``), each
+  value with its unit and source
 - fitting plate parameters to measured drags: `read_drag`, `resolve_params`, `fit` -> `Fit`
 - optimising the robot's gait: `optimize`, `Variable`
 - files: `write_h5`, `write_rrd` (any result); they load h5py and rerun on first use, not on ``import finrft``
@@ -41,6 +43,7 @@ from .drive import Drive
 from .experiment import Experiment, Result, run
 from .fit import Fit, fit, read_drag, resolve_params
 from .intrusion import Intrusion
+from .media import medium
 from .optimize import Variable, optimize
 from .scene import IntrusionScene, RobotScene, Scene, SceneError, UserScene, load_scene, preset, to_toml
 from .simulate import PlateTest, simulate
@@ -51,8 +54,9 @@ _RECORDING = ("write_h5", "write_rrd")
 
 __all__ = ["Drive", "Experiment", "Fit", "Intrusion", "IntrusionScene", "PlateTest", "Result", "RobotScene", "Scene",
            "SceneError", "SimulationUnstable", "Swim", "UserModel", "UserScene", "Variable", "attach", "fit",
-           "load_scene", "local_executor", "map_jobs", "optimize", "preset", "read_drag", "resolve_params", "run",
-           "run_experiments", "run_many", "simulate", "swim", "table_rows", "table_scenes", "to_toml", *_RECORDING]
+           "load_scene", "local_executor", "map_jobs", "medium", "optimize", "preset", "read_drag",
+           "resolve_params", "run", "run_experiments", "run_many", "simulate", "swim", "table_rows", "table_scenes",
+           "to_toml", *_RECORDING]
 
 
 def __getattr__(name: str) -> Any:

@@ -26,7 +26,7 @@ from typing import Iterator, Sequence
 import mujoco
 import numpy as np
 
-from . import coupling, native
+from . import coupling, media, native
 from .laws import li2013
 from .scene import SceneError
 
@@ -112,16 +112,23 @@ class SurfaceForces:
                               d.qfrc_passive)
 
 
-def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str, law: str = "li2013", zeta: float = 1.0,
+def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str, law: str = "li2013", zeta: float | None = None,
            surface_z: float = 0.0, element_size: float = 0.005, backend: str = "native",
-           coefficients: li2013.Coefficients = li2013.GENERIC) -> Attached:
+           coefficients: li2013.Coefficients | None = None, medium: str | None = None) -> Attached:
     """Add granular RFT to the named bodies of ``spec`` (before it is compiled).
 
     ``law``: ``li2013`` (`finrft.laws.li2013`) with ``coefficients`` (default: the generic medium) scaled by
-    ``zeta``; ``surface_z``: height of the free surface, m; ``element_size``: the elements' size, m;
+    ``zeta`` (default 1), or instead of both a ``medium`` of the catalogue (`finrft.media`, e.g.
+    ``"poppy_seeds_lp"``); ``surface_z``: height of the free surface, m; ``element_size``: the elements' size, m;
     ``backend``: ``native`` (falls back to ``python``, with a warning, when the plugin cannot be loaded) or
     ``python`` (then run the model inside ``Attached.installed``). Raises `SceneError` on bad input.
     """
+    if medium is not None:
+        if zeta is not None or coefficients is not None:
+            raise SceneError(f"attach: medium={medium!r} gives zeta and the coefficients: pass one or the other")
+        zeta, coefficients = li2013.medium_parameters(media.medium(medium))
+    zeta = 1.0 if zeta is None else zeta
+    coefficients = li2013.GENERIC if coefficients is None else coefficients
     names = [bodies] if isinstance(bodies, str) else list(bodies)
     _check(names, law, zeta, surface_z, element_size, backend)
     backend = native.resolve_backend(backend)

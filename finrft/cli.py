@@ -253,8 +253,8 @@ def build_parser() -> argparse.ArgumentParser:
                           "drive.cycles=N back-and-forth cycles), exactly: the joint carries a very large armature "
                           "and the force (torque) it needs is recorded, with each attached body's position and the "
                           "medium's force on it. The scene (SI units) has [model] (path, bodies), [medium] (law, "
-                          "zeta, surface_z, element_size), [drive] (joint, speed, stroke, cycles, start) and [sim] "
-                          "(dt, integrator, backend, record_dt; MuJoCo's explicit step only).")
+                          "name or zeta, surface_z, element_size), [drive] (joint, speed, stroke, cycles, start) and "
+                          "[sim] (dt, integrator, backend, record_dt; MuJoCo's explicit step only).")
     user.add_argument("model", nargs="?", metavar="MODEL.xml", help="the MJCF file (overrides model.path)")
     ug = user.add_argument_group("scene")
     ug.add_argument("--scene", required=True, metavar="FILE.toml", help="user-model scene file in SI units")
@@ -285,6 +285,29 @@ def build_parser() -> argparse.ArgumentParser:
     _add_force(intrude)
     _add_json(intrude, "each angle's summary and curve")
     _add_quiet(intrude)
+
+    medium = sub.add_parser("medium", help="the catalogue of named granular media, with units and sources",
+                            description="Print the named media of the catalogue (finrft/media.toml) that scenes "
+                            "(medium.name) and `finrft law --medium` take: each value with its unit and source, "
+                            "what is unverified, and what could not be found.")
+    medium.add_argument("name", nargs="?", metavar="NAME", help="one medium (default: --list)")
+    medium.add_argument("--list", action="store_true", help="every medium")
+    _add_json(medium, "the media (each value with its unit and source)")
+    _add_quiet(medium)
+
+    law = sub.add_parser("law", help="a force law's stress map in a medium (li2013: alpha_x, alpha_z over beta, "
+                         "gamma)", description="Evaluate a law's stress per unit depth over its angles, as in the "
+                         "papers' figures: for li2013, alpha_x and alpha_z (N/cm^3) over the plate angle beta and "
+                         "the velocity angle gamma, both -90..90 deg at 5 deg, for the medium's zeta.")
+    law.add_argument("name", metavar="NAME", help="the law, e.g. li2013")
+    law.add_argument("--medium", default="generic", metavar="M",
+                     help="a medium of the catalogue (finrft medium --list; default: %(default)s)")
+    law.add_argument("--plot", metavar="FILE.png", help="write the map as a figure, one colour map per field")
+    _add_force(law)
+    law.add_argument("--json", action="store_true", help="print the map as JSON on the last line of "
+                              "stdout: law, the two angle axes (_deg) and each field, flat lists of one entry per "
+                              "grid point")
+    _add_quiet(law)
 
     table = sub.add_parser("table", help="the paper's Table I: six gaits, eta next to the paper's",
                            description="Evaluate the six gaits of the paper's Table I (one flap cycle each) and "
@@ -687,6 +710,37 @@ def _intrude(args: argparse.Namespace) -> int:
     return 0
 
 
+def _medium(args: argparse.Namespace) -> int:
+    from . import media
+    if args.name is None and not args.list:
+        raise UsageError("give a medium's NAME or --list (see 'finrft medium --help')")
+    chosen = media.media() if args.list else (media.medium(args.name),)
+    _say(args, "\n\n".join(media.describe(m) for m in chosen))
+    if args.json:
+        print(_json([m.to_dict() for m in chosen]))
+    return 0
+
+
+def _law(args: argparse.Namespace) -> int:
+    from . import lawmap
+    _check_output(args.plot, ".png", "--plot", args.force)
+    data = lawmap.stress_map(args.name, args.medium)
+    if args.plot:
+        with atomic_path(args.plot) as tmp:
+            lawmap.plot(args.name, args.medium, data, tmp)
+    (xkey, x), (ykey, y), *fields = data.items()
+    units = lawmap.law_module(args.name).MAP_UNITS
+    _say(args, f"{args.name} in {args.medium}: {len(x)} points, {xkey} and {ykey} in "
+         f"[{min(x.min(), y.min()):g}, {max(x.max(), y.max()):g}]")
+    for key, values in fields:
+        _say(args, f"  {key}: {values.min():.4g} to {values.max():.4g} {units[key]}")
+    if args.plot:
+        _say(args, f"wrote figure: {args.plot}")
+    if args.json:
+        print(_json({"law": args.name, **data}))
+    return 0
+
+
 def _table(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
     from .batch import run_experiments
     from .swim import Swim, table_markdown, table_rows, table_scenes
@@ -968,7 +1022,8 @@ def _robot(command: Callable[[argparse.Namespace, scenes.RobotScene], int]) -> C
 
 COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
     "drag": _run_test, "rotate": _run_test, "scene": _scene, "swim": _robot(_swim), "optimize": _robot(_optimize),
-    "table": _robot(_table), "run": _user_run, "intrude": _intrude, "fit": _fit, "fit-rft": _fit_rft, "report": _report, "bench": _bench}
+    "table": _robot(_table), "run": _user_run, "intrude": _intrude, "medium": _medium, "law": _law, "fit": _fit,
+    "fit-rft": _fit_rft, "report": _report, "bench": _bench}
 
 
 def _main(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> int:

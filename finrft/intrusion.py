@@ -140,7 +140,8 @@ def plot_curves(runs: list[Result], path: str | Path) -> None:
         horizontal.plot(1e3 * r.depth, r.force_x, label=label)
     p, medium = runs[0].scene.plate, runs[0].scene.medium
     vertical.set(xlabel="depth of the lowest point (mm)", ylabel="vertical force F_z (N, up)",
-                 title=f"{1e3 * p.width:g} x {1e3 * p.length:g} mm plate pushed down, zeta {medium.zeta:g}")
+                 title=f"{1e3 * p.width:g} x {1e3 * p.length:g} mm plate pushed down, "
+                 f"{medium.name or f'zeta {medium.zeta:g}'}")
     horizontal.set(xlabel="depth of the lowest point (mm)", ylabel="horizontal force F_x (N)",
                    title="Horizontal force")
     for ax in (vertical, horizontal):

@@ -155,8 +155,10 @@ class Model:
 class Medium:
     law: str = _f("li2013", "", "li2013: the granular RFT of Li, Zhang & Goldman 2013 on surface elements",
                   choices=("li2013",))
+    name: str = _f("", "", "a named medium of the catalogue (finrft medium --list), which gives zeta or its own "
+                   "coefficients; empty: the generic coefficients scaled by zeta")
     zeta: float = _f(1.0, "", "the medium's scale: alpha_z of a horizontal plate pushed down, in N/cm^3 (the "
-                     "generic coefficients are scaled by it)", minimum=0.0)
+                     "generic coefficients are scaled by it; only without medium.name)", minimum=0.0)
     surface_z: float = _f(0.0, "m", "height of the free surface (gravity along -z); the medium lies below")
     element_size: float = _f(0.005, "m", "size of the surface elements", minimum=0.0)
 
@@ -169,6 +171,16 @@ class JointDrive:
     stroke: float = _f(0.05, "m or rad", "length of one stroke", minimum=0.0)
     cycles: int = _f(0, "", "out-and-back cycles of a triangle wave; 0: one stroke out", minimum=0, exclusive=False)
     start: float = _f(0.0, "m or rad", "the joint's position at t = 0 (its qpos)")
+
+
+def _check_medium(m: Medium) -> None:
+    if not m.name:
+        return
+    from . import media  # the catalogue's module imports this one
+    from .laws import li2013
+    if m.zeta != Medium.zeta:
+        raise SceneError(f"medium.name = {m.name!r} gives the medium's zeta: leave medium.zeta out (got {m.zeta:g})")
+    li2013.medium_parameters(media.medium(m.name))
 
 
 # Newton, implicit and adaptive steps take implicitly only the forces of the segment law's force groups (the
@@ -273,6 +285,7 @@ class UserScene(_Sections):
 
     def __post_init__(self) -> None:
         _check_sim(self.sim)
+        _check_medium(self.medium)
 
 
 @dataclass(frozen=True)
@@ -285,6 +298,7 @@ class IntrusionScene(_Sections):
 
     def __post_init__(self) -> None:
         _check_sim(self.sim)
+        _check_medium(self.medium)
 
 
 def _check_table(r: RFT) -> None:

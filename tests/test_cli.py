@@ -205,6 +205,7 @@ WRITERS = [
     (["run", "model.xml", "--scene", "scene.toml"], "--out", "run.h5"),
     (["run", "model.xml", "--scene", "scene.toml"], "--rrd", "run.rrd"),
     (["intrude"], "--plot", "curves.png"),
+    (["law", "li2013"], "--plot", "map.png"),
 ]
 
 
@@ -335,7 +336,7 @@ def test_swim_help_defaults_are_the_presets():
 
 
 COMMANDS = [["drag"], ["rotate"], ["scene"], ["swim"], ["optimize"], ["table"], ["fit"], ["fit-rft"], ["report"],
-            ["run"], ["intrude"],
+            ["run"], ["intrude"], ["medium"], ["law"],
             *[["bench", kind] for kind in ("backends", "robot", "accuracy", "modelling", "fit")]]
 
 

@@ -6,11 +6,13 @@ import ctypes
 import numpy as np
 import pytest
 
-from finrft import native
+from finrft import media, native
 from finrft.laws import li2013
 
 CM3 = li2013.N_PER_CM3
 RNG = np.random.default_rng(2013)
+# every catalogued medium the law can use (its coefficient set, or the generic one)
+MEDIA = [m.name for m in media.media() if m.get("zeta") or m.get("li2013_coefficients")]
 
 
 @pytest.mark.parametrize("beta, gamma, x, z", [
@@ -68,12 +70,12 @@ def test_the_folding_is_continuous():
                                atol=1e-6 * CM3)
 
 
-@pytest.mark.parametrize("name", ["GENERIC", "POPPY_SEEDS_LP", "POPPY_SEEDS_CP"])
+@pytest.mark.parametrize("name", MEDIA)
 def test_every_element_dissipates(name):
     # The power of the stress on a leading element, -|v| (alpha_x cos gamma + alpha_z sin gamma) per unit depth
     # and area, is negative over the whole range, for each coefficient set.
     beta, gamma = np.meshgrid(np.linspace(-np.pi / 2, np.pi / 2, 721), np.linspace(-np.pi / 2, np.pi / 2, 721))
-    x, z = li2013.alpha(beta, gamma, coefficients=getattr(li2013, name))
+    x, z = li2013.alpha(beta, gamma, *li2013.medium_parameters(media.medium(name)))
     assert (x * np.cos(gamma) + z * np.sin(gamma)).min() > 0
 
 
@@ -116,9 +118,9 @@ def _p(array):
     return array.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
 
 
-@pytest.mark.parametrize("name", ["GENERIC", "POPPY_SEEDS_CP"])
+@pytest.mark.parametrize("name", ["generic", "poppy_seeds_cp"])
 def test_c_twin_alpha_equals_numpy(library, name):
-    coefficients = getattr(li2013, name)
+    coefficients = li2013.medium_parameters(media.medium(name))[1]
     coef = np.array(coefficients.values())
     out = np.zeros(2)
     beta, gamma = RNG.uniform(-2 * np.pi, 2 * np.pi, (2, 2000))

@@ -13,6 +13,10 @@ name. Its module provides
   its parameters' numbers written out.
 
 Modules of another KIND (a surface law, say) live here too and are not segment laws.
+
+A law of any kind may also draw its stress map (``finrft law NAME``): ``stress_map(medium) -> dict`` of flat arrays
+of one length, one entry per grid point, for a catalogued medium (`finrft.media.Material`): first two grid axes
+named ``*_deg`` (the figure's x then y axis), then its fields, each with its unit in the module's ``MAP_UNITS``.
 """
 
 from __future__ import annotations
@@ -31,10 +35,19 @@ Law = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 
 
 @functools.cache
+def _modules() -> dict[str, ModuleType]:
+    return {info.name: importlib.import_module(f"{__name__}.{info.name}") for info in pkgutil.iter_modules(__path__)
+            if not info.name.startswith("_")}
+
+
+@functools.cache
 def _registry() -> dict[str, ModuleType]:
-    modules = (importlib.import_module(f"{__name__}.{info.name}") for info in pkgutil.iter_modules(__path__)
-               if not info.name.startswith("_"))
-    return {module.__name__.rpartition(".")[2]: module for module in modules if getattr(module, "KIND", "") == SEGMENT}
+    return {name: module for name, module in _modules().items() if getattr(module, "KIND", "") == SEGMENT}
+
+
+def mapped() -> dict[str, ModuleType]:
+    """The laws of any kind that draw their stress map, by name (see the module's docstring)."""
+    return {name: module for name, module in sorted(_modules().items()) if hasattr(module, "stress_map")}
 
 
 def names() -> tuple[str, ...]:

@@ -31,6 +31,8 @@ from dataclasses import astuple, dataclass
 
 import numpy as np
 
+from ..scene import SceneError
+
 N_PER_CM3 = 1e6  # N/m^3 in one N/cm^3
 
 
@@ -60,10 +62,8 @@ class Coefficients:
 # Generic coefficients of Li et al. 2013 (their Table S2), as transcribed identically by independent public codes;
 # scaled by zeta = alpha_z(0, pi/2) of the medium in N/cm^3.
 GENERIC = Coefficients.per_cm3(0.206, 0.169, 0.212, 0.358, 0.055, -0.124, 0.253, 0.007, 0.088)
-# Poppy seeds, loosely (LP) and closely (CP) packed, used with zeta = 1. Unverified: transcribed from third-party
-# code, not checked against the paper's Table S2.
-POPPY_SEEDS_LP = Coefficients.per_cm3(0.051, 0.047, 0.053, 0.083, 0.020, -0.026, 0.057, 0.000, 0.025)
-POPPY_SEEDS_CP = Coefficients.per_cm3(0.094, 0.092, 0.092, 0.151, 0.035, -0.039, 0.086, 0.018, 0.046)
+# The coefficient sets of named media (poppy seeds loosely and closely packed, ...) are in the media catalogue
+# (finrft/media.toml), with their sources: `medium_parameters`.
 
 
 def alpha(beta, gamma, zeta: float = 1.0, coefficients: Coefficients = GENERIC) -> tuple[np.ndarray, np.ndarray]:
@@ -119,3 +119,32 @@ def element_forces(normal: np.ndarray, velocity: np.ndarray, depth: np.ndarray, 
     force[..., :2] = -(scale * alpha_x)[..., None] * r
     force[..., 2] = scale * alpha_z
     return force
+
+
+def medium_parameters(medium) -> tuple[float, Coefficients]:
+    """zeta and the coefficients of a catalogued medium (`finrft.media.Material`): its own coefficient set if it
+    has one (else the generic set), scaled by its zeta if it has one (else 1)."""
+    zeta, own = medium.get("zeta"), medium.get("li2013_coefficients")
+    if zeta is None and own is None:
+        raise SceneError(f"medium {medium.name!r} has neither zeta nor li2013_coefficients (not found in the "
+                         f"literature searched), so the li2013 law cannot use it")
+    if own is not None and len(own.value) != len(GENERIC.values()):
+        raise SceneError(f"medium {medium.name!r}: li2013_coefficients must be {len(GENERIC.values())} numbers "
+                         f"(A00 A10 B11 B01 B-11 C11 C01 C-11 D10), got {len(own.value)}")
+    if zeta is not None and not zeta.value > 0:
+        raise SceneError(f"medium {medium.name!r}: zeta must be > 0, got {zeta.value!r}")
+    return (1.0 if zeta is None else zeta.value), (GENERIC if own is None else Coefficients.per_cm3(*own.value))
+
+
+# The stress map's grid: Li 2013 Fig. 2's range, both angles in [-90, 90] deg, at 5 deg.
+MAP_DEG = np.arange(-90, 91, 5)
+MAP_UNITS = {"alpha_x": "N/cm^3", "alpha_z": "N/cm^3"}
+
+
+def stress_map(medium) -> dict[str, np.ndarray]:
+    """alpha_x and alpha_z (N/cm^3) of a catalogued medium over its grid (beta_deg, gamma_deg), flat arrays,
+    beta the outer index: the law's picture, as in Li 2013 Fig. 2."""
+    zeta, coefficients = medium_parameters(medium)
+    beta, gamma = (a.ravel().astype(float) for a in np.meshgrid(MAP_DEG, MAP_DEG, indexing="ij"))
+    alpha_x, alpha_z = alpha(np.radians(beta), np.radians(gamma), zeta, coefficients)
+    return {"beta_deg": beta, "gamma_deg": gamma, "alpha_x": alpha_x / N_PER_CM3, "alpha_z": alpha_z / N_PER_CM3}

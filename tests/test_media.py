@@ -1,0 +1,164 @@
+"""The media catalogue (every value with a unit and a source, nothing made up), `finrft medium`, and `finrft law`:
+the stress map equal to the law at its grid points, its figure, and bad input; a named medium in attach and in
+scenes."""
+
+import json
+import math
+
+import mujoco
+import numpy as np
+import pytest
+
+from finrft import media
+from finrft.attach import attach
+from finrft.cli import main
+from finrft.intrusion import intrude
+from finrft.laws import li2013
+from finrft.scene import IntrusionScene, SceneError, scene_from_dict
+
+CM3 = li2013.N_PER_CM3
+# alpha_z(0, 90 deg) of the poppy-seed sets: the sum of their A and B coefficients (Li 2013's zeta of a medium)
+POPPY_ZETA = {"poppy_seeds_lp": 0.051 + 0.047 + 0.053 + 0.083 + 0.020,
+              "poppy_seeds_cp": 0.094 + 0.092 + 0.092 + 0.151 + 0.035}
+
+
+def _last_json(out: str):
+    return json.loads(out.strip().splitlines()[-1])
+
+
+def test_the_catalogue_names_the_asked_media_each_value_with_its_source():
+    assert {"generic", "poppy_seeds_lp", "poppy_seeds_cp", "glass_beads_3mm", "glass_beads_4mm"} <= set(media.names())
+    for m in media.media():
+        assert m.description
+        for key, value in m.values.items():
+            assert value.source.strip() and value.status in ("", media.UNVERIFIED), (m.name, key)
+        if m.missing:
+            assert m.note or m.name.startswith("poppy"), m.name  # where it was looked for
+    assert media.medium("generic").get("zeta").value == 1.0
+    # no li2013 values were found for glass beads: none is made up, and the law refuses them
+    for name in ("glass_beads_3mm", "glass_beads_4mm"):
+        assert {"zeta", "li2013_coefficients"} <= set(media.medium(name).missing)
+        with pytest.raises(SceneError, match="neither zeta nor li2013_coefficients"):
+            li2013.medium_parameters(media.medium(name))
+
+
+@pytest.mark.parametrize("name", sorted(POPPY_ZETA))
+def test_poppy_seed_sets_are_absolute_and_unverified(name):
+    m = media.medium(name)
+    assert m.get("li2013_coefficients").status == media.UNVERIFIED
+    zeta, coefficients = li2013.medium_parameters(m)
+    assert zeta == 1.0
+    assert li2013.alpha(0.0, math.pi / 2, zeta, coefficients)[1] / CM3 == pytest.approx(POPPY_ZETA[name], abs=1e-12)
+
+
+def test_an_unknown_medium_names_the_known_ones():
+    with pytest.raises(SceneError, match="unknown medium 'sand'.*generic, poppy_seeds_lp"):
+        media.medium("sand")
+
+
+@pytest.mark.parametrize("entry, message", [
+    ({"description": "d", "zeta": {"value": 1.0}}, "names its source"),
+    ({"description": "d", "zeta": {"value": 1.0, "source": " "}}, "names its source"),
+    ({"description": "d", "zeta": {"value": 1.0, "source": "s", "status": "guessed"}}, "status must be"),
+    ({"description": "d", "zeta": {"value": "1", "source": "s"}}, "finite number"),
+    ({"description": "d", "zeta": {"value": float("nan"), "source": "s"}}, "finite number"),
+    ({"description": "d", "colour": {"value": 1.0, "source": "s"}}, "unknown quantity 'colour'"),
+    ({"description": "d", "missing": ["zeta"], "zeta": {"value": 1.0, "source": "s"}}, "both given and missing"),
+    ({"zeta": {"value": 1.0, "source": "s"}}, "needs a description"),
+])
+def test_a_bad_catalogue_is_refused(entry, message):
+    with pytest.raises(SceneError, match=message):
+        media.parse({"units": {"zeta": "N/cm^3"}, "media": {"m": entry}})
+
+
+def test_medium_list_json_shows_units_and_sources(capsys):
+    assert main(["medium", "--list", "--json"]) == 0
+    out = capsys.readouterr().out
+    listed = _last_json(out)
+    assert [m["name"] for m in listed] == list(media.names())
+    beads = next(m for m in listed if m["name"] == "glass_beads_3mm")
+    assert beads["values"]["grain_diameter"] == {"value": pytest.approx(3.0), "unit": "mm",
+                                                 "source": media.medium("glass_beads_3mm").get("grain_diameter").source,
+                                                 "status": ""}
+    assert "zeta = 1 N/cm^3" in out and "(unverified)" in out and "not found: zeta" in out
+
+
+def test_law_li2013_json_is_the_law_on_its_grid(capsys):
+    assert main(["law", "li2013", "--json", "--quiet"]) == 0
+    data = _last_json(capsys.readouterr().out)
+    assert list(data) == ["law", "beta_deg", "gamma_deg", "alpha_x", "alpha_z"] and data["law"] == "li2013"
+    beta, gamma = np.array(data["beta_deg"]), np.array(data["gamma_deg"])
+    assert all(len(data[k]) == 37 * 37 for k in ("beta_deg", "gamma_deg", "alpha_x", "alpha_z"))
+    # every (beta, gamma) pair of [-90, 90] deg at 5 deg, once
+    assert {(b, g) for b, g in zip(beta, gamma)} == {(b, g) for b in range(-90, 91, 5) for g in range(-90, 91, 5)}
+    for i in np.random.default_rng(5).choice(len(beta), 40, replace=False):
+        x, z = li2013.alpha(math.radians(beta[i]), math.radians(gamma[i]))
+        assert (data["alpha_x"][i], data["alpha_z"][i]) == pytest.approx((x / CM3, z / CM3), abs=1e-12)
+    at = {(b, g): (x, z) for b, g, x, z in zip(beta, gamma, data["alpha_x"], data["alpha_z"])}
+    assert at[(0, 90)][1] == pytest.approx(1.000, abs=1e-12)   # zeta of the generic medium
+    assert at[(0, -90)][1] == pytest.approx(-0.250, abs=1e-12)  # Li 2013's extraction
+    assert at[(90, 0)][0] == pytest.approx(0.370, abs=1e-12)
+
+
+def test_law_li2013_in_a_named_medium(capsys):
+    assert main(["law", "li2013", "--medium", "poppy_seeds_cp", "--json", "--quiet"]) == 0
+    data = _last_json(capsys.readouterr().out)
+    i = next(i for i, (b, g) in enumerate(zip(data["beta_deg"], data["gamma_deg"])) if (b, g) == (0, 90))
+    assert data["alpha_z"][i] == pytest.approx(POPPY_ZETA["poppy_seeds_cp"], abs=1e-12)
+
+
+def test_law_plot_is_written_and_not_overwritten(tmp_path, capsys):
+    png = tmp_path / "map.png"
+    assert main(["law", "li2013", "--plot", str(png), "--quiet"]) == 0
+    import matplotlib.image
+    height, width, _ = matplotlib.image.imread(png).shape
+    assert width > 800 and height > 300  # two panels side by side
+    assert main(["law", "li2013", "--plot", str(png)]) == 2
+    assert "exists" in capsys.readouterr().err
+    assert main(["law", "li2013", "--plot", str(png), "--force", "--quiet"]) == 0
+    assert [p.name for p in tmp_path.iterdir()] == ["map.png"]  # no temporary file left
+
+
+@pytest.mark.parametrize("argv, named", [
+    (["law", "nope", "--plot", "m.png"], "unknown law 'nope'"),
+    (["law", "li2013", "--medium", "sand", "--plot", "m.png"], "unknown medium 'sand'"),
+    (["law", "li2013", "--medium", "glass_beads_3mm", "--plot", "m.png"], "glass_beads_3mm"),
+    (["law", "li2013", "--plot", "m.pdf"], "must end in .png"),
+    (["medium", "sand"], "unknown medium 'sand'"),
+    (["medium"], "--list"),
+])
+def test_bad_input_is_one_line_exit_2_and_writes_nothing(argv, named, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(argv) == 2
+    captured = capsys.readouterr()
+    assert len(captured.err.strip().splitlines()) == 1 and named in captured.err and not captured.out
+    assert not list(tmp_path.iterdir())
+
+
+BOX = """<mujoco><worldbody><body name="plate" pos="0 0 -0.05"><freejoint/>
+<geom type="box" size="0.02 0.03 0.001"/></body></worldbody></mujoco>"""
+
+
+def test_attach_takes_a_named_medium():
+    attached = attach(mujoco.MjSpec.from_string(BOX), "plate", medium="poppy_seeds_lp", backend="python")
+    assert attached.zeta == 1.0
+    assert attached.coefficients == li2013.medium_parameters(media.medium("poppy_seeds_lp"))[1]
+    assert attach(mujoco.MjSpec.from_string(BOX), "plate", backend="python").coefficients == li2013.GENERIC
+    with pytest.raises(SceneError, match="one or the other"):
+        attach(mujoco.MjSpec.from_string(BOX), "plate", medium="generic", zeta=0.5)
+    with pytest.raises(SceneError, match="unknown medium"):
+        attach(mujoco.MjSpec.from_string(BOX), "plate", medium="sand")
+
+
+def test_a_scene_names_its_medium():
+    scene = scene_from_dict({"medium": {"name": "poppy_seeds_cp"}, "plate": {"depth": 0.03}}, IntrusionScene)
+    run = intrude(scene, [0.0])[0]
+    p = scene.plate
+    deep = run.depth > 0.01
+    # a horizontal plate pushed straight down: alpha_z(0, 90 deg) of the medium x w L d
+    assert run.force_z[deep] == pytest.approx(POPPY_ZETA["poppy_seeds_cp"] * CM3 * p.width * p.length
+                                              * run.depth[deep], rel=1e-6)
+    for medium, message in [({"name": "sand"}, "unknown medium"), ({"name": "generic", "zeta": 0.5}, "leave"),
+                            ({"name": "glass_beads_4mm"}, "neither zeta")]:
+        with pytest.raises(SceneError, match=message):
+            scene_from_dict({"medium": medium}, IntrusionScene)

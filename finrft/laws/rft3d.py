@@ -31,9 +31,11 @@ Li's |alpha_z| > 0.1 (14 % with -0.02730); -0.20770 also pushes a horizontal pla
 (alpha_z = +0.101), feeding energy in. tests/test_rft3d.py measures both. The c2 entries differ by 7e-4, below what
 either test resolves.
 
-Not dissipative everywhere: with AGARWAL_2023, about 0.06 % of leading (normal, velocity) pairs drawn uniformly get
-alpha_gen . v > 0, all on upward-facing leading faces (n_z > 0.3) moving at n . v between 0.09 and 0.33 of the
-speed, where the stress is small (power at most 0.005 of a horizontal plate pushed down).
+Not dissipative everywhere: the fit's normal stress pulls outward (alpha . n > 0) on about 5 % of leading (normal,
+velocity) pairs drawn uniformly, all grazing (n . v below 0.2 of the speed). With mu_surf = 0 the force is that
+normal stress alone and feeds energy in there; with mu_surf >= 0.2 the tangential part outweighs it but on about
+0.06 % of pairs (upward-facing faces rising at n . v below 0.33 of the speed). The power fed in is at most 0.8 % of
+that of a horizontal plate pushed down at the same speed (tests/test_rft3d.py).
 """
 
 from __future__ import annotations

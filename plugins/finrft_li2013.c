@@ -82,7 +82,7 @@ FINRFT_LI2013_EXPORT void finrft_li2013_element_force(const double coef[NCOEF], 
   force[2] = scale * a[1];
 }
 
-// The 20 monomials of the 3D-RFT fit, in the order of TERMS in rft3d.py.
+// The 20 monomials of the 3D-RFT fit, in the order of terms() in rft3d.py.
 static void rft3d_terms(double p1, double p2, double p3, double t[NTERMS]) {
   const double values[NTERMS] = {1,           p1,           p2,           p3,           p1 * p1,
                                  p2 * p2,     p3 * p3,      p1 * p2,      p2 * p3,      p3 * p1,

@@ -6,7 +6,7 @@ feels the stress alpha |z| per unit area, alpha = xi_n alpha_gen, capped by the 
 
     xi_n = rho_c g (894 mu_int^3 - 386 mu_int^2 + 89 mu_int)                     N/m^3
     p1 = sin gamma,  p2 = cos beta,  p3 = cos psi cos gamma sin beta + sin gamma cos beta
-    f_k = sum_i c_k,i T_i(p1, p2, p3)    (k = 1, 2, 3; the 20 monomials of degree <= 3 in TERMS order)
+    f_k = sum_i c_k,i T_i(p1, p2, p3)    (k = 1, 2, 3; T_i the 20 monomials of `terms`)
     alpha_gen = (f1 sin beta cos psi + f2 cos gamma,  f1 sin beta sin psi,  -f1 cos beta - f2 sin gamma - f3)
 
 in the local frame (r, theta, z): z up, r the horizontal direction of the velocity, theta = z x r. gamma is the
@@ -28,7 +28,9 @@ law is a 2D RFT in the plane of motion, which should be that of Li et al. 2013: 
 its alpha_z departs from Li's generic fit by 0.123 (rms, in units of a horizontal plate pushed down) with -0.02730
 and by 0.155 with -0.20770, and the latter has the wrong sign of alpha_z on half of the extraction quadrant where
 Li's |alpha_z| > 0.1 (14 % with -0.02730); -0.20770 also pushes a horizontal plate pulled straight up upwards
-(alpha_z = +0.101), feeding energy in. tests/test_rft3d.py measures both. The c2 entries differ by 7e-4, below what
+(alpha_z = +0.101), feeding energy in. Both sets leave alpha_r 0.077 (rms) from Li's; neither is Li's fit to better than about 0.1.
+A horizontal plate pushed straight down has every T_i = 1 and alpha_gen = (0, 0, -sum(c1 + c2 + c3)): 0.87504
+with AGARWAL_2023, 1.05614 with the IsaacLab set. tests/test_rft3d.py measures all of these. The c2 entries differ by 7e-4, below what
 either test resolves.
 
 Not dissipative everywhere: the fit's normal stress pulls outward (alpha . n > 0) on about 5 % of leading (normal,

@@ -28,10 +28,10 @@ law is a 2D RFT in the plane of motion, which should be that of Li et al. 2013: 
 its alpha_z departs from Li's generic fit by 0.123 (rms, in units of a horizontal plate pushed down) with -0.02730
 and by 0.155 with -0.20770, and the latter has the wrong sign of alpha_z on half of the extraction quadrant where
 Li's |alpha_z| > 0.1 (14 % with -0.02730); -0.20770 also pushes a horizontal plate pulled straight up upwards
-(alpha_z = +0.101), feeding energy in. Both sets leave alpha_r 0.077 (rms) from Li's; neither is Li's fit to better than about 0.1.
-A horizontal plate pushed straight down has every T_i = 1 and alpha_gen = (0, 0, -sum(c1 + c2 + c3)): 0.87504
-with AGARWAL_2023, 1.05614 with the IsaacLab set. tests/test_rft3d.py measures all of these. The c2 entries differ by 7e-4, below what
-either test resolves.
+(alpha_z = +0.101), feeding energy in. Both sets leave alpha_r 0.077 (rms) from Li's; neither is Li's fit to
+better than about 0.1. The c2 entries differ by 7e-4, below what either test resolves. A horizontal plate pushed
+straight down has every T_i = 1 and alpha_gen = (0, 0, -sum(c1 + c2 + c3)): 0.87504 with AGARWAL_2023, 1.05614 with
+the IsaacLab set. tests/test_rft3d.py measures all of these.
 
 Not dissipative everywhere: the fit's normal stress pulls outward (alpha . n > 0) on about 5 % of leading (normal,
 velocity) pairs drawn uniformly, all grazing (n . v below 0.2 of the speed). With mu_surf = 0 the force is that

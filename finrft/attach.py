@@ -2,7 +2,8 @@
 elements and gives them a granular resistive force law, before the spec is compiled.
 
 Each element below the free surface (z < surface_z, gravity along -z) that leads the motion (outward normal .
-velocity > 0) takes the law's stress times its depth and area (`finrft.laws.li2013.element_forces`). The force
+velocity > 0) takes the law's stress times its depth and area (`finrft.laws.li2013.element_forces` or
+`finrft.laws.rft3d.element_forces`). The force
 appears where MuJoCo's passive forces appear, ``data.qfrc_passive``: from the native plugin ``finrft.surface``
 (plugins/finrft_li2013.c, one instance per body, the elements in its config) or, with the Python backend, from a
 passive-force callback that `Attached.installed` sets for a block and then restores.
@@ -27,10 +28,10 @@ import mujoco
 import numpy as np
 
 from . import coupling, media, native
-from .laws import li2013
+from .laws import li2013, rft3d
 from .scene import SceneError
 
-LAWS = ("li2013",)
+LAWS = ("li2013", "rft3d")
 BACKENDS = ("native", "python")
 PLUGIN = "finrft.surface"
 # More elements than this make the plugin's config and every passive-force evaluation needlessly large.
@@ -51,6 +52,20 @@ class Surface:
     area: np.ndarray
 
 
+@dataclass(frozen=True)
+class Rft3dMedium:
+    """The parameters of the `rft3d` law: critical density rho_c (kg/m^3), internal friction mu_int, and the
+    intruder's surface friction mu_surf."""
+
+    rho_c: float
+    mu_int: float
+    mu_surf: float
+
+    @property
+    def xi(self) -> float:
+        return rft3d.xi(self.rho_c, self.mu_int)
+
+
 @dataclass(frozen=True, eq=False)
 class Attached:
     """What `attach` added to a spec: the law and medium, and each body's surface elements."""
@@ -60,8 +75,18 @@ class Attached:
     surface_z: float
     element_size: float
     backend: str               # the backend in use: "native" (plugin instances in the spec) or "python"
-    coefficients: li2013.Coefficients
+    coefficients: li2013.Coefficients | rft3d.Coefficients
     surfaces: tuple[Surface, ...] = field(repr=False)
+    medium: Rft3dMedium | None = None  # rft3d only
+
+    def element_forces(self, normal: np.ndarray, velocity: np.ndarray, depth: np.ndarray, area: np.ndarray
+                       ) -> np.ndarray:
+        """The law's force on each element (world frame), as the native plugin computes it."""
+        if self.law == "rft3d":
+            m = self.medium
+            return rft3d.element_forces(normal, velocity, depth, area, m.rho_c, m.mu_int, m.mu_surf,
+                                        self.coefficients)
+        return li2013.element_forces(normal, velocity, depth, area, self.zeta, self.coefficients)
 
     @property
     def elements(self) -> dict[str, int]:
@@ -103,7 +128,7 @@ class SurfaceForces:
         mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_BODY, body, self._twist, 0)
         velocity = self._twist[3:] + np.cross(self._twist[:3], arm)
         depth = a.surface_z - (d.xpos[body, 2] + arm[:, 2])
-        return li2013.element_forces(normal, velocity, depth, surface.area, a.zeta, a.coefficients), arm
+        return a.element_forces(normal, velocity, depth, surface.area), arm
 
     def __call__(self, m: mujoco.MjModel, d: mujoco.MjData) -> None:
         for body, surface in self.bodies:
@@ -114,23 +139,34 @@ class SurfaceForces:
 
 def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str, law: str = "li2013", zeta: float | None = None,
            surface_z: float = 0.0, element_size: float = 0.005, backend: str = "native",
-           coefficients: li2013.Coefficients | None = None, medium: str | None = None) -> Attached:
+           coefficients: li2013.Coefficients | rft3d.Coefficients | None = None, medium: str | None = None,
+           rho_c: float | None = None, mu_int: float | None = None, mu_surf: float | None = None) -> Attached:
     """Add granular RFT to the named bodies of ``spec`` (before it is compiled).
 
     ``law``: ``li2013`` (`finrft.laws.li2013`) with ``coefficients`` (default: the generic medium) scaled by
     ``zeta`` (default 1), or instead of both a ``medium`` of the catalogue (`finrft.media`, e.g.
-    ``"poppy_seeds_lp"``); ``surface_z``: height of the free surface, m; ``element_size``: the elements' size, m;
-    ``backend``: ``native`` (falls back to ``python``, with a warning, when the plugin cannot be loaded) or
-    ``python`` (then run the model inside ``Attached.installed``). Raises `SceneError` on bad input.
+    ``"poppy_seeds_lp"``); or ``rft3d`` (`finrft.laws.rft3d`) with ``coefficients`` (default:
+    `rft3d.AGARWAL_2023`) and the medium's critical density ``rho_c`` (kg/m^3), internal friction ``mu_int`` and
+    the bodies' surface friction ``mu_surf``, all three required; ``surface_z``: height of the free surface, m;
+    ``element_size``: the elements' size, m; ``backend``: ``native`` (falls back to ``python``, with a warning,
+    when the plugin cannot be loaded) or ``python`` (then run the model inside ``Attached.installed``). Raises
+    `SceneError` on bad input.
     """
     if medium is not None:
+        if law != "li2013":
+            raise SceneError(f"attach: the media catalogue gives li2013's parameters, not {law}'s")
         if zeta is not None or coefficients is not None:
             raise SceneError(f"attach: medium={medium!r} gives zeta and the coefficients: pass one or the other")
         zeta, coefficients = li2013.medium_parameters(media.medium(medium))
     zeta = 1.0 if zeta is None else zeta
-    coefficients = li2013.GENERIC if coefficients is None else coefficients
     names = [bodies] if isinstance(bodies, str) else list(bodies)
     _check(names, law, zeta, surface_z, element_size, backend)
+    granular = _rft3d_medium(law, rho_c, mu_int, mu_surf)
+    kind = rft3d.Coefficients if law == "rft3d" else li2013.Coefficients
+    if coefficients is None:
+        coefficients = rft3d.AGARWAL_2023 if law == "rft3d" else li2013.GENERIC
+    elif not isinstance(coefficients, kind):
+        raise SceneError(f"attach: law {law!r} takes finrft.laws.{law}.Coefficients")
     backend = native.resolve_backend(backend)
     model = spec.copy().compile()
     surfaces = []
@@ -146,7 +182,7 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str, law: str = "li2013"
         raise SceneError(f"attach: element_size = {element_size:g} m gives {total} elements, more than "
                          f"{MAX_ELEMENTS}: use a larger element_size")
     attached = Attached(law, float(zeta), float(surface_z), float(element_size), backend, coefficients,
-                        tuple(surfaces))
+                        tuple(surfaces), granular)
     if backend == "native":
         spec.activate_plugin(PLUGIN)
         for surface in surfaces:
@@ -171,13 +207,31 @@ def _check(names: list[str], law: str, zeta: float, surface_z: float, element_si
         raise SceneError(f"attach: element_size must be > 0 m, got {element_size!r}")
 
 
+def _rft3d_medium(law: str, rho_c: float | None, mu_int: float | None, mu_surf: float | None
+                  ) -> Rft3dMedium | None:
+    given = {"rho_c": rho_c, "mu_int": mu_int, "mu_surf": mu_surf}
+    if law != "rft3d":
+        named = [k for k, v in given.items() if v is not None]
+        if named:
+            raise SceneError(f"attach: {', '.join(named)} belong to law rft3d, not {law}")
+        return None
+    for key, value in given.items():
+        if value is None:
+            raise SceneError(f"attach: law rft3d needs {key}")
+        if not math.isfinite(value) or value < 0 or (value == 0 and key != "mu_surf"):
+            raise SceneError(f"attach: {key} must be {'>= 0' if key == 'mu_surf' else '> 0'}, got {value!r}")
+    return Rft3dMedium(float(rho_c), float(mu_int), float(mu_surf))  # xi_n > 0 for every mu_int > 0
+
+
 def _bind(spec: mujoco.MjSpec, attached: Attached, surface: Surface) -> None:
     elements = np.column_stack([surface.centre, surface.normal, surface.area])
     instance = spec.add_plugin(name=f"finrft_surface_{surface.body}", plugin_name=PLUGIN, active=True)
+    scale = ({"xi": repr(attached.medium.xi), "mu_surf": repr(attached.medium.mu_surf)} if attached.medium
+             else {"zeta": repr(attached.zeta)})
     instance.config = {
         "law": attached.law,
         "coefficients": " ".join(map(repr, attached.coefficients.values())),
-        "zeta": repr(attached.zeta),
+        **scale,
         "surface_z": repr(attached.surface_z),
         "elements": " ".join(map(repr, elements.ravel().tolist())),  # repr: the Python backend's exact numbers
     }

@@ -1,11 +1,15 @@
-// finrft.surface: a MuJoCo engine plugin (passive force) applying the granular RFT law of Li, Zhang & Goldman
-// 2013 to the surface elements of a body. The C twin of finrft/laws/li2013.py and of the Python backend in
-// finrft/attach.py: same formulas, same folding, same choice of plane.
+// finrft.surface: a MuJoCo engine plugin (passive force) applying a granular surface law to the surface elements
+// of a body: Li, Zhang & Goldman 2013 or the 3D-RFT of Agarwal, Goldman & Kamrin 2023. The C twin of
+// finrft/laws/li2013.py, finrft/laws/rft3d.py and of the Python backend in finrft/attach.py: same formulas, same
+// folding, same choice of plane.
 //
-// One instance per body (finrft.attach makes them). Config, all required:
-//   law           "li2013"
-//   coefficients  the fit's nine coefficients A00 A10 B11 B01 B-11 C11 C01 C-11 D10, N/m^3
-//   zeta          > 0, the medium's scale
+// One instance per body (finrft.attach makes them). Config, all required for its law:
+//   law           "li2013" or "rft3d"
+//   coefficients  li2013: the fit's nine coefficients A00 A10 B11 B01 B-11 C11 C01 C-11 D10, N/m^3;
+//                 rft3d: the fit's c1, c2, c3 (20 each, dimensionless)
+//   zeta          li2013: > 0, the medium's scale
+//   xi            rft3d: > 0, the medium's scale xi_n, N/m^3
+//   mu_surf       rft3d: >= 0, the intruder's surface friction
 //   surface_z     m, height of the free surface (gravity along -z)
 //   elements      "cx cy cz nx ny nz area ..." per element: centre and outward unit normal in the body frame, m^2
 //
@@ -26,6 +30,8 @@
 #endif
 
 #define NCOEF 9
+#define NTERMS 20
+#define NCOEF_RFT3D (3 * NTERMS)
 // Below this fraction of the speed, a velocity's horizontal part is taken as none (as VERTICAL in li2013.py).
 #define VERTICAL 1e-12
 
@@ -76,15 +82,59 @@ FINRFT_LI2013_EXPORT void finrft_li2013_element_force(const double coef[NCOEF], 
   force[2] = scale * a[1];
 }
 
+// The 20 monomials of the 3D-RFT fit, in the order of terms() in rft3d.py.
+static void rft3d_terms(double p1, double p2, double p3, double t[NTERMS]) {
+  const double values[NTERMS] = {1,           p1,           p2,           p3,           p1 * p1,
+                                 p2 * p2,     p3 * p3,      p1 * p2,      p2 * p3,      p3 * p1,
+                                 p1 * p1 * p1, p2 * p2 * p2, p3 * p3 * p3, p1 * p2 * p2, p2 * p1 * p1,
+                                 p2 * p3 * p3, p3 * p2 * p2, p3 * p1 * p1, p1 * p3 * p3, p1 * p2 * p3};
+  memcpy(t, values, sizeof(values));
+}
+
+// The 3D-RFT force on one element (world frame, z up): coefficients c1, c2, c3, the medium's scale xi (N/m^3),
+// the surface friction, outward unit normal n, velocity v, depth below the surface, area. As element_forces in
+// rft3d.py.
+FINRFT_LI2013_EXPORT void finrft_rft3d_element_force(const double coef[NCOEF_RFT3D], double xi, double mu_surf,
+                                                     const double n[3], const double v[3], double depth,
+                                                     double area, double force[3]) {
+  force[0] = force[1] = force[2] = 0;
+  if (!(depth > 0) || !(n[0] * v[0] + n[1] * v[1] + n[2] * v[2] > 0)) return;
+  double speed = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+  double u[3] = {v[0] / speed, v[1] / speed, v[2] / speed};
+  double side = n[2] < 0 ? 1 : -1;  // the plate's lower face
+  double low[3] = {side * n[0], side * n[1], side * n[2]};
+  double t[NTERMS], f[3] = {0, 0, 0};
+  rft3d_terms(-u[2], -low[2], low[0] * u[0] + low[1] * u[1] + low[2] * u[2], t);
+  for (int k = 0; k < 3; k++)
+    for (int i = 0; i < NTERMS; i++) f[k] += coef[NTERMS * k + i] * t[i];
+  double stress[3], normal_part[3], tangential[3];
+  for (int i = 0; i < 3; i++) stress[i] = f[0] * low[i] + f[1] * u[i];
+  stress[2] -= f[2];
+  double along = stress[0] * n[0] + stress[1] * n[1] + stress[2] * n[2];
+  for (int i = 0; i < 3; i++) {
+    normal_part[i] = along * n[i];
+    tangential[i] = stress[i] - normal_part[i];
+  }
+  double cap = mu_surf * sqrt(normal_part[0] * normal_part[0] + normal_part[1] * normal_part[1] +
+                              normal_part[2] * normal_part[2]);
+  double size = sqrt(tangential[0] * tangential[0] + tangential[1] * tangential[1] + tangential[2] * tangential[2]);
+  double kept = size > cap ? cap / size : 1;
+  double scale = xi * area * depth;
+  for (int i = 0; i < 3; i++) force[i] = scale * (normal_part[i] + kept * tangential[i]);
+}
+
+enum { LAW_LI2013, LAW_RFT3D };
+
 typedef struct {
-  double coef[NCOEF];
-  double zeta, surface_z;
+  int law;
+  double coef[NCOEF_RFT3D];  // the first NCOEF for li2013
+  double zeta, xi, mu_surf, surface_z;
   int body;
   int n;
   double* element;  // n x 7: centre, normal (body frame), area
 } SurfaceData;
 
-static const char* kSurfaceAttributes[] = {"law", "coefficients", "zeta", "surface_z", "elements"};
+static const char* kSurfaceAttributes[] = {"law", "coefficients", "zeta", "xi", "mu_surf", "surface_z", "elements"};
 
 static void surface_free(SurfaceData* p) {
   if (!p) return;
@@ -121,26 +171,45 @@ static int read_scalar(const mjModel* m, int instance, const char* key, double* 
 
 static int surface_init(const mjModel* m, mjData* d, int instance) {
   const char* law = mj_getPluginConfig(m, instance, "law");
-  if (!law || strcmp(law, "li2013")) {
-    mju_warning("finrft.surface: config 'law' must be 'li2013', got '%s'", law ? law : "");
+  int rft3d = law && !strcmp(law, "rft3d");
+  if (!law || (strcmp(law, "li2013") && !rft3d)) {
+    mju_warning("finrft.surface: config 'law' must be 'li2013' or 'rft3d', got '%s'", law ? law : "");
     return -1;
   }
   SurfaceData* p = (SurfaceData*)calloc(1, sizeof(SurfaceData));
   if (!p) return -1;
+  p->law = rft3d ? LAW_RFT3D : LAW_LI2013;
+  int ncoef = rft3d ? NCOEF_RFT3D : NCOEF;
   const char* coef = mj_getPluginConfig(m, instance, "coefficients");
-  if (!coef || read_numbers(coef, p->coef, NCOEF) != NCOEF) {
-    mju_warning("finrft.surface: config 'coefficients' must hold %d numbers (N/m^3)", NCOEF);
+  if (!coef || read_numbers(coef, p->coef, ncoef) != ncoef) {
+    mju_warning("finrft.surface: config 'coefficients' must hold %d numbers for law '%s'", ncoef, law);
     surface_free(p);
     return -1;
   }
-  if (read_scalar(m, instance, "zeta", &p->zeta) || read_scalar(m, instance, "surface_z", &p->surface_z)) {
+  if (read_scalar(m, instance, "surface_z", &p->surface_z)) {
     surface_free(p);
     return -1;
   }
-  if (!(p->zeta > 0)) {
-    mju_warning("finrft.surface: config 'zeta' must be > 0");
-    surface_free(p);
-    return -1;
+  if (rft3d) {
+    if (read_scalar(m, instance, "xi", &p->xi) || read_scalar(m, instance, "mu_surf", &p->mu_surf)) {
+      surface_free(p);
+      return -1;
+    }
+    if (!(p->xi > 0) || !(p->mu_surf >= 0)) {
+      mju_warning("finrft.surface: config 'xi' must be > 0 and 'mu_surf' >= 0");
+      surface_free(p);
+      return -1;
+    }
+  } else {
+    if (read_scalar(m, instance, "zeta", &p->zeta)) {
+      surface_free(p);
+      return -1;
+    }
+    if (!(p->zeta > 0)) {
+      mju_warning("finrft.surface: config 'zeta' must be > 0");
+      surface_free(p);
+      return -1;
+    }
   }
   p->body = -1;
   for (int b = 0; b < m->nbody; b++) {
@@ -200,7 +269,10 @@ static void surface_compute(const mjModel* m, mjData* d, int instance, int capab
     if (!(depth > 0)) continue;
     mju_cross(v, twist, arm);
     mju_addTo3(v, twist + 3);
-    finrft_li2013_element_force(p->coef, p->zeta, normal, v, depth, e[6], f);
+    if (p->law == LAW_RFT3D)
+      finrft_rft3d_element_force(p->coef, p->xi, p->mu_surf, normal, v, depth, e[6], f);
+    else
+      finrft_li2013_element_force(p->coef, p->zeta, normal, v, depth, e[6], f);
     mju_addTo3(total, f);
     mju_cross(moment, arm, f);
     mju_addTo3(torque, moment);

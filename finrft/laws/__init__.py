@@ -88,8 +88,8 @@ def warn_if_feeds_energy(scene: Any) -> None:
     reason = "" if _warned else feeds_energy(scene)
     if reason:
         _warned.append(reason)
-        warnings.warn(f"the scene's RFT law '{scene.rft.law}' can feed energy in: {reason}; results record it as "
-                      f"law_feeds_energy", FeedsEnergy, stacklevel=2)
+        warnings.warn(f"RFT law '{scene.rft.law}' feeds energy in: {reason} (kept to reproduce published runs; "
+                      f"result files record it as law_feeds_energy)", FeedsEnergy, stacklevel=2)
 
 
 def components(v: np.ndarray, x_axis: np.ndarray, y_axis: np.ndarray,

@@ -31,8 +31,7 @@ def feeds_energy(params: dict[str, float]) -> str:
     """Why the law can push a segment along its own motion (F.v > 0), or "" when it dissipates at every velocity:
     per unit speed its power is -(f_perp (v^.y^)^2 + f_par (v^.x^)^2), so either coefficient < 0 feeds energy in."""
     if params["f_par"] < 0:
-        return (f"f_par = {params['f_par']:g} N < 0: the tangential force pushes a segment along its axial motion "
-                f"(the paper's model)")
+        return f"f_par = {params['f_par']:g} N < 0 pushes a segment along its axial motion"
     if params["f_perp"] < 0:
-        return f"f_perp = {params['f_perp']:g} N < 0: the normal force pushes a segment along its sideways motion"
+        return f"f_perp = {params['f_perp']:g} N < 0 pushes a segment along its sideways motion"
     return ""

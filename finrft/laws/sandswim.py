@@ -66,8 +66,7 @@ def feeds_energy(params: dict[str, float]) -> str:
     c_s, c_f, gamma0 = params["c_s"], params["c_f"], params["gamma0"]
     k = math.cos(gamma0) / math.sin(gamma0)
     if c_f < 0:
-        return f"c_f = {c_f:g} N < 0: the drag along the motion is reversed"
+        return f"c_f = {c_f:g} N < 0 pushes a segment along its motion"
     if c_s * k + c_f < 0:
-        return (f"c_s cot(gamma0) + c_f = {c_s * k + c_f:g} N < 0: the normal force pushes a segment along a "
-                f"slight sideways motion")
+        return f"c_s cot(gamma0) + c_f = {c_s * k + c_f:g} N < 0 pushes a segment along a slight sideways motion"
     return ""

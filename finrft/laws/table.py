@@ -68,8 +68,8 @@ def feeds_energy(params: dict[str, ForceTable]) -> str:
               + np.interp(attack, samples, table.f_par) * np.sin(np.radians(90.0 - attack_deg)))  # cos, 0 at 90
     worst = int(np.argmin(resist))
     if resist[worst] < 0:
-        return (f"at attack {attack_deg[worst]:g} deg the table's forces push a segment along its motion "
-                f"(F.v/|v| = {-resist[worst]:.3g} N)")
+        return (f"the table pushes a segment along its motion at attack {attack_deg[worst]:g} deg "
+                f"({-resist[worst]:.3g} N)")
     return ""
 
 

@@ -15,10 +15,12 @@ import contextlib
 import multiprocessing
 import os
 import signal
+import warnings
 from concurrent.futures import Executor, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any, Callable, Iterator, Sequence, TypeVar
 
+from . import laws
 from .convergence import ErrorLimits
 from .drive import Drive
 from .experiment import Experiment, Result, run
@@ -40,8 +42,9 @@ def default_workers() -> int:
 
 def _ignore_interrupt() -> None:
     # Ctrl-C reaches every process in the terminal's group: the parent handles it and shuts the pool down, a
-    # worker would only print a traceback.
+    # worker would only print a traceback. Likewise the parent says that a law feeds energy in (`map_jobs`).
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    warnings.simplefilter("ignore", laws.FeedsEnergy)
 
 
 def local_executor(workers: int | None = None) -> ProcessPoolExecutor:
@@ -62,6 +65,10 @@ def map_jobs(fn: Callable[[T], R], jobs: Sequence[T], *, workers: int | None = N
     jobs = list(jobs)
     results: list[R] = []
     with pool_for(executor, 1 if len(jobs) <= 1 else workers) as pool:
+        if pool is not None:
+            for job in jobs:
+                for part in job if isinstance(job, tuple) else (job,):
+                    laws.warn_if_feeds_energy(part)
         pending = [pool.submit(fn, job) for job in jobs] if pool is not None else jobs
         try:
             for item in pending:

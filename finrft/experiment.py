@@ -17,6 +17,7 @@ from typing import Any, Callable, Protocol
 import mujoco
 import numpy as np
 
+from . import laws
 from .convergence import ErrorLimits, Estimated, checked, max_difference, paired, require_finite
 from .coupling import PythonCoupling, installed
 from .drive import Drive
@@ -182,7 +183,9 @@ def run(experiment: Experiment, scene: Any, *, progress: Callable[[float], None]
     """Run an experiment on a scene, with an estimate of its discretisation error (``result.error_estimate``,
     from a companion run: see finrft.convergence). Raises SimulationUnstable rather than return a diverged run,
     and InaccurateResult when the estimate exceeds ``max_error`` (None: report it only). ``estimate_error=False``
-    skips the estimate, for studies that measure the error themselves."""
+    skips the estimate, for studies that measure the error themselves. A scene whose law can feed energy in (the
+    paper's model) runs, with a warning once per process (`laws.FeedsEnergy`)."""
+    laws.warn_if_feeds_energy(scene)
     return checked(experiment.build, lambda s, built, p, companion: _once(experiment, s, built, p, companion),
                    scene, progress, max_error, estimate_error)
 

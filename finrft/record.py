@@ -17,13 +17,14 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
+from . import laws
 from .experiment import DISPLAY, Result
 from .files import atomic_path, provenance
 from .scene import to_toml
 
 # Written by write_h5 itself; extra_attrs may not replace them, or a file could contradict its own data.
 _ROOT_ATTRS = ("schema", "scene_toml", "scene_json", "drive_json", "cycles", "summary_json", "finrft_version",
-               "mujoco_version", "numpy_version", "created_utc", "sign_convention")
+               "mujoco_version", "numpy_version", "created_utc", "sign_convention", "law_feeds_energy")
 
 
 def _provenance(scene: Any, summary: dict[str, Any]) -> dict[str, Any]:
@@ -39,7 +40,8 @@ def _provenance(scene: Any, summary: dict[str, Any]) -> dict[str, Any]:
 def write_h5(run: Result, path: str | Path, *, extra_attrs: dict[str, Any] | None = None) -> None:
     """Write any experiment's result to HDF5, atomically: its series at the root with SI ``units`` and a
     ``description`` (the per-sample ones on the dimension scale ``time``), the scene, the experiment's parameters
-    and the summary as root attributes. ``extra_attrs`` are added to the root attributes."""
+    and the summary as root attributes, with ``law_feeds_energy``: why the scene's segment law can feed energy in,
+    or "" (also for a scene without one). ``extra_attrs`` are added to the root attributes."""
     extra = dict(extra_attrs or {})
     clash = sorted(set(extra) & set(_ROOT_ATTRS))
     if clash:
@@ -59,7 +61,8 @@ def write_h5(run: Result, path: str | Path, *, extra_attrs: dict[str, Any] | Non
                 ds.dims[0].label = "time"
                 ds.dims[0].attach_scale(t)
         f.attrs.update({"schema": experiment.schema, **_provenance(run.scene, run.summary()), **experiment.attrs(),
-                        "sign_convention": experiment.sign_convention, **extra})
+                        "sign_convention": experiment.sign_convention, "law_feeds_energy": laws.feeds_energy(run.scene),
+                        **extra})
 
 
 def _stream(path: Path) -> rr.RecordingStream:

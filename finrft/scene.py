@@ -73,13 +73,20 @@ class Plate(Chain):
 
 @dataclass(frozen=True)
 class RFT:
-    law: str = _f("paper", "", "paper: direction-cosine law; table: F_perp(theta), F_par(theta) from a CSV",
-                  choices=laws.names)
+    law: str = _f("paper", "", "paper: direction-cosine law; table: F_perp(theta), F_par(theta) from a CSV; "
+                  "sandswim: the sand-swimming law of Maladen et al. 2009", choices=laws.names)
     f_perp: float = _f(1.2, "N", "normal force coefficient per segment (paper law); < 0 would pull the plate along",
                        minimum=0.0, exclusive=False)
     f_par: float = _f(-0.2, "N", "tangential force coefficient per segment (paper law; < 0 feeds energy in)")
     v_reg: float = _f(0.001, "m/s", "speed below which the rate-independent force fades out (tanh)", minimum=0.0)
     table: str = _f("", "", "table law: CSV with columns attack_deg, f_perp_N, f_par_N (relative to the scene file)")
+    c_s: float = _f(0.0, "N", "sandswim law: C_S per segment (the medium's normal-force scale)", minimum=0.0,
+                    exclusive=False)
+    c_f: float = _f(0.0, "N", "sandswim law: C_F per segment (the medium's friction-like drag)", minimum=0.0,
+                    exclusive=False)
+    gamma0: float = _f(0.0, "rad", "sandswim law: gamma0, how fast F_perp saturates with the angle of motion",
+                       minimum=0.0, exclusive=False, maximum=math.pi / 2,
+                       why_maximum="beyond it the normal force would push a segment along its motion")
 
 
 @dataclass(frozen=True)
@@ -236,7 +243,7 @@ class Scene(_Sections):
     sim: Sim = field(default_factory=Sim)
 
     def __post_init__(self) -> None:
-        _check_table(self.rft)
+        _check_law(self.rft)
         _check_sim(self.sim)
 
 
@@ -255,7 +262,7 @@ class RobotScene(_Sections):
     sim: Sim = field(default_factory=Sim)
 
     def __post_init__(self) -> None:
-        _check_table(self.rft)
+        _check_law(self.rft)
         _check_sim(self.sim)
         g = self.gait
         for key in ("theta1", "theta2"):
@@ -301,9 +308,12 @@ class IntrusionScene(_Sections):
         _check_medium(self.medium)
 
 
-def _check_table(r: RFT) -> None:
+def _check_law(r: RFT) -> None:
     if r.law == "table" and not r.table:
         raise SceneError("rft.law = 'table' needs rft.table, the path of a CSV with attack_deg, f_perp_N, f_par_N")
+    if r.law == "sandswim" and not (r.c_s > 0 and r.c_f > 0 and r.gamma0 > 0):
+        raise SceneError("rft.law = 'sandswim' needs rft.c_s > 0, rft.c_f > 0 (N per segment) and "
+                         "0 < rft.gamma0 <= pi/2 (rad), the medium's fitted values: none are built in")
 
 
 PRESETS: dict[type, tuple[str, ...]] = {Scene: ("paper", "physical"), RobotScene: ("paper", "physical")}

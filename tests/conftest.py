@@ -17,3 +17,17 @@ def responsive(paper: Scene) -> Scene:
     stop would need a step under 50 us for 0.5 deg, see test_limit_stop_holds)."""
     return paper.replace(**{"plate.segment_inertia": 1e-2, "plate.rod_inertia": 1e-2, "plate.damping": 0.2,
                             "sim.dt": 2.5e-4})
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _energy_warning_given():
+    """The presets' law feeds energy in (f_par < 0), which a run says once per process: say it before any test, so
+    that no test's stderr depends on which ran first (tests of the warning give it a fresh process state)."""
+    from finrft import laws
+    laws._warned.append("the presets' f_par < 0")
+
+
+@pytest.fixture
+def errors_only():
+    """A subprocess's stderr without that once-per-process warning, for tests of other messages."""
+    return lambda err: "".join(line for line in err.splitlines(keepends=True) if "feeds energy in" not in line)

@@ -277,15 +277,15 @@ def _run_cli(*argv: str, **options) -> subprocess.Popen:
                             stderr=subprocess.PIPE, text=True, cwd=OUTSIDE, **options)
 
 
-def test_closed_stdout_is_no_traceback():
+def test_closed_stdout_is_no_traceback(errors_only):
     # finrft swim --json | head -c 10: the reader goes away before finrft writes.
     done = _run_cli("swim", "--json")
     done.stdout.close()
-    err = done.stderr.read()
+    err = errors_only(done.stderr.read())
     assert done.wait() == 141 and err == ""
 
 
-def test_interrupt_is_one_line_and_exit_130():
+def test_interrupt_is_one_line_and_exit_130(errors_only):
     code = ("import sys; from finrft.cli import main; print('ready', flush=True); "
             "sys.exit(main(sys.argv[1:]))")
     run = subprocess.Popen([sys.executable, "-c", code, "drag", "--distance", "100000"], cwd=OUTSIDE,
@@ -294,7 +294,7 @@ def test_interrupt_is_one_line_and_exit_130():
     time.sleep(0.5)
     run.send_signal(signal.SIGINT)
     assert run.wait(timeout=60) == 130
-    assert run.stderr.read() == "finrft: interrupted\n"
+    assert errors_only(run.stderr.read()) == "finrft: interrupted\n"
 
 
 def _robot_preset_facts(help_text: str, name: str) -> str:

@@ -1,6 +1,7 @@
 """The RFT laws against their closed forms and each other, the registry that finds them, and each law's C twin
 against its numpy source of truth."""
 
+import math
 import sys
 
 import mujoco
@@ -9,7 +10,7 @@ import pytest
 
 from finrft import laws, models
 from finrft.coupling import PythonCoupling, installed
-from finrft.laws import paper, table
+from finrft.laws import paper, sandswim, table
 from finrft.scene import SceneError, preset
 
 F_PERP, F_PAR, V_REG = 1.2, -0.2, 1e-3
@@ -97,13 +98,75 @@ def extra_laws(tmp_path, monkeypatch):
 
 
 def test_registry_finds_the_laws_by_name_and_skips_other_modules(extra_laws):
-    assert laws.names() == ("paper", "table", "viscous")
+    assert laws.names() == ("paper", "sandswim", "table", "viscous")
     scene = preset("paper").replace(**{"rft.law": "viscous", "rft.f_perp": 2.0})  # the scene's choices follow
     v = np.array([[0.0, 1e-3, 0.0]])
     np.testing.assert_allclose(laws.bind(scene.rft)(v, *frames(np.zeros(1))), -2.0 * v / scene.rft.v_reg)
     assert laws.plugin_config(scene.rft) == {"law": "viscous", "v_reg": repr(scene.rft.v_reg), "f_perp": "2.0"}
-    with pytest.raises(SceneError, match="use one of paper, table, viscous"):
+    with pytest.raises(SceneError, match="use one of paper, sandswim, table, viscous"):
         preset("paper").replace(**{"rft.law": "surface"})
+
+
+C_S, C_F, GAMMA0 = 1.7, 0.6, np.radians(20.0)  # shapes only: no published values are built in
+
+
+def sandswim_force(v, x, y, c_s=C_S, c_f=C_F, gamma0=GAMMA0):
+    return sandswim.force(v, x, y, V_REG, c_s=c_s, c_f=c_f, gamma0=gamma0)
+
+
+def _moving_at(psi, speed=0.05):
+    """Segments along x moving in the plane at angles psi to their axis."""
+    v = speed * np.stack([np.cos(psi), np.sin(psi), 0 * psi], axis=-1)
+    return v, *frames(np.zeros_like(psi))
+
+
+def test_sandswim_is_the_papers_formula():
+    # The law's force against F_par = C_F cos psi, F_perp = C_S sin beta0 + C_F sin psi with
+    # tan beta0 = cot(gamma0) sin psi written out per angle, each opposing its part of the motion.
+    psi = np.radians(np.linspace(0.0, 90.0, 91))
+    v, x, y = _moving_at(psi)
+    ramp = np.tanh(0.05 / V_REG)
+    beta0 = np.array([math.atan(math.sin(p) / math.tan(GAMMA0)) for p in psi])
+    perp = C_S * np.sin(beta0) + C_F * np.sin(psi)
+    par = C_F * np.cos(psi)
+    force = sandswim_force(v, x, y)
+    np.testing.assert_allclose(force[:, 0], -ramp * par, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(force[:, 1], -ramp * perp, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(np.c_[perp, par], np.c_[sandswim.magnitudes(psi, C_S, C_F, GAMMA0)], atol=1e-12)
+
+
+def test_sandswim_published_shape():
+    psi = np.radians(np.linspace(0.0, 90.0, 901))
+    perp, par = sandswim.magnitudes(psi, C_S, C_F, GAMMA0)
+    # Broadside drag over axial drag: at psi = 90 deg, tan beta0 = cot gamma0, so sin beta0 = cos gamma0 (the
+    # ratio tends to (C_S + C_F) / C_F only as gamma0 -> 0).
+    assert perp[-1] / par[0] == pytest.approx((C_S * math.cos(GAMMA0) + C_F) / C_F, rel=1e-12)
+    assert perp[0] == 0.0 and par[-1] == pytest.approx(0.0, abs=1e-15) and par[0] == C_F
+    assert np.all(np.diff(perp) > 0) and np.all(np.diff(par) < 0)  # rises to its broadside value, as in the figures
+    # The steep rise at small psi that gamma0 sets: dF_perp/dpsi(0) = C_S cot gamma0 + C_F.
+    slope = (sandswim.magnitudes(1e-7, C_S, C_F, GAMMA0)[0]) / 1e-7
+    assert slope == pytest.approx(C_S / math.tan(GAMMA0) + C_F, rel=1e-6)
+
+
+def test_sandswim_without_c_s_is_isotropic_friction_and_speed_independent():
+    rng = np.random.default_rng(7)
+    v = rng.normal(size=(100, 3))
+    v *= 0.05 / np.linalg.norm(v, axis=1, keepdims=True)  # 50 v_reg: the ramp is 1
+    x, y = frames(rng.uniform(-np.pi, np.pi, 100))
+    # C_S = 0 leaves Coulomb-like drag C_F opposite the motion: the paper law with f_perp = f_par = C_F.
+    np.testing.assert_allclose(sandswim_force(v, x, y, c_s=0.0),
+                               paper.force(v, x, y, V_REG, f_perp=C_F, f_par=C_F), atol=1e-15)
+    # A frictional fluid: above v_reg the force does not depend on speed.
+    np.testing.assert_allclose(sandswim_force(10 * v, x, y), sandswim_force(v, x, y), rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(sandswim_force(-v, x, y), -sandswim_force(v, x, y), atol=1e-15)
+
+
+@pytest.mark.parametrize("values", [{}, {"rft.c_s": 1.0, "rft.c_f": 0.5}, {"rft.c_f": 0.5, "rft.gamma0": 0.3}])
+def test_sandswim_needs_its_coefficients(values):
+    with pytest.raises(SceneError, match="none are built in"):
+        preset("paper").replace(**{"rft.law": "sandswim", **values})
+    with pytest.raises(SceneError, match="rft.gamma0 must be <="):
+        preset("paper").replace(**{"rft.law": "sandswim", "rft.c_s": 1.0, "rft.c_f": 0.5, "rft.gamma0": 2.0})
 
 
 # Parameters of each registered law for the twin test (a table that is not the paper law's, so that the table
@@ -113,7 +176,8 @@ def _examples(tmp_path):
     path = tmp_path / "forces.csv"
     table.write_table(path, table.ForceTable(attack, 1.2 * np.sin(np.radians(attack)) ** 0.5,
                                              -0.3 * np.cos(np.radians(attack))))
-    return {"paper": {"rft.f_perp": 1.3, "rft.f_par": -0.4}, "table": {"rft.table": str(path)}}
+    return {"paper": {"rft.f_perp": 1.3, "rft.f_par": -0.4}, "table": {"rft.table": str(path)},
+            "sandswim": {"rft.c_s": 1.1, "rft.c_f": 0.45, "rft.gamma0": 0.4}}
 
 
 def test_every_law_has_a_c_twin_giving_the_same_forces(tmp_path):

@@ -9,6 +9,8 @@ name. Its module provides
 - ``force(v, x_axis, y_axis, v_reg, **parameters) -> (N, 3)``, pure numpy: the force (N, world frame) on N segments
   from their midpoint velocities ``v`` (N, 3), their unit axes ``x_axis`` (N, 3) and in-plane normals ``y_axis``
   (N, 3); every law fades out below the speed ``v_reg`` (the implicit methods difference it on that scale);
+- ``feeds_energy(parameters) -> str``: why the law can push a segment along its own motion (F.v > 0), or "" when
+  it dissipates at every velocity and orientation;
 - optionally ``config(parameters) -> dict[str, str]``: its keys of the native plugin's config, when they are not
   its parameters' numbers written out.
 
@@ -24,6 +26,7 @@ from __future__ import annotations
 import functools
 import importlib
 import pkgutil
+import warnings
 from types import ModuleType
 from typing import Any, Callable
 
@@ -73,6 +76,33 @@ def plugin_config(rft: Any) -> dict[str, str]:
     params = law.parameters(rft)
     own = law.config(params) if hasattr(law, "config") else {key: repr(float(value)) for key, value in params.items()}
     return {"law": rft.law, "v_reg": repr(rft.v_reg), **own}
+
+
+class FeedsEnergy(RuntimeWarning):
+    """A scene's law can feed energy in (the paper's model, say): allowed, to reproduce published runs."""
+
+
+def feeds_energy(scene: Any) -> str:
+    """Why a scene's segment law can push a segment along its own motion, or "" when it dissipates; "" too for a
+    scene without an ``[rft]`` section (a surface law's, whose dissipation its tests show)."""
+    rft = getattr(scene, "rft", None)
+    if rft is None:
+        return ""
+    law = module(rft.law)
+    return law.feeds_energy(law.parameters(rft))
+
+
+_warned: list[str] = []  # the reason this process has warned of: once is enough
+
+
+def warn_if_feeds_energy(scene: Any) -> None:
+    """Warn (FeedsEnergy) when a scene's segment law can feed energy in, once per process; anything that is not
+    such a scene passes."""
+    reason = "" if _warned else feeds_energy(scene)
+    if reason:
+        _warned.append(reason)
+        warnings.warn(f"RFT law '{scene.rft.law}' feeds energy in: {reason} (kept to reproduce published runs; "
+                      f"result files record it as law_feeds_energy)", FeedsEnergy, stacklevel=2)
 
 
 def components(v: np.ndarray, x_axis: np.ndarray, y_axis: np.ndarray,

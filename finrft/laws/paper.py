@@ -25,3 +25,13 @@ def force(v: np.ndarray, x_axis: np.ndarray, y_axis: np.ndarray, v_reg: float, f
     """(N, 3) newtons."""
     ramp, vx, vy = components(v, x_axis, y_axis, v_reg)
     return -ramp[..., None] * (f_perp * vy[..., None] * y_axis + f_par * vx[..., None] * x_axis)
+
+
+def feeds_energy(params: dict[str, float]) -> str:
+    """Why the law can push a segment along its own motion (F.v > 0), or "" when it dissipates at every velocity:
+    per unit speed its power is -(f_perp (v^.y^)^2 + f_par (v^.x^)^2), so either coefficient < 0 feeds energy in."""
+    if params["f_par"] < 0:
+        return f"f_par = {params['f_par']:g} N < 0 pushes a segment along its axial motion"
+    if params["f_perp"] < 0:
+        return f"f_perp = {params['f_perp']:g} N < 0 pushes a segment along its sideways motion"
+    return ""

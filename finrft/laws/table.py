@@ -54,6 +54,25 @@ def force(v: np.ndarray, x_axis: np.ndarray, y_axis: np.ndarray, v_reg: float, t
     return -ramp[..., None] * ((perp * np.sign(vy))[..., None] * y_axis + (par * np.sign(vx))[..., None] * x_axis)
 
 
+def feeds_energy(params: dict[str, ForceTable]) -> str:
+    """Why the law can push a segment along its own motion (F.v > 0), or "" when it dissipates at every velocity.
+
+    Per unit speed its power is -(F_perp(theta) sin theta + F_par(theta) cos theta), times the share of the velocity
+    in the segment's plane; a negative magnitude may be outweighed by the other, so the sum is checked at every
+    sample and on a 0.01 deg grid."""
+    table = params["table"]
+    attack_deg = np.union1d(np.linspace(0.0, 90.0, 9001), np.clip(table.attack_deg, 0.0, 90.0))
+    samples = np.radians(table.attack_deg)
+    attack = np.radians(attack_deg)
+    resist = (np.interp(attack, samples, table.f_perp) * np.sin(attack)
+              + np.interp(attack, samples, table.f_par) * np.sin(np.radians(90.0 - attack_deg)))  # cos, 0 at 90
+    worst = int(np.argmin(resist))
+    if resist[worst] < 0:
+        return (f"the table pushes a segment along its motion at attack {attack_deg[worst]:g} deg "
+                f"({-resist[worst]:.3g} N)")
+    return ""
+
+
 def read_table(path: str | Path) -> ForceTable:
     """Read a force table CSV (columns attack_deg, f_perp_N, f_par_N; angles increasing over 0..90 degrees)."""
     path = Path(path)

@@ -1,0 +1,92 @@
+"""Every segment law dissipates (F.v <= 0 at every velocity and orientation) with dissipative parameters, each
+law's `feeds_energy` says when it does not, and a run of a law that can feed energy in says so once on stderr and
+in its result file."""
+
+import h5py
+import numpy as np
+import pytest
+
+from finrft import laws
+from finrft.cli import main
+from finrft.laws import table
+from finrft.scene import preset
+
+V_REG = 1e-3
+SAMPLES = 20000
+
+
+def _random_segments(rng, n=SAMPLES):
+    """Velocities of every direction in 3D (out of the segment's plane too) and speed (around v_reg and far
+    above), and random orthonormal segment axes x, y."""
+    v = rng.normal(size=(n, 3)) * rng.choice([1e-4, 1e-3, 1e-2, 1.0], size=(n, 1))
+    x = rng.normal(size=(n, 3))
+    x /= np.linalg.norm(x, axis=1, keepdims=True)
+    y = np.cross(x, rng.normal(size=(n, 3)))
+    y /= np.linalg.norm(y, axis=1, keepdims=True)
+    return v, x, y
+
+
+def _max_power(name, params, seed=3):
+    """The largest F.v over random samples, and the largest |F| |v| (its scale)."""
+    v, x, y = _random_segments(np.random.default_rng(seed))
+    force = laws.module(name).force(v, x, y, V_REG, **params)
+    return np.einsum("ij,ij->i", force, v).max(), (np.linalg.norm(force, axis=1) * np.linalg.norm(v, axis=1)).max()
+
+
+def _table(perp, par, attack_deg=(0.0, 45.0, 90.0)):
+    return {"table": table.ForceTable(np.array(attack_deg), np.array(perp, float), np.array(par, float))}
+
+
+# Parameters that dissipate, per registered law; and parameters that can feed energy in.
+DISSIPATIVE = {
+    "paper": [{"f_perp": 1.2, "f_par": 0.2}, {"f_perp": 1.2, "f_par": 0.0}, {"f_perp": 0.0, "f_par": 0.7}],
+    "table": [_table([0.0, 1.0, 1.2], [0.3, 0.2, 0.0]), {"table": table.paper_table(1.2, 0.2, samples=19)},
+              # negative F_par near 90 deg, outweighed there by F_perp sin(theta)
+              _table([0.0, 1.0, 1.0], [0.2, 0.0, -0.1])],
+    "sandswim": [{"c_s": 1.7, "c_f": 0.6, "gamma0": 0.35}, {"c_s": 0.9, "c_f": 1.2, "gamma0": np.pi / 2},
+                 {"c_s": 2.0, "c_f": 0.0, "gamma0": 0.1}],
+}
+FEEDING = {
+    "paper": [{"f_perp": 1.2, "f_par": -0.2}, {"f_perp": -0.5, "f_par": 0.3}],
+    "table": [{"table": table.paper_table(1.2, -0.2, samples=19)}, _table([0.0, -0.3, 1.0], [0.3, 0.2, 0.0])],
+    "sandswim": [{"c_s": 1.0, "c_f": -0.1, "gamma0": 0.3}, {"c_s": -1.0, "c_f": 0.5, "gamma0": 0.3}],
+}
+
+
+def test_every_law_has_examples_here():
+    assert set(DISSIPATIVE) == set(FEEDING) == set(laws.names()), "every registered law needs its cases here"
+
+
+@pytest.mark.parametrize("name,params", [(n, p) for n, cases in DISSIPATIVE.items() for p in cases])
+def test_dissipative_parameters_never_feed_energy_in(name, params):
+    assert laws.module(name).feeds_energy(params) == ""
+    power, scale = _max_power(name, params)
+    assert power <= 1e-12 * scale
+
+
+@pytest.mark.parametrize("name,params", [(n, p) for n, cases in FEEDING.items() for p in cases])
+def test_feeding_parameters_are_detected_and_do_feed_energy_in(name, params):
+    assert laws.module(name).feeds_energy(params) != ""
+    power, scale = _max_power(name, params)
+    assert power > 1e-3 * scale  # the sampling finds the motion that the law pushes along
+
+
+def test_the_paper_presets_feed_energy_in_and_say_why():
+    for name in ("paper", "physical"):
+        assert "f_par" in laws.feeds_energy(preset(name))
+    assert laws.feeds_energy(preset("paper").replace(**{"rft.f_par": 0.2})) == ""
+
+
+def test_a_run_says_once_that_its_law_feeds_energy_in(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(laws, "_warned", [])  # as in a fresh process
+    fast = ["--set", "sim.dt=0.001", "--distance", "5"]
+    outs = [tmp_path / "first.h5", tmp_path / "second.h5", tmp_path / "dissipative.h5"]
+    assert main(["drag", "--out", str(outs[0]), "--quiet", *fast]) == 0
+    assert main(["drag", "--out", str(outs[1]), "--quiet", *fast]) == 0
+    assert main(["drag", "--out", str(outs[2]), "--quiet", "--set", "rft.f_par=0.2", *fast]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("finrft: warning: ") and "f_par = -0.2 N < 0" in err[0], err
+    reason = laws.feeds_energy(preset("paper"))
+    for out, expected in zip(outs, (reason, reason, "")):
+        with h5py.File(out) as f:
+            assert f.attrs["law_feeds_energy"] == expected

@@ -90,9 +90,12 @@ def extra_laws(tmp_path, monkeypatch):
         "def force(v, x_axis, y_axis, v_reg, f_perp):\n    return -f_perp * v / v_reg\n")
     (tmp_path / "surface.py").write_text("KIND = 'surface'\ndef force_at_depth(depth):\n    return depth\n")
     monkeypatch.setattr(laws, "__path__", [*laws.__path__, str(tmp_path)])
-    laws._registry.cache_clear()
+    for cache in (laws._modules, laws._registry):
+        cache.cache_clear()
     yield
-    laws._registry.cache_clear()
+    monkeypatch.undo()  # the registry must be rebuilt from the package's own path
+    for cache in (laws._modules, laws._registry):
+        cache.cache_clear()
     for name in ("viscous", "surface"):
         sys.modules.pop(f"finrft.laws.{name}", None)
 

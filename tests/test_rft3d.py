@@ -8,6 +8,7 @@ import dataclasses
 import mujoco
 import numpy as np
 import pytest
+from test_attach import passive as attach_passive
 
 from finrft import native
 from finrft.attach import attach
@@ -199,17 +200,8 @@ MEDIUM = {"rho_c": 1500.0, "mu_int": 0.4, "mu_surf": 0.3}
 
 
 def passive(xml, qvel, qpos=None, backend="native", **kwargs):
-    spec = mujoco.MjSpec.from_string(xml)
-    attached = attach(spec, ["probe"], law="rft3d", backend=backend, **{**MEDIUM, **kwargs})
-    assert attached.backend == backend
-    model = spec.compile()
-    data = mujoco.MjData(model)
-    if qpos is not None:
-        data.qpos[:] = qpos
-    data.qvel[:] = qvel
-    with attached.installed(model):
-        mujoco.mj_forward(model, data)
-    return data.qfrc_passive.copy(), attached
+    """test_attach's probe with the rft3d law in the test medium."""
+    return attach_passive(xml, qvel, qpos, backend, law="rft3d", **{**MEDIUM, **kwargs})
 
 
 def body(geoms, joint='<joint type="free"/>', pos="0 0 0"):

@@ -1,9 +1,12 @@
 """Many runs at once on all cores: a pool of worker processes, each running `finrft.experiment.run` of any
-experiment (`run_experiments`; `run_many` for plate tests).
+experiment (`run_experiments`; `run_many` for plate tests), and MuJoCo's threaded rollout of plate tests' states
+(`rollout_plates`).
 
-A process pool rather than MuJoCo's threaded rollout: an experiment reverses its drive with an impulse computed
-between strokes, so its motion is not an open-loop control sequence. Every worker loads the native plugin when it
-imports MuJoCo; a result is the same, bit for bit, as the single run of the same job.
+Whole runs go to processes: a run reads, checks and estimates its error in Python at every recorded instant,
+which threads would serialise. Where only the states are wanted, rollout steps them with no Python between the
+drive's reversals, which it applies between strokes (an impulse computed in Python, once per stroke). Every worker
+loads the native plugin when it imports MuJoCo; a result is the same, bit for bit, as the single run of the same
+job.
 
 Workers are spawned, and a spawned worker imports the main module again: in a script, call `run_experiments`,
 `run_many` and `map_jobs` under ``if __name__ == "__main__":`` (notebooks and the interactive prompt need nothing).

@@ -1,9 +1,12 @@
 """Many runs at once on all cores: a pool of worker processes, each running `finrft.experiment.run` of any
-experiment (`run_experiments`; `run_many` for plate tests).
+experiment (`run_experiments`; `run_many` for plate tests), and MuJoCo's threaded rollout of plate tests' states
+(`rollout_plates`).
 
-A process pool rather than MuJoCo's threaded rollout: an experiment reverses its drive with an impulse computed
-between strokes, so its motion is not an open-loop control sequence. Every worker loads the native plugin when it
-imports MuJoCo; a result is the same, bit for bit, as the single run of the same job.
+Whole runs go to processes: a run reads, checks and estimates its error in Python at every recorded instant,
+which threads would serialise. Where only the states are wanted, rollout steps them with no Python between the
+drive's reversals, which it applies between strokes (an impulse computed in Python, once per stroke). Every worker
+loads the native plugin when it imports MuJoCo; a result is the same, bit for bit, as the single run of the same
+job.
 
 Workers are spawned, and a spawned worker imports the main module again: in a script, call `run_experiments`,
 `run_many` and `map_jobs` under ``if __name__ == "__main__":`` (notebooks and the interactive prompt need nothing).
@@ -19,6 +22,9 @@ import warnings
 from concurrent.futures import Executor, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any, Callable, Iterator, Sequence, TypeVar
+
+import mujoco
+import numpy as np
 
 from . import laws
 from .convergence import ErrorLimits
@@ -117,3 +123,52 @@ def run_experiments(jobs: Sequence[tuple[Experiment, Any]], *, max_error: ErrorL
 def run_many(jobs: Sequence[tuple[Scene, Drive]], **options) -> list[Result]:
     """Simulate every (scene, drive) plate test and return the runs in order (options as `run_experiments`)."""
     return run_experiments([(PlateTest(drive), scene) for scene, drive in jobs], **options)
+
+
+def rollout_plates(jobs: Sequence[tuple[Scene, Drive]], *, workers: int | None = None) -> list[np.ndarray]:
+    """The states (mjSTATE_FULLPHYSICS) at the recorded instants of every (scene, drive) plate test, stepped by
+    MuJoCo's threaded rollout on ``workers`` threads: no Python runs between the drive's reversals, which are
+    applied between strokes as `stepping.Prescribed` applies them. The same steps as `simulate`'s, so the same
+    states, bit for bit (a model with constraints, limit stops or welds, restarts its solver's warm start at each
+    reversal: the same to the solver's tolerance); but no readings, chatter probe or error estimate (`run_many`
+    gives those): for sweeps that need the states only, at the cores' full rate.
+
+    Every job must share its drive, ``sim.dt`` and ``sim.record_dt``, and step explicitly with the native backend
+    (a Python force callback cannot run on rollout's threads); ValueError otherwise."""
+    from mujoco import rollout
+
+    from .stepping import schedule
+    jobs = list(jobs)
+    if not jobs:
+        return []
+    scene0, drive = jobs[0]
+    for scene, other in jobs:
+        if other != drive or (scene.sim.dt, scene.sim.record_dt) != (scene0.sim.dt, scene0.sim.record_dt):
+            raise ValueError("rollout_plates: every job needs the same drive, sim.dt and sim.record_dt")
+        if scene.sim.method != "explicit" or scene.sim.backend != "native":
+            raise ValueError("rollout_plates: every job needs sim.method 'explicit' and sim.backend 'native'")
+    test = PlateTest(drive)
+    built = [test.build(scene) for scene, _ in jobs]
+    models = [b.model for b in built]
+    steps, starts, samples = schedule(drive, scene0.sim.dt, scene0.sim.record_dt)
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    datas = [mujoco.MjData(m) for m in models]
+    trials = [test.start(scene, b, d, True) for (scene, _), b, d in zip(jobs, built, datas)]
+    bounds = np.r_[starts, steps]
+    out = np.zeros((len(jobs), len(samples), mujoco.mj_stateSize(models[0], spec)))
+    threads = workers or default_workers()
+    with rollout.Rollout(nthread=threads) as pool:
+        scratch = [mujoco.MjData(models[0]) for _ in range(threads)]
+        for k, (first, last) in enumerate(zip(bounds[:-1], bounds[1:])):
+            initial = np.zeros((len(jobs), out.shape[2]))
+            for j, (m, d, trial) in enumerate(zip(models, datas, trials)):
+                trial.on_stroke(k)
+                mujoco.mj_getState(m, d, initial[j], spec)
+            state, _ = pool.rollout(models, scratch, initial, nstep=int(last - first))
+            inside = (samples >= first) & (samples <= last) if k == len(starts) - 1 else \
+                (samples >= first) & (samples < last)
+            index = samples[inside] - first
+            out[:, inside] = np.where((index == 0)[None, :, None], initial[:, None], state[:, index - 1])
+            for m, d, final in zip(models, datas, state[:, -1]):
+                mujoco.mj_setState(m, d, final, spec)
+    return list(out)

@@ -43,7 +43,8 @@ def _best(fn: Callable[[], Any], repeat: int) -> float:
 def backends(scene: Scene | None = None, *, batch_size: int = 64, workers: int | None = None,
              repeat: int = 3, log: Callable[[str], None] = print, progress: Progress = None) -> dict[str, Any]:
     """The paper plate drag (200 mm at 30 mm/s) with each backend, against bare MuJoCo stepping of the same
-    model without RFT, and the batch throughput of ``batch_size`` drags on all cores against one core."""
+    model without RFT, and the batch throughput of ``batch_size`` drags on ``workers`` cores: a process pool of
+    whole runs (`batch.run_many`) and MuJoCo's threaded rollout of their states (`batch.rollout_plates`)."""
     scene = scene or preset("paper")
     drive = Drive(speed=0.03, stroke=0.2)
     workers = workers or batch.default_workers()
@@ -59,39 +60,119 @@ def backends(scene: Scene | None = None, *, batch_size: int = 64, workers: int |
         log(f"{backend:>6} backend: {wall * 1e3:8.1f} ms per drag, {steps / wall:10.0f} steps/s")
         _tick(progress, i + 1, 4)
 
-    bare = models.build_plate(scene.replace(**{"sim.backend": "python"})).model
-
-    def bare_loop() -> None:
-        d = mujoco.MjData(bare)
-        for _ in range(steps):
-            mujoco.mj_step(bare, d)
-    wall = _best(bare_loop, repeat)
+    # The step alone, with and without the plugin: the same model, integrator and motion (the drive at its
+    # speed), stepped in C (mj_step's nstep) so that neither pays Python per step; interleaved, so that the
+    # machine's load weighs on both alike.
+    loops = {name: _stepping(scene.replace(**{"sim.backend": backend}), drive, steps)
+             for name, backend in (("bare", "python"), ("native_step", "native"))}
+    walls = {name: min(times) for name, times in _interleaved(loops, max(repeat, 7)).items()}
     _tick(progress, 3, 4)
-    out["bare_wall_s"], out["bare_steps_per_s"] = wall, steps / wall
-    log(f"  bare mj_step, same model without RFT: {wall * 1e3:8.1f} ms, {steps / wall:10.0f} steps/s")
+    for name, wall in walls.items():
+        out[f"{name}_wall_s"], out[f"{name}_steps_per_s"] = wall, steps / wall
+    log(f"  bare mj_step, same model without RFT: {walls['bare'] * 1e3:8.1f} ms, {steps / walls['bare']:10.0f} "
+        f"steps/s; with the RFT plugin {walls['native_step'] * 1e3:8.1f} ms")
     out["native_over_python"] = out["python_wall_s"] / out["native_wall_s"]
-    out["native_over_bare"] = out["native_wall_s"] / out["bare_wall_s"]
-    log(f"native is {out['native_over_python']:.1f}x faster than the Python callback (target >= 10x) and costs "
-        f"{out['native_over_bare']:.2f}x bare mj_step (target <= 2x)")
+    out["native_over_bare"] = walls["native_step"] / walls["bare"]
+    out["drag_over_bare"] = out["native_wall_s"] / walls["bare"]
+    log(f"native is {out['native_over_python']:.1f}x faster than the Python callback (target >= 10x); its step "
+        f"costs {out['native_over_bare']:.2f}x bare mj_step (target <= 1.3x), the whole drag (model, recording, "
+        f"chatter probe) {out['drag_over_bare']:.2f}x")
     for name in PRESETS[Scene]:
         out[f"error_estimate_overhead_{name}"] = _estimate_overhead(
             lambda **options: simulate(preset(name), drive, max_error=None, **options), repeat)
         log(f"error estimate on the {name} preset's drag: {100 * out[f'error_estimate_overhead_{name}']:.0f} % of "
             f"the run (target <= 30 %)")
 
-    rng = np.random.default_rng(0)
-    jobs = [(scene.replace(**{"plate.damping": float(b)}), drive) for b in rng.uniform(0.5, 2.5, batch_size)]
+    jobs = _drags(scene, drive, batch_size)
     serial = _best(lambda: batch.run_many(jobs, workers=1), 1)
-    with batch.local_executor(workers) as pool:
-        batch.run_many(jobs[:workers], executor=pool)  # start the workers before timing
-        parallel = _best(lambda: batch.run_many(jobs, executor=pool), 1)
+    parallel, rolled = _pool_rate(jobs, workers), _rollout_rate(jobs, workers)
     _tick(progress, 4, 4)
     total = steps * batch_size
+    bare = workers * out["bare_steps_per_s"]
     out.update(batch_size=batch_size, workers=workers, batch_serial_steps_per_s=total / serial,
-               batch_parallel_steps_per_s=total / parallel, batch_speedup=serial / parallel)
+               batch_parallel_steps_per_s=total / parallel, batch_speedup=serial / parallel,
+               batch_parallel_over_bare=total / parallel / bare, batch_rollout_steps_per_s=total / rolled,
+               batch_rollout_over_bare=total / rolled / bare)
     log(f"batch of {batch_size} drags: {total / serial:10.0f} steps/s on 1 core, {total / parallel:10.0f} steps/s "
-        f"on {workers} workers: {serial / parallel:.2f}x (target >= 1.6x on 2 cores)")
+        f"on {workers} workers ({serial / parallel:.2f}x; {out['batch_parallel_over_bare']:.2f} of workers x bare), "
+        f"rollout of their states {total / rolled:10.0f} steps/s ({out['batch_rollout_over_bare']:.2f} of workers x "
+        f"bare; target >= 0.8)")
     return out
+
+
+def _stepping(scene: Scene, drive: Drive, steps: int) -> Callable[[], None]:
+    """``steps`` of mj_step, in C, of the plate's model with the drive at its speed."""
+    plate = models.build_plate(scene)
+
+    def run() -> None:
+        d = mujoco.MjData(plate.model)
+        d.qvel[plate.drive_dof] = drive.stroke_velocity(0)
+        mujoco.mj_step(plate.model, d, steps)
+    return run
+
+
+def _interleaved(runs: dict[str, Callable[[], Any]], rounds: int) -> dict[str, list[float]]:
+    """Wall times of each run, taken in turn ``rounds`` times."""
+    times: dict[str, list[float]] = {name: [] for name in runs}
+    for _ in range(rounds):
+        for name, fn in runs.items():
+            times[name].append(_best(fn, 1))
+    return times
+
+
+def _drags(scene: Scene, drive: Drive, n: int) -> list[tuple[Scene, Drive]]:
+    """``n`` drags of the scene with the plate's damping drawn from 0.5 to 2.5 N m s/rad."""
+    rng = np.random.default_rng(0)
+    return [(scene.replace(**{"plate.damping": float(b)}), drive) for b in rng.uniform(0.5, 2.5, n)]
+
+
+def _pool_rate(jobs: list[tuple[Scene, Drive]], workers: int) -> float:
+    """Wall time of `batch.run_many` of the jobs on a warm pool of ``workers`` processes."""
+    if workers == 1:
+        return _best(lambda: batch.run_many(jobs, workers=1), 1)
+    with batch.local_executor(workers) as pool:
+        batch.run_many(jobs[:workers], executor=pool)  # start the workers before timing
+        return _best(lambda: batch.run_many(jobs, executor=pool), 1)
+
+
+def _rollout_rate(jobs: list[tuple[Scene, Drive]], workers: int) -> float:
+    """Wall time of `batch.rollout_plates` of the jobs on ``workers`` threads (best of two)."""
+    return _best(lambda: batch.rollout_plates(jobs, workers=workers), 2)
+
+
+def scaling(path: str | Path, scene: Scene | None = None, *, batch_size: int = 64,
+            counts: list[int] | None = None, log: Callable[[str], None] = print) -> dict[str, Any]:
+    """Batch throughput (steps/s) of the paper drag against the number of workers (1, 2 and up to the cores):
+    the process pool of whole runs and the threaded rollout of their states, with bare mj_step on one core times
+    the workers for scale; a chart at ``path``."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    scene = scene or preset("paper")
+    drive = Drive(speed=0.03, stroke=0.2)
+    counts = counts or list(range(1, max(2, batch.default_workers()) + 1))
+    steps = simulate(scene, drive, estimate_error=False).steps
+    bare = steps / _best(_stepping(scene.replace(**{"sim.backend": "python"}), drive, steps), 7)
+    jobs = _drags(scene, drive, batch_size)
+    total = steps * batch_size
+    rows = []
+    for n in counts:
+        rows.append({"workers": n, "pool_steps_per_s": total / _pool_rate(jobs, n),
+                     "rollout_steps_per_s": total / _rollout_rate(jobs, n), "bare_steps_per_s": n * bare})
+        log(f"{n} workers: pool {rows[-1]['pool_steps_per_s']:10.0f}, rollout {rows[-1]['rollout_steps_per_s']:10.0f}"
+            f" steps/s (bare x workers {n * bare:10.0f})")
+    fig, ax = plt.subplots(figsize=(5, 3.5))
+    for key, label, style in (("rollout_steps_per_s", "threaded rollout (states)", "o-"),
+                              ("pool_steps_per_s", "process pool (whole runs)", "s-"),
+                              ("bare_steps_per_s", "bare mj_step x workers", "k--")):
+        ax.plot(counts, [r[key] / 1e3 for r in rows], style, label=label)
+    ax.set(xlabel="workers", ylabel="thousand steps / s", xticks=counts,
+           title=f"{batch_size} paper drags of {steps} steps, {batch.default_workers()} cores")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return {"date": date.today().isoformat(), "batch_size": batch_size, "steps": steps, "rows": rows}
 
 
 def robot(scene: RobotScene | None = None, *, budget: int = 300, workers: int | None = None, repeat: int = 3,

@@ -388,6 +388,8 @@ def build_parser() -> argparse.ArgumentParser:
                                 "on all cores against one core.")
     backends.add_argument("--batch", type=_number("simulations", minimum=1, inclusive=True, integer=True),
                           default=64, metavar="N", help="simulations in the batch (default: %(default)s)")
+    backends.add_argument("--scaling", metavar="FILE.png", help="also chart the batch throughput against the "
+                          "number of workers (1, 2, ... up to the cores): process pool and threaded rollout")
     _add_workers(backends)
     robot = kinds.add_parser("robot", help="one gait evaluation and a full optimisation",
                              description="Time one gait evaluation (one flap cycle) and a CMA-ES optimisation of "
@@ -984,12 +986,19 @@ def _bench(args: argparse.Namespace) -> int:
             figures = bench.fit_speed(args.data, budget=args.budget, workers=args.workers, log=log,
                                       progress=bar and (lambda done, total: bar(done)))
     else:
+        if args.bench == "backends" and args.scaling:
+            target = Path(args.scaling)
+            if target.suffix.lower() != ".png" or not target.parent.is_dir():
+                raise UsageError(f"--scaling {args.scaling}: give a .png file in an existing folder")
         run = {"modelling": lambda **kw: bench.modelling(**kw),
                "robot": lambda **kw: bench.robot(scenes.preset(args.preset, scenes.RobotScene), budget=args.budget,
                                                  workers=args.workers, **kw),
                "backends": lambda **kw: bench.backends(batch_size=args.batch, workers=args.workers, **kw)}
         with _progress(args, 1, f"bench {args.bench}", "%") as bar:
             figures = run[args.bench](log=log, progress=bar and (lambda done, total: bar(done / total)))
+        if args.bench == "backends" and args.scaling:
+            figures["scaling"] = bench.scaling(args.scaling, batch_size=args.batch, log=log)["rows"]
+            _say(args, f"wrote {args.scaling}")
     if args.json:
         print(_json(figures))
     return 0

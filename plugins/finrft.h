@@ -68,6 +68,7 @@ typedef struct {
   int nseg;
   int* site;
   int* body;
+  int* last_dof;  // per segment: the last dof of its body's chain (-1: none), where J^T F starts
   int nhinge;
   int* hinge_qpos;
   int* hinge_dof;

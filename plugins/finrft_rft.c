@@ -73,6 +73,7 @@ static void free_instance(FinrftInstance* p) {
   if (p->params) p->law->destroy(p->params);
   free(p->site);
   free(p->body);
+  free(p->last_dof);
   free(p->hinge_qpos);
   free(p->hinge_dof);
   free(p);
@@ -128,6 +129,10 @@ static int rft_init(const mjModel* m, mjData* d, int instance) {
       if (pass) {
         p->site[nseg] = s;
         p->body[nseg] = m->site_bodyid[s];
+        // the last dof of the nearest body up the tree that has dofs: the end of the segment's dof chain
+        int b = m->site_bodyid[s];
+        while (b > 0 && !m->body_dofnum[b]) b = m->body_parentid[b];
+        p->last_dof[nseg] = b > 0 ? m->body_dofadr[b] + m->body_dofnum[b] - 1 : -1;
       }
       nseg++;
     }
@@ -146,9 +151,10 @@ static int rft_init(const mjModel* m, mjData* d, int instance) {
       p->nhinge = nhinge;
       p->site = (int*)malloc((nseg + 1) * sizeof(int));
       p->body = (int*)malloc((nseg + 1) * sizeof(int));
+      p->last_dof = (int*)malloc((nseg + 1) * sizeof(int));
       p->hinge_qpos = (int*)malloc((nhinge + 1) * sizeof(int));
       p->hinge_dof = (int*)malloc((nhinge + 1) * sizeof(int));
-      if (!p->site || !p->body || !p->hinge_qpos || !p->hinge_dof) {
+      if (!p->site || !p->body || !p->last_dof || !p->hinge_qpos || !p->hinge_dof) {
         free_instance(p);
         return -1;
       }
@@ -165,17 +171,29 @@ static void rft_destroy(mjData* d, int instance) {
 
 static void rft_reset(const mjModel* m, mjtNum* plugin_state, void* plugin_data, int instance) {}
 
+// A segment's force enters straight through the com-based motion MuJoCo has already computed: its midpoint's
+// velocity is the body's cvel shifted to the midpoint, and each dof j up the body's chain takes the generalized
+// force cdof_j . (offset x F, F), which is J^T F without forming the Jacobian (mj_objectVelocity and mj_applyFT
+// cost a spatial transform and a full 3 x nv Jacobian per segment).
 static void rft_compute(const mjModel* m, mjData* d, int instance, int capability_bit) {
   if (!(capability_bit & mjPLUGIN_PASSIVE)) return;
   const FinrftInstance* p = (const FinrftInstance*)d->plugin_data[instance];
   if (!p) return;
-  mjtNum twist[6], x[3], y[3], force[3], torque[3] = {0, 0, 0};
+  mjtNum offset[3], v[3], x[3], y[3], force[3], moment[3];
   for (int i = 0; i < p->nseg; i++) {
-    int s = p->site[i];
-    mj_objectVelocity(m, d, mjOBJ_SITE, s, twist, 0);
+    int s = p->site[i], b = p->body[i];
+    const mjtNum* com = d->subtree_com + 3 * m->body_rootid[b];
+    const mjtNum* cvel = d->cvel + 6 * b;
+    mju_sub3(offset, d->site_xpos + 3 * s, com);
+    mju_cross(v, cvel, offset);
+    mju_addTo3(v, cvel + 3);
     finrft_site_axes(d, s, x, y);
-    p->law->force(p->params, p->v_reg, twist + 3, x, y, force);
-    mj_applyFT(m, d, force, torque, d->site_xpos + 3 * s, p->body[i], d->qfrc_passive);
+    p->law->force(p->params, p->v_reg, v, x, y, force);
+    mju_cross(moment, offset, force);
+    for (int j = p->last_dof[i]; j >= 0; j = m->dof_parentid[j]) {
+      const mjtNum* cdof = d->cdof + 6 * j;
+      d->qfrc_passive[j] += mju_dot3(cdof, moment) + mju_dot3(cdof + 3, force);
+    }
   }
   if (p->stop_stiffness > 0) {
     for (int h = 0; h < p->nhinge; h++) {

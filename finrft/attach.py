@@ -158,9 +158,9 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str, law: str = "li2013"
     the bodies' surface friction ``mu_surf``, all three required; ``drft_lambda`` (dimensionless, default 0: off):
     DRFT's rate-dependent term on top of either law (`finrft.laws.drft`), with the medium's density: rft3d's
     ``rho_c``, li2013's ``bulk_density`` (kg/m^3; else the catalogued ``medium``'s, if it has one);
-    ``surface_z``: height of the free surface, m; ``element_size``: the elements' size, m; ``backend``: ``native`` (falls back to ``python``, with a warning,
-    when the plugin cannot be loaded) or ``python`` (then run the model inside ``Attached.installed``). Raises
-    `SceneError` on bad input.
+    ``surface_z``: height of the free surface, m; ``element_size``: the elements' size, m; ``backend``:
+    ``native`` (falls back to ``python``, with a warning, when the plugin cannot be loaded) or ``python`` (then run
+    the model inside ``Attached.installed``). Raises `SceneError` on bad input.
     """
     if medium is not None:
         if law != "li2013":

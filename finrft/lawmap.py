@@ -71,10 +71,11 @@ def plot(name: str, medium: str, data: dict[str, np.ndarray], path: str | Path) 
             ax.contour(xs, ys, grid, levels=[0.0], colors="k", linewidths=0.8)
         fig.colorbar(mesh, ax=ax, label=f"{key} ({units[key]})")
         ax.set(xlabel=_label(xkey), ylabel=_label(ykey), title=key, aspect="equal")
-        for axis, values in ((ax.xaxis, xs), (ax.yaxis, ys)):  # at most 7 ticks, on multiples of 15 or 30 deg
+        for axis, values in ((ax.xaxis, xs), (ax.yaxis, ys)):  # about 7 ticks, on round numbers of degrees
             span = values.max() - values.min()
             axis.set_major_locator(MultipleLocator(next(s for s in (5, 10, 15, 30, 45, 90) if span <= 6 * s)))
-    fig.suptitle(f"{name} {getattr(module, 'MAP_QUANTITY', 'stress per unit depth')}, medium {material.name}: {material.description}"
+    quantity = getattr(module, "MAP_QUANTITY", "stress per unit depth")
+    fig.suptitle(f"{name} {quantity}, medium {material.name}: {material.description}"
                  + (f"\n{extra}" if extra else ""), fontsize=10)
     fig.tight_layout()
     fig.savefig(path, format="png", dpi=120)

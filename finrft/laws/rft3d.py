@@ -38,6 +38,10 @@ velocity) pairs drawn uniformly, all grazing (n . v below 0.2 of the speed). Wit
 normal stress alone and feeds energy in there; with mu_surf >= 0.2 the tangential part outweighs it but on about
 0.06 % of pairs (upward-facing faces rising at n . v below 0.33 of the speed). The power fed in is at most 0.8 % of
 that of a horizontal plate pushed down at the same speed (tests/test_rft3d.py).
+
+`stress_map` (``finrft law rft3d``) draws alpha_x = -alpha_r and alpha_z in the vertical plane (psi = 0, Li 2013's
+axes), before the friction cap, for a catalogued medium's xi_n; the generic medium, which has no bulk density nor
+internal friction, is drawn at xi_n = 1 N/cm^3.
 """
 
 from __future__ import annotations

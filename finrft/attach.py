@@ -3,7 +3,8 @@ elements and gives them a granular resistive force law, before the spec is compi
 
 Each element below the free surface (z < surface_z, gravity along -z) that leads the motion (outward normal .
 velocity > 0) takes the law's stress times its depth and area (`finrft.laws.li2013.element_forces` or
-`finrft.laws.rft3d.element_forces`). The force
+`finrft.laws.rft3d.element_forces`), plus, with ``drft_lambda`` > 0, DRFT's rate-dependent term
+(`finrft.laws.drft`). The force
 appears where MuJoCo's passive forces appear, ``data.qfrc_passive``: from the native plugin ``finrft.surface``
 (plugins/finrft_li2013.c, one instance per body, the elements in its config) or, with the Python backend, from a
 passive-force callback that `Attached.installed` sets for a block and then restores.
@@ -28,7 +29,7 @@ import mujoco
 import numpy as np
 
 from . import coupling, media, native
-from .laws import li2013, rft3d
+from .laws import drft, li2013, rft3d
 from .scene import SceneError
 
 LAWS = ("li2013", "rft3d")
@@ -78,15 +79,21 @@ class Attached:
     coefficients: li2013.Coefficients | rft3d.Coefficients
     surfaces: tuple[Surface, ...] = field(repr=False)
     medium: Rft3dMedium | None = None  # rft3d only
+    drft_lambda: float = 0.0   # DRFT's lambda; 0: the quasi-static law alone
+    bulk_density: float = 0.0  # kg/m^3, DRFT's rho_c (0: none known)
 
     def element_forces(self, normal: np.ndarray, velocity: np.ndarray, depth: np.ndarray, area: np.ndarray
                        ) -> np.ndarray:
         """The law's force on each element (world frame), as the native plugin computes it."""
         if self.law == "rft3d":
             m = self.medium
-            return rft3d.element_forces(normal, velocity, depth, area, m.rho_c, m.mu_int, m.mu_surf,
-                                        self.coefficients)
-        return li2013.element_forces(normal, velocity, depth, area, self.zeta, self.coefficients)
+            force = rft3d.element_forces(normal, velocity, depth, area, m.rho_c, m.mu_int, m.mu_surf,
+                                         self.coefficients)
+        else:
+            force = li2013.element_forces(normal, velocity, depth, area, self.zeta, self.coefficients)
+        if self.drft_lambda > 0:
+            force = force + drft.element_forces(normal, velocity, depth, area, self.drft_lambda, self.bulk_density)
+        return force
 
     @property
     def elements(self) -> dict[str, int]:
@@ -140,17 +147,20 @@ class SurfaceForces:
 def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str, law: str = "li2013", zeta: float | None = None,
            surface_z: float = 0.0, element_size: float = 0.005, backend: str = "native",
            coefficients: li2013.Coefficients | rft3d.Coefficients | None = None, medium: str | None = None,
-           rho_c: float | None = None, mu_int: float | None = None, mu_surf: float | None = None) -> Attached:
+           rho_c: float | None = None, mu_int: float | None = None, mu_surf: float | None = None,
+           drft_lambda: float = 0.0, bulk_density: float | None = None) -> Attached:
     """Add granular RFT to the named bodies of ``spec`` (before it is compiled).
 
     ``law``: ``li2013`` (`finrft.laws.li2013`) with ``coefficients`` (default: the generic medium) scaled by
     ``zeta`` (default 1), or instead of both a ``medium`` of the catalogue (`finrft.media`, e.g.
     ``"poppy_seeds_lp"``); or ``rft3d`` (`finrft.laws.rft3d`) with ``coefficients`` (default:
     `rft3d.AGARWAL_2023`) and the medium's critical density ``rho_c`` (kg/m^3), internal friction ``mu_int`` and
-    the bodies' surface friction ``mu_surf``, all three required; ``surface_z``: height of the free surface, m;
-    ``element_size``: the elements' size, m; ``backend``: ``native`` (falls back to ``python``, with a warning,
-    when the plugin cannot be loaded) or ``python`` (then run the model inside ``Attached.installed``). Raises
-    `SceneError` on bad input.
+    the bodies' surface friction ``mu_surf``, all three required; ``drft_lambda`` (dimensionless, default 0: off):
+    DRFT's rate-dependent term on top of either law (`finrft.laws.drft`), with the medium's density: rft3d's
+    ``rho_c``, li2013's ``bulk_density`` (kg/m^3; else the catalogued ``medium``'s, if it has one);
+    ``surface_z``: height of the free surface, m; ``element_size``: the elements' size, m; ``backend``:
+    ``native`` (falls back to ``python``, with a warning, when the plugin cannot be loaded) or ``python`` (then run
+    the model inside ``Attached.installed``). Raises `SceneError` on bad input.
     """
     if medium is not None:
         if law != "li2013":
@@ -162,6 +172,11 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str, law: str = "li2013"
     names = [bodies] if isinstance(bodies, str) else list(bodies)
     _check(names, law, zeta, surface_z, element_size, backend)
     granular = _rft3d_medium(law, rho_c, mu_int, mu_surf)
+    if law == "rft3d" and bulk_density is not None:
+        raise SceneError("attach: law rft3d's bulk density is rho_c: pass rho_c, not bulk_density")
+    catalogued = media.medium(medium).get("bulk_density") if medium is not None else None
+    rho = drft.density(drft_lambda, rho_c if law == "rft3d" else bulk_density,
+                       None if catalogued is None else catalogued.value, "bulk_density", "attach")
     kind = rft3d.Coefficients if law == "rft3d" else li2013.Coefficients
     if coefficients is None:
         coefficients = rft3d.AGARWAL_2023 if law == "rft3d" else li2013.GENERIC
@@ -182,7 +197,7 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str, law: str = "li2013"
         raise SceneError(f"attach: element_size = {element_size:g} m gives {total} elements, more than "
                          f"{MAX_ELEMENTS}: use a larger element_size")
     attached = Attached(law, float(zeta), float(surface_z), float(element_size), backend, coefficients,
-                        tuple(surfaces), granular)
+                        tuple(surfaces), granular, float(drft_lambda), rho)
     if backend == "native":
         spec.activate_plugin(PLUGIN)
         for surface in surfaces:
@@ -232,6 +247,8 @@ def _bind(spec: mujoco.MjSpec, attached: Attached, surface: Surface) -> None:
         "law": attached.law,
         "coefficients": " ".join(map(repr, attached.coefficients.values())),
         **scale,
+        **({"drft_lambda": repr(attached.drft_lambda), "bulk_density": repr(attached.bulk_density)}
+           if attached.drft_lambda > 0 else {}),
         "surface_z": repr(attached.surface_z),
         "elements": " ".join(map(repr, elements.ravel().tolist())),  # repr: the Python backend's exact numbers
     }

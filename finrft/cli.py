@@ -295,11 +295,15 @@ def build_parser() -> argparse.ArgumentParser:
     _add_json(medium, "the media (each value with its unit and source)")
     _add_quiet(medium)
 
-    law = sub.add_parser("law", help="a force law's stress map in a medium (li2013: alpha_x, alpha_z over beta, "
-                         "gamma)", description="Evaluate a law's stress per unit depth over its angles, as in the "
+    law = sub.add_parser("law", help="a force law's stress map in a medium (li2013, rft3d: alpha_x, alpha_z over "
+                         "beta, gamma; sandswim: F_perp, F_par over psi, gamma0)",
+                         description="Evaluate a law's stress per unit depth over its angles, as in the "
                          "papers' figures: for li2013, alpha_x and alpha_z (N/cm^3) over the plate angle beta and "
-                         "the velocity angle gamma, both -90..90 deg at 5 deg, for the medium's zeta.")
-    law.add_argument("name", metavar="NAME", help="the law, e.g. li2013")
+                         "the velocity angle gamma, both -90..90 deg at 5 deg, for the medium's zeta; for rft3d the "
+                         "same in the vertical plane (psi = 0) for the medium's xi_n (from its bulk density and "
+                         "internal friction; generic: 1 N/cm^3); for sandswim, F_perp and F_par per unit C_S and "
+                         "C_F over the angle psi between velocity and body axis (0..90 deg at 1 deg) and gamma0.")
+    law.add_argument("name", metavar="NAME", help="the law: li2013, rft3d or sandswim")
     law.add_argument("--medium", default="generic", metavar="M",
                      help="a medium of the catalogue (finrft medium --list; default: %(default)s)")
     law.add_argument("--plot", metavar="FILE.png", help="write the map as a figure, one colour map per field")
@@ -736,6 +740,8 @@ def _law(args: argparse.Namespace) -> int:
          f"[{min(x.min(), y.min()):g}, {max(x.max(), y.max()):g}]")
     for key, values in fields:
         _say(args, f"  {key}: {values.min():.4g} to {values.max():.4g} {units[key]}")
+    if lawmap.note(args.name, args.medium):
+        _say(args, f"  {lawmap.note(args.name, args.medium)}")
     if args.plot:
         _say(args, f"wrote figure: {args.plot}")
     if args.json:

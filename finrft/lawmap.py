@@ -35,6 +35,12 @@ def stress_map(name: str, medium: str = "generic") -> dict[str, np.ndarray]:
     return data
 
 
+def note(name: str, medium: str = "generic") -> str:
+    """The law's one line on what its map in ``medium`` shows (its module's optional ``map_note``), or ""."""
+    module = law_module(name)
+    return module.map_note(media.medium(medium)) if hasattr(module, "map_note") else ""
+
+
 def _label(key: str) -> str:
     return f"{key.removesuffix('_deg')} (deg)"
 
@@ -46,13 +52,16 @@ def plot(name: str, medium: str, data: dict[str, np.ndarray], path: str | Path) 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.colors import CenteredNorm
+    from matplotlib.ticker import MultipleLocator
 
     material = media.medium(medium)
-    units = law_module(name).MAP_UNITS
+    module = law_module(name)
+    units = module.MAP_UNITS
     (xkey, x), (ykey, y), *fields = data.items()
     xs, xi = np.unique(x, return_inverse=True)
     ys, yi = np.unique(y, return_inverse=True)
-    fig, axes = plt.subplots(1, len(fields), figsize=(5.2 * len(fields), 4.4), squeeze=False)
+    extra = note(name, medium)
+    fig, axes = plt.subplots(1, len(fields), figsize=(5.2 * len(fields), 4.7 if extra else 4.4), squeeze=False)
     for ax, (key, values) in zip(axes[0], fields):
         grid = np.full((len(ys), len(xs)), np.nan)
         grid[yi, xi] = values
@@ -62,9 +71,12 @@ def plot(name: str, medium: str, data: dict[str, np.ndarray], path: str | Path) 
             ax.contour(xs, ys, grid, levels=[0.0], colors="k", linewidths=0.8)
         fig.colorbar(mesh, ax=ax, label=f"{key} ({units[key]})")
         ax.set(xlabel=_label(xkey), ylabel=_label(ykey), title=key, aspect="equal")
-        ax.set_xticks(np.linspace(xs.min(), xs.max(), 7))
-        ax.set_yticks(np.linspace(ys.min(), ys.max(), 7))
-    fig.suptitle(f"{name} stress per unit depth, medium {material.name}: {material.description}", fontsize=10)
+        for axis, values in ((ax.xaxis, xs), (ax.yaxis, ys)):  # about 7 ticks, on round numbers of degrees
+            span = values.max() - values.min()
+            axis.set_major_locator(MultipleLocator(next(s for s in (5, 10, 15, 30, 45, 90) if span <= 6 * s)))
+    quantity = getattr(module, "MAP_QUANTITY", "stress per unit depth")
+    fig.suptitle(f"{name} {quantity}, medium {material.name}: {material.description}"
+                 + (f"\n{extra}" if extra else ""), fontsize=10)
     fig.tight_layout()
     fig.savefig(path, format="png", dpi=120)
     plt.close(fig)

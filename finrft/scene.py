@@ -168,6 +168,11 @@ class Medium:
                      "generic coefficients are scaled by it; only without medium.name)", minimum=0.0)
     surface_z: float = _f(0.0, "m", "height of the free surface (gravity along -z); the medium lies below")
     element_size: float = _f(0.005, "m", "size of the surface elements", minimum=0.0)
+    drft_lambda: float = _f(0.0, "", "DRFT's rate-dependent term (Agarwal et al. 2021 Sci. Adv.): the leading "
+                            "elements also take a pressure drft_lambda * bulk_density * (v.n)^2; 0: off, the "
+                            "quasi-static law alone; the paper fits O(1) values", minimum=0.0, exclusive=False)
+    bulk_density: float = _f(0.0, "kg/m^3", "the medium's bulk (critical) density, for drft_lambda > 0; 0: the "
+                             "catalogued medium's (medium.name), if it has one", minimum=0.0, exclusive=False)
 
 
 @dataclass(frozen=True)
@@ -201,10 +206,13 @@ class JointDrive:
 
 
 def _check_medium(m: Medium) -> None:
+    from . import media  # the catalogue's module imports this one
+    from .laws import drft, li2013
+    catalogued = media.medium(m.name).get("bulk_density") if m.name else None
+    drft.density(m.drft_lambda, m.bulk_density or None, None if catalogued is None else catalogued.value,
+                 "medium.bulk_density", "medium")
     if not m.name:
         return
-    from . import media  # the catalogue's module imports this one
-    from .laws import li2013
     if m.zeta != Medium.zeta:
         raise SceneError(f"medium.name = {m.name!r} gives the medium's zeta: leave medium.zeta out (got {m.zeta:g})")
     li2013.medium_parameters(media.medium(m.name))
@@ -223,7 +231,8 @@ class IntrusionPlate:
     angle: float = _f(0.0, "rad", "beta: 0 horizontal, pi/2 vertical (cutting in edge first); positive turns the "
                       "lower face towards -x", minimum=-math.pi / 2, exclusive=False, maximum=math.pi / 2,
                       why_maximum="a plate's angle repeats every pi")
-    speed: float = _f(0.01, "m/s", "downward speed (the law is rate-independent)", minimum=0.0)
+    speed: float = _f(0.01, "m/s", "downward speed (the law is rate-independent unless medium.drft_lambda > 0)",
+                      minimum=0.0)
     clearance: float = _f(0.002, "m", "height of the plate's lowest point above the surface at t = 0",
                           minimum=0.0, exclusive=False)
     depth: float = _f(0.05, "m", "depth of the plate's lowest point at the end", minimum=0.0)

@@ -91,7 +91,8 @@ def build_attached(spec: mujoco.MjSpec, joint_name: str, bodies: tuple[str, ...]
     joint.armature = ARMATURE_RATIO * mass[dof, dof]
     attached = attach(spec, list(bodies), law=medium.law, zeta=None if medium.name else medium.zeta,
                       surface_z=medium.surface_z, element_size=medium.element_size, backend=sim.backend,
-                      medium=medium.name or None)
+                      medium=medium.name or None, drft_lambda=medium.drft_lambda,
+                      bulk_density=medium.bulk_density or None)
     model = _compile(spec)
     jid = model.joint(joint_name).id
     return AttachedModel(model, attached, int(model.jnt_dofadr[jid]), int(model.jnt_qposadr[jid]),

@@ -1,7 +1,7 @@
 // finrft.surface: a MuJoCo engine plugin (passive force) applying a granular surface law to the surface elements
-// of a body: Li, Zhang & Goldman 2013 or the 3D-RFT of Agarwal, Goldman & Kamrin 2023. The C twin of
-// finrft/laws/li2013.py, finrft/laws/rft3d.py and of the Python backend in finrft/attach.py: same formulas, same
-// folding, same choice of plane.
+// of a body: Li, Zhang & Goldman 2013 or the 3D-RFT of Agarwal, Goldman & Kamrin 2023, optionally with DRFT's
+// rate-dependent term on top. The C twin of finrft/laws/li2013.py, finrft/laws/rft3d.py, finrft/laws/drft.py and
+// of the Python backend in finrft/attach.py: same formulas, same folding, same choice of plane.
 //
 // One instance per body (finrft.attach makes them). Config, all required for its law:
 //   law           "li2013" or "rft3d"
@@ -11,6 +11,8 @@
 //   xi            rft3d: > 0, the medium's scale xi_n, N/m^3
 //   mu_surf       rft3d: >= 0, the intruder's surface friction
 //   surface_z     m, height of the free surface (gravity along -z)
+//   drft_lambda   optional, >= 0 (absent: 0, off): DRFT's dimensionless lambda
+//   bulk_density  with drft_lambda > 0: > 0, the medium's density rho_c, kg/m^3
 //   elements      "cx cy cz nx ny nz area ..." per element: centre and outward unit normal in the body frame, m^2
 //
 // No static state: everything lives in the per-mjData struct, so instances and threads never share memory; the
@@ -123,18 +125,33 @@ FINRFT_LI2013_EXPORT void finrft_rft3d_element_force(const double coef[NCOEF_RFT
   for (int i = 0; i < 3; i++) force[i] = scale * (normal_part[i] + kept * tangential[i]);
 }
 
+// DRFT's dynamic inertial force on one element (world frame): -lambda rho_c (n . v)^2 n area on a leading element
+// below the surface, else 0. As element_forces in drft.py.
+FINRFT_LI2013_EXPORT void finrft_drft_element_force(double drft_lambda, double rho_c, const double n[3],
+                                                    const double v[3], double depth, double area,
+                                                    double force[3]) {
+  force[0] = force[1] = force[2] = 0;
+  double v_n = n[0] * v[0] + n[1] * v[1] + n[2] * v[2];
+  if (!(depth > 0) || !(v_n > 0)) return;
+  double pressure = drft_lambda * rho_c * v_n * v_n * area;
+  for (int i = 0; i < 3; i++) force[i] = -pressure * n[i];
+}
+
 enum { LAW_LI2013, LAW_RFT3D };
 
 typedef struct {
   int law;
   double coef[NCOEF_RFT3D];  // the first NCOEF for li2013
   double zeta, xi, mu_surf, surface_z;
+  double drft_lambda, bulk_density;  // drft_lambda = 0: no DRFT term
   int body;
   int n;
   double* element;  // n x 7: centre, normal (body frame), area
 } SurfaceData;
 
-static const char* kSurfaceAttributes[] = {"law", "coefficients", "zeta", "xi", "mu_surf", "surface_z", "elements"};
+static const char* kSurfaceAttributes[] = {"law",       "coefficients", "zeta",        "xi",
+                                           "mu_surf",   "surface_z",    "drft_lambda", "bulk_density",
+                                           "elements"};
 
 static void surface_free(SurfaceData* p) {
   if (!p) return;
@@ -211,6 +228,20 @@ static int surface_init(const mjModel* m, mjData* d, int instance) {
       return -1;
     }
   }
+  const char* drft = mj_getPluginConfig(m, instance, "drft_lambda");
+  if (drft && *drft) {
+    if (read_scalar(m, instance, "drft_lambda", &p->drft_lambda)) {
+      surface_free(p);
+      return -1;
+    }
+    if (!(p->drft_lambda >= 0) ||
+        (p->drft_lambda > 0 && (read_scalar(m, instance, "bulk_density", &p->bulk_density) ||
+                                !(p->bulk_density > 0)))) {
+      mju_warning("finrft.surface: config 'drft_lambda' must be >= 0, and when > 0 'bulk_density' must be > 0");
+      surface_free(p);
+      return -1;
+    }
+  }
   p->body = -1;
   for (int b = 0; b < m->nbody; b++) {
     if (m->body_plugin[b] != instance) continue;
@@ -273,6 +304,11 @@ static void surface_compute(const mjModel* m, mjData* d, int instance, int capab
       finrft_rft3d_element_force(p->coef, p->xi, p->mu_surf, normal, v, depth, e[6], f);
     else
       finrft_li2013_element_force(p->coef, p->zeta, normal, v, depth, e[6], f);
+    if (p->drft_lambda > 0) {
+      mjtNum inertial[3];
+      finrft_drft_element_force(p->drft_lambda, p->bulk_density, normal, v, depth, e[6], inertial);
+      mju_addTo3(f, inertial);
+    }
     mju_addTo3(total, f);
     mju_cross(moment, arm, f);
     mju_addTo3(torque, moment);

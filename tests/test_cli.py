@@ -379,3 +379,24 @@ def test_progress_of_a_drag_and_quiet(monkeypatch, capsys, quiet):
     if not quiet:
         assert seen[-1] == (100, 100)
     assert (capsys.readouterr().out == "") == quiet
+
+
+def test_law_sandswim_is_the_papers_magnitudes_per_unit_coefficient(tmp_path, capsys):
+    from finrft.laws import sandswim
+    assert main(["law", "sandswim", "--json", "--plot", str(tmp_path / "map.png")]) == 0
+    out = capsys.readouterr().out
+    data = _last_json(out)
+    assert list(data) == ["law", "psi_deg", "gamma0_deg", "f_perp_c_s", "f_perp_c_f", "f_par_c_f"]
+    assert {len(data[k]) for k in list(data)[1:]} == {91 * 18} and "F_perp = C_S f_perp_c_s" in out
+    assert sorted(set(data["psi_deg"])) == list(range(91))  # every degree
+    psi, gamma0 = np.radians(data["psi_deg"]), np.radians(data["gamma0_deg"])
+    # recombined with coefficients, the map is the law's magnitudes (the papers' form)
+    c_s, c_f = 1.7, 0.6
+    perp, par = sandswim.magnitudes(psi, c_s, c_f, gamma0)
+    np.testing.assert_allclose(c_s * np.array(data["f_perp_c_s"]) + c_f * np.array(data["f_perp_c_f"]), perp,
+                               rtol=1e-12)
+    np.testing.assert_allclose(c_f * np.array(data["f_par_c_f"]), par, rtol=1e-12, atol=1e-15)
+    # sin(beta0) by hand: tan(beta0) = cot(gamma0) sin(psi); at gamma0 = 45 deg, psi = 30 deg: atan(0.5)
+    i = list(zip(data["psi_deg"], data["gamma0_deg"])).index((30, 45))
+    assert data["f_perp_c_s"][i] == pytest.approx(np.sin(np.arctan(0.5)), abs=1e-12)
+    assert (tmp_path / "map.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -4,6 +4,7 @@ the friction cap, dissipation (and where it fails), the C twin, and attach on bo
 
 import ctypes
 import dataclasses
+import json
 
 import mujoco
 import numpy as np
@@ -12,6 +13,7 @@ from test_attach import passive as attach_passive
 
 from finrft import native
 from finrft.attach import attach
+from finrft.cli import main
 from finrft.laws import li2013, rft3d
 from finrft.scene import SceneError
 
@@ -247,3 +249,46 @@ def test_bad_input_names_the_problem(kwargs, message):
     spec = mujoco.MjSpec.from_string(body('<geom size=".01"/>'))
     with pytest.raises(SceneError, match=message):
         attach(spec, ["probe"], **{"law": "rft3d", **MEDIUM, **kwargs})
+
+
+def _last_json(out):
+    return json.loads(out.strip().splitlines()[-1])
+
+
+def test_law_rft3d_json_is_the_vertical_plane_in_units_of_xi(capsys):
+    assert main(["law", "rft3d", "--json", "--quiet"]) == 0
+    data = _last_json(capsys.readouterr().out)
+    assert list(data) == ["law", "beta_deg", "gamma_deg", "alpha_x", "alpha_z"] and data["law"] == "rft3d"
+    assert {len(data[k]) for k in list(data)[1:]} == {37 * 37}
+    at = {(b, g): (x, z) for b, g, x, z in zip(data["beta_deg"], data["gamma_deg"], data["alpha_x"], data["alpha_z"])}
+    # the generic medium has no bulk density: xi_n = 1 N/cm^3, so a horizontal plate pushed down takes 0.87504
+    assert at[(0, 90)] == pytest.approx((0.0, 0.87504), abs=1e-6)
+    assert at[(0, -90)][1] == pytest.approx(-0.07966, abs=1e-6)  # pulled up: held back
+    # Li's x axis is -r: the map's alpha_x is -alpha_r of the law at psi = 0, and alpha_z the law's
+    for (b, g), (x, z) in list(at.items())[::97]:
+        r, theta, vertical = rft3d.alpha_gen(np.radians(b), np.radians(g), 0.0)
+        assert (x, z) == pytest.approx((-r, vertical), abs=1e-12)
+
+
+def test_law_rft3d_in_a_medium_with_its_values(monkeypatch, capsys):
+    from finrft import media
+    poppy = media.medium("poppy_seeds_lp")
+    values = {**poppy.values, "bulk_density": media.Value(1500.0, "kg/m^3", "test"),
+              "internal_friction_angle": media.Value(np.arctan(0.4), "rad", "test")}
+    monkeypatch.setattr(media, "medium", lambda name: dataclasses.replace(poppy, values=values))
+    assert main(["law", "rft3d", "--medium", "poppy_seeds_lp", "--json"]) == 0
+    out = capsys.readouterr().out
+    data = _last_json(out)
+    i = list(zip(data["beta_deg"], data["gamma_deg"])).index((0, 90))
+    assert data["alpha_z"][i] == pytest.approx(0.87504 * rft3d.xi(1500.0, 0.4) / 1e6, rel=1e-5)  # 0.3999 N/cm^3
+    assert "xi_n = 0.457 N/cm^3" in out
+
+
+def test_law_rft3d_plot_and_media_it_cannot_scale(tmp_path, capsys):
+    png = tmp_path / "map.png"
+    assert main(["law", "rft3d", "--plot", str(png), "--quiet"]) == 0
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert main(["law", "rft3d", "--medium", "poppy_seeds_cp", "--json"]) == 2
+    captured = capsys.readouterr()
+    assert len(captured.err.strip().splitlines()) == 1 and not captured.out
+    assert "bulk_density nor internal_friction_angle" in captured.err and "Traceback" not in captured.err

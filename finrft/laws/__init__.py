@@ -18,7 +18,9 @@ Modules of another KIND (a surface law, say) live here too and are not segment l
 
 A law of any kind may also draw its stress map (``finrft law NAME``): ``stress_map(medium) -> dict`` of flat arrays
 of one length, one entry per grid point, for a catalogued medium (`finrft.media.Material`): first two grid axes
-named ``*_deg`` (the figure's x then y axis), then its fields, each with its unit in the module's ``MAP_UNITS``.
+named ``*_deg`` (the figure's x then y axis), then its fields, each with its unit in the module's ``MAP_UNITS``;
+optionally ``map_note(medium) -> str``, one line on the map's scale, and ``MAP_QUANTITY``, what the fields are
+(default: stress per unit depth).
 """
 
 from __future__ import annotations

@@ -38,13 +38,20 @@ velocity) pairs drawn uniformly, all grazing (n . v below 0.2 of the speed). Wit
 normal stress alone and feeds energy in there; with mu_surf >= 0.2 the tangential part outweighs it but on about
 0.06 % of pairs (upward-facing faces rising at n . v below 0.33 of the speed). The power fed in is at most 0.8 % of
 that of a horizontal plate pushed down at the same speed (tests/test_rft3d.py).
+
+`stress_map` (``finrft law rft3d``) draws alpha_x = -alpha_r and alpha_z in the vertical plane (psi = 0, Li 2013's
+axes), before the friction cap, for a catalogued medium's xi_n; the generic medium, which has no bulk density nor
+internal friction, is drawn at xi_n = 1 N/cm^3.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
+
+from ..scene import SceneError
 
 STANDARD_GRAVITY = 9.81  # m/s^2, g of xi_n
 
@@ -148,3 +155,40 @@ def element_forces(normal: np.ndarray, velocity: np.ndarray, depth: np.ndarray, 
     leading = (np.einsum("...i,...i", normal, velocity) > 0) & (np.asarray(depth) > 0)
     scale = np.where(leading, xi(rho_c, mu_int) * np.asarray(area) * np.asarray(depth), 0.0)
     return scale[..., None] * stress
+
+
+# The stress map's grid: the vertical plane (psi = 0), as Li 2013 Fig. 2, both angles in [-90, 90] deg at 5 deg.
+MAP_DEG = np.arange(-90, 91, 5)
+MAP_UNITS = {"alpha_x": "N/cm^3", "alpha_z": "N/cm^3"}
+N_PER_CM3 = 1e6  # N/m^3 in one N/cm^3
+GENERIC = "generic"  # the catalogue's generic medium, mapped at xi_n = 1 N/cm^3
+
+
+def medium_xi(medium) -> float:
+    """xi_n (N/m^3) of a catalogued medium (`finrft.media.Material`), from its bulk density and internal friction
+    angle; the generic medium, which has neither, takes 1 N/cm^3 (its map is alpha_gen in units of xi_n)."""
+    rho, angle = medium.get("bulk_density"), medium.get("internal_friction_angle")
+    if rho is not None and angle is not None:
+        return xi(rho.value, math.tan(angle.value))
+    if medium.name == GENERIC:
+        return N_PER_CM3
+    missing = [key for key, value in (("bulk_density", rho), ("internal_friction_angle", angle)) if value is None]
+    raise SceneError(f"medium {medium.name!r} has no {' nor '.join(missing)} (not found in the literature searched), "
+                     f"so the rft3d law cannot scale its stress (xi_n)")
+
+
+def map_note(medium) -> str:
+    """What the map's scale is, in one line."""
+    if medium.get("bulk_density") is None or medium.get("internal_friction_angle") is None:
+        return "xi_n = 1 N/cm^3 (no bulk density nor internal friction catalogued): alpha_gen in units of xi_n"
+    return f"xi_n = {medium_xi(medium) / N_PER_CM3:.4g} N/cm^3 from the bulk density and internal friction"
+
+
+def stress_map(medium) -> dict[str, np.ndarray]:
+    """alpha_x and alpha_z (N/cm^3) of a catalogued medium in the vertical plane (psi = 0) over the grid
+    (beta_deg, gamma_deg), flat arrays, beta the outer index, in Li 2013's axes (x = -r: alpha_x > 0 resists a
+    horizontal motion) and before the surface-friction cap (the intruder's, not the medium's)."""
+    scale = medium_xi(medium) / N_PER_CM3
+    beta, gamma = (a.ravel().astype(float) for a in np.meshgrid(MAP_DEG, MAP_DEG, indexing="ij"))
+    alpha = alpha_gen(np.radians(beta), np.radians(gamma), 0.0)
+    return {"beta_deg": beta, "gamma_deg": gamma, "alpha_x": -scale * alpha[:, 0], "alpha_z": scale * alpha[:, 2]}

@@ -70,3 +70,27 @@ def feeds_energy(params: dict[str, float]) -> str:
     if c_s * k + c_f < 0:
         return f"c_s cot(gamma0) + c_f = {c_s * k + c_f:g} N < 0 pushes a segment along a slight sideways motion"
     return ""
+
+
+# The stress map's grid: psi over 0..90 deg at 1 deg, gamma0 over 5..90 deg at 5 deg.
+MAP_PSI_DEG = np.arange(0, 91, 1)
+MAP_GAMMA0_DEG = np.arange(5, 91, 5)
+MAP_UNITS = {"f_perp_c_s": "C_S", "f_perp_c_f": "C_F", "f_par_c_f": "C_F"}
+MAP_QUANTITY = "force per segment, per unit coefficient"
+
+
+def map_note(medium) -> str:
+    """What the map shows, in one line."""
+    return ("per unit coefficient, for any medium (no medium's C_S, C_F, gamma0 are catalogued): F_perp = C_S "
+            "f_perp_c_s + C_F f_perp_c_f, F_par = C_F f_par_c_f")
+
+
+def stress_map(medium) -> dict[str, np.ndarray]:
+    """The law's magnitudes over the grid (psi_deg, gamma0_deg), flat arrays, psi the outer index, split into the
+    parts each coefficient multiplies: F_perp's C_S part sin(beta0) per unit C_S, its C_F part sin(psi) and F_par's
+    cos(psi) per unit C_F. The catalogue gives no medium's coefficients (a scene does: rft.c_s, rft.c_f,
+    rft.gamma0), so the map is the same for every medium."""
+    psi, gamma0 = (a.ravel().astype(float) for a in np.meshgrid(MAP_PSI_DEG, MAP_GAMMA0_DEG, indexing="ij"))
+    per_c_s, _ = magnitudes(np.radians(psi), 1.0, 0.0, np.radians(gamma0))
+    per_c_f, par = magnitudes(np.radians(psi), 0.0, 1.0, np.radians(gamma0))
+    return {"psi_deg": psi, "gamma0_deg": gamma0, "f_perp_c_s": per_c_s, "f_perp_c_f": per_c_f, "f_par_c_f": par}

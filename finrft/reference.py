@@ -8,8 +8,9 @@ come from the principle of virtual work, derived by hand: with segment midpoints
     A_kj = I_k delta_kj + l^2 cos(phi_k - phi_j) sum_i m_i c_ik c_ij
     Q_k  = sum_i F_i . c_ik l e_perp(phi_k) + tau_k - tau_(k+1)
 
-with F_i the RFT force (the paper law) and tau_k the torque of hinge k on segment k. A reversal of the drive
-changes P' at once; the segments then take the impulse ``A dphi' = -sum_i m_i c_ik l e_perp . dP'``.
+with F_i the RFT force (the paper or the sand-swimming law) and tau_k the torque of hinge k on segment k. A
+reversal of the drive changes P' at once; the segments then take the impulse
+``A dphi' = -sum_i m_i c_ik l e_perp . dP'``.
 It serves as the test oracle for the MuJoCo model (hinged plates; the origami stop as the penalty spring).
 The half robot is solved the same way, in the body's slide and the fin's absolute angles (`solve_robot`).
 

@@ -76,6 +76,10 @@ def test_four_parameter_fit_predicts_the_unseen_speed():
     assert result.validate_rmse_deg["origami_v30"] < 3.0
     assert max(result.rmse_deg.values()) < 3.5
     assert laws.feeds_energy(result.scene) == ""
+    physical = preset("physical")  # what this fit gave, rounded to four digits
+    for key in ("c_s", "c_f", "gamma0"):
+        assert getattr(result.scene.rft, key) == pytest.approx(getattr(physical.rft, key), rel=1e-3)
+    assert result.scene.plate.damping == pytest.approx(physical.plate.damping, rel=1e-3)
 
 
 def test_rft_identification_closes_the_loop(tmp_path, capsys):

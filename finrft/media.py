@@ -232,10 +232,10 @@ def sandswim_coefficients(length: float, depth: float, height: float, bulk_densi
 
 
 def immersion_properties(section: Any) -> tuple[float, float, float] | None:
-    """A chain scene's ``[medium]`` (`finrft.scene.Immersion`): its bulk density (kg/m^3), internal and surface
-    friction coefficients, each given there or by its named medium (the catalogue's internal friction angle as
-    its tangent), and its height; None when any is missing. SceneError for an unknown medium or a value given by
-    both."""
+    """What a chain scene's ``[medium]`` (`finrft.scene.Immersion`) gives `sandswim_coefficients`: its bulk
+    density (kg/m^3), internal and surface friction coefficients, each given there or by its named medium (the
+    catalogue's internal friction angle as its tangent); None when any of them or the height is missing.
+    SceneError for an unknown medium or a value given by both."""
     material = medium(section.name) if section.name else None
     catalogued = {"bulk_density": "bulk_density", "internal_friction": "internal_friction_angle",
                   "surface_friction": "surface_friction"}

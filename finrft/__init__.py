@@ -21,7 +21,8 @@ The API, by topic:
   module-level function), `local_executor`; `rollout_plates` (plate tests' states on MuJoCo's threaded rollout)
 - RFT on any MuJoCo model: `attach` (the Li, Zhang & Goldman 2013 law on the named bodies of an MjSpec)
 - granular media: `medium(name)`, one of the catalogue of named media (every one: ``finrft.media.media()``), each
-  value with its unit and source
+  value with its unit and source; ``finrft.media.sandswim_coefficients`` derives a segment's sand-swimming law
+  from 3D-RFT (a plate or robot scene's ``[medium]`` does it for its chain)
 - fitting plate parameters to measured drags: `read_drag`, `resolve_params`, `fit` -> `Fit`
 - optimising the robot's gait: `optimize`, `Variable`
 - files: `write_h5`, `write_rrd` (any result); they load h5py and rerun on first use, not on ``import finrft``

@@ -215,23 +215,27 @@ def sandswim_coefficients(length: float, depth: float, height: float, bulk_densi
     if not scale > 0:
         raise SceneError("3D-RFT gives no horizontal force on this plate: nothing to fit the sandswim law to")
 
+    # in units of the largest force, so that the fit is the same problem at every size and depth
+    perp, par = perp / scale, par / scale
+
     def residual(x: np.ndarray) -> np.ndarray:
         law_perp, law_par = sandswim.magnitudes(PSI, *x)
-        return np.concatenate([law_perp - perp, law_par - par]) / scale
+        return np.concatenate([law_perp - perp, law_par - par])
 
-    c_f = max(float(par.max()), 1e-6 * scale)
-    start = np.array([max(float(perp[-1]) - c_f, 1e-3 * scale), c_f, math.pi / 4])
-    found = least_squares(residual, start, bounds=([0.0, 0.0, 1e-6], [np.inf, np.inf, math.pi / 2]))
+    c_f = max(float(par.max()), 1e-6)
+    start = np.array([max(float(perp[-1]) - c_f, 1e-3), c_f, math.pi / 4])
+    found = least_squares(residual, start, bounds=([0.0, 0.0, 1e-6], [np.inf, np.inf, math.pi / 2]),
+                          xtol=1e-12, ftol=1e-12, gtol=1e-12)
     error = scale * found.fun
-    return SandswimFit(*(float(v) for v in found.x), rms=float(np.sqrt(np.mean(error ** 2))),
-                       max_error=float(np.abs(error).max()), scale=scale)
+    return SandswimFit(scale * float(found.x[0]), scale * float(found.x[1]), float(found.x[2]),
+                       rms=float(np.sqrt(np.mean(error ** 2))), max_error=float(np.abs(error).max()), scale=scale)
 
 
 def immersion_properties(section: Any) -> tuple[float, float, float] | None:
-    """A chain scene's ``[medium]`` (`finrft.scene.Immersion`): its bulk density (kg/m^3), internal and surface
-    friction coefficients, each given there or by its named medium (the catalogue's internal friction angle as
-    its tangent), and its height; None when any is missing. SceneError for an unknown medium or a value given by
-    both."""
+    """What a chain scene's ``[medium]`` (`finrft.scene.Immersion`) gives `sandswim_coefficients`: its bulk
+    density (kg/m^3), internal and surface friction coefficients, each given there or by its named medium (the
+    catalogue's internal friction angle as its tangent); None when any of them or the height is missing.
+    SceneError for an unknown medium or a value given by both."""
     material = medium(section.name) if section.name else None
     catalogued = {"bulk_density": "bulk_density", "internal_friction": "internal_friction_angle",
                   "surface_friction": "surface_friction"}

@@ -8,8 +8,9 @@ come from the principle of virtual work, derived by hand: with segment midpoints
     A_kj = I_k delta_kj + l^2 cos(phi_k - phi_j) sum_i m_i c_ik c_ij
     Q_k  = sum_i F_i . c_ik l e_perp(phi_k) + tau_k - tau_(k+1)
 
-with F_i the RFT force (the paper law) and tau_k the torque of hinge k on segment k. A reversal of the drive
-changes P' at once; the segments then take the impulse ``A dphi' = -sum_i m_i c_ik l e_perp . dP'``.
+with F_i the RFT force (the paper or the sand-swimming law) and tau_k the torque of hinge k on segment k. A
+reversal of the drive changes P' at once; the segments then take the impulse
+``A dphi' = -sum_i m_i c_ik l e_perp . dP'``.
 It serves as the test oracle for the MuJoCo model (hinged plates; the origami stop as the penalty spring).
 The half robot is solved the same way, in the body's slide and the fin's absolute angles (`solve_robot`).
 
@@ -44,10 +45,29 @@ def _paper_law(f_perp: float, f_par: float, v_reg: float) -> Callable[[np.ndarra
     return law
 
 
+def _sandswim_law(c_s: float, c_f: float, gamma0: float, v_reg: float) -> Callable[..., np.ndarray]:
+    """The sand-swimming law as Maladen et al. 2009 write it, with psi the angle between the velocity and the axis
+    e: F_par = C_F cos psi, F_perp = C_S sin beta0 + C_F sin psi, tan beta0 = cot gamma0 sin psi, each against
+    its part of the motion, faded in over tanh(|v| / v_reg)."""
+    def law(v, e, n):
+        speed = np.sqrt(np.sum(v * v, axis=1))
+        unit = v / np.maximum(speed, 1e-300)[:, None]
+        along, normal = np.sum(unit * e, axis=1), np.sum(unit * n, axis=1)
+        psi = np.arctan2(np.abs(normal), np.abs(along))
+        beta0 = np.arctan(np.sin(psi) / np.tan(gamma0))
+        f_perp = c_s * np.sin(beta0) + c_f * np.sin(psi)
+        f_par = c_f * np.cos(psi)
+        return -np.tanh(speed / v_reg)[:, None] * ((f_perp * np.sign(normal))[:, None] * n
+                                                   + (f_par * np.sign(along))[:, None] * e)
+    return law
+
+
 def _scene_law(rft: RFT):
-    if rft.law != "paper":
-        raise ValueError("the reference solves the paper law (rft.law = 'paper')")
-    return _paper_law(rft.f_perp, rft.f_par, rft.v_reg)
+    if rft.law == "paper":
+        return _paper_law(rft.f_perp, rft.f_par, rft.v_reg)
+    if rft.law == "sandswim":
+        return _sandswim_law(rft.c_s, rft.c_f, rft.gamma0, rft.v_reg)
+    raise ValueError(f"the reference solves the paper and sandswim laws, not rft.law = {rft.law!r}")
 
 
 def _stop(deflection, stiffness: float):

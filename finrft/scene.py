@@ -1,10 +1,11 @@
 """The scene schema: every physical and numerical parameter of a simulation, in SI units.
 
 A plate scene is a TOML file with the sections ``[plate]``, ``[rft]``, ``[medium]`` and ``[sim]``; a robot scene
-has ``[robot]``, ``[body]``, ``[arm]``, ``[fin]``, ``[rft]``, ``[medium]``, ``[gait]`` and ``[sim]``; a user's model (`UserScene`)
-``[model]``, ``[medium]``, ``[drive]`` and ``[sim]``; a plate intrusion (`IntrusionScene`) ``[plate]``,
-``[medium]`` and ``[sim]``. This module is the one place
-where keys, types, units, allowed values and defaults are declared; everything else reads a validated scene.
+has ``[robot]``, ``[body]``, ``[arm]``, ``[fin]``, ``[rft]``, ``[medium]``, ``[gait]`` and ``[sim]`` (their
+``[medium]`` is `Immersion`); a user's model (`UserScene`) ``[model]``, ``[medium]``, ``[drive]`` and ``[sim]``; a
+plate intrusion (`IntrusionScene`) ``[plate]``, ``[medium]`` and ``[sim]`` (their ``[medium]`` is `Medium`, the
+surface laws'). This module is the one place where keys, types, units, allowed values and defaults are declared;
+everything else reads a validated scene.
 """
 
 from __future__ import annotations

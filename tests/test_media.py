@@ -4,17 +4,19 @@ scenes."""
 
 import json
 import math
+import tomllib
 
+import h5py
 import mujoco
 import numpy as np
 import pytest
 
-from finrft import media
+from finrft import laws, media
 from finrft.attach import attach
 from finrft.cli import main
 from finrft.intrusion import intrude
 from finrft.laws import li2013, sandswim
-from finrft.scene import IntrusionScene, SceneError, scene_from_dict
+from finrft.scene import IntrusionScene, RobotScene, Scene, SceneError, preset, scene_from_dict, to_toml
 
 CM3 = li2013.N_PER_CM3
 # alpha_z(0, 90 deg) of the poppy-seed sets: the sum of their A and B coefficients (Li 2013's zeta of a medium)
@@ -203,3 +205,54 @@ def test_the_derived_sandswim_law_gives_the_attached_plates_force(mu_surf):
                              found.gamma0)[0, :2]
         np.testing.assert_allclose(law, _attached_plate_force(psi, mu_surf), rtol=0,
                                    atol=found.max_error * (1 + 1e-9))
+
+
+MEDIUM_SET = {"medium.height": 0.03, "medium.depth": 0.02, "medium.bulk_density": 1500.0,
+              "medium.internal_friction": 0.4, "medium.surface_friction": 0.4}
+
+
+def test_the_physical_preset_names_its_medium_and_dissipates():
+    scene = preset("physical")
+    assert scene.medium.name == "glass_beads_4mm" and scene.rft.law == "sandswim"
+    assert laws.feeds_energy(scene) == "" and laws.feeds_energy(preset("paper"))
+
+
+@pytest.mark.parametrize("cls, length_key", [(Scene, "plate.segment_length"), (RobotScene, "fin.segment_length")])
+def test_a_sandswim_law_left_at_zero_takes_its_coefficients_from_the_medium(cls, length_key):
+    scene = preset("physical", cls).replace(**{"rft.law": "sandswim", "rft.c_s": 0.0, "rft.c_f": 0.0,
+                                               "rft.gamma0": 0.0, **MEDIUM_SET})
+    same = scene.replace()
+    found = media.sandswim_coefficients(
+        getattr(getattr(scene, length_key.split(".")[0]), "segment_length"), 0.02, 0.03, 1500.0, 0.4, 0.4)
+    assert (scene.rft.c_s, scene.rft.c_f, scene.rft.gamma0) == (found.c_s, found.c_f, found.gamma0)
+    assert same.rft == scene.rft
+    # deeper: 3D-RFT's stress grows with depth, so C_S and C_F with the plate's mean depth, and gamma0 stays
+    deeper = scene.replace(**{"medium.depth": 0.05})
+    ratio = (0.05 + 0.015) / (0.02 + 0.015)
+    assert deeper.rft.c_s == pytest.approx(ratio * scene.rft.c_s, rel=1e-5)
+    assert deeper.rft.c_f == pytest.approx(ratio * scene.rft.c_f, rel=1e-5)
+    assert deeper.rft.gamma0 == pytest.approx(scene.rft.gamma0, rel=1e-5)
+    # the resolved scene holds the values: its TOML gives the same law
+    assert scene_from_dict(tomllib.loads(to_toml(scene)), cls).rft == scene.rft
+    # coefficients set explicitly are kept
+    assert scene.replace(**{"rft.c_s": 1.0}).rft.c_s == 1.0
+
+
+def test_a_sandswim_law_without_coefficients_or_medium_values_is_refused():
+    scene = preset("physical")
+    with pytest.raises(SceneError, match=r"sandswim' needs rft.c_s > 0.*\[medium\] height, bulk_density"):
+        scene.replace(**{"rft.c_s": 0.0, "rft.c_f": 0.0, "rft.gamma0": 0.0, **MEDIUM_SET, "medium.height": 0.0})
+    with pytest.raises(SceneError, match="unknown medium 'sand'"):
+        scene.replace(**{"medium.name": "sand"})
+
+
+def test_result_files_record_the_medium(tmp_path, capsys):
+    out = tmp_path / "drag.h5"
+    assert main(["drag", "--preset", "physical", "--distance", "10", "--quiet", "--out", str(out)]) == 0
+    with h5py.File(out) as f:
+        stored = json.loads(f.attrs["scene_json"])
+        assert stored["medium"]["name"] == "glass_beads_4mm" and f.attrs["law_feeds_energy"] == ""
+        assert 'name = "glass_beads_4mm"' in f.attrs["scene_toml"]
+    assert main(["drag", "--set", "medium.name=sand", "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "unknown medium 'sand'" in err[0]

@@ -120,7 +120,9 @@ def _flips(scene, method: str, dt: float) -> float:
 def test_explicit_coupling_chatters_on_light_segments_and_newton_does_not():
     light = preset("physical")
     assert _flips(light, "explicit", 1e-4) > 0.9
-    assert _flips(light, "implicit", 1e-3) > 0.9  # the force linearised at the step's start overshoots too
+    # the force linearised at the step's start overshoots too (at 3 ms on this plate's sand-swimming law; the
+    # paper law of the earlier fit, twice the normal force, made it chatter at 1 ms already)
+    assert _flips(light, "implicit", 3e-3) > 0.9
     assert _flips(light, "explicit", 1e-5) == 0
     assert _flips(light, "newton", 1e-3) == 0
 

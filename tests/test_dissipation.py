@@ -71,10 +71,10 @@ def test_feeding_parameters_are_detected_and_do_feed_energy_in(name, params):
     assert power > 1e-3 * scale  # the sampling finds the motion that the law pushes along
 
 
-def test_the_paper_presets_feed_energy_in_and_say_why():
-    for name in ("paper", "physical"):
-        assert "f_par" in laws.feeds_energy(preset(name))
+def test_the_paper_preset_feeds_energy_in_and_says_why_and_the_physical_one_dissipates():
+    assert "f_par" in laws.feeds_energy(preset("paper"))
     assert laws.feeds_energy(preset("paper").replace(**{"rft.f_par": 0.2})) == ""
+    assert laws.feeds_energy(preset("physical")) == ""
 
 
 def test_a_run_says_once_that_its_law_feeds_energy_in(tmp_path, capsys, monkeypatch):

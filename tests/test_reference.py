@@ -54,5 +54,5 @@ def test_reference_shares_no_code_with_what_it_checks():
     imported = {node.module for node in ast.walk(tree) if isinstance(node, ast.ImportFrom) and node.level}
     imported |= {alias.name for node in ast.walk(tree) if isinstance(node, ast.Import) for alias in node.names}
     assert imported <= {"drive", "scene", "numpy", "scipy.integrate", "dataclasses", "typing", "__future__"}, imported
-    with pytest.raises(ValueError, match="paper law"):
+    with pytest.raises(ValueError, match="reference solves the paper"):
         reference.solve(preset("paper").replace(**{"rft.law": "table", "rft.table": "forces.csv"}), Drive(), [0.0])

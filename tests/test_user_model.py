@@ -158,7 +158,7 @@ def test_intrusion_is_an_experiment_of_the_engine():
 
 def test_the_readme_scene_runs_the_readme_plate(tmp_path, capsys):
     readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
-    (block,) = re.findall(r"^```toml\n(.*?)^```", readme, flags=re.S | re.M)
+    (block,) = [b for b in re.findall(r"^```toml\n(.*?)^```", readme, flags=re.S | re.M) if "[model]" in b]
     (tmp_path / "plate.xml").write_text(MODEL)
     (tmp_path / "scene.toml").write_text(block)
     assert main(["run", "--scene", str(tmp_path / "scene.toml"), "--json", "--quiet"]) == 0

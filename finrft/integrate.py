@@ -16,6 +16,9 @@
   must agree to ``sim.tolerance`` (max over qpos and qvel of |difference| / (1e-3 + |value|)), never above
   ``sim.max_step``; the accepted state is extrapolated, 2 (two halves) - (one step), which cancels the implicit
   step's first-order error. ``sim.dt`` is then only the time grid of reversals and recorded samples.
+- ``adaptive-newton``: the same control on newton steps. A stop engaging or a segment reversing is where the
+  halves and the whole step disagree, so the steps shrink there and grow through the quasi-static sweep between;
+  a step whose Newton solve finds no root is rejected and retried at a quarter of its size.
 
 A stepper advances ``n`` steps of ``sim.dt`` and returns 0 or a `finrft.native.Code`: UNSTABLE when the state
 stopped being finite, STEP_TOO_SMALL when the adaptive step fell below 1e-9 s, NOT_CONVERGED when Newton's method
@@ -112,15 +115,18 @@ class Implicit(_Counted):
 
 
 class Adaptive(_Counted):
-    """The adaptive method; the step size carries over from one call to the next."""
+    """The adaptive methods on implicit (``iterations`` 1) or newton steps; the step size carries over from one
+    call to the next."""
 
-    def __init__(self, m: mujoco.MjModel, sim: Sim, backend: str, groups: Sequence[ForceGroup]) -> None:
+    def __init__(self, m: mujoco.MjModel, sim: Sim, iterations: int, backend: str,
+                 groups: Sequence[ForceGroup]) -> None:
         super().__init__()
         self.m, self.max_step, self.tolerance, self.h = m, sim.max_step, sim.tolerance, sim.dt
+        self.iterations = iterations
         self._native = None
         if backend == "native":
             self._native = _native("finrft_adaptive_advance", ctypes.c_double, ctypes.c_double, ctypes.c_double,
-                                   ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int64))
+                                   ctypes.c_int, ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int64))
         else:
             self._implicit = PythonImplicit(m, groups)
             self._spec = mujoco.mjtState.mjSTATE_INTEGRATION
@@ -128,11 +134,15 @@ class Adaptive(_Counted):
             self._start, self._full, self._halves = np.zeros(size), np.zeros(size), np.zeros(size)
 
     def __call__(self, d: mujoco.MjData, n: int) -> int:
-        duration = n * self.m.opt.timestep
+        return self.until(d, d.time + n * self.m.opt.timestep)
+
+    def until(self, d: mujoco.MjData, end: float) -> int:
+        """Steps to time ``end`` exactly, off the grid of ``sim.dt`` if need be (a reversal of the drive)."""
+        duration = end - d.time
         if self._native is not None:
             h = ctypes.c_double(self.h)
             failed = self._native(self.m._address, d._address, duration, self.max_step, self.tolerance,
-                                  ctypes.byref(h), self.counts)
+                                  self.iterations, ctypes.byref(h), self.counts)
             self.h = h.value
             return failed
         return self._python(d, duration)
@@ -143,11 +153,19 @@ class Adaptive(_Counted):
         while d.time < end - 1e-12:
             step = min(self.h, self.max_step, end - d.time)
             mujoco.mj_getState(m, d, self._start, spec)
-            failed = self._implicit.steps(d, 1, step, 1)
+            failed = self._implicit.step(d, step, self.iterations, NEWTON_HALVINGS)
             mujoco.mj_getState(m, d, self._full, spec)
             mujoco.mj_setState(m, d, self._start, spec)
-            failed = failed or self._implicit.steps(d, 2, step / 2, 1)
+            for _ in range(2):
+                failed = failed or self._implicit.step(d, step / 2, self.iterations, NEWTON_HALVINGS)
             mujoco.mj_getState(m, d, self._halves, spec)
+            if failed == Code.NOT_CONVERGED and self.iterations > 1:
+                mujoco.mj_setState(m, d, self._start, spec)
+                self.h = step / 4
+                self.counts[1] += 1
+                if self.h < 1e-9:
+                    return Code.STEP_TOO_SMALL
+                continue
             error = np.max(np.abs(self._full[span] - self._halves[span]) / (1e-3 + np.abs(self._halves[span])))
             if failed or not np.isfinite(error):
                 return failed or Code.UNSTABLE
@@ -301,5 +319,6 @@ METHODS: dict[str, Callable[[mujoco.MjModel, Sim, str, Sequence[ForceGroup]], St
     "explicit": lambda m, sim, backend, groups: Explicit(m),
     "implicit": lambda m, sim, backend, groups: Implicit(m, 1, backend, groups),
     "newton": lambda m, sim, backend, groups: Implicit(m, NEWTON_ITERATIONS, backend, groups),
-    "adaptive": lambda m, sim, backend, groups: Adaptive(m, sim, backend, groups),
+    "adaptive": lambda m, sim, backend, groups: Adaptive(m, sim, 1, backend, groups),
+    "adaptive-newton": lambda m, sim, backend, groups: Adaptive(m, sim, NEWTON_ITERATIONS, backend, groups),
 }

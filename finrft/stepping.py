@@ -13,6 +13,7 @@ from .convergence import SimulationUnstable, check_resolution, check_size, recor
 from .drive import Drive
 from .integrate import Stepper
 from .native import Code, captured_warnings
+from .scene import ADAPTIVE
 
 _BAD_STATE = (mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL)
 
@@ -115,12 +116,16 @@ PROBE_EVERY = 2
 def step_through(m: mujoco.MjModel, d: mujoco.MjData, scene: Any, advance: Stepper, steps: int,
                  starts: np.ndarray, samples: np.ndarray, on_stroke: Callable[[int], None],
                  on_sample: Callable[[int], None], progress: Callable[[float], None] | None = None,
-                 watch: Sequence[int] = (), forward: bool = True) -> None:
+                 watch: Sequence[int] = (), forward: bool = True, stroke_time: float | None = None) -> None:
     """Step a model through a run: ``on_stroke(k)`` as stroke k starts, ``on_sample(i)`` (after mj_forward, unless
     ``forward`` is False: then only the state is current) at recorded step ``samples[i]``; ``advance`` steps in
     chunks in between. Stops loudly if the state blows up, or if the ``watch`` dofs chatter (fixed-step methods:
-    the three steps before every PROBE_EVERY-th sample are taken one by one and checked when the run ends)."""
-    probe = len(watch) > 0 and scene.sim.method != "adaptive"
+    the three steps before every PROBE_EVERY-th sample are taken one by one and checked when the run ends).
+    Given the drive's ``stroke_time``, an adaptive method's reversals and end fall on multiples of it exactly,
+    not on the nearest step of the grid: the stroke's length, rounded to whole steps, is felt in eta."""
+    adaptive = scene.sim.method in ADAPTIVE
+    probe = len(watch) > 0 and not adaptive
+    exact = adaptive and stroke_time is not None
     # velocity[i, j]: the watched velocities 3 - j steps before sample i (j = 3: at the sample)
     velocity = np.full((len(samples), 4, len(watch)), np.nan)
     slot: dict[int, list[tuple[int, int]]] = {}
@@ -149,7 +154,13 @@ def step_through(m: mujoco.MjModel, d: mujoco.MjData, scene: Any, advance: Stepp
                     progress(step / steps)
             if step == steps:
                 break
-            code = advance(d, int(events[i + 1] - step))
+            following = int(events[i + 1])
+            if exact:
+                at = np.searchsorted(starts, following, side="right") - 1
+                strokes = len(starts) if following == steps else at if following == starts[at] else None
+                code = advance.until(d, strokes * stroke_time if strokes is not None else following * scene.sim.dt)
+            else:
+                code = advance(d, following - step)
             if code or any(counts[w] for w in bad):
                 raise unstable(scene, d.time, messages, code or 1)
     if probe:

@@ -1,6 +1,6 @@
 // The time-stepping methods of finrft (the twins of finrft/integrate.py), called through ctypes:
 //   finrft_implicit_step     the "implicit" and "newton" methods
-//   finrft_adaptive_advance  the "adaptive" method
+//   finrft_adaptive_advance  the "adaptive" and "adaptive-newton" methods
 // They return 0 or a code of finrft.native.Code (FINRFT_UNSTABLE, ...). A step allocates nothing on the heap: its
 // workspace lives on the mjData stack (mj_markStack ... mj_freeStack), sized once per call.
 //
@@ -49,6 +49,7 @@ typedef struct {
   Segments segments;
   Newton w;
   mjtNum* rhs;
+  mjtNum* mass;     // nv x nv, the mass matrix at the step's start
   int64_t* counts;  // NULL, or where to add the steps taken and rejected (halved by the newton method)
 } Workspace;
 
@@ -69,7 +70,7 @@ static int workspace_make(const mjModel* m, mjData* d, Workspace* ws, int extra,
     s->n += p->nseg;
     if (p->stop_stiffness > 0) s->nstop += p->nhinge;
   }
-  size_t numbers = 3 * (size_t)s->n * nv + 6 * (size_t)s->n + 2 * (size_t)s->nstop + 3 * (size_t)nv * nv +
+  size_t numbers = 3 * (size_t)s->n * nv + 6 * (size_t)s->n + 2 * (size_t)s->nstop + 4 * (size_t)nv * nv +
                    12 * (size_t)nv + extra;
   size_t bytes = numbers * sizeof(mjtNum) + (s->ninst + s->n) * sizeof(void*) + s->nstop * sizeof(int) + 1024;
   if (bytes + d->maxuse_stack > d->narena - d->pstack - d->parena) return FINRFT_ARENA_FULL;
@@ -84,9 +85,9 @@ static int workspace_make(const mjModel* m, mjData* d, Workspace* ws, int extra,
     if (m->plugin[i] == slot && d->plugin_data[i]) s->inst[k++] = (const FinrftInstance*)d->plugin_data[i];
   }
   Newton* w = &ws->w;
-  mjtNum** squares[] = {&w->matrix, &w->jacobian, &w->slope};
+  mjtNum** squares[] = {&w->matrix, &w->jacobian, &w->slope, &ws->mass};
   mjtNum** vectors[] = {&w->other, &w->force, &w->dv, &w->step, &w->g, &w->trial, &w->candidate, &w->u, &ws->rhs};
-  for (int i = 0; i < 3; i++) *squares[i] = mj_stackAllocNum(d, (size_t)nv * nv + 1);
+  for (int i = 0; i < 4; i++) *squares[i] = mj_stackAllocNum(d, (size_t)nv * nv + 1);
   for (int i = 0; i < 9; i++) *vectors[i] = mj_stackAllocNum(d, nv + 1);
   if (extra_out) *extra_out = mj_stackAllocNum(d, extra);
   ws->counts = NULL;
@@ -240,13 +241,22 @@ static int newton_solve(const Segments* s, Newton* w, const mjtNum* qvel, const 
   return FINRFT_NOT_CONVERGED;
 }
 
-// One implicit step of size dt; 0, FINRFT_UNSTABLE when the state stopped being finite, or FINRFT_NOT_CONVERGED.
-static int implicit_step(const mjModel* m, mjData* d, mjtNum dt, int iterations, Workspace* ws, int halvings) {
-  int nv = m->nv;
-  Newton* w = &ws->w;
+// What a step needs of its start (the state in d): MuJoCo's forces, rhs = M qacc, the mass matrix, the segments.
+static void step_prepare(const mjModel* m, mjData* d, Workspace* ws) {
   mj_forward(m, d);
   mj_mulM(m, d, ws->rhs, d->qacc);
-  mj_fullM(m, d, w->matrix);
+  mj_fullM(m, d, ws->mass);
+  segments_update(m, d, &ws->segments);
+}
+
+// One implicit step of size dt from the start step_prepare saw:
+// 0, FINRFT_UNSTABLE when the state stopped being finite, or FINRFT_NOT_CONVERGED (the state untouched). It leaves
+// MuJoCo's derived quantities in d as they were at the start, so another step from the same start needs no
+// step_prepare once the state is restored.
+static int step_take(const mjModel* m, mjData* d, mjtNum dt, int iterations, Workspace* ws) {
+  int nv = m->nv;
+  Newton* w = &ws->w;
+  mju_copy(w->matrix, ws->mass, nv * nv);
   for (int i = 0; i < nv; i++) w->matrix[i * nv + i] += dt * m->dof_damping[i];
   for (int a = 0; a < m->nu; a++) {
     if (m->actuator_trntype[a] != mjTRN_JOINT || m->actuator_biastype[a] != mjBIAS_AFFINE) continue;
@@ -254,13 +264,7 @@ static int implicit_step(const mjModel* m, mjData* d, mjtNum dt, int iterations,
     mjtNum gear = m->actuator_gear[6 * a];
     w->matrix[dof * nv + dof] -= dt * gear * gear * m->actuator_biasprm[mjNBIAS * a + 2];
   }
-  segments_update(m, d, &ws->segments);
-  if (newton_solve(&ws->segments, w, d->qvel, ws->rhs, dt, iterations)) {
-    if (iterations == 1 || halvings == NEWTON_HALVINGS) return FINRFT_NOT_CONVERGED;
-    if (ws->counts) ws->counts[1]++;
-    int failed = implicit_step(m, d, dt / 2, iterations, ws, halvings + 1);
-    return failed ? failed : implicit_step(m, d, dt / 2, iterations, ws, halvings + 1);
-  }
+  if (newton_solve(&ws->segments, w, d->qvel, ws->rhs, dt, iterations)) return FINRFT_NOT_CONVERGED;
   for (int a = 0; a < m->nu; a++) {
     int adr = m->actuator_actadr[a];
     if (adr < 0) continue;
@@ -283,6 +287,17 @@ static int implicit_step(const mjModel* m, mjData* d, mjtNum dt, int iterations,
   return failed;
 }
 
+// One implicit step of size dt; 0, FINRFT_UNSTABLE when the state stopped being finite, or FINRFT_NOT_CONVERGED.
+static int implicit_step(const mjModel* m, mjData* d, mjtNum dt, int iterations, Workspace* ws, int halvings) {
+  step_prepare(m, d, ws);
+  int failed = step_take(m, d, dt, iterations, ws);
+  if (failed != FINRFT_NOT_CONVERGED) return failed;
+  if (iterations == 1 || halvings == NEWTON_HALVINGS) return FINRFT_NOT_CONVERGED;
+  if (ws->counts) ws->counts[1]++;
+  failed = implicit_step(m, d, dt / 2, iterations, ws, halvings + 1);
+  return failed ? failed : implicit_step(m, d, dt / 2, iterations, ws, halvings + 1);
+}
+
 // nstep implicit steps of size dt; 0 or the first failure's code.
 static int implicit_steps(const mjModel* m, mjData* d, int nstep, mjtNum dt, int iterations, Workspace* ws) {
   int failed = 0;
@@ -302,14 +317,16 @@ FINRFT_EXPORT int finrft_implicit_step(const mjModel* m, mjData* d, int nstep, i
   return failed;
 }
 
-// The adaptive method: implicit steps over `duration` seconds, each accepted when one step of h and two of h/2
-// agree to `tol` (max over qpos, qvel of |difference| / (1e-3 + |value|)). The accepted positions and velocities
-// are extrapolated, 2 (two halves) - (one step), which cancels the first-order error of the implicit step. The
-// step grows or shrinks by 0.9 sqrt(tol / error) (within 0.2x..2x), never above hmax; *h carries it over calls.
+// The adaptive methods: steps over `duration` seconds, implicit (iterations == 1: "adaptive") or newton
+// ("adaptive-newton"), each accepted when one step of h and two of h/2 agree to `tol` (max over qpos, qvel of
+// |difference| / (1e-3 + |value|)). Both are first order, so the accepted positions and velocities are
+// extrapolated, 2 (two halves) - (one step), which cancels the first-order error. The step grows or shrinks by
+// 0.9 sqrt(tol / error) (within 0.2x..2x), never above hmax; *h carries it over calls. A newton step whose solve
+// finds no root is rejected like one over the tolerance, its size divided by 4 (no halving inside the step).
 // counts (or NULL): the steps accepted and rejected are added to counts[0] and counts[1].
 // Returns 0, FINRFT_UNSTABLE, FINRFT_STEP_TOO_SMALL when the step falls below 1e-9 s, or another failure's code.
 FINRFT_EXPORT int finrft_adaptive_advance(const mjModel* m, mjData* d, mjtNum duration, mjtNum hmax, mjtNum tol,
-                                          mjtNum* h, int64_t* counts) {
+                                          int iterations, mjtNum* h, int64_t* counts) {
   const int spec = mjSTATE_INTEGRATION;
   int size = mj_stateSize(m, spec);
   Workspace ws;
@@ -320,16 +337,32 @@ FINRFT_EXPORT int finrft_adaptive_advance(const mjModel* m, mjData* d, mjtNum du
   mjtNum end = d->time + duration;
   // the slice of the integration state holding qpos and qvel (after time)
   int first = 1, count = m->nq + m->nv;
+  // newton steps: the positions only (see above)
+  int measured = iterations > 1 ? m->nq : count;
   while (!failed && d->time < end - 1e-12) {
     mjtNum step = mju_min(mju_min(*h, hmax), end - d->time);
+    // The whole step and the first half start from the same state: one step_prepare serves both.
     mj_getState(m, d, start, spec);
-    failed = implicit_steps(m, d, 1, step, 1, &ws);
+    step_prepare(m, d, &ws);
+    failed = step_take(m, d, step, iterations, &ws);
     mj_getState(m, d, full, spec);
     mj_setState(m, d, start, spec);
-    failed = failed ? failed : implicit_steps(m, d, 2, step / 2, 1, &ws);
+    if (!failed) failed = step_take(m, d, step / 2, iterations, &ws);
+    if (!failed) {
+      step_prepare(m, d, &ws);
+      failed = step_take(m, d, step / 2, iterations, &ws);
+    }
     mj_getState(m, d, halves, spec);
+    if (failed == FINRFT_NOT_CONVERGED && iterations > 1) {
+      mj_setState(m, d, start, spec);
+      *h = step / 4;
+      failed = 0;
+      if (counts) counts[1]++;
+      if (*h < 1e-9) failed = FINRFT_STEP_TOO_SMALL;
+      continue;
+    }
     mjtNum error = 0;
-    for (int i = first; i < first + count; i++) {
+    for (int i = first; i < first + measured; i++) {
       error = mju_max(error, fabs(full[i] - halves[i]) / (1e-3 + fabs(halves[i])));
     }
     if (failed || !isfinite(error)) {
@@ -337,7 +370,9 @@ FINRFT_EXPORT int finrft_adaptive_advance(const mjModel* m, mjData* d, mjtNum du
     } else if (error <= tol) {
       for (int i = first; i < first + count; i++) halves[i] += halves[i] - full[i];
       mj_setState(m, d, halves, spec);
-      *h = mju_min(hmax, step * mju_min(2.0, 0.9 * sqrt(tol / mju_max(error, 1e-300))));
+      mjtNum proposal = mju_min(hmax, step * mju_min(2.0, 0.9 * sqrt(tol / mju_max(error, 1e-300))));
+      // a step cut short to land on `end` (a sample, a reversal) is no reason to shorten the steps after it
+      *h = step < *h ? mju_max(*h, proposal) : proposal;
       if (counts) counts[0]++;
     } else {
       mj_setState(m, d, start, spec);

@@ -16,9 +16,14 @@
   must agree to ``sim.tolerance`` (max over qpos and qvel of |difference| / (1e-3 + |value|)), never above
   ``sim.max_step``; the accepted state is extrapolated, 2 (two halves) - (one step), which cancels the implicit
   step's first-order error. ``sim.dt`` is then only the time grid of reversals and recorded samples.
-- ``adaptive-newton``: the same control on newton steps. A stop engaging or a segment reversing is where the
-  halves and the whole step disagree, so the steps shrink there and grow through the quasi-static sweep between;
-  a step whose Newton solve finds no root is rejected and retried at a quarter of its size.
+  A step cut short to land on a sample or a reversal leaves the next step's size as it was.
+- ``adaptive-newton``: the same control on newton steps, the error measured on qpos only: the stiff RFT force
+  slaves a light segment's velocity to its position, so the velocity jumps within microseconds (at the start, at
+  each reversal) and the newton step lands on the jumped value whatever its size; the halves and the whole step
+  differ there in velocity by O(1) at any step, in position by h times that, which the position test sees. A stop
+  engaging or a segment reversing is where the positions disagree, so the steps shrink there and grow through the
+  quasi-static sweep between; a step whose Newton solve finds no root is rejected and retried at a quarter of its
+  size.
 
 A stepper advances ``n`` steps of ``sim.dt`` and returns 0 or a `finrft.native.Code`: UNSTABLE when the state
 stopped being finite, STEP_TOO_SMALL when the adaptive step fell below 1e-9 s, NOT_CONVERGED when Newton's method
@@ -150,6 +155,7 @@ class Adaptive(_Counted):
     def _python(self, d: mujoco.MjData, duration: float) -> int:
         m, spec, end = self.m, self._spec, d.time + duration
         span = slice(1, 1 + m.nq + m.nv)  # qpos and qvel in the integration state, after time
+        measured = slice(1, 1 + m.nq) if self.iterations > 1 else span
         while d.time < end - 1e-12:
             step = min(self.h, self.max_step, end - d.time)
             mujoco.mj_getState(m, d, self._start, spec)
@@ -166,13 +172,15 @@ class Adaptive(_Counted):
                 if self.h < 1e-9:
                     return Code.STEP_TOO_SMALL
                 continue
-            error = np.max(np.abs(self._full[span] - self._halves[span]) / (1e-3 + np.abs(self._halves[span])))
+            error = np.max(np.abs(self._full[measured] - self._halves[measured])
+                           / (1e-3 + np.abs(self._halves[measured])))
             if failed or not np.isfinite(error):
                 return failed or Code.UNSTABLE
             if error <= self.tolerance:
                 self._halves[span] += self._halves[span] - self._full[span]
                 mujoco.mj_setState(m, d, self._halves, spec)
-                self.h = min(self.max_step, step * min(2.0, 0.9 * np.sqrt(self.tolerance / max(error, 1e-300))))
+                proposal = min(self.max_step, step * min(2.0, 0.9 * np.sqrt(self.tolerance / max(error, 1e-300))))
+                self.h = max(self.h, proposal) if step < self.h else proposal
                 self.counts[0] += 1
             else:
                 mujoco.mj_setState(m, d, self._start, spec)

@@ -319,7 +319,8 @@ FINRFT_EXPORT int finrft_implicit_step(const mjModel* m, mjData* d, int nstep, i
 
 // The adaptive methods: steps over `duration` seconds, implicit (iterations == 1: "adaptive") or newton
 // ("adaptive-newton"), each accepted when one step of h and two of h/2 agree to `tol` (max over qpos, qvel of
-// |difference| / (1e-3 + |value|)). Both are first order, so the accepted positions and velocities are
+// |difference| / (1e-3 + |value|); newton steps: over qpos only, as a light segment's velocity jumps onto the
+// stiff force's balance within any step, which shows in the positions as h times the jump, see integrate.py). Both are first order, so the accepted positions and velocities are
 // extrapolated, 2 (two halves) - (one step), which cancels the first-order error. The step grows or shrinks by
 // 0.9 sqrt(tol / error) (within 0.2x..2x), never above hmax; *h carries it over calls. A newton step whose solve
 // finds no root is rejected like one over the tolerance, its size divided by 4 (no halving inside the step).
@@ -337,7 +338,6 @@ FINRFT_EXPORT int finrft_adaptive_advance(const mjModel* m, mjData* d, mjtNum du
   mjtNum end = d->time + duration;
   // the slice of the integration state holding qpos and qvel (after time)
   int first = 1, count = m->nq + m->nv;
-  // newton steps: the positions only (see above)
   int measured = iterations > 1 ? m->nq : count;
   while (!failed && d->time < end - 1e-12) {
     mjtNum step = mju_min(mju_min(*h, hmax), end - d->time);

@@ -49,6 +49,7 @@ from .scene import Sim
 NEWTON_ITERATIONS = 50
 NEWTON_TOLERANCE = 1e-10
 NEWTON_HALVINGS = 10
+NEWTON_SHARE = 1e-3  # the adaptive newton method stops Newton's method at this share of the step's tolerance
 
 
 def _native(name: str, *argtypes) -> Callable[..., int]:
@@ -134,6 +135,8 @@ class Adaptive(_Counted):
                                    ctypes.c_int, ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int64))
         else:
             self._implicit = PythonImplicit(m, groups)
+            # Newton's error, a velocity, moves a position by h times it: far below what the step's test allows
+            self._implicit.tolerance = max(NEWTON_TOLERANCE, NEWTON_SHARE * sim.tolerance)
             self._spec = mujoco.mjtState.mjSTATE_INTEGRATION
             size = mujoco.mj_stateSize(m, self._spec)
             self._start, self._full, self._halves = np.zeros(size), np.zeros(size), np.zeros(size)
@@ -205,6 +208,7 @@ class PythonImplicit:
             self.damping[dof, dof] -= m.actuator_gear[a, 0] ** 2 * m.actuator_biasprm[a, 2]
         self._mass = np.zeros((m.nv, m.nv))
         self._rhs = np.zeros(m.nv)
+        self.tolerance = NEWTON_TOLERANCE  # Newton's method stops when the change is below this times (1 + |qvel|)
 
     def _segments(self, d: mujoco.MjData) -> tuple[list, list]:
         """Per force group: its law, v_reg, the site Jacobians (k, 3, nv) and the segments' axes and normals; and per
@@ -276,7 +280,7 @@ class PythonImplicit:
                     break
                 alpha /= 2
             dv, g = dv + alpha * step, trial
-            if np.abs(alpha * step).max() <= NEWTON_TOLERANCE * (1 + np.abs(qvel + dv).max()):
+            if np.abs(alpha * step).max() <= self.tolerance * (1 + np.abs(qvel + dv).max()):
                 return dv
             _, slope = self._forces(forces, qvel + dv, dt, True)
         return None

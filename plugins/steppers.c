@@ -26,6 +26,8 @@
 // Where Newton's method finds no root (forces that feed energy in, such as f_par < 0, can leave the implicit
 // equation without one near v), the newton method halves the step, down to dt / 2^NEWTON_HALVINGS.
 #define NEWTON_HALVINGS 10
+// The adaptive newton method stops Newton's method at NEWTON_SHARE of the step's tolerance.
+#define NEWTON_SHARE 1e-3
 
 // The forces the implicit methods take at the new velocity: every RFT segment of the model (its instance, site
 // Jacobian and axes at the current positions) and every penalty stop (its hinge and deflection now).
@@ -51,6 +53,7 @@ typedef struct {
   mjtNum* rhs;
   mjtNum* mass;     // nv x nv, the mass matrix at the step's start
   int64_t* counts;  // NULL, or where to add the steps taken and rejected (halved by the newton method)
+  mjtNum newton_tolerance;  // Newton's method stops when the change is below this times (1 + |qvel|)
 } Workspace;
 
 // The workspace of a model's steps, and `extra` more numbers (NULL when not wanted), on the mjData stack (after
@@ -91,6 +94,7 @@ static int workspace_make(const mjModel* m, mjData* d, Workspace* ws, int extra,
   for (int i = 0; i < 9; i++) *vectors[i] = mj_stackAllocNum(d, nv + 1);
   if (extra_out) *extra_out = mj_stackAllocNum(d, extra);
   ws->counts = NULL;
+  ws->newton_tolerance = NEWTON_TOLERANCE;
   return 0;
 }
 
@@ -198,7 +202,7 @@ static mjtNum newton_residual(const Segments* s, Newton* w, const mjtNum* qvel, 
 // in the RFT force (the first Newton iterate, no line search, stops as MuJoCo computed them); otherwise the root
 // of G, with the stops' torque taken at the new positions too, by Newton's method, or FINRFT_NOT_CONVERGED.
 static int newton_solve(const Segments* s, Newton* w, const mjtNum* qvel, const mjtNum* rhs, mjtNum dt,
-                        int iterations) {
+                        int iterations, mjtNum tolerance) {
   int nv = s->nv;
   mjtNum ahead = iterations > 1 ? dt : 0;
   segments_force(s, qvel, ahead, w->force, w->slope);
@@ -234,7 +238,7 @@ static int newton_solve(const Segments* s, Newton* w, const mjtNum* qvel, const 
       scale = mju_max(scale, fabs(qvel[i] + w->dv[i]));
     }
     norm = trial_norm;
-    if (change <= NEWTON_TOLERANCE * (1 + scale)) return 0;
+    if (change <= tolerance * (1 + scale)) return 0;
     for (int i = 0; i < nv; i++) w->u[i] = qvel[i] + w->dv[i];
     segments_force(s, w->u, dt, w->force, w->slope);
   }
@@ -264,7 +268,7 @@ static int step_take(const mjModel* m, mjData* d, mjtNum dt, int iterations, Wor
     mjtNum gear = m->actuator_gear[6 * a];
     w->matrix[dof * nv + dof] -= dt * gear * gear * m->actuator_biasprm[mjNBIAS * a + 2];
   }
-  if (newton_solve(&ws->segments, w, d->qvel, ws->rhs, dt, iterations)) return FINRFT_NOT_CONVERGED;
+  if (newton_solve(&ws->segments, w, d->qvel, ws->rhs, dt, iterations, ws->newton_tolerance)) return FINRFT_NOT_CONVERGED;
   for (int a = 0; a < m->nu; a++) {
     int adr = m->actuator_actadr[a];
     if (adr < 0) continue;
@@ -335,6 +339,8 @@ FINRFT_EXPORT int finrft_adaptive_advance(const mjModel* m, mjData* d, mjtNum du
   mj_markStack(d);
   int failed = workspace_make(m, d, &ws, 3 * size, &states);
   mjtNum *start = states, *full = states + size, *halves = states + 2 * size;
+  // Newton's error, a velocity, moves a position by h times it: far below what the step's test allows
+  ws.newton_tolerance = mju_max(NEWTON_TOLERANCE, NEWTON_SHARE * tol);
   mjtNum end = d->time + duration;
   // the slice of the integration state holding qpos and qvel (after time)
   int first = 1, count = m->nq + m->nv;

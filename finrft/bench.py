@@ -338,12 +338,13 @@ def _settings(case: StudyCase, base: Scene | RobotScene, quick: bool,
                 fields = {"backend": backend, "method": _label(method, integrator), "dt": dt, "tolerance": ""}
                 out.append((fields, base.replace(**{"sim.backend": backend, "sim.method": method,
                                                     "sim.integrator": integrator, "sim.dt": dt})))
-        # The adaptive method on the case's grid, largest step 10 ms.
-        for tolerance in ((1e-2,) if quick else TOLERANCES) if backend == "native" else ():
-            fields = {"backend": backend, "method": "adaptive", "dt": case.grid, "tolerance": tolerance}
-            out.append((fields, base.replace(**{"sim.backend": backend, "sim.method": "adaptive",
-                                                "sim.dt": case.grid, "sim.max_step": 1e-2,
-                                                "sim.tolerance": tolerance})))
+        # The adaptive methods on the case's grid, largest step 10 ms.
+        for method in ADAPTIVE:
+            for tolerance in ((1e-2,) if quick else TOLERANCES) if backend == "native" else ():
+                fields = {"backend": backend, "method": method, "dt": case.grid, "tolerance": tolerance}
+                out.append((fields, base.replace(**{"sim.backend": backend, "sim.method": method,
+                                                    "sim.dt": case.grid, "sim.max_step": 1e-2,
+                                                    "sim.tolerance": tolerance})))
     return out
 
 
@@ -423,7 +424,7 @@ def accuracy(out: str | Path = "accuracy", *, quick: bool = False, workers: int 
 
 
 def _setting(row: dict[str, Any]) -> str:
-    return (f"{row['method']}, tolerance {row['tolerance']:g}" if row["method"] == "adaptive"
+    return (f"{row['method']}, tolerance {row['tolerance']:g}" if row["method"] in ADAPTIVE
             else f"{row['method']}, dt {row['dt']:g} s")
 
 

@@ -401,8 +401,8 @@ def build_parser() -> argparse.ArgumentParser:
                            description="Run the origami drag (45 mm out and back) and one flap cycle of the "
                            "robot, each with the paper's and with physical inertias, for every method (explicit "
                            "with each MuJoCo integrator, implicit, newton: steps of 10 µs to 10 ms; adaptive and "
-                           "adaptive-newton: tolerances 0.1 to 1e-5), v_reg (0.1, 1, 10 mm/s) and backend (python at steps of 1 ms "
-                           "and more); write DIR/accuracy.csv, a chart of error against wall time (accuracy.png) "
+                           "adaptive-newton: tolerances 0.1 to 1e-5), v_reg (0.1, 1, 10 mm/s) and backend (python "
+                           "at steps of 1 ms and more); write DIR/accuracy.csv, a chart of error against wall time (accuracy.png) "
                            "and a summary of the fastest setting within 0.1° and 1° (accuracy.md). Takes about "
                            "4 minutes on two cores.")
     acc.add_argument("--out", default="accuracy", metavar="DIR", help="output folder (default: %(default)s)")

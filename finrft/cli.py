@@ -402,9 +402,9 @@ def build_parser() -> argparse.ArgumentParser:
                            "robot, each with the paper's and with physical inertias, for every method (explicit "
                            "with each MuJoCo integrator, implicit, newton: steps of 10 µs to 10 ms; adaptive and "
                            "adaptive-newton: tolerances 0.1 to 1e-5), v_reg (0.1, 1, 10 mm/s) and backend (python "
-                           "at steps of 1 ms and more); write DIR/accuracy.csv, a chart of error against wall time (accuracy.png) "
-                           "and a summary of the fastest setting within 0.1° and 1° (accuracy.md). Takes about "
-                           "4 minutes on two cores.")
+                           "at steps of 1 ms and more); write DIR/accuracy.csv, a chart of error against wall time "
+                           "(accuracy.png) and a summary of the fastest setting within 0.1° and 1° (accuracy.md). "
+                           "Takes about 4 minutes on two cores.")
     acc.add_argument("--out", default="accuracy", metavar="DIR", help="output folder (default: %(default)s)")
     acc.add_argument("--quick", action="store_true",
                      help="steps of 0.1 and 1 ms, one tolerance and v_reg, and a coarser reference (about 25 s)")

@@ -99,7 +99,7 @@ class Sim:
     method: str = _f("newton", "", "explicit: MuJoCo's step, the RFT force as it is; implicit: implicitfast "
                      "with the RFT force linearised in velocity; newton: implicitfast with the RFT force at the new "
                      "velocity, solved by Newton's method (stable and accurate at large steps on light segments); "
-                     "adaptive: implicit steps sized by an error estimate (dt is then the grid of reversals and samples); "
+                     "adaptive: implicit steps sized by an error estimate (dt is then the grid of samples); "
                      "adaptive-newton: newton steps sized by the same estimate",
                      choices=lambda: tuple(_methods()))
     max_step: float = _f(1e-3, "s", "adaptive methods: largest step", minimum=0.0)

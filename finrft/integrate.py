@@ -49,7 +49,7 @@ from .scene import Sim
 NEWTON_ITERATIONS = 50
 NEWTON_TOLERANCE = 1e-10
 NEWTON_HALVINGS = 10
-NEWTON_SHARE = 1e-3  # the adaptive newton method stops Newton's method at this share of the step's tolerance
+NEWTON_SHARE = 1e-2  # the adaptive newton method stops Newton's method at this share of the step's tolerance
 
 
 def _native(name: str, *argtypes) -> Callable[..., int]:
@@ -226,22 +226,25 @@ class PythonImplicit:
         return segments, stops
 
     @staticmethod
-    def _forces(forces: tuple[list, list], u: np.ndarray, ahead: float,
-                slope: bool) -> tuple[np.ndarray, np.ndarray | None]:
+    def _forces(forces: tuple[list, list], u: np.ndarray, ahead: float, slope: bool,
+                forward: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
         """At generalised velocity ``u``: the RFT force plus the penalty stops' torque at the deflection they
         reach ``ahead`` seconds on at ``u``, and, with ``slope``, its derivative in ``u`` (the law's by central
-        differences)."""
+        differences, or with ``forward`` forward ones: half the law's calls, for Newton's method, whose root does
+        not depend on the derivative)."""
         segments, stops = forces
         nv = len(u)
         force, jacobian = np.zeros(nv), np.zeros((nv, nv)) if slope else None
         for law, v_reg, jacp, x, y in segments:
             v = jacp @ u
-            force += np.einsum("kin,ki->n", jacp, law(v, x, y))
+            f = law(v, x, y)
+            force += np.einsum("kin,ki->n", jacp, f)
             if slope:
                 h = 1e-6 * (np.linalg.norm(v, axis=1) + v_reg)[:, None, None] * np.eye(3)  # (k, probe, 3)
                 up = law(v[:, None] + h, x[:, None], y[:, None])
-                down = law(v[:, None] - h, x[:, None], y[:, None])
-                dfdv = np.swapaxes((up - down) / (2 * h.sum(axis=2, keepdims=True)), 1, 2)  # (k, force, v)
+                down = f[:, None] if forward else law(v[:, None] - h, x[:, None], y[:, None])
+                step = h.sum(axis=2, keepdims=True) * (1 if forward else 2)
+                dfdv = np.swapaxes((up - down) / step, 1, 2)  # (k, force, v)
                 jacobian += np.einsum("kin,kij,kjm->nm", jacp, dfdv, jacp)
         for stiffness, dofs, deflection in stops:
             torque, stiffening = penalty_stop(deflection + ahead * u[dofs], stiffness)
@@ -261,7 +264,7 @@ class PythonImplicit:
         forces = self._segments(d)
         qvel = d.qvel.copy()
         ahead = dt if iterations > 1 else 0.0
-        force, slope = self._forces(forces, qvel, ahead, True)
+        force, slope = self._forces(forces, qvel, ahead, True, forward=iterations > 1)
         # every force but F, taken out at the stops' present deflection
         other = self._rhs - (self._forces(forces, qvel, 0.0, False)[0] if ahead else force)
 
@@ -282,7 +285,7 @@ class PythonImplicit:
             dv, g = dv + alpha * step, trial
             if np.abs(alpha * step).max() <= self.tolerance * (1 + np.abs(qvel + dv).max()):
                 return dv
-            _, slope = self._forces(forces, qvel + dv, dt, True)
+            _, slope = self._forces(forces, qvel + dv, dt, True, forward=True)
         return None
 
     def steps(self, d: mujoco.MjData, n: int, dt: float, iterations: int, counts: Counts | None = None) -> int:

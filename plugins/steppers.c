@@ -12,7 +12,8 @@
 // F(u) = sum_i J_i^T F_i(J_i u). A rate-independent law is a near-discontinuity in velocity, so a linearisation
 // at v (the first Newton iterate: the "implicit" method) overshoots on light segments; the "newton" method
 // iterates, with a backtracking line search on |G|, to the root, the penalty stops taken at the new positions.
-// dF_i/dv comes from central differences of the same law, so no law needs a derivative of its own. Then, as
+// dF_i/dv comes from central differences of the same law (forward ones in Newton's method, whose root does not
+// depend on it), so no law needs a derivative of its own. Then, as
 // MuJoCo's implicitfast: activations, qvel += dv, positions, time.
 
 #include <math.h>
@@ -27,7 +28,7 @@
 // equation without one near v), the newton method halves the step, down to dt / 2^NEWTON_HALVINGS.
 #define NEWTON_HALVINGS 10
 // The adaptive newton method stops Newton's method at NEWTON_SHARE of the step's tolerance.
-#define NEWTON_SHARE 1e-3
+#define NEWTON_SHARE 1e-2
 
 // The forces the implicit methods take at the new velocity: every RFT segment of the model (its instance, site
 // Jacobian and axes at the current positions) and every penalty stop (its hinge and deflection now).
@@ -116,11 +117,18 @@ static void segments_update(const mjModel* m, mjData* d, Segments* s) {
   }
 }
 
-// dF/dv (3 x 3, row-major) of one segment at velocity v, by central differences.
+// dF/dv (3 x 3, row-major) of one segment at velocity v, by central differences, or, given the force f0 at v,
+// forward ones: half the law's calls, for Newton's method, whose root does not depend on the derivative.
 static void segment_jacobian(const FinrftInstance* p, const mjtNum v[3], const mjtNum x[3], const mjtNum y[3],
-                             mjtNum jac[9]) {
+                             const mjtNum* f0, mjtNum jac[9]) {
   mjtNum h = 1e-6 * (sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]) + p->v_reg);
-  for (int k = 0; k < 3; k++) {
+  for (int k = 0; f0 && k < 3; k++) {
+    mjtNum up[3] = {v[0], v[1], v[2]}, fu[3];
+    up[k] += h;
+    p->law->force(p->params, p->v_reg, up, x, y, fu);
+    for (int r = 0; r < 3; r++) jac[3 * r + k] = (fu[r] - f0[r]) / h;
+  }
+  for (int k = 0; !f0 && k < 3; k++) {
     mjtNum up[3] = {v[0], v[1], v[2]}, down[3] = {v[0], v[1], v[2]}, fu[3], fd[3];
     up[k] += h;
     down[k] -= h;
@@ -131,8 +139,10 @@ static void segment_jacobian(const FinrftInstance* p, const mjtNum v[3], const m
 }
 
 // At generalised velocity u: the RFT force plus the penalty stops' torque at the deflection they reach after
-// `ahead` seconds at u (nv), and, when slope is not NULL, its derivative in u (nv x nv).
-static void segments_force(const Segments* s, const mjtNum* u, mjtNum ahead, mjtNum* force, mjtNum* slope) {
+// `ahead` seconds at u (nv), and, when slope is not NULL, its derivative in u (nv x nv), the law's by forward
+// differences when `forward`, else central ones.
+static void segments_force(const Segments* s, const mjtNum* u, mjtNum ahead, mjtNum* force, mjtNum* slope,
+                           int forward) {
   int nv = s->nv;
   mju_zero(force, nv);
   if (slope) mju_zero(slope, nv * nv);
@@ -145,7 +155,7 @@ static void segments_force(const Segments* s, const mjtNum* u, mjtNum ahead, mjt
     p->law->force(p->params, p->v_reg, v, x, y, f);
     for (int col = 0; col < nv; col++) force[col] += jac[col] * f[0] + jac[nv + col] * f[1] + jac[2 * nv + col] * f[2];
     if (!slope) continue;
-    segment_jacobian(p, v, x, y, c);
+    segment_jacobian(p, v, x, y, forward ? f : NULL, c);
     for (int col = 0; col < nv; col++) {
       for (int r = 0; r < 3; r++) cj[r] = c[3 * r] * jac[col] + c[3 * r + 1] * jac[nv + col] + c[3 * r + 2] * jac[2 * nv + col];
       for (int row = 0; row < nv; row++) {
@@ -192,7 +202,7 @@ static mjtNum newton_residual(const Segments* s, Newton* w, const mjtNum* qvel, 
                               mjtNum* out) {
   int nv = s->nv;
   for (int i = 0; i < nv; i++) w->u[i] = qvel[i] + dv[i];
-  segments_force(s, w->u, dt, w->force, NULL);
+  segments_force(s, w->u, dt, w->force, NULL, 0);
   mju_mulMatVec(out, w->matrix, dv, nv, nv);
   for (int i = 0; i < nv; i++) out[i] -= dt * (w->other[i] + w->force[i]);
   return mju_norm(out, nv);
@@ -205,9 +215,9 @@ static int newton_solve(const Segments* s, Newton* w, const mjtNum* qvel, const 
                         int iterations, mjtNum tolerance) {
   int nv = s->nv;
   mjtNum ahead = iterations > 1 ? dt : 0;
-  segments_force(s, qvel, ahead, w->force, w->slope);
+  segments_force(s, qvel, ahead, w->force, w->slope, iterations > 1);
   // other: every force but F, taken out at the stops' present deflection (w->trial is free until the search)
-  if (ahead > 0) segments_force(s, qvel, 0, w->trial, NULL);
+  if (ahead > 0) segments_force(s, qvel, 0, w->trial, NULL, 0);
   const mjtNum* now = ahead > 0 ? w->trial : w->force;
   for (int i = 0; i < nv; i++) w->other[i] = rhs[i] - now[i];
   for (int i = 0; i < nv; i++) {
@@ -240,7 +250,7 @@ static int newton_solve(const Segments* s, Newton* w, const mjtNum* qvel, const 
     norm = trial_norm;
     if (change <= tolerance * (1 + scale)) return 0;
     for (int i = 0; i < nv; i++) w->u[i] = qvel[i] + w->dv[i];
-    segments_force(s, w->u, dt, w->force, w->slope);
+    segments_force(s, w->u, dt, w->force, w->slope, 1);
   }
   return FINRFT_NOT_CONVERGED;
 }

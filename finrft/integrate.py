@@ -30,6 +30,7 @@ stopped being finite, STEP_TOO_SMALL when the adaptive step fell below 1e-9 s, N
 did not converge, ARENA_FULL when the native step's workspace does not fit on the mjData stack. It counts
 the steps it has taken and rejected: a fixed step takes exactly the steps asked for, unless Newton's method halves
 one (one rejected, two taken); the adaptive method takes its accepted steps and rejects those over the tolerance.
+An adaptive stepper also steps ``until(d, t)``, to an instant off the grid (a reversal of the drive).
 """
 
 from __future__ import annotations

@@ -164,8 +164,8 @@ def test_native_step_too_big_for_the_arena_says_so_and_leaves_the_state(method):
 def test_adaptive_newton_converges_to_newton_on_the_light_plate():
     # The physical plate (light segments, stiff penalty stops): adaptive-newton against newton at 10 µs (itself
     # within 1e-4 deg of newton at 20 µs); the error stays small at loose tolerances and falls at tight ones.
-    light, drive = preset("physical").replace(**{"sim.dt": 1e-3, "sim.max_step": 1e-2}), Drive(speed=0.03, stroke=0.015,
-                                                                                                cycles=1)
+    light = preset("physical").replace(**{"sim.dt": 1e-3, "sim.max_step": 1e-2})
+    drive = Drive(speed=0.03, stroke=0.015, cycles=1)
     fine = simulate(light.replace(**{"sim.dt": 1e-5}), drive, estimate_error=False)
     errors = []
     for tolerance in (1e-1, 1e-2, 1e-5):

@@ -63,7 +63,7 @@ PLATE_PRESETS_HELP = ("built-in plate scene when no --scene is given (default: p
 ROBOT_PRESETS_HELP = ("built-in robot scene when no --scene is given (default: paper): paper = the authors' model "
                       "with its quirks: inertias of 1 kg m^2, penalty stops, stroke body drag (a constant force "
                       "against the fin's sweep), adaptive method; physical = real inertias, penalty stops, "
-                      "velocity body drag (against the body's velocity), newton method")
+                      "velocity body drag (against the body's velocity), adaptive-newton method")
 
 
 def _add_quiet(p: argparse.ArgumentParser) -> None:
@@ -406,11 +406,11 @@ def build_parser() -> argparse.ArgumentParser:
     acc = kinds.add_parser("accuracy", help="speed against accuracy of every time-stepping method and step",
                            description="Run the origami drag (45 mm out and back) and one flap cycle of the "
                            "robot, each with the paper's and with physical inertias, for every method (explicit "
-                           "with each MuJoCo integrator, implicit, newton: steps of 10 µs to 10 ms; adaptive: "
-                           "tolerances 0.1 to 1e-5), v_reg (0.1, 1, 10 mm/s) and backend (python at steps of 1 ms "
-                           "and more); write DIR/accuracy.csv, a chart of error against wall time (accuracy.png) "
-                           "and a summary of the fastest setting within 0.1° and 1° (accuracy.md). Takes about "
-                           "4 minutes on two cores.")
+                           "with each MuJoCo integrator, implicit, newton: steps of 10 µs to 10 ms; adaptive and "
+                           "adaptive-newton: tolerances 0.1 to 1e-5), v_reg (0.1, 1, 10 mm/s) and backend (python "
+                           "at steps of 1 ms and more); write DIR/accuracy.csv, a chart of error against wall time "
+                           "(accuracy.png) and a summary of the fastest setting within 0.1° and 1° (accuracy.md). "
+                           "Takes about 4 minutes on two cores.")
     acc.add_argument("--out", default="accuracy", metavar="DIR", help="output folder (default: %(default)s)")
     acc.add_argument("--quick", action="store_true",
                      help="steps of 0.1 and 1 ms, one tolerance and v_reg, and a coarser reference (about 25 s)")

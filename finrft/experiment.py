@@ -22,7 +22,7 @@ from .convergence import ErrorLimits, Estimated, checked, max_difference, paired
 from .coupling import PythonCoupling, installed
 from .drive import Drive
 from .integrate import stepper
-from .stepping import schedule, step_through
+from .stepping import instants, schedule, step_through
 
 
 @dataclass(frozen=True)
@@ -203,7 +203,8 @@ def _once(experiment: Experiment, scene: Any, built: Any, progress: Callable[[fl
     m = built.model
     d = mujoco.MjData(m)
     dt = scene.sim.dt
-    steps, starts, samples = schedule(experiment.drive_for(scene), dt, scene.sim.record_dt)
+    drive = experiment.drive_for(scene)
+    steps, starts, samples = schedule(drive, dt, scene.sim.record_dt)
     trial = experiment.start(scene, built, d, companion)
     readings: dict[str, np.ndarray] = {}
 
@@ -217,9 +218,10 @@ def _once(experiment: Experiment, scene: Any, built: Any, progress: Callable[[fl
     advance = stepper(m, scene.sim, built.backend, built.groups)
     with installed(python_forces(built) if built.backend == "python" else None):
         step_through(m, d, scene, advance, steps, starts, samples, trial.on_stroke, on_sample, progress,
-                     [] if companion else trial.watch, forward=not companion)
+                     [] if companion else trial.watch, forward=not companion, stroke_time=drive.stroke_time)
     series, values = trial.finish(d, readings)
-    result = Result(experiment=experiment, scene=scene, time=samples * dt, series=series, values=values,
+    result = Result(experiment=experiment, scene=scene,
+                    time=instants(samples, steps, starts, scene.sim, drive.stroke_time), series=series, values=values,
                     steps=advance.taken, wall_s=time.perf_counter() - start, backend=built.backend,
                     steps_rejected=advance.rejected)
     experiment.check(result)

@@ -16,12 +16,21 @@
   must agree to ``sim.tolerance`` (max over qpos and qvel of |difference| / (1e-3 + |value|)), never above
   ``sim.max_step``; the accepted state is extrapolated, 2 (two halves) - (one step), which cancels the implicit
   step's first-order error. ``sim.dt`` is then only the time grid of reversals and recorded samples.
+  A step cut short to land on a sample or a reversal leaves the next step's size as it was.
+- ``adaptive-newton``: the same control on newton steps, the error measured on qpos only: the stiff RFT force
+  slaves a light segment's velocity to its position, so the velocity jumps within microseconds (at the start, at
+  each reversal) and the newton step lands on the jumped value whatever its size; the halves and the whole step
+  differ there in velocity by O(1) at any step, in position by h times that, which the position test sees. A stop
+  engaging or a segment reversing is where the positions disagree, so the steps shrink there and grow through the
+  quasi-static sweep between; a step whose Newton solve finds no root is rejected and retried at a quarter of its
+  size.
 
 A stepper advances ``n`` steps of ``sim.dt`` and returns 0 or a `finrft.native.Code`: UNSTABLE when the state
 stopped being finite, STEP_TOO_SMALL when the adaptive step fell below 1e-9 s, NOT_CONVERGED when Newton's method
 did not converge, ARENA_FULL when the native step's workspace does not fit on the mjData stack. It counts
 the steps it has taken and rejected: a fixed step takes exactly the steps asked for, unless Newton's method halves
 one (one rejected, two taken); the adaptive method takes its accepted steps and rejects those over the tolerance.
+An adaptive stepper also steps ``until(d, t)``, to an instant off the grid (a reversal of the drive).
 """
 
 from __future__ import annotations
@@ -41,6 +50,7 @@ from .scene import Sim
 NEWTON_ITERATIONS = 50
 NEWTON_TOLERANCE = 1e-10
 NEWTON_HALVINGS = 10
+NEWTON_SHARE = 1e-2  # the adaptive newton method stops Newton's method at this share of the step's tolerance
 
 
 def _native(name: str, *argtypes) -> Callable[..., int]:
@@ -112,27 +122,36 @@ class Implicit(_Counted):
 
 
 class Adaptive(_Counted):
-    """The adaptive method; the step size carries over from one call to the next."""
+    """The adaptive methods on implicit (``iterations`` 1) or newton steps; the step size carries over from one
+    call to the next."""
 
-    def __init__(self, m: mujoco.MjModel, sim: Sim, backend: str, groups: Sequence[ForceGroup]) -> None:
+    def __init__(self, m: mujoco.MjModel, sim: Sim, iterations: int, backend: str,
+                 groups: Sequence[ForceGroup]) -> None:
         super().__init__()
         self.m, self.max_step, self.tolerance, self.h = m, sim.max_step, sim.tolerance, sim.dt
+        self.iterations = iterations
         self._native = None
         if backend == "native":
             self._native = _native("finrft_adaptive_advance", ctypes.c_double, ctypes.c_double, ctypes.c_double,
-                                   ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int64))
+                                   ctypes.c_int, ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int64))
         else:
             self._implicit = PythonImplicit(m, groups)
+            # Newton's error, a velocity, moves a position by h times it: far below what the step's test allows
+            self._implicit.tolerance = max(NEWTON_TOLERANCE, NEWTON_SHARE * sim.tolerance)
             self._spec = mujoco.mjtState.mjSTATE_INTEGRATION
             size = mujoco.mj_stateSize(m, self._spec)
             self._start, self._full, self._halves = np.zeros(size), np.zeros(size), np.zeros(size)
 
     def __call__(self, d: mujoco.MjData, n: int) -> int:
-        duration = n * self.m.opt.timestep
+        return self.until(d, d.time + n * self.m.opt.timestep)
+
+    def until(self, d: mujoco.MjData, end: float) -> int:
+        """Steps to time ``end`` exactly, off the grid of ``sim.dt`` if need be (a reversal of the drive)."""
+        duration = end - d.time
         if self._native is not None:
             h = ctypes.c_double(self.h)
             failed = self._native(self.m._address, d._address, duration, self.max_step, self.tolerance,
-                                  ctypes.byref(h), self.counts)
+                                  self.iterations, ctypes.byref(h), self.counts)
             self.h = h.value
             return failed
         return self._python(d, duration)
@@ -140,21 +159,32 @@ class Adaptive(_Counted):
     def _python(self, d: mujoco.MjData, duration: float) -> int:
         m, spec, end = self.m, self._spec, d.time + duration
         span = slice(1, 1 + m.nq + m.nv)  # qpos and qvel in the integration state, after time
+        measured = slice(1, 1 + m.nq) if self.iterations > 1 else span
         while d.time < end - 1e-12:
             step = min(self.h, self.max_step, end - d.time)
             mujoco.mj_getState(m, d, self._start, spec)
-            failed = self._implicit.steps(d, 1, step, 1)
+            failed = self._implicit.step(d, step, self.iterations, NEWTON_HALVINGS)
             mujoco.mj_getState(m, d, self._full, spec)
             mujoco.mj_setState(m, d, self._start, spec)
-            failed = failed or self._implicit.steps(d, 2, step / 2, 1)
+            for _ in range(2):
+                failed = failed or self._implicit.step(d, step / 2, self.iterations, NEWTON_HALVINGS)
             mujoco.mj_getState(m, d, self._halves, spec)
-            error = np.max(np.abs(self._full[span] - self._halves[span]) / (1e-3 + np.abs(self._halves[span])))
+            if failed == Code.NOT_CONVERGED and self.iterations > 1:
+                mujoco.mj_setState(m, d, self._start, spec)
+                self.h = step / 4
+                self.counts[1] += 1
+                if self.h < 1e-9:
+                    return Code.STEP_TOO_SMALL
+                continue
+            error = np.max(np.abs(self._full[measured] - self._halves[measured])
+                           / (1e-3 + np.abs(self._halves[measured])))
             if failed or not np.isfinite(error):
                 return failed or Code.UNSTABLE
             if error <= self.tolerance:
                 self._halves[span] += self._halves[span] - self._full[span]
                 mujoco.mj_setState(m, d, self._halves, spec)
-                self.h = min(self.max_step, step * min(2.0, 0.9 * np.sqrt(self.tolerance / max(error, 1e-300))))
+                proposal = min(self.max_step, step * min(2.0, 0.9 * np.sqrt(self.tolerance / max(error, 1e-300))))
+                self.h = max(self.h, proposal) if step < self.h else proposal
                 self.counts[0] += 1
             else:
                 mujoco.mj_setState(m, d, self._start, spec)
@@ -179,6 +209,7 @@ class PythonImplicit:
             self.damping[dof, dof] -= m.actuator_gear[a, 0] ** 2 * m.actuator_biasprm[a, 2]
         self._mass = np.zeros((m.nv, m.nv))
         self._rhs = np.zeros(m.nv)
+        self.tolerance = NEWTON_TOLERANCE  # Newton's method stops when the change is below this times (1 + |qvel|)
 
     def _segments(self, d: mujoco.MjData) -> tuple[list, list]:
         """Per force group: its law, v_reg, the site Jacobians (k, 3, nv) and the segments' axes and normals; and per
@@ -196,22 +227,25 @@ class PythonImplicit:
         return segments, stops
 
     @staticmethod
-    def _forces(forces: tuple[list, list], u: np.ndarray, ahead: float,
-                slope: bool) -> tuple[np.ndarray, np.ndarray | None]:
+    def _forces(forces: tuple[list, list], u: np.ndarray, ahead: float, slope: bool,
+                forward: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
         """At generalised velocity ``u``: the RFT force plus the penalty stops' torque at the deflection they
         reach ``ahead`` seconds on at ``u``, and, with ``slope``, its derivative in ``u`` (the law's by central
-        differences)."""
+        differences, or with ``forward`` forward ones: half the law's calls, for Newton's method, whose root does
+        not depend on the derivative)."""
         segments, stops = forces
         nv = len(u)
         force, jacobian = np.zeros(nv), np.zeros((nv, nv)) if slope else None
         for law, v_reg, jacp, x, y in segments:
             v = jacp @ u
-            force += np.einsum("kin,ki->n", jacp, law(v, x, y))
+            f = law(v, x, y)
+            force += np.einsum("kin,ki->n", jacp, f)
             if slope:
                 h = 1e-6 * (np.linalg.norm(v, axis=1) + v_reg)[:, None, None] * np.eye(3)  # (k, probe, 3)
                 up = law(v[:, None] + h, x[:, None], y[:, None])
-                down = law(v[:, None] - h, x[:, None], y[:, None])
-                dfdv = np.swapaxes((up - down) / (2 * h.sum(axis=2, keepdims=True)), 1, 2)  # (k, force, v)
+                down = f[:, None] if forward else law(v[:, None] - h, x[:, None], y[:, None])
+                step = h.sum(axis=2, keepdims=True) * (1 if forward else 2)
+                dfdv = np.swapaxes((up - down) / step, 1, 2)  # (k, force, v)
                 jacobian += np.einsum("kin,kij,kjm->nm", jacp, dfdv, jacp)
         for stiffness, dofs, deflection in stops:
             torque, stiffening = penalty_stop(deflection + ahead * u[dofs], stiffness)
@@ -231,7 +265,7 @@ class PythonImplicit:
         forces = self._segments(d)
         qvel = d.qvel.copy()
         ahead = dt if iterations > 1 else 0.0
-        force, slope = self._forces(forces, qvel, ahead, True)
+        force, slope = self._forces(forces, qvel, ahead, True, forward=iterations > 1)
         # every force but F, taken out at the stops' present deflection
         other = self._rhs - (self._forces(forces, qvel, 0.0, False)[0] if ahead else force)
 
@@ -250,9 +284,9 @@ class PythonImplicit:
                     break
                 alpha /= 2
             dv, g = dv + alpha * step, trial
-            if np.abs(alpha * step).max() <= NEWTON_TOLERANCE * (1 + np.abs(qvel + dv).max()):
+            if np.abs(alpha * step).max() <= self.tolerance * (1 + np.abs(qvel + dv).max()):
                 return dv
-            _, slope = self._forces(forces, qvel + dv, dt, True)
+            _, slope = self._forces(forces, qvel + dv, dt, True, forward=True)
         return None
 
     def steps(self, d: mujoco.MjData, n: int, dt: float, iterations: int, counts: Counts | None = None) -> int:
@@ -301,5 +335,6 @@ METHODS: dict[str, Callable[[mujoco.MjModel, Sim, str, Sequence[ForceGroup]], St
     "explicit": lambda m, sim, backend, groups: Explicit(m),
     "implicit": lambda m, sim, backend, groups: Implicit(m, 1, backend, groups),
     "newton": lambda m, sim, backend, groups: Implicit(m, NEWTON_ITERATIONS, backend, groups),
-    "adaptive": lambda m, sim, backend, groups: Adaptive(m, sim, backend, groups),
+    "adaptive": lambda m, sim, backend, groups: Adaptive(m, sim, 1, backend, groups),
+    "adaptive-newton": lambda m, sim, backend, groups: Adaptive(m, sim, NEWTON_ITERATIONS, backend, groups),
 }

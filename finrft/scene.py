@@ -100,10 +100,11 @@ class Sim:
     method: str = _f("newton", "", "explicit: MuJoCo's step, the RFT force as it is; implicit: implicitfast "
                      "with the RFT force linearised in velocity; newton: implicitfast with the RFT force at the new "
                      "velocity, solved by Newton's method (stable and accurate at large steps on light segments); "
-                     "adaptive: implicit steps sized by an error estimate (dt is then the grid of reversals and samples)",
+                     "adaptive: implicit steps sized by an error estimate (dt is then the grid of samples); "
+                     "adaptive-newton: newton steps sized by the same estimate",
                      choices=lambda: tuple(_methods()))
-    max_step: float = _f(1e-3, "s", "adaptive method: largest step", minimum=0.0)
-    tolerance: float = _f(1e-4, "", "adaptive method: error per step, relative (absolute below 1e-3)", minimum=0.0,
+    max_step: float = _f(1e-3, "s", "adaptive methods: largest step", minimum=0.0)
+    tolerance: float = _f(1e-4, "", "adaptive methods: error per step, relative (absolute below 1e-3)", minimum=0.0,
                           maximum=0.1, why_maximum="a looser step-doubling test accepts steps of any error")
     record_dt: float = _f(0.02, "s", "interval between recorded samples (rounded to whole steps)", minimum=0.0)
 
@@ -218,6 +219,9 @@ def _check_medium(m: Medium) -> None:
         raise SceneError(f"medium.name = {m.name!r} gives the medium's zeta: leave medium.zeta out (got {m.zeta:g})")
     li2013.medium_parameters(media.medium(m.name))
 
+
+# The methods whose steps follow an error estimate (sim.tolerance, sim.max_step) on the time grid sim.dt.
+ADAPTIVE = ("adaptive", "adaptive-newton")
 
 # Newton, implicit and adaptive steps take implicitly only the forces of the segment law's force groups (the
 # plugin finrft.rft); the surface elements of `attach` are not among them, so a user's model runs MuJoCo's step.

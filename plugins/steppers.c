@@ -1,6 +1,6 @@
 // The time-stepping methods of finrft (the twins of finrft/integrate.py), called through ctypes:
 //   finrft_implicit_step     the "implicit" and "newton" methods
-//   finrft_adaptive_advance  the "adaptive" method
+//   finrft_adaptive_advance  the "adaptive" and "adaptive-newton" methods
 // They return 0 or a code of finrft.native.Code (FINRFT_UNSTABLE, ...). A step allocates nothing on the heap: its
 // workspace lives on the mjData stack (mj_markStack ... mj_freeStack), sized once per call.
 //
@@ -12,7 +12,8 @@
 // F(u) = sum_i J_i^T F_i(J_i u). A rate-independent law is a near-discontinuity in velocity, so a linearisation
 // at v (the first Newton iterate: the "implicit" method) overshoots on light segments; the "newton" method
 // iterates, with a backtracking line search on |G|, to the root, the penalty stops taken at the new positions.
-// dF_i/dv comes from central differences of the same law, so no law needs a derivative of its own. Then, as
+// dF_i/dv comes from central differences of the same law (forward ones in Newton's method, whose root does not
+// depend on it), so no law needs a derivative of its own. Then, as
 // MuJoCo's implicitfast: activations, qvel += dv, positions, time.
 
 #include <math.h>
@@ -26,6 +27,8 @@
 // Where Newton's method finds no root (forces that feed energy in, such as f_par < 0, can leave the implicit
 // equation without one near v), the newton method halves the step, down to dt / 2^NEWTON_HALVINGS.
 #define NEWTON_HALVINGS 10
+// The adaptive newton method stops Newton's method at NEWTON_SHARE of the step's tolerance.
+#define NEWTON_SHARE 1e-2
 
 // The forces the implicit methods take at the new velocity: every RFT segment of the model (its instance, site
 // Jacobian and axes at the current positions) and every penalty stop (its hinge and deflection now).
@@ -49,7 +52,9 @@ typedef struct {
   Segments segments;
   Newton w;
   mjtNum* rhs;
+  mjtNum* mass;     // nv x nv, the mass matrix at the step's start
   int64_t* counts;  // NULL, or where to add the steps taken and rejected (halved by the newton method)
+  mjtNum newton_tolerance;  // Newton's method stops when the change is below this times (1 + |qvel|)
 } Workspace;
 
 // The workspace of a model's steps, and `extra` more numbers (NULL when not wanted), on the mjData stack (after
@@ -69,7 +74,7 @@ static int workspace_make(const mjModel* m, mjData* d, Workspace* ws, int extra,
     s->n += p->nseg;
     if (p->stop_stiffness > 0) s->nstop += p->nhinge;
   }
-  size_t numbers = 3 * (size_t)s->n * nv + 6 * (size_t)s->n + 2 * (size_t)s->nstop + 3 * (size_t)nv * nv +
+  size_t numbers = 3 * (size_t)s->n * nv + 6 * (size_t)s->n + 2 * (size_t)s->nstop + 4 * (size_t)nv * nv +
                    12 * (size_t)nv + extra;
   size_t bytes = numbers * sizeof(mjtNum) + (s->ninst + s->n) * sizeof(void*) + s->nstop * sizeof(int) + 1024;
   if (bytes + d->maxuse_stack > d->narena - d->pstack - d->parena) return FINRFT_ARENA_FULL;
@@ -84,12 +89,13 @@ static int workspace_make(const mjModel* m, mjData* d, Workspace* ws, int extra,
     if (m->plugin[i] == slot && d->plugin_data[i]) s->inst[k++] = (const FinrftInstance*)d->plugin_data[i];
   }
   Newton* w = &ws->w;
-  mjtNum** squares[] = {&w->matrix, &w->jacobian, &w->slope};
+  mjtNum** squares[] = {&w->matrix, &w->jacobian, &w->slope, &ws->mass};
   mjtNum** vectors[] = {&w->other, &w->force, &w->dv, &w->step, &w->g, &w->trial, &w->candidate, &w->u, &ws->rhs};
-  for (int i = 0; i < 3; i++) *squares[i] = mj_stackAllocNum(d, (size_t)nv * nv + 1);
+  for (int i = 0; i < 4; i++) *squares[i] = mj_stackAllocNum(d, (size_t)nv * nv + 1);
   for (int i = 0; i < 9; i++) *vectors[i] = mj_stackAllocNum(d, nv + 1);
   if (extra_out) *extra_out = mj_stackAllocNum(d, extra);
   ws->counts = NULL;
+  ws->newton_tolerance = NEWTON_TOLERANCE;
   return 0;
 }
 
@@ -111,11 +117,18 @@ static void segments_update(const mjModel* m, mjData* d, Segments* s) {
   }
 }
 
-// dF/dv (3 x 3, row-major) of one segment at velocity v, by central differences.
+// dF/dv (3 x 3, row-major) of one segment at velocity v, by central differences, or, given the force f0 at v,
+// forward ones: half the law's calls, for Newton's method, whose root does not depend on the derivative.
 static void segment_jacobian(const FinrftInstance* p, const mjtNum v[3], const mjtNum x[3], const mjtNum y[3],
-                             mjtNum jac[9]) {
+                             const mjtNum* f0, mjtNum jac[9]) {
   mjtNum h = 1e-6 * (sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]) + p->v_reg);
-  for (int k = 0; k < 3; k++) {
+  for (int k = 0; f0 && k < 3; k++) {
+    mjtNum up[3] = {v[0], v[1], v[2]}, fu[3];
+    up[k] += h;
+    p->law->force(p->params, p->v_reg, up, x, y, fu);
+    for (int r = 0; r < 3; r++) jac[3 * r + k] = (fu[r] - f0[r]) / h;
+  }
+  for (int k = 0; !f0 && k < 3; k++) {
     mjtNum up[3] = {v[0], v[1], v[2]}, down[3] = {v[0], v[1], v[2]}, fu[3], fd[3];
     up[k] += h;
     down[k] -= h;
@@ -126,8 +139,10 @@ static void segment_jacobian(const FinrftInstance* p, const mjtNum v[3], const m
 }
 
 // At generalised velocity u: the RFT force plus the penalty stops' torque at the deflection they reach after
-// `ahead` seconds at u (nv), and, when slope is not NULL, its derivative in u (nv x nv).
-static void segments_force(const Segments* s, const mjtNum* u, mjtNum ahead, mjtNum* force, mjtNum* slope) {
+// `ahead` seconds at u (nv), and, when slope is not NULL, its derivative in u (nv x nv), the law's by forward
+// differences when `forward`, else central ones.
+static void segments_force(const Segments* s, const mjtNum* u, mjtNum ahead, mjtNum* force, mjtNum* slope,
+                           int forward) {
   int nv = s->nv;
   mju_zero(force, nv);
   if (slope) mju_zero(slope, nv * nv);
@@ -140,7 +155,7 @@ static void segments_force(const Segments* s, const mjtNum* u, mjtNum ahead, mjt
     p->law->force(p->params, p->v_reg, v, x, y, f);
     for (int col = 0; col < nv; col++) force[col] += jac[col] * f[0] + jac[nv + col] * f[1] + jac[2 * nv + col] * f[2];
     if (!slope) continue;
-    segment_jacobian(p, v, x, y, c);
+    segment_jacobian(p, v, x, y, forward ? f : NULL, c);
     for (int col = 0; col < nv; col++) {
       for (int r = 0; r < 3; r++) cj[r] = c[3 * r] * jac[col] + c[3 * r + 1] * jac[nv + col] + c[3 * r + 2] * jac[2 * nv + col];
       for (int row = 0; row < nv; row++) {
@@ -187,7 +202,7 @@ static mjtNum newton_residual(const Segments* s, Newton* w, const mjtNum* qvel, 
                               mjtNum* out) {
   int nv = s->nv;
   for (int i = 0; i < nv; i++) w->u[i] = qvel[i] + dv[i];
-  segments_force(s, w->u, dt, w->force, NULL);
+  segments_force(s, w->u, dt, w->force, NULL, 0);
   mju_mulMatVec(out, w->matrix, dv, nv, nv);
   for (int i = 0; i < nv; i++) out[i] -= dt * (w->other[i] + w->force[i]);
   return mju_norm(out, nv);
@@ -197,12 +212,12 @@ static mjtNum newton_residual(const Segments* s, Newton* w, const mjtNum* qvel, 
 // in the RFT force (the first Newton iterate, no line search, stops as MuJoCo computed them); otherwise the root
 // of G, with the stops' torque taken at the new positions too, by Newton's method, or FINRFT_NOT_CONVERGED.
 static int newton_solve(const Segments* s, Newton* w, const mjtNum* qvel, const mjtNum* rhs, mjtNum dt,
-                        int iterations) {
+                        int iterations, mjtNum tolerance) {
   int nv = s->nv;
   mjtNum ahead = iterations > 1 ? dt : 0;
-  segments_force(s, qvel, ahead, w->force, w->slope);
+  segments_force(s, qvel, ahead, w->force, w->slope, iterations > 1);
   // other: every force but F, taken out at the stops' present deflection (w->trial is free until the search)
-  if (ahead > 0) segments_force(s, qvel, 0, w->trial, NULL);
+  if (ahead > 0) segments_force(s, qvel, 0, w->trial, NULL, 0);
   const mjtNum* now = ahead > 0 ? w->trial : w->force;
   for (int i = 0; i < nv; i++) w->other[i] = rhs[i] - now[i];
   for (int i = 0; i < nv; i++) {
@@ -233,20 +248,29 @@ static int newton_solve(const Segments* s, Newton* w, const mjtNum* qvel, const 
       scale = mju_max(scale, fabs(qvel[i] + w->dv[i]));
     }
     norm = trial_norm;
-    if (change <= NEWTON_TOLERANCE * (1 + scale)) return 0;
+    if (change <= tolerance * (1 + scale)) return 0;
     for (int i = 0; i < nv; i++) w->u[i] = qvel[i] + w->dv[i];
-    segments_force(s, w->u, dt, w->force, w->slope);
+    segments_force(s, w->u, dt, w->force, w->slope, 1);
   }
   return FINRFT_NOT_CONVERGED;
 }
 
-// One implicit step of size dt; 0, FINRFT_UNSTABLE when the state stopped being finite, or FINRFT_NOT_CONVERGED.
-static int implicit_step(const mjModel* m, mjData* d, mjtNum dt, int iterations, Workspace* ws, int halvings) {
-  int nv = m->nv;
-  Newton* w = &ws->w;
+// What a step needs of its start (the state in d): MuJoCo's forces, rhs = M qacc, the mass matrix, the segments.
+static void step_prepare(const mjModel* m, mjData* d, Workspace* ws) {
   mj_forward(m, d);
   mj_mulM(m, d, ws->rhs, d->qacc);
-  mj_fullM(m, d, w->matrix);
+  mj_fullM(m, d, ws->mass);
+  segments_update(m, d, &ws->segments);
+}
+
+// One implicit step of size dt from the start step_prepare saw:
+// 0, FINRFT_UNSTABLE when the state stopped being finite, or FINRFT_NOT_CONVERGED (the state untouched). It leaves
+// MuJoCo's derived quantities in d as they were at the start, so another step from the same start needs no
+// step_prepare once the state is restored.
+static int step_take(const mjModel* m, mjData* d, mjtNum dt, int iterations, Workspace* ws) {
+  int nv = m->nv;
+  Newton* w = &ws->w;
+  mju_copy(w->matrix, ws->mass, nv * nv);
   for (int i = 0; i < nv; i++) w->matrix[i * nv + i] += dt * m->dof_damping[i];
   for (int a = 0; a < m->nu; a++) {
     if (m->actuator_trntype[a] != mjTRN_JOINT || m->actuator_biastype[a] != mjBIAS_AFFINE) continue;
@@ -254,13 +278,7 @@ static int implicit_step(const mjModel* m, mjData* d, mjtNum dt, int iterations,
     mjtNum gear = m->actuator_gear[6 * a];
     w->matrix[dof * nv + dof] -= dt * gear * gear * m->actuator_biasprm[mjNBIAS * a + 2];
   }
-  segments_update(m, d, &ws->segments);
-  if (newton_solve(&ws->segments, w, d->qvel, ws->rhs, dt, iterations)) {
-    if (iterations == 1 || halvings == NEWTON_HALVINGS) return FINRFT_NOT_CONVERGED;
-    if (ws->counts) ws->counts[1]++;
-    int failed = implicit_step(m, d, dt / 2, iterations, ws, halvings + 1);
-    return failed ? failed : implicit_step(m, d, dt / 2, iterations, ws, halvings + 1);
-  }
+  if (newton_solve(&ws->segments, w, d->qvel, ws->rhs, dt, iterations, ws->newton_tolerance)) return FINRFT_NOT_CONVERGED;
   for (int a = 0; a < m->nu; a++) {
     int adr = m->actuator_actadr[a];
     if (adr < 0) continue;
@@ -283,6 +301,17 @@ static int implicit_step(const mjModel* m, mjData* d, mjtNum dt, int iterations,
   return failed;
 }
 
+// One implicit step of size dt; 0, FINRFT_UNSTABLE when the state stopped being finite, or FINRFT_NOT_CONVERGED.
+static int implicit_step(const mjModel* m, mjData* d, mjtNum dt, int iterations, Workspace* ws, int halvings) {
+  step_prepare(m, d, ws);
+  int failed = step_take(m, d, dt, iterations, ws);
+  if (failed != FINRFT_NOT_CONVERGED) return failed;
+  if (iterations == 1 || halvings == NEWTON_HALVINGS) return FINRFT_NOT_CONVERGED;
+  if (ws->counts) ws->counts[1]++;
+  failed = implicit_step(m, d, dt / 2, iterations, ws, halvings + 1);
+  return failed ? failed : implicit_step(m, d, dt / 2, iterations, ws, halvings + 1);
+}
+
 // nstep implicit steps of size dt; 0 or the first failure's code.
 static int implicit_steps(const mjModel* m, mjData* d, int nstep, mjtNum dt, int iterations, Workspace* ws) {
   int failed = 0;
@@ -302,14 +331,17 @@ FINRFT_EXPORT int finrft_implicit_step(const mjModel* m, mjData* d, int nstep, i
   return failed;
 }
 
-// The adaptive method: implicit steps over `duration` seconds, each accepted when one step of h and two of h/2
-// agree to `tol` (max over qpos, qvel of |difference| / (1e-3 + |value|)). The accepted positions and velocities
-// are extrapolated, 2 (two halves) - (one step), which cancels the first-order error of the implicit step. The
-// step grows or shrinks by 0.9 sqrt(tol / error) (within 0.2x..2x), never above hmax; *h carries it over calls.
+// The adaptive methods: steps over `duration` seconds, implicit (iterations == 1: "adaptive") or newton
+// ("adaptive-newton"), each accepted when one step of h and two of h/2 agree to `tol` (max over qpos, qvel of
+// |difference| / (1e-3 + |value|); newton steps: over qpos only, as a light segment's velocity jumps onto the
+// stiff force's balance within any step, which shows in the positions as h times the jump, see integrate.py). Both are first order, so the accepted positions and velocities are
+// extrapolated, 2 (two halves) - (one step), which cancels the first-order error. The step grows or shrinks by
+// 0.9 sqrt(tol / error) (within 0.2x..2x), never above hmax; *h carries it over calls. A newton step whose solve
+// finds no root is rejected like one over the tolerance, its size divided by 4 (no halving inside the step).
 // counts (or NULL): the steps accepted and rejected are added to counts[0] and counts[1].
 // Returns 0, FINRFT_UNSTABLE, FINRFT_STEP_TOO_SMALL when the step falls below 1e-9 s, or another failure's code.
 FINRFT_EXPORT int finrft_adaptive_advance(const mjModel* m, mjData* d, mjtNum duration, mjtNum hmax, mjtNum tol,
-                                          mjtNum* h, int64_t* counts) {
+                                          int iterations, mjtNum* h, int64_t* counts) {
   const int spec = mjSTATE_INTEGRATION;
   int size = mj_stateSize(m, spec);
   Workspace ws;
@@ -317,19 +349,36 @@ FINRFT_EXPORT int finrft_adaptive_advance(const mjModel* m, mjData* d, mjtNum du
   mj_markStack(d);
   int failed = workspace_make(m, d, &ws, 3 * size, &states);
   mjtNum *start = states, *full = states + size, *halves = states + 2 * size;
+  // Newton's error, a velocity, moves a position by h times it: far below what the step's test allows
+  ws.newton_tolerance = mju_max(NEWTON_TOLERANCE, NEWTON_SHARE * tol);
   mjtNum end = d->time + duration;
   // the slice of the integration state holding qpos and qvel (after time)
   int first = 1, count = m->nq + m->nv;
+  int measured = iterations > 1 ? m->nq : count;
   while (!failed && d->time < end - 1e-12) {
     mjtNum step = mju_min(mju_min(*h, hmax), end - d->time);
+    // The whole step and the first half start from the same state: one step_prepare serves both.
     mj_getState(m, d, start, spec);
-    failed = implicit_steps(m, d, 1, step, 1, &ws);
+    step_prepare(m, d, &ws);
+    failed = step_take(m, d, step, iterations, &ws);
     mj_getState(m, d, full, spec);
     mj_setState(m, d, start, spec);
-    failed = failed ? failed : implicit_steps(m, d, 2, step / 2, 1, &ws);
+    if (!failed) failed = step_take(m, d, step / 2, iterations, &ws);
+    if (!failed) {
+      step_prepare(m, d, &ws);
+      failed = step_take(m, d, step / 2, iterations, &ws);
+    }
     mj_getState(m, d, halves, spec);
+    if (failed == FINRFT_NOT_CONVERGED && iterations > 1) {
+      mj_setState(m, d, start, spec);
+      *h = step / 4;
+      failed = 0;
+      if (counts) counts[1]++;
+      if (*h < 1e-9) failed = FINRFT_STEP_TOO_SMALL;
+      continue;
+    }
     mjtNum error = 0;
-    for (int i = first; i < first + count; i++) {
+    for (int i = first; i < first + measured; i++) {
       error = mju_max(error, fabs(full[i] - halves[i]) / (1e-3 + fabs(halves[i])));
     }
     if (failed || !isfinite(error)) {
@@ -337,7 +386,9 @@ FINRFT_EXPORT int finrft_adaptive_advance(const mjModel* m, mjData* d, mjtNum du
     } else if (error <= tol) {
       for (int i = first; i < first + count; i++) halves[i] += halves[i] - full[i];
       mj_setState(m, d, halves, spec);
-      *h = mju_min(hmax, step * mju_min(2.0, 0.9 * sqrt(tol / mju_max(error, 1e-300))));
+      mjtNum proposal = mju_min(hmax, step * mju_min(2.0, 0.9 * sqrt(tol / mju_max(error, 1e-300))));
+      // a step cut short to land on `end` (a sample, a reversal) is no reason to shorten the steps after it
+      *h = step < *h ? mju_max(*h, proposal) : proposal;
       if (counts) counts[0]++;
     } else {
       mj_setState(m, d, start, spec);

@@ -66,7 +66,7 @@ def test_a_coarse_companion_out_of_range_does_not_refuse_an_accurate_run():
     # The position servo's explicit feedback needs 0.1 ms: at 0.4 ms the coarse companion is wrong by several
     # points of eta, the fine one (50 us) confirms the run (0.13 points against 10 us).
     scene = preset("physical", RobotScene).replace(**{"robot.servo": "position", "robot.servo_kp": 200.0,
-                                                      "sim.dt": 1e-4})
+                                                      "sim.method": "newton", "sim.dt": 1e-4})
     run = swim(scene, 1)
     assert run.error_companion == "dt 5e-05 s" and run.error_estimate["eta_points"] < 0.5
 
@@ -88,7 +88,8 @@ def _one_line(capsys) -> str:
       "--cycles", "2"], 1, "estimated discretisation error"),
     (["rotate", "--cycles", "1", "--set", "sim.dt=0.1", "--set", "plate.segment_inertia=1e-3",
       "--set", "plate.damping=0.05"], 1, "unstable"),
-    (["swim", "--preset", "physical", "--set", "sim.dt=0.02"], 1, "estimated discretisation error"),
+    (["swim", "--preset", "physical", "--set", "sim.method='newton'", "--set", "sim.dt=0.02"], 1,
+     "estimated discretisation error"),
 ])
 def test_unresolvable_or_inaccurate_runs_are_loud(tmp_path, capsys, argv, status, named):
     out = tmp_path / "run.h5"

@@ -29,7 +29,8 @@ def test_implicit_step_without_rft_is_implicitfast(backend):
     np.testing.assert_allclose(ours.qvel, theirs.qvel, atol=1e-12)
 
 
-@pytest.mark.parametrize("method,atol", [("implicit", 1e-9), ("newton", 1e-9), ("adaptive", 1e-6)])
+@pytest.mark.parametrize("method,atol", [("implicit", 1e-9), ("newton", 1e-9), ("adaptive", 1e-6),
+                                         ("adaptive-newton", 1e-6)])
 def test_native_and_numpy_methods_agree(method, atol):
     scene = preset("paper").replace(**{"sim.method": method, "plate.segment_inertia": 1e-3, "sim.dt": 1e-3})
     drive = Drive(stroke=0.05, cycles=1)
@@ -160,3 +161,60 @@ def test_native_step_too_big_for_the_arena_says_so_and_leaves_the_state(method):
         d = mujoco.MjData(m)
         assert integrate.stepper(m, scene.sim, "native", [])(d, 5) == code
         assert d.time == (0.0 if code else pytest.approx(5 * scene.sim.dt))
+
+
+def test_adaptive_newton_converges_to_newton_on_the_light_plate():
+    # The physical plate (light segments, stiff penalty stops): adaptive-newton against newton at 10 µs (itself
+    # within 1e-4 deg of newton at 20 µs); the error stays small at loose tolerances and falls at tight ones.
+    light = preset("physical").replace(**{"sim.dt": 1e-3, "sim.max_step": 1e-2})
+    drive = Drive(speed=0.03, stroke=0.015, cycles=1)
+    fine = simulate(light.replace(**{"sim.dt": 1e-5}), drive, estimate_error=False)
+    errors = []
+    for tolerance in (1e-1, 1e-2, 1e-5):
+        run = simulate(light.replace(**{"sim.method": "adaptive-newton", "sim.tolerance": tolerance}), drive,
+                       estimate_error=False)
+        assert np.allclose(run.time, fine.time)
+        errors.append(np.degrees(np.abs(np.c_[run.segment_angle, run.hinge_angle]
+                                        - np.c_[fine.segment_angle, fine.hinge_angle]).max()))
+    assert errors[0] < 0.02 and errors[1] < 0.005 and errors[2] < min(5e-4, errors[0] / 10)
+    assert np.degrees(fine.hinge_angle.min()) < -8  # the plate did fold
+
+
+def test_adaptive_newton_converges_to_newton_on_the_physical_robot():
+    # Newton at strokes of 5e4 and 1e5 steps (reversals on the grid), extrapolated to dt -> 0 as a first-order
+    # method: adaptive-newton's eta and hinge angles at the preset's tolerance and at 1/10 of it.
+    from finrft.scene import RobotScene
+    from finrft.swim import gait_drive, swim
+    scene = preset("physical", RobotScene)
+    stroke = gait_drive(scene, 1).stroke_time
+    coarse, fine = (swim(scene.replace(**{"sim.method": "newton", "sim.dt": stroke / n}), estimate_error=False)
+                    for n in (50_000, 100_000))
+    eta = 2 * fine.series["eta"][0] - coarse.series["eta"][0]
+    assert abs(fine.series["eta"][0] - eta) < 1e-4  # the reference's own error, well under the check's
+    for tolerance, eta_error in ((scene.sim.tolerance, 5e-4), (scene.sim.tolerance / 10, 1e-4)):
+        run = swim(scene.replace(**{"sim.tolerance": tolerance}), estimate_error=False)
+        assert abs(run.series["eta"][0] - eta) < eta_error
+        i = np.searchsorted(np.round(fine.time, 9), np.round(run.time, 9))
+        assert np.degrees(np.abs(run.series["hinge_angle"] - fine.series["hinge_angle"][i]).max()) < 0.02
+
+
+def test_adaptive_reversals_fall_on_the_drive_not_the_grid():
+    # The robot's stroke (25/11 s) is no whole number of these grids' steps: rounded to the grid it would be up to
+    # 7 µs off, which moves eta by ~1e-4; on the drive's instants eta does not depend on the grid.
+    from finrft.scene import RobotScene
+    from finrft.swim import swim
+    scene = preset("physical", RobotScene).replace(**{"sim.tolerance": 1e-5})
+    etas = [swim(scene.replace(**{"sim.dt": dt}), estimate_error=False).series["eta"][0] for dt in (1e-5, 2e-5, 1e-3)]
+    assert np.ptp(etas) < 1e-6
+
+
+def test_physical_robot_error_estimate_bounds_its_error():
+    # The companion at 25x the tolerance: the estimate must cover the error against a run at 1/100 the tolerance,
+    # and stay within the default limits.
+    from finrft.scene import RobotScene
+    from finrft.swim import swim
+    scene = preset("physical", RobotScene)
+    run = swim(scene)
+    converged = swim(scene.replace(**{"sim.tolerance": scene.sim.tolerance / 100}), estimate_error=False)
+    error = 100 * abs(run.series["eta"][0] - converged.series["eta"][0])
+    assert error <= run.error_estimate["eta_points"] <= 0.5

@@ -183,8 +183,8 @@ from finrft.scene import RobotScene, preset
 counter = ctypes.CDLL(sys.argv[1])
 counter.count_stop.restype = ctypes.c_long
 out = {}
-for method in ("implicit", "newton", "adaptive"):
-    scene = preset("physical", RobotScene).replace(**{"sim.method": method, "sim.max_step": 1e-3})
+for method in ("implicit", "newton", "adaptive", "adaptive-newton"):
+    scene = preset("physical", RobotScene).replace(**{"sim.method": method, "sim.dt": 3e-4, "sim.max_step": 1e-3})
     robot = models.build_robot(scene)
     d = mujoco.MjData(robot.model)
     d.qpos[robot.servo_qpos] = scene.gait.theta2
@@ -193,10 +193,10 @@ for method in ("implicit", "newton", "adaptive"):
     assert advance(d, 10) == 0  # ctypes and MuJoCo set up what they keep
     for n in (1, 300):
         # the library's function itself, its arguments made beforehand: nothing of Python's is counted
-        if method == "adaptive":
+        if method.startswith("adaptive"):
             h = ctypes.c_double(advance.h)
             args = (robot.model._address, d._address, n * scene.sim.dt, advance.max_step, advance.tolerance,
-                    ctypes.byref(h), advance.counts)
+                    advance.iterations, ctypes.byref(h), advance.counts)
         else:
             args = (robot.model._address, d._address, n, advance.iterations, advance.counts)
         counter.count_start()
@@ -219,5 +219,5 @@ def test_native_steps_allocate_nothing(tmp_path):
     done = subprocess.run([sys.executable, "-c", ALLOCATION_RUN, counter], capture_output=True, text=True,
                           env={**os.environ, "LD_PRELOAD": counter}, check=True, cwd=tmp_path)
     counts = json.loads(done.stdout.splitlines()[-1])
-    for method in ("implicit", "newton", "adaptive"):
+    for method in ("implicit", "newton", "adaptive", "adaptive-newton"):
         assert counts[f"{method}/300"] == counts[f"{method}/1"] == 0, counts

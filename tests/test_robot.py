@@ -60,7 +60,7 @@ def test_position_servo_tracks_the_gait():
     # the prescribed servo (the gait followed exactly, its torque read from the drive's momentum): the arm within
     # 3 deg at every sample (1.2 deg measured), and, away from the reversals, the same mean torque per stroke
     # within 2 % (0.3 % measured): the servo does the work the gait needs.
-    scene = preset("physical", RobotScene).replace(**{"sim.dt": 1e-4})
+    scene = preset("physical", RobotScene).replace(**{"sim.method": "newton", "sim.dt": 1e-4})
     servo = swim(scene.replace(**{"robot.servo": "position", "robot.servo_kp": 200.0}), 1)
     exact = swim(scene, 1)
     assert np.degrees(np.abs(servo.arm_angle - exact.arm_angle)).max() < 3.0

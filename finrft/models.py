@@ -8,6 +8,8 @@ hinge spring/damper/stop, and the drive. Indices come from the objects attach re
 
 from __future__ import annotations
 
+import functools
+
 from dataclasses import dataclass
 from importlib import resources
 
@@ -67,6 +69,16 @@ def mjcf_path(name: str = "plate.xml"):
     return resources.files("finrft.mjcf") / name
 
 
+@functools.cache
+def _parsed(name: str) -> mujoco.MjSpec:
+    return mujoco.MjSpec.from_file(str(mjcf_path(name)))
+
+
+def _spec(name: str) -> mujoco.MjSpec:
+    """A fresh MjSpec of a packaged MJCF file: parsed once per process (a batch builds many models), copied."""
+    return _parsed(name).copy()
+
+
 def _quat_z(angle: float) -> list[float]:
     return [np.cos(angle / 2), 0.0, 0.0, np.sin(angle / 2)]
 
@@ -98,7 +110,7 @@ def _segment_spec(chain: Chain, dt: float, spatial: bool, hinged: bool) -> mujoc
     """mjcf/segment.xml with a chain's segment: length, mass and inertia, hinge spring/damper/stop; without its
     hinge unless ``hinged``; ``spatial``: also free to turn about its own x and y axes (joints ``bendx``,
     ``bendy``)."""
-    spec = mujoco.MjSpec.from_file(str(mjcf_path("segment.xml")))
+    spec = _spec("segment.xml")
     half = chain.segment_length / 2
     body = spec.body("segment")
     body.mass, body.ipos, body.inertia = chain.segment_mass, [half, 0, 0], [chain.segment_inertia] * 3
@@ -162,7 +174,7 @@ def _bind(spec: mujoco.MjSpec, name: str, law: RFT, stop_stiffness: float, bodie
 
 
 def _new_spec(file: str, sim: Sim) -> mujoco.MjSpec:
-    spec = mujoco.MjSpec.from_file(str(mjcf_path(file)))
+    spec = _spec(file)
     spec.option.timestep = sim.dt
     spec.option.integrator = INTEGRATORS[sim.integrator]
     return spec

@@ -14,7 +14,7 @@ from importlib import resources
 import mujoco
 import numpy as np
 
-from . import laws, native
+from . import geometry, laws, native
 from .scene import RFT, Chain, RobotScene, Scene, SceneError, Sim
 
 INTEGRATORS = {
@@ -286,8 +286,20 @@ class RobotModel:
     groups: tuple[ForceGroup, ...]
 
 
+def _from_geometry(scene: RobotScene) -> bool:
+    return scene.robot.forces == "geometry"
+
+
+def fin_law(scene: RobotScene) -> RFT:
+    """The law of a fin segment: [rft] as given, or from the geometry (finrft.geometry)."""
+    return geometry.fin_law(scene) if _from_geometry(scene) else scene.rft
+
+
 def arm_law(scene: RobotScene) -> RFT:
-    """The arm's RFT law: the paper law with a normal coefficient that grows with the arm's length."""
+    """The arm's RFT law: from the geometry (finrft.geometry), or the paper law with a normal coefficient that
+    grows with the arm's length."""
+    if _from_geometry(scene):
+        return geometry.arm_law(scene)
     a = scene.arm
     return RFT(law="paper", f_perp=a.f_perp_base + a.f_perp_per_length * a.length, f_par=a.f_par,
                v_reg=scene.rft.v_reg)
@@ -298,9 +310,14 @@ def body_share(scene: RobotScene) -> float:
     return 0.5 if scene.robot.model == "half" else 1.0
 
 
+def body_drag(scene: RobotScene) -> float:
+    """The whole robot's body drag (N): body.drag, or the body's faces and the cart (finrft.geometry)."""
+    return geometry.body_resistance(scene)["total"] if _from_geometry(scene) else scene.body.drag
+
+
 def body_law(scene: RobotScene) -> RFT:
     """The velocity body drag as an isotropic RFT law: F = -tanh(|v|/v_reg) drag v/|v|."""
-    drag = body_share(scene) * scene.body.drag
+    drag = body_share(scene) * body_drag(scene)
     return RFT(law="paper", f_perp=drag, f_par=drag, v_reg=scene.body.v_reg)
 
 
@@ -350,7 +367,7 @@ def _robot(scene: RobotScene, backend: str) -> _Robot:
             actuator.actrange = [scene.gait.theta2, scene.gait.theta1]
             robot.actuators.append(actuator)
     if backend == "native":
-        _bind(spec, "fin_sand", scene.rft, penalty_stiffness(fin), _fin_bodies(robot))
+        _bind(spec, "fin_sand", fin_law(scene), penalty_stiffness(fin), _fin_bodies(robot))
         _bind(spec, "arm_sand", arm_law(scene), 0.0, robot.arms)
         if scene.body.drag_law == "velocity":
             _bind(spec, "body_sand", body_law(scene), 0.0, [body])
@@ -374,7 +391,7 @@ def build_robot(scene: RobotScene) -> RobotModel:
     model = _compile(robot.spec)
     fin = scene.fin
     sides = ("r",) if scene.robot.model == "half" else ("r", "l")
-    groups = [_group(model, "fin_sand", scene.rft, penalty_stiffness(fin), _fin_bodies(robot)),
+    groups = [_group(model, "fin_sand", fin_law(scene), penalty_stiffness(fin), _fin_bodies(robot)),
               _group(model, "arm_sand", arm_law(scene), 0.0, robot.arms)]
     if scene.body.drag_law == "velocity":
         groups.append(_group(model, "body_sand", body_law(scene), 0.0, [robot.body]))

@@ -3,6 +3,9 @@
 `media()` gives every medium, `medium(name)` one (a `SceneError` names the known media for an unknown name). The
 values are what the literature gives, nothing estimated: a value not found is absent (`Material.missing`), and a
 law that needs it says so (`finrft.laws.li2013.medium_parameters`).
+
+`sandswim_coefficients` derives the sand-swimming law of a segment from 3D-RFT and the medium's bulk density,
+internal and surface friction; `immersion_properties` reads those from a chain scene's ``[medium]``.
 """
 
 from __future__ import annotations
@@ -14,6 +17,10 @@ from dataclasses import dataclass, field
 from importlib import resources
 from typing import Any
 
+import numpy as np
+from scipy.optimize import least_squares
+
+from .laws import rft3d, sandswim
 from .scene import SceneError
 
 UNVERIFIED = "unverified"  # the one status: from a secondary source, not checked against the primary one
@@ -147,3 +154,97 @@ def describe(material: Material) -> str:
     if material.note:
         lines.append(f"  note: {material.note}")
     return "\n".join(lines)
+
+
+# The angles between a segment's velocity and its axis at which the sand-swimming law is fitted to 3D-RFT.
+PSI = np.radians(np.arange(0.0, 90.5, 1.0))
+
+
+@dataclass(frozen=True)
+class SandswimFit:
+    """The sand-swimming law's C_S, C_F (N per segment) and gamma0 (rad) fitted to 3D-RFT, and how well it fits:
+    the RMS and the largest difference in F_perp and F_par over the fitted angles (N), against ``scale``, the
+    largest force 3D-RFT gives there (N)."""
+
+    c_s: float
+    c_f: float
+    gamma0: float
+    rms: float
+    max_error: float
+    scale: float
+
+
+def plate_forces(psi: np.ndarray, length: float, depth: float, height: float, bulk_density: float,
+                 internal_friction: float, surface_friction: float,
+                 thickness: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """3D-RFT's F_perp and F_par (N, resisting the motion) on a vertical rigid plate, ``length`` along its axis x
+    and ``height`` down from ``depth`` below the free surface (m), moving horizontally at the angles ``psi`` (rad)
+    to its axis; a ``thickness`` (m) gives it edge faces too. Each face moves flat, so its stress is uniform and
+    depth-weighting it is exact: stress x area x the face's mean depth."""
+    psi = np.asarray(psi, dtype=float)
+    velocity = np.stack([np.cos(psi), np.sin(psi), np.zeros_like(psi)], axis=-1)
+    mean_depth = depth + height / 2
+    total = np.zeros_like(velocity)
+    # the side faces (normals +-y) and the edges (normals +-x); only leading faces feel the medium
+    for normal, area in (((0.0, 1.0, 0.0), length * height), ((0.0, -1.0, 0.0), length * height),
+                         ((1.0, 0.0, 0.0), thickness * height), ((-1.0, 0.0, 0.0), thickness * height)):
+        normals = np.broadcast_to(np.array(normal), velocity.shape)
+        total += rft3d.element_forces(normals, velocity, np.full(psi.shape, mean_depth), np.full(psi.shape, area),
+                                      bulk_density, internal_friction, surface_friction)
+    return -total[..., 1], -total[..., 0]
+
+
+@functools.lru_cache(maxsize=256)
+def sandswim_coefficients(length: float, depth: float, height: float, bulk_density: float, internal_friction: float,
+                          surface_friction: float, thickness: float = 0.0) -> SandswimFit:
+    """The sand-swimming law (`finrft.laws.sandswim`) of one segment: C_S, C_F and gamma0 fitted by least squares
+    to 3D-RFT's force (`plate_forces`: Agarwal, Goldman & Kamrin 2023) on a vertical plate of the segment's
+    ``length`` and ``height``, its top edge ``depth`` below the free surface (m), moving horizontally at every
+    angle psi = 0, 1, ..., 90 deg to its axis, in a medium of critical density ``bulk_density`` (kg/m^3) and
+    internal friction coefficient ``internal_friction``, the plate's friction against the grains being
+    ``surface_friction``. 3D-RFT's vertical force, which the in-plane law has no place for, is left out."""
+    if not (length > 0 and height > 0 and depth >= 0 and thickness >= 0):
+        raise SceneError(f"sandswim coefficients need length > 0, height > 0, depth >= 0 and thickness >= 0 (m), "
+                         f"got {length:g}, {height:g}, {depth:g}, {thickness:g}")
+    if not (bulk_density > 0 and internal_friction > 0 and surface_friction >= 0):
+        raise SceneError(f"sandswim coefficients need bulk_density > 0, internal_friction > 0 and surface_friction "
+                         f">= 0, got {bulk_density:g}, {internal_friction:g}, {surface_friction:g}")
+    perp, par = plate_forces(PSI, length, depth, height, bulk_density, internal_friction, surface_friction,
+                             thickness)
+    scale = float(max(np.abs(perp).max(), np.abs(par).max()))
+    if not scale > 0:
+        raise SceneError("3D-RFT gives no horizontal force on this plate: nothing to fit the sandswim law to")
+
+    def residual(x: np.ndarray) -> np.ndarray:
+        law_perp, law_par = sandswim.magnitudes(PSI, *x)
+        return np.concatenate([law_perp - perp, law_par - par]) / scale
+
+    c_f = max(float(par.max()), 1e-6 * scale)
+    start = np.array([max(float(perp[-1]) - c_f, 1e-3 * scale), c_f, math.pi / 4])
+    found = least_squares(residual, start, bounds=([0.0, 0.0, 1e-6], [np.inf, np.inf, math.pi / 2]))
+    error = scale * found.fun
+    return SandswimFit(*(float(v) for v in found.x), rms=float(np.sqrt(np.mean(error ** 2))),
+                       max_error=float(np.abs(error).max()), scale=scale)
+
+
+def immersion_properties(section: Any) -> tuple[float, float, float] | None:
+    """A chain scene's ``[medium]`` (`finrft.scene.Immersion`): its bulk density (kg/m^3), internal and surface
+    friction coefficients, each given there or by its named medium (the catalogue's internal friction angle as
+    its tangent), and its height; None when any is missing. SceneError for an unknown medium or a value given by
+    both."""
+    material = medium(section.name) if section.name else None
+    catalogued = {"bulk_density": "bulk_density", "internal_friction": "internal_friction_angle",
+                  "surface_friction": "surface_friction"}
+    values = []
+    for key, quantity in catalogued.items():
+        given = getattr(section, key)
+        known = material.get(quantity) if material else None
+        if given and known:
+            raise SceneError(f"medium.name = {section.name!r} gives {quantity}: leave medium.{key} out "
+                             f"(got {given:g})")
+        if known:
+            given = math.tan(known.value) if quantity == "internal_friction_angle" else known.value
+        values.append(given)
+    if not (section.height > 0 and all(values)):
+        return None
+    return tuple(values)

@@ -1,7 +1,7 @@
 """The scene schema: every physical and numerical parameter of a simulation, in SI units.
 
-A plate scene is a TOML file with the sections ``[plate]``, ``[rft]`` and ``[sim]``; a robot scene has
-``[robot]``, ``[body]``, ``[arm]``, ``[fin]``, ``[rft]``, ``[gait]`` and ``[sim]``; a user's model (`UserScene`)
+A plate scene is a TOML file with the sections ``[plate]``, ``[rft]``, ``[medium]`` and ``[sim]``; a robot scene
+has ``[robot]``, ``[body]``, ``[arm]``, ``[fin]``, ``[rft]``, ``[medium]``, ``[gait]`` and ``[sim]``; a user's model (`UserScene`)
 ``[model]``, ``[medium]``, ``[drive]`` and ``[sim]``; a plate intrusion (`IntrusionScene`) ``[plate]``,
 ``[medium]`` and ``[sim]``. This module is the one place
 where keys, types, units, allowed values and defaults are declared; everything else reads a validated scene.
@@ -192,6 +192,26 @@ class Medium:
 
 
 @dataclass(frozen=True)
+class Immersion:
+    """What a chain of segments (the plate, the robot's fins) is immersed in: the medium, named for provenance, and
+    what the sand-swimming law's coefficients follow from (`finrft.media.sandswim_coefficients`). Not `Medium`,
+    the surface laws' section: a chain's law acts on segments, so surface elements and their law have no place
+    here, and the chain's depth and height do."""
+
+    name: str = _f("", "", "a medium of the catalogue (finrft medium --list); empty: unnamed")
+    depth: float = _f(0.0, "m", "depth of the chain's top edge below the free surface", minimum=0.0, exclusive=False)
+    height: float = _f(0.0, "m", "the chain's vertical extent (the plate's height); 0: not given", minimum=0.0,
+                       exclusive=False)
+    bulk_density: float = _f(0.0, "kg/m^3", "the medium's critical (bulk) density, 3D-RFT's rho_c; 0: the named "
+                             "medium's, if catalogued", minimum=0.0, exclusive=False)
+    internal_friction: float = _f(0.0, "", "the medium's internal friction coefficient, 3D-RFT's mu_int (tan of the "
+                                  "internal friction angle); 0: the named medium's, if catalogued", minimum=0.0,
+                                  exclusive=False)
+    surface_friction: float = _f(0.0, "", "friction coefficient between the chain and the grains, 3D-RFT's "
+                                 "mu_surf; 0: the named medium's, if catalogued", minimum=0.0, exclusive=False)
+
+
+@dataclass(frozen=True)
 class JointDrive:
     joint: str = _f("", "", "the joint moved at constant speed (slide: m, m/s; hinge: rad, rad/s); it follows the "
                     "motion exactly (a very large armature) and the force it needs is recorded")
@@ -230,13 +250,21 @@ class IntrusionPlate:
     depth: float = _f(0.05, "m", "depth of the plate's lowest point at the end", minimum=0.0)
 
 
+# The sand-swimming law's keys, which a chain's scene may leave at 0 to take them from its [medium].
+SANDSWIM_KEYS = ("c_s", "c_f", "gamma0")
+
+
 class _Sections:
     def to_dict(self) -> dict[str, dict[str, Any]]:
         return dataclasses.asdict(self)
 
     def replace(self, **updates: Any):
-        """A copy with dotted keys changed, e.g. ``scene.replace(**{"plate.kind": "soft"})``; validated."""
+        """A copy with dotted keys changed, e.g. ``scene.replace(**{"plate.kind": "soft"})``; validated. Law
+        coefficients the scene took from its medium are taken anew (from the changed medium or chain), unless
+        the updates set them."""
         data = self.to_dict()
+        if getattr(self, "_rft_from_medium", False) and not any(f"rft.{k}" in updates for k in SANDSWIM_KEYS):
+            data["rft"].update(dict.fromkeys(SANDSWIM_KEYS, 0.0))
         for key, value in updates.items():
             section, name = split_key(type(self), key)
             data[section][name] = value
@@ -261,10 +289,11 @@ class Scene(_Sections):
 
     plate: Plate = field(default_factory=Plate)
     rft: RFT = field(default_factory=RFT)
+    medium: Immersion = field(default_factory=Immersion)
     sim: Sim = field(default_factory=Sim)
 
     def __post_init__(self) -> None:
-        _check_law(self.rft)
+        _law_from_medium(self, self.plate.segment_length)
         _check_sim(self.sim)
 
 
@@ -279,11 +308,12 @@ class RobotScene(_Sections):
                                                      segment_inertia=2.65e-7, stiffness=0.5879, damping=0.4399,
                                                      stop_stiffness=100.0))
     rft: RFT = field(default_factory=lambda: RFT(f_perp=6.779, f_par=-1.0))
+    medium: Immersion = field(default_factory=Immersion)
     gait: Gait = field(default_factory=Gait)
     sim: Sim = field(default_factory=Sim)
 
     def __post_init__(self) -> None:
-        _check_law(self.rft)
+        _law_from_medium(self, self.fin.segment_length)
         _check_sim(self.sim)
         g = self.gait
         for key in ("theta1", "theta2"):
@@ -340,7 +370,26 @@ def _check_law(r: RFT) -> None:
         raise SceneError("rft.law = 'table' needs rft.table, the path of a CSV with attack_deg, f_perp_N, f_par_N")
     if r.law == "sandswim" and not (r.c_s > 0 and r.c_f > 0 and r.gamma0 > 0):
         raise SceneError("rft.law = 'sandswim' needs rft.c_s > 0, rft.c_f > 0 (N per segment) and "
-                         "0 < rft.gamma0 <= pi/2 (rad), the medium's fitted values: none are built in")
+                         "0 < rft.gamma0 <= pi/2 (rad), the medium's fitted values: none are built in (or leave "
+                         "all three at 0 and give [medium] height, bulk_density, internal_friction and "
+                         "surface_friction to derive them)")
+
+
+def _law_from_medium(scene: Any, segment_length: float) -> None:
+    """Check a chain scene's medium and law; a sandswim law with c_s, c_f and gamma0 all 0 takes them from the
+    medium when it gives what they follow from (the scene then holds them, and remembers where they came from).
+    A derived C_S or C_F may be 0 (3D-RFT gives a thin plate no drag along itself without surface friction)."""
+    from . import media  # the catalogue's module imports this one
+
+    rft = scene.rft
+    properties = media.immersion_properties(scene.medium)
+    if rft.law == "sandswim" and not any(getattr(rft, k) for k in SANDSWIM_KEYS) and properties is not None:
+        found = media.sandswim_coefficients(segment_length, scene.medium.depth, scene.medium.height, *properties)
+        object.__setattr__(scene, "rft", dataclasses.replace(rft, c_s=found.c_s, c_f=found.c_f,
+                                                             gamma0=found.gamma0))
+        object.__setattr__(scene, "_rft_from_medium", True)
+    else:
+        _check_law(rft)
 
 
 PRESETS: dict[type, tuple[str, ...]] = {Scene: ("paper", "physical"), RobotScene: ("paper", "physical")}
@@ -351,7 +400,7 @@ def sections(cls: type) -> dict[str, type]:
     """A scene class's sections and their types, in order."""
     hints = {"Plate": Plate, "RFT": RFT, "Sim": Sim, "Robot": Robot, "Body": Body, "Arm": Arm, "Chain": Chain, "Fin": Fin,
              "Gait": Gait, "Model": Model, "Medium": Medium, "JointDrive": JointDrive, "ExplicitSim": ExplicitSim,
-             "IntrusionPlate": IntrusionPlate}
+             "IntrusionPlate": IntrusionPlate, "Immersion": Immersion}
     return {f.name: hints[f.type] if isinstance(f.type, str) else f.type for f in dataclasses.fields(cls)}
 
 

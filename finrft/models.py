@@ -286,19 +286,10 @@ class RobotModel:
     groups: tuple[ForceGroup, ...]
 
 
-def _from_geometry(scene: RobotScene) -> bool:
-    return scene.robot.forces == "geometry"
-
-
-def fin_law(scene: RobotScene) -> RFT:
-    """The law of a fin segment: [rft] as given, or from the geometry (finrft.geometry)."""
-    return geometry.fin_law(scene) if _from_geometry(scene) else scene.rft
-
-
 def arm_law(scene: RobotScene) -> RFT:
-    """The arm's RFT law: from the geometry (finrft.geometry), or the paper law with a normal coefficient that
-    grows with the arm's length."""
-    if _from_geometry(scene):
+    """The arm's RFT law: from the medium (finrft.geometry), or the paper law with a normal coefficient that grows
+    with the arm's length."""
+    if geometry.properties(scene) is not None:
         return geometry.arm_law(scene)
     a = scene.arm
     return RFT(law="paper", f_perp=a.f_perp_base + a.f_perp_per_length * a.length, f_par=a.f_par,
@@ -311,8 +302,9 @@ def body_share(scene: RobotScene) -> float:
 
 
 def body_drag(scene: RobotScene) -> float:
-    """The whole robot's body drag (N): body.drag, or the body's faces and the cart (finrft.geometry)."""
-    return geometry.body_resistance(scene)["total"] if _from_geometry(scene) else scene.body.drag
+    """The whole robot's body drag (N): body.drag, or from the medium the body's faces and the cart
+    (finrft.geometry)."""
+    return scene.body.drag if geometry.properties(scene) is None else geometry.body_resistance(scene)["total"]
 
 
 def body_law(scene: RobotScene) -> RFT:
@@ -367,7 +359,7 @@ def _robot(scene: RobotScene, backend: str) -> _Robot:
             actuator.actrange = [scene.gait.theta2, scene.gait.theta1]
             robot.actuators.append(actuator)
     if backend == "native":
-        _bind(spec, "fin_sand", fin_law(scene), penalty_stiffness(fin), _fin_bodies(robot))
+        _bind(spec, "fin_sand", scene.rft, penalty_stiffness(fin), _fin_bodies(robot))
         _bind(spec, "arm_sand", arm_law(scene), 0.0, robot.arms)
         if scene.body.drag_law == "velocity":
             _bind(spec, "body_sand", body_law(scene), 0.0, [body])
@@ -391,7 +383,7 @@ def build_robot(scene: RobotScene) -> RobotModel:
     model = _compile(robot.spec)
     fin = scene.fin
     sides = ("r",) if scene.robot.model == "half" else ("r", "l")
-    groups = [_group(model, "fin_sand", fin_law(scene), penalty_stiffness(fin), _fin_bodies(robot)),
+    groups = [_group(model, "fin_sand", scene.rft, penalty_stiffness(fin), _fin_bodies(robot)),
               _group(model, "arm_sand", arm_law(scene), 0.0, robot.arms)]
     if scene.body.drag_law == "velocity":
         groups.append(_group(model, "body_sand", body_law(scene), 0.0, [robot.body]))

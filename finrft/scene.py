@@ -60,12 +60,6 @@ class Chain:
 
 
 @dataclass(frozen=True)
-class Fin(Chain):
-    height: float = _f(0.055, "m", "geometry forces: the fin plate's height H_p, its top edge at robot.depth",
-                       minimum=0.0)
-
-
-@dataclass(frozen=True)
 class Plate(Chain):
     rod_length: float = _f(0.007, "m", "extension rod from the driven base point to the first hinge", minimum=0.0)
     rod_mass: float = _f(0.010, "kg", "mass of the extension rod, at its midpoint", minimum=0.0)
@@ -121,12 +115,6 @@ class Robot:
                     "tracks it", choices=("prescribed", "position"))
     servo_kp: float = _f(50.0, "N m/rad", "position servo stiffness (servo = position); critically damped",
                          minimum=0.0)
-    forces: str = _f("coefficients", "", "coefficients: each group's RFT coefficients as given ([rft] per fin "
-                     "segment in N, [arm] f_perp_*, f_par, [body] drag); geometry: one law for every face, [rft] "
-                     "then giving the medium's stresses per unit depth (N/m^3), times each face's depth moment "
-                     "(finrft.geometry)", choices=("coefficients", "geometry"))
-    depth: float = _f(0.010, "m", "geometry forces: depth of the top edges of body, arms and fins below the surface",
-                      minimum=0.0, exclusive=False)
 
 
 @dataclass(frozen=True)
@@ -139,11 +127,11 @@ class Body:
                        "stroke",
                        choices=("velocity", "stroke"))
     v_reg: float = _f(0.001, "m/s", "regularisation speed of the velocity body drag", minimum=0.0)
-    height: float = _f(0.045, "m", "geometry forces: body height H_r (its faces span robot.depth to depth + H_r)",
+    height: float = _f(0.045, "m", "with [medium]: body height H_r, its top edge at medium.depth",
                        minimum=0.0)
-    width: float = _f(0.055, "m", "geometry forces: body width W_r, the front face", minimum=0.0)
-    length: float = _f(0.075, "m", "geometry forces: body length L_r, each side face", minimum=0.0)
-    cart: float = _f(0.0, "N", "geometry forces: the cart's rolling resistance, against the body's motion (whole "
+    width: float = _f(0.055, "m", "with [medium]: body width W_r, the front face", minimum=0.0)
+    length: float = _f(0.075, "m", "with [medium]: body length L_r, along its axis", minimum=0.0)
+    cart: float = _f(0.0, "N", "with [medium]: the cart's rolling resistance, against the body's motion (whole "
                      "robot)", minimum=0.0, exclusive=False)
 
 
@@ -160,7 +148,7 @@ class Arm:
     f_perp_per_length: float = _f(17940.0, "N/m", "arm RFT normal coefficient per arm length", minimum=0.0,
                                   exclusive=False)
     f_par: float = _f(-0.3, "N", "arm RFT tangential coefficient")
-    height: float = _f(0.010, "m", "geometry forces: the arm's height, its top edge at robot.depth", minimum=0.0)
+    height: float = _f(0.010, "m", "with [medium]: the arm's height, its top edge at medium.depth", minimum=0.0)
 
 
 @dataclass(frozen=True)
@@ -304,7 +292,7 @@ class RobotScene(_Sections):
     robot: Robot = field(default_factory=Robot)
     body: Body = field(default_factory=Body)
     arm: Arm = field(default_factory=Arm)
-    fin: Fin = field(default_factory=lambda: Fin(segments=3, segment_length=0.02, segment_mass=0.00795,
+    fin: Chain = field(default_factory=lambda: Chain(segments=3, segment_length=0.02, segment_mass=0.00795,
                                                      segment_inertia=2.65e-7, stiffness=0.5879, damping=0.4399,
                                                      stop_stiffness=100.0))
     rft: RFT = field(default_factory=lambda: RFT(f_perp=6.779, f_par=-1.0))
@@ -323,12 +311,11 @@ class RobotScene(_Sections):
         if g.theta1 <= g.theta2:
             raise SceneError(f"gait.theta1 ({math.degrees(g.theta1):g} deg) must be greater than gait.theta2 "
                              f"({math.degrees(g.theta2):g} deg)")
-        if self.robot.forces == "geometry" and self.body.drag_law != "velocity":
-            raise SceneError("robot.forces = 'geometry' resists the body against its velocity: set "
-                             "body.drag_law = 'velocity'")
-        if self.robot.forces == "geometry" and self.rft.law == "table":
-            raise SceneError("robot.forces = 'geometry' scales the law's coefficients by each face's depth moment: "
-                             "a table law's CSV cannot be scaled; use the paper or sandswim law")
+        from . import media  # the catalogue's module imports this one
+
+        if self.body.drag_law != "velocity" and media.immersion_properties(self.medium) is not None:
+            raise SceneError("a robot in a [medium] is resisted against its body's velocity (its faces and the "
+                             "cart): set body.drag_law = 'velocity'")
 
 
 @dataclass(frozen=True)
@@ -398,7 +385,7 @@ _PRESET_PREFIX = {Scene: "plate", RobotScene: "robot"}
 
 def sections(cls: type) -> dict[str, type]:
     """A scene class's sections and their types, in order."""
-    hints = {"Plate": Plate, "RFT": RFT, "Sim": Sim, "Robot": Robot, "Body": Body, "Arm": Arm, "Chain": Chain, "Fin": Fin,
+    hints = {"Plate": Plate, "RFT": RFT, "Sim": Sim, "Robot": Robot, "Body": Body, "Arm": Arm, "Chain": Chain,
              "Gait": Gait, "Model": Model, "Medium": Medium, "JointDrive": JointDrive, "ExplicitSim": ExplicitSim,
              "IntrusionPlate": IntrusionPlate, "Immersion": Immersion}
     return {f.name: hints[f.type] if isinstance(f.type, str) else f.type for f in dataclasses.fields(cls)}

@@ -1,90 +1,177 @@
-"""Fit the physical robot's robot-specific parameters on rows of the paper's Table I, and predict the rest.
+"""Fit the physical robot on rows of the paper's Table I, predict the rest, and test the fin law's shape.
 
-The parameters: the fin hinges' stiffness k (N m/rad; the damping follows as k times the preset's time constant
-b/k, a property of the hinge material) and the cart's rolling resistance (N). The cost is the sum over the rows of
-(eta - eta_exp)^2, eta steady (finrft.swim.steady).
+The fin law's shape is the sand-swimming law's gamma0 and c_f/c_s; its scale is fixed throughout at the physical
+preset's broadside force per segment (c_s cos gamma0 + c_f, from 3D-RFT on the segment), so a shape changes how
+the force turns with the direction of motion, not how large it is. The fin hinges' damping follows their
+stiffness k as k times the preset's time constant b/k. eta is steady (finrft.swim.steady).
 
-- The grid: k and the cart on the rows Optimized and Asymmetry 1, every evaluation logged to the CSV given (default
-  docs/robot_fit.csv), the best point printed. No point gets Asymmetry 1's sign right with Optimized near its
-  measured eta (see the README's robot section), so the preset does not take it.
-- --bisect: k alone on finrft.swim.PHYSICAL_FITTED (Optimized), the cart at the preset's estimate: what the preset
-  holds.
-- --leave-one-out: each origami row in turn predicted from a fit of k alone (on the grid) on the others.
+- preset: the shape 3D-RFT gives (the preset's), k fitted on Optimized (bisection): what the preset holds.
+- plate: the shape fitted to the plate's measured drags (finrft/presets/plate-physical.toml), k refitted on
+  Optimized.
+- free: k and gamma0 fitted on Optimized and Asymmetry 1 (c_f/c_s the preset's): for each gamma0 of a grid, k
+  matching Optimized, then gamma0 bisected where Asymmetry 1 crosses its measured eta (or the grid's best); and the
+  plate measurements' RMSE at that gamma0 (the plate preset's other values kept).
 
-    python scripts/fit_robot.py [--out docs/robot_fit.csv] [--bisect] [--leave-one-out]
+Every evaluation is printed and, with --out, written to a CSV. One process, no workers.
+
+    python scripts/fit_robot.py [--shape preset|plate|free ...] [--out LOG.csv]
 """
 
 from __future__ import annotations
 
 import argparse
 import csv
+import math
+import sys
 import warnings
 
 import numpy as np
 
 import finrft
+from finrft import data as shipped
 from finrft.convergence import SimulationFailed
-from finrft.swim import PAPER_TABLE, PHYSICAL_FITTED, swim, table_scenes
+from finrft.fit import mse, read_drag
+from finrft.swim import PAPER_TABLE, swim, table_scenes
 
-STIFFNESS = np.geomspace(0.1, 4.0, 14)       # N m/rad
-CART = (0.0, 2.0, 5.0, 10.0, 20.0)           # N, whole robot
+NAMES = [row[0] for row in PAPER_TABLE]
+MEASURED = np.array([row[5] / 100 for row in PAPER_TABLE])
+SPEED = np.array([row[7] for row in PAPER_TABLE])
+GAMMA0 = np.linspace(0.2, 1.5, 14)  # rad
 
 
-def etas(scene: finrft.RobotScene, k: float, cart: float, rows: list[int]) -> list[float]:
-    tau = scene.fin.damping / scene.fin.stiffness
-    tried = scene.replace(**{"fin.stiffness": k, "fin.damping": tau * k, "body.cart": cart})
-    out = []
-    for i, s in enumerate(table_scenes(tried)):
-        if i in rows:
-            try:
-                out.append(swim(s, s.gait.cycles, max_error=None).summary()["eta_steady"])
-            except SimulationFailed:
-                out.append(float("nan"))
-    return out
+def broadside(rft: finrft.scene.RFT) -> float:
+    """The sand-swimming law's force (N) on a segment moving along its normal."""
+    return rft.c_s * math.cos(rft.gamma0) + rft.c_f
+
+
+def shaped(scene: finrft.RobotScene, gamma0: float, ratio: float) -> finrft.RobotScene:
+    """The scene with the fin law's gamma0 and c_f/c_s set, its broadside force kept."""
+    c_s = broadside(scene.rft) / (math.cos(gamma0) + ratio)
+    return scene.replace(**{"rft.c_s": c_s, "rft.c_f": ratio * c_s, "rft.gamma0": gamma0})
+
+
+class Robot:
+    """Evaluations of one fin-law shape, logged."""
+
+    def __init__(self, scene: finrft.RobotScene, label: str, log: csv.writer | None) -> None:
+        self.scene, self.label, self.log = scene, label, log
+        self.tau = scene.fin.damping / scene.fin.stiffness
+
+    def with_k(self, k: float) -> finrft.RobotScene:
+        return self.scene.replace(**{"fin.stiffness": k, "fin.damping": self.tau * k})
+
+    def run(self, k: float, row: int) -> dict[str, float]:
+        s = table_scenes(self.with_k(k))[row]
+        try:
+            s = swim(s, s.gait.cycles, max_error=None).summary()
+            out = {key: s[f"{key}_steady"] for key in ("eta", "D1_mm", "D2_mm", "net_speed_mm_s")}
+            out["eta_first_cycle"] = s["eta_first_cycle"]
+        except SimulationFailed:
+            out = {"eta": float("nan"), "D1_mm": float("nan"), "D2_mm": float("nan"),
+                   "net_speed_mm_s": float("nan"), "eta_first_cycle": float("nan")}
+        r = self.scene.rft
+        if self.log:
+            self.log.writerow([self.label, f"{r.gamma0:.5f}", f"{r.c_f / r.c_s:.5f}", f"{k:.6g}", NAMES[row],
+                               f"{out['eta']:.6f}", f"{out['net_speed_mm_s']:.4f}"])
+        return out
+
+    def fit_k(self, row: int, low: float = 0.05, high: float = 20.0, steps: int = 14) -> float:
+        """k (N m/rad) at which the row's eta is its measured one, by bisection in log k: eta falls as k grows (the
+        fin folds less in the recovery stroke). A bracket end when the measured eta lies outside."""
+        target = MEASURED[row]
+        if self.run(low, row)["eta"] < target:
+            return low
+        if self.run(high, row)["eta"] > target:
+            return high
+        for _ in range(steps):
+            k = math.sqrt(low * high)
+            low, high = (k, high) if self.run(k, row)["eta"] > target else (low, k)
+        return math.sqrt(low * high)
+
+    def table(self, k: float, fitted: tuple[str, ...]) -> list[dict[str, float]]:
+        rows = []
+        for i, name in enumerate(NAMES):
+            rows.append({"gait": name, "fitted": name in fitted, **self.run(k, i)})
+        return rows
+
+
+def show(title: str, robot: Robot, k: float, rows: list[dict[str, float]]) -> None:
+    r = robot.scene.rft
+    print(f"\n### {title}: gamma0 {r.gamma0:.4f} rad, c_f/c_s {r.c_f / r.c_s:.3f}, c_s {r.c_s:.3f} N, "
+          f"c_f {r.c_f:.3f} N (broadside {broadside(r):.3f} N per segment), k {k:.4g} N m/rad\n")
+    print("| gait | η % | η cycle 1 % | η_exp % | net speed mm/s | paper speed mm/s | speed ratio | fit |")
+    print("|---|---:|---:|---:|---:|---:|---:|---|")
+    for i, row in enumerate(rows):
+        print(f"| {row['gait']} | {100 * row['eta']:.2f} | {100 * row['eta_first_cycle']:.2f} | "
+              f"{100 * MEASURED[i]:.2f} | {row['net_speed_mm_s']:.2f} | {SPEED[i]:.2f} | "
+              f"{row['net_speed_mm_s'] / SPEED[i]:.2f} | {'fitted' if row['fitted'] else 'predicted'} |")
+    error = [abs(row["eta"] - MEASURED[i]) for i, row in enumerate(rows)]
+    signs = all(np.sign(row["eta"]) == np.sign(MEASURED[i]) for i, row in enumerate(rows) if not row["fitted"])
+    gap = rows[NAMES.index("Optimized")]["eta"] - rows[NAMES.index("Rigid fin")]["eta"]
+    print(f"\nmean |eta - eta_exp| {100 * np.mean(error):.2f} points; predicted signs right: {signs}; optimized - "
+          f"rigid {100 * gap:.2f} points")
+    sys.stdout.flush()
+
+
+def plate_rmse(gamma0: float) -> float:
+    """The plate measurements' RMSE (deg) over the 10, 30 and 50 mm/s drags with the physical plate preset's
+    gamma0 replaced, its other values kept."""
+    plate = finrft.preset("physical", finrft.Scene).replace(**{"rft.gamma0": gamma0})
+    files = sorted(shipped.plate_drag_dir().glob("*.csv"))
+    return float(np.sqrt(np.mean([mse(plate, read_drag(f)) for f in files])))
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", default="docs/robot_fit.csv")
-    parser.add_argument("--leave-one-out", action="store_true")
-    parser.add_argument("--bisect", action="store_true")
+    parser.add_argument("--shape", nargs="+", choices=("preset", "plate", "free"), default=["preset", "plate", "free"])
+    parser.add_argument("--out", help="CSV log of every evaluation")
     args = parser.parse_args()
     warnings.simplefilter("ignore", finrft.laws.FeedsEnergy)
     scene = finrft.preset("physical", finrft.RobotScene)
-    names = [row[0] for row in PAPER_TABLE]
-    measured = np.array([row[5] / 100 for row in PAPER_TABLE])
-    if args.bisect:
-        (row,) = [names.index(n) for n in PHYSICAL_FITTED]
-        low, high = 1.0, 3.0  # eta falls as k grows: the fin folds less
-        for _ in range(12):
-            k = float(np.sqrt(low * high))
-            (eta,) = etas(scene, k, scene.body.cart, [row])
-            print(f"k {k:.5g} N m/rad: eta {100 * eta:.3f} % (measured {100 * measured[row]:.2f})")
-            low, high = (k, high) if eta > measured[row] else (low, k)
-        return
-    rows = [names.index("Optimized"), names.index("Asymmetry 1")]
-    best = (np.inf, 0.0, 0.0)
-    with open(args.out, "w", newline="") as f:
-        out = csv.writer(f)
-        out.writerow(["stiffness_N_m_rad", "cart_N"] + [f"eta_{names[i]}" for i in rows] + ["cost"])
-        for k in STIFFNESS:
-            for cart in CART:
-                eta = etas(scene, k, cart, rows)
-                cost = float(np.sum((np.array(eta) - measured[rows]) ** 2))
-                out.writerow([f"{k:.5g}", cart] + [f"{e:.5f}" for e in eta] + [f"{cost:.6g}"])
-                f.flush()
-                if cost < best[0]:
-                    best = (cost, k, cart)
-                print(f"k {k:.4g} cart {cart:g}: " + " ".join(f"{100 * e:.2f}" for e in eta) + f" cost {cost:.4g}")
-    print(f"best: k {best[1]:.5g} N m/rad, cart {best[2]:g} N, rms {100 * np.sqrt(best[0] / len(rows)):.2f} points")
-    if args.leave_one_out:
-        origami = [i for i, row in enumerate(PAPER_TABLE) if row[4] == "origami"]
-        for left in origami:
-            others = [i for i in origami if i != left]
-            costs = [np.nansum((np.array(etas(scene, k, best[2], others)) - measured[others]) ** 2) for k in STIFFNESS]
-            k = STIFFNESS[int(np.argmin(costs))]
-            (eta,) = etas(scene, k, best[2], [left])
-            print(f"leave out {names[left]}: k {k:.4g} -> eta {100 * eta:.2f} % (measured {100 * measured[left]:.2f})")
+    ratio = scene.rft.c_f / scene.rft.c_s
+    optimized, asymmetry = NAMES.index("Optimized"), NAMES.index("Asymmetry 1")
+    f = open(args.out, "w", newline="") if args.out else None
+    log = csv.writer(f) if f else None
+    if log:
+        log.writerow(["shape", "gamma0_rad", "c_f_over_c_s", "stiffness_N_m_rad", "gait", "eta", "net_speed_mm_s"])
+    if "preset" in args.shape:
+        robot = Robot(scene, "preset", log)
+        k = robot.fit_k(optimized)
+        show("(a) the preset's shape (3D-RFT)", robot, k, robot.table(k, ("Optimized",)))
+    if "plate" in args.shape:
+        plate = finrft.preset("physical", finrft.Scene).rft
+        robot = Robot(shaped(scene, plate.gamma0, plate.c_f / plate.c_s), "plate", log)
+        k = robot.fit_k(optimized)
+        show("(b) the plate-fitted shape", robot, k, robot.table(k, ("Optimized",)))
+    if "free" in args.shape:
+        def miss(gamma0: float) -> tuple[float, float]:
+            robot = Robot(shaped(scene, gamma0, ratio), "free", log)
+            k = robot.fit_k(optimized)
+            found = robot.run(k, asymmetry)["eta"] - MEASURED[asymmetry]
+            print(f"gamma0 {gamma0:.4f} rad: k {k:.4g} N m/rad, Asymmetry 1 eta - eta_exp {100 * found:+.2f} points")
+            sys.stdout.flush()
+            return k, found
+
+        misses = [miss(g)[1] for g in GAMMA0]
+        crossing = [i for i in range(len(GAMMA0) - 1) if misses[i] * misses[i + 1] < 0]
+        if crossing:
+            low, high = GAMMA0[crossing[0]], GAMMA0[crossing[0] + 1]
+            low_sign = np.sign(misses[crossing[0]])
+            for _ in range(6):
+                mid = (low + high) / 2
+                low, high = (mid, high) if np.sign(miss(mid)[1]) == low_sign else (low, mid)
+            gamma0 = (low + high) / 2
+        else:
+            gamma0 = float(GAMMA0[int(np.nanargmin(np.abs(misses)))])
+        robot = Robot(shaped(scene, gamma0, ratio), "free", log)
+        k = robot.fit_k(optimized)
+        show("(c) k and gamma0 fitted on Optimized and Asymmetry 1", robot, k,
+             robot.table(k, ("Optimized", "Asymmetry 1")))
+        plate = finrft.preset("physical", finrft.Scene).rft.gamma0
+        print(f"\nplate RMSE (10, 30, 50 mm/s; the plate preset's b, c_s, c_f): {plate_rmse(plate):.2f} deg at its "
+              f"gamma0 {plate:.4f} rad, {plate_rmse(gamma0):.2f} deg at the robot's {gamma0:.4f} rad")
+    if f:
+        f.close()
 
 
 if __name__ == "__main__":

@@ -293,7 +293,7 @@ def robot_physical(out: Path, quick: bool, workers: int | None) -> str:
     fig.savefig(out / "robot_physical.png", dpi=150)
     plt.close(fig)
     mean = np.mean([abs(r["eta"] - r["paper_eta_exp"]) for r in rows])
-    return (f"Physical preset (forces from the geometry, {scene.sim.method} method, dt {scene.sim.dt:g} s), eta "
+    return (f"Physical preset (forces from 3D-RFT in its [medium], {scene.sim.method} method, dt {scene.sim.dt:g} s), eta "
             f"over the steady cycles 2..{gaits[0].gait.cycles}; mean |eta - eta_exp| {100 * mean:.2f} points:\n\n"
             f"{table_markdown(rows)}\n\n![model against experiment, trajectories](robot_physical.png)\n\n"
             f"See the README's robot section for the model, what was fitted and where it fails.")

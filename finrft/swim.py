@@ -218,7 +218,7 @@ PAPER_TABLE = (
 )
 
 
-# The gaits the physical preset's fitted parameter (fin.stiffness) was fitted on (scripts/fit_robot.py --bisect).
+# The gaits the physical preset's fitted parameter (fin.stiffness) was fitted on (scripts/fit_robot.py --shape preset).
 PHYSICAL_FITTED = ("Optimized",)
 
 

@@ -220,8 +220,9 @@ def build_parser() -> argparse.ArgumentParser:
                       help="arm length L_a in mm (default: the scene's, 65 in the presets)")
     swim.add_argument("--omega", type=_number("deg/s"), metavar="DEG_S",
                       help="arm angular speed in degrees/s (default: the scene's, 66 in the presets)")
-    swim.add_argument("--cycles", type=_number("cycles", minimum=1, inclusive=True, integer=True), default=1,
-                      metavar="N", help="flap cycles (default: %(default)s); figures are the last cycle's")
+    swim.add_argument("--cycles", type=_number("cycles", minimum=1, inclusive=True, integer=True),
+                      metavar="N", help="flap cycles (default: the scene's gait.cycles: 1 in the paper preset, 4 in "
+                      "the physical one); figures are the last cycle's, and eta over cycles 2..N")
     _add_robot(swim)
     _add_max_error(swim)
     _add_run_outputs(swim)
@@ -634,7 +635,7 @@ def _swim(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
     from .swim import Swim
     _check_output(args.out, ".h5", "--out", args.force)
     _check_output(args.rrd, ".rrd", "--rrd", args.force)
-    run = _run(args, Swim(args.cycles), scene)
+    run = _run(args, Swim(args.cycles or scene.gait.cycles), scene)
     summary = run.summary()
     _write(args, run)
     _say(args, f"{scene.robot.model} robot, {scene.fin.kind} fin, theta1 {summary['theta1_deg']:g} deg, theta2 "
@@ -751,12 +752,12 @@ def _law(args: argparse.Namespace) -> int:
 
 def _table(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
     from .batch import run_experiments
-    from .swim import Swim, table_markdown, table_rows, table_scenes
-    jobs = [(Swim(1), s) for s in table_scenes(scene)]
+    from .swim import PHYSICAL_FITTED, Swim, table_markdown, table_rows, table_scenes
+    jobs = [(Swim(s.gait.cycles), s) for s in table_scenes(scene)]
     with _progress(args, len(jobs), "Table I", "gaits") as bar:
         runs = run_experiments(jobs, max_error=_limits(args), workers=args.workers,
                                progress=bar and (lambda done, total: bar(done)))
-    rows = table_rows(runs)
+    rows = table_rows(runs, PHYSICAL_FITTED if args.preset == "physical" and not args.scene else ())
     _say(args, table_markdown(rows))
     if args.json:
         print(_json(rows))

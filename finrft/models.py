@@ -16,7 +16,7 @@ from importlib import resources
 import mujoco
 import numpy as np
 
-from . import laws, native
+from . import geometry, laws, native
 from .scene import RFT, Chain, RobotScene, Scene, SceneError, Sim
 
 INTEGRATORS = {
@@ -299,7 +299,10 @@ class RobotModel:
 
 
 def arm_law(scene: RobotScene) -> RFT:
-    """The arm's RFT law: the paper law with a normal coefficient that grows with the arm's length."""
+    """The arm's RFT law: from the medium (finrft.geometry), or the paper law with a normal coefficient that grows
+    with the arm's length."""
+    if geometry.properties(scene) is not None:
+        return geometry.arm_law(scene)
     a = scene.arm
     return RFT(law="paper", f_perp=a.f_perp_base + a.f_perp_per_length * a.length, f_par=a.f_par,
                v_reg=scene.rft.v_reg)
@@ -310,9 +313,15 @@ def body_share(scene: RobotScene) -> float:
     return 0.5 if scene.robot.model == "half" else 1.0
 
 
+def body_drag(scene: RobotScene) -> float:
+    """The whole robot's body drag (N): body.drag, or from the medium the body's faces and the cart
+    (finrft.geometry)."""
+    return scene.body.drag if geometry.properties(scene) is None else geometry.body_resistance(scene)["total"]
+
+
 def body_law(scene: RobotScene) -> RFT:
     """The velocity body drag as an isotropic RFT law: F = -tanh(|v|/v_reg) drag v/|v|."""
-    drag = body_share(scene) * scene.body.drag
+    drag = body_share(scene) * body_drag(scene)
     return RFT(law="paper", f_perp=drag, f_par=drag, v_reg=scene.body.v_reg)
 
 

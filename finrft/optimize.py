@@ -86,16 +86,16 @@ def check_variables(scene: RobotScene, variables: Sequence[Variable]) -> None:
 
 
 def evaluate(scene: RobotScene, max_error: ErrorLimits = ErrorLimits()) -> dict[str, float]:
-    """One gait evaluation: one flap cycle from rest, eta, the distances and the estimate of eta's discretisation
-    error (points); failures, including an estimate above ``max_error``, are marked, not raised: an optimiser must
-    not climb a discretisation error."""
+    """One gait evaluation: gait.cycles flap cycles from rest, eta and the distances (steady: finrft.swim.steady)
+    and the estimate of eta's discretisation error (points); failures, including an estimate above ``max_error``,
+    are marked, not raised: an optimiser must not climb a discretisation error."""
     try:
-        run = swim(scene, 1, max_error=max_error)
+        run = swim(scene, scene.gait.cycles, max_error=max_error)
     except (SimulationFailed, SceneError) as exc:
         return {"eta": float("nan"), "D1_mm": float("nan"), "D2_mm": float("nan"), "eta_error_points": float("nan"),
                 "error": str(exc)}
     summary = run.summary()
-    return {"eta": summary["eta"], "D1_mm": summary["D1_mm"], "D2_mm": summary["D2_mm"],
+    return {"eta": summary["eta_steady"], "D1_mm": summary["D1_mm_steady"], "D2_mm": summary["D2_mm_steady"],
             "eta_error_points": run.error_estimate["eta_points"], "error": ""}
 
 

@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, Callable
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from . import media
 from .drive import Drive
 
 if TYPE_CHECKING:
@@ -219,6 +220,8 @@ class _HalfRobot:
         f, a = scene.fin, scene.arm
         if scene.robot.model != "half" or scene.robot.servo != "prescribed":
             raise ValueError("the reference solves the half robot with a prescribed servo")
+        if media.immersion_properties(scene.medium) is not None:
+            raise ValueError("the reference takes the arm's and body's coefficients as given, not from a [medium]")
         if f.kind == "origami" and f.stop != "penalty":
             raise ValueError("the reference models the origami stop as the penalty spring (fin.stop = 'penalty')")
         self.scene, self.drive, self.n, self.l, self.L = scene, drive, f.segments, f.segment_length, a.length

@@ -129,6 +129,12 @@ class Body:
                        "stroke",
                        choices=("velocity", "stroke"))
     v_reg: float = _f(0.001, "m/s", "regularisation speed of the velocity body drag", minimum=0.0)
+    height: float = _f(0.045, "m", "with [medium]: body height H_r, its top edge at medium.depth",
+                       minimum=0.0)
+    width: float = _f(0.055, "m", "with [medium]: body width W_r, the front face", minimum=0.0)
+    length: float = _f(0.075, "m", "with [medium]: body length L_r, along its axis", minimum=0.0)
+    cart: float = _f(0.0, "N", "with [medium]: the cart's rolling resistance, against the body's motion (whole "
+                     "robot)", minimum=0.0, exclusive=False)
 
 
 @dataclass(frozen=True)
@@ -144,6 +150,7 @@ class Arm:
     f_perp_per_length: float = _f(17940.0, "N/m", "arm RFT normal coefficient per arm length", minimum=0.0,
                                   exclusive=False)
     f_par: float = _f(-0.3, "N", "arm RFT tangential coefficient")
+    height: float = _f(0.010, "m", "with [medium]: the arm's height, its top edge at medium.depth", minimum=0.0)
 
 
 @dataclass(frozen=True)
@@ -152,6 +159,8 @@ class Gait:
                        "+90 deg = forward)")
     theta2: float = _f(-1.5707963267948966, "rad", "arm angle at the end of the power stroke; the gait starts here")
     omega: float = _f(1.1519173063162575, "rad/s", "arm angular speed", minimum=0.0)
+    cycles: int = _f(1, "", "flap cycles a gait is evaluated over (table, optimize): 1, the first cycle from rest; "
+                     "N >= 2, eta over the steady cycles 2..N", minimum=1, exclusive=False)
 
 
 @dataclass(frozen=True)
@@ -316,6 +325,11 @@ class RobotScene(_Sections):
         if g.theta1 <= g.theta2:
             raise SceneError(f"gait.theta1 ({math.degrees(g.theta1):g} deg) must be greater than gait.theta2 "
                              f"({math.degrees(g.theta2):g} deg)")
+        from . import media  # the catalogue's module imports this one
+
+        if self.body.drag_law != "velocity" and media.immersion_properties(self.medium) is not None:
+            raise SceneError("a robot in a [medium] is resisted against its body's velocity (its faces and the "
+                             "cart): set body.drag_law = 'velocity'")
 
 
 @dataclass(frozen=True)

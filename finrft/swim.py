@@ -4,6 +4,10 @@ A flap cycle starts at arm angle theta2 with the recovery stroke (the arm swings
 the fin folds) and ends with the power stroke (back to theta2, the fin flat against its stops). The body moves
 back by D2 in the recovery stroke and forward by D1 in the power stroke; the paper's swimming efficiency is
 eta = (D1 - D2) / D1. The robot starts at rest, arm and fin at theta2, the arm turning at omega.
+
+The experiment measures a robot already swimming, so a gait's eta (`steady`) is taken over the cycles after the
+first: eta = (sum D1 - sum D2) / sum D1 over cycles 2..N, the net distance over the distance forward (a mean of the
+per-cycle eta would weigh a short cycle as much as a long one); with N = 1 it is the first cycle's.
 """
 
 from __future__ import annotations
@@ -91,12 +95,13 @@ class Swim:
         return _cycle_rows(run.stroke_y, self.cycles, run.cycle_time)
 
     def summary(self, run: Result) -> dict[str, Any]:
-        """The last cycle's figures, and per-cycle lists."""
+        """The last cycle's figures, per-cycle lists, the first cycle's eta and the steady figures (`steady`)."""
         rows = self.cycle_table(run)
         scene = run.scene
         g = scene.gait
         out: dict[str, Any] = dict(rows[-1])
         out.update({f"{key}_per_cycle": [row[key] for row in rows] for key in rows[-1]})
+        out.update(eta_first_cycle=rows[0]["eta"], **{f"{key}_steady": value for key, value in steady(rows).items()})
         out.update(theta1_deg=float(np.degrees(g.theta1)), theta2_deg=float(np.degrees(g.theta2)),
                    arm_length_mm=1e3 * scene.arm.length, omega_deg_s=float(np.degrees(g.omega)),
                    fin=scene.fin.kind, model=scene.robot.model, cycles=int(self.cycles))
@@ -116,6 +121,15 @@ def _cycle_rows(stroke_y: np.ndarray, cycles: int, cycle_time: float) -> list[di
                      "eta": (forward - back) / forward if forward > 0 else float("nan"),
                      "net_mm": 1e3 * (y2 - y0), "net_speed_mm_s": 1e3 * (y2 - y0) / cycle_time})
     return rows
+
+
+def steady(rows: list[dict[str, float]]) -> dict[str, float]:
+    """eta, the mean D1 and D2 (mm) and the net speed (mm/s) over cycles 2..N of per-cycle rows (`_cycle_rows`),
+    eta = (sum D1 - sum D2) / sum D1; the first cycle's with one row."""
+    kept = rows[1:] or rows
+    forward, back = sum(r["D1_mm"] for r in kept), sum(r["D2_mm"] for r in kept)
+    return {"eta": (forward - back) / forward if forward > 0 else float("nan"), "D1_mm": forward / len(kept),
+            "D2_mm": back / len(kept), "net_speed_mm_s": sum(r["net_speed_mm_s"] for r in kept) / len(kept)}
 
 
 def gait_drive(scene: RobotScene, cycles: int) -> Drive:
@@ -204,6 +218,10 @@ PAPER_TABLE = (
 )
 
 
+# The gaits the physical preset's fitted parameter (fin.stiffness) was fitted on (scripts/fit_robot.py --shape preset).
+PHYSICAL_FITTED = ("Optimized",)
+
+
 def table_scenes(scene: RobotScene) -> list[RobotScene]:
     """The scene of each gait of the paper's Table I."""
     return [scene.replace(**{"gait.theta1": np.radians(t1), "gait.theta2": np.radians(t2),
@@ -211,28 +229,35 @@ def table_scenes(scene: RobotScene) -> list[RobotScene]:
             for _, t1, t2, la, fin, *_ in PAPER_TABLE]
 
 
-def table_rows(runs: list[Result]) -> list[dict[str, Any]]:
-    """Table I rows: finrft's eta (the paper's definition), the authors' script measure |net| / D1, the
-    distances and the net speed, beside the paper's figures."""
+def table_rows(runs: list[Result], fitted: tuple[str, ...] = ()) -> list[dict[str, Any]]:
+    """Table I rows: finrft's eta (steady, `steady`; the first cycle's when a run has one), the first cycle's, the
+    authors' script measure |net| / D1, the distances and the net speed (steady), beside the paper's figures;
+    ``fitted``: the gaits the scene's parameters were fitted on."""
     rows = []
     for (name, t1, t2, la, fin, eta_exp, eta_sim, speed_exp), result in zip(PAPER_TABLE, runs):
         s = result.summary()
         rows.append({"gait": name, "theta1_deg": t1, "theta2_deg": t2, "arm_length_mm": la, "fin": fin,
-                     "eta": s["eta"], "eta_script": abs(s["net_mm"]) / s["D1_mm"], "D1_mm": s["D1_mm"],
-                     "D2_mm": s["D2_mm"], "net_speed_mm_s": s["net_speed_mm_s"], "paper_eta_sim": eta_sim / 100,
-                     "paper_eta_exp": eta_exp / 100, "paper_net_speed_exp_mm_s": speed_exp,
+                     "cycles": s["cycles"], "eta": s["eta_steady"], "eta_first_cycle": s["eta_first_cycle"],
+                     "eta_script": abs(s["D1_mm_steady"] - s["D2_mm_steady"]) / s["D1_mm_steady"],
+                     "D1_mm": s["D1_mm_steady"], "D2_mm": s["D2_mm_steady"],
+                     "net_speed_mm_s": s["net_speed_mm_s_steady"], "paper_eta_sim": eta_sim / 100,
+                     "paper_eta_exp": eta_exp / 100, "paper_net_speed_exp_mm_s": speed_exp, "fitted": name in fitted,
                      "error_estimate": s.get("error_estimate")})
     return rows
 
 
 def table_markdown(rows: list[dict[str, Any]]) -> str:
-    lines = ["| gait | Θ1 ° | Θ2 ° | L_a mm | fin | η % | \\|net\\|/D1 % | paper η_sim % | paper η_exp % | D1 mm | "
-             "D2 mm | net speed mm/s | paper speed mm/s |",
-             "|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    lines = ["| gait | Θ1 ° | Θ2 ° | L_a mm | fin | η % | η cycle 1 % | \\|net\\|/D1 % | paper η_sim % | "
+             "paper η_exp % | D1 mm | D2 mm | net speed mm/s | paper speed mm/s | fit |",
+             "|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
     for r in rows:
         lines.append(f"| {r['gait']} | {r['theta1_deg']} | {r['theta2_deg']} | {r['arm_length_mm']} | {r['fin']} | "
-                     f"{100 * r['eta']:.2f} | {100 * r['eta_script']:.2f} | {100 * r['paper_eta_sim']:.2f} | "
-                     f"{100 * r['paper_eta_exp']:.2f} | {r['D1_mm']:.1f} | {r['D2_mm']:.1f} | "
-                     f"{r['net_speed_mm_s']:.2f} | {r['paper_net_speed_exp_mm_s']:.2f} |")
+                     f"{100 * r['eta']:.2f} | {100 * r['eta_first_cycle']:.2f} | {100 * r['eta_script']:.2f} | "
+                     f"{100 * r['paper_eta_sim']:.2f} | {100 * r['paper_eta_exp']:.2f} | {r['D1_mm']:.1f} | "
+                     f"{r['D2_mm']:.1f} | {r['net_speed_mm_s']:.2f} | {r['paper_net_speed_exp_mm_s']:.2f} | "
+                     f"{'fitted' if r['fitted'] else ''} |")
+    cycles = rows[0]["cycles"] if rows else 1
+    if cycles > 1:
+        lines.append(f"\nη, D1, D2 and the net speed over the steady cycles 2..{cycles}; η cycle 1 from rest.")
     return "\n".join(lines)
 

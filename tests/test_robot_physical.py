@@ -1,0 +1,91 @@
+"""The physical robot: forces from its medium, steady eta, reversibility of a rigid fin, the table's fields."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from finrft import geometry, media
+from finrft.cli import main
+from finrft.models import arm_law, body_drag, body_law
+from finrft.scene import RobotScene, SceneError, preset
+from finrft.swim import steady, swim
+
+
+@pytest.fixture(scope="module")
+def physical():
+    return preset("physical", RobotScene)
+
+
+def _broadside(rft):
+    """The sand-swimming law's force on a segment moving along its normal: C_S sin(beta0) + C_F at psi = 90 deg,
+    tan beta0 = cot gamma0."""
+    return rft.c_s * math.cos(rft.gamma0) + rft.c_f
+
+
+def test_faces_take_3d_rft_forces_from_the_medium(physical):
+    """Fin segments, arms and body take 3D-RFT on vertical faces at medium.depth, from the [medium]'s values."""
+    s, m = physical, physical.medium
+    props = (m.bulk_density, m.internal_friction, m.surface_friction)
+    broadside = np.array([math.pi / 2])
+    # the body: only its front face (W x H, broadside) resists in 3D-RFT; the sides slide along themselves
+    front, _ = media.plate_forces(broadside, s.body.width, m.depth, s.body.height, *props)
+    assert geometry.body_resistance(s)["faces"] == pytest.approx(front[0], rel=1e-9)
+    assert body_drag(s) == pytest.approx(front[0] + s.body.cart, rel=1e-9)
+    assert body_law(s).f_perp == pytest.approx(0.5 * body_drag(s))  # the half robot carries half
+    # fins and arms: the sand-swimming law fitted to 3D-RFT on their faces, as close as the fit is
+    for law, length, height in ((s.rft, s.fin.segment_length, m.height), (arm_law(s), s.arm.length, s.arm.height)):
+        fit = media.sandswim_coefficients(length, m.depth, height, *props)
+        assert (law.law, law.c_s, law.c_f, law.gamma0) == ("sandswim", fit.c_s, fit.c_f, fit.gamma0)
+        perp, _ = media.plate_forces(broadside, length, m.depth, height, *props)
+        assert abs(_broadside(law) - perp[0]) <= fit.max_error
+    # the magnitudes are those of a small robot: a few newtons per segment
+    assert 1.0 < _broadside(s.rft) < 20.0
+
+
+def test_without_a_medium_the_coefficients_are_as_given():
+    paper = preset("paper", RobotScene)
+    assert geometry.properties(paper) is None
+    a = paper.arm
+    assert arm_law(paper).f_perp == pytest.approx(a.f_perp_base + a.f_perp_per_length * a.length)
+    assert body_drag(paper) == paper.body.drag
+
+
+def test_a_robot_in_a_medium_needs_a_velocity_drag(physical):
+    with pytest.raises(SceneError, match="drag_law"):
+        physical.replace(**{"body.drag_law": "stroke"})
+
+
+def test_steady_eta_is_net_over_forward_after_the_first_cycle():
+    rows = [{"D1_mm": 10.0, "D2_mm": 9.0, "net_speed_mm_s": 0.1, "eta": 0.1},
+            {"D1_mm": 20.0, "D2_mm": 15.0, "net_speed_mm_s": 1.0, "eta": 0.25},
+            {"D1_mm": 30.0, "D2_mm": 30.0, "net_speed_mm_s": 0.0, "eta": 0.0}]
+    s = steady(rows)
+    assert s["eta"] == pytest.approx((50 - 45) / 50)  # not the mean of 0.25 and 0
+    assert s["D1_mm"] == pytest.approx(25.0) and s["D2_mm"] == pytest.approx(22.5)
+    assert s["net_speed_mm_s"] == pytest.approx(0.5)
+    assert steady(rows[:1])["eta"] == pytest.approx(0.1)
+
+
+def test_rigid_fin_does_not_swim(physical):
+    """Rate-independent, dissipative forces and negligible inertia make the motion kinematically reversible: a
+    rigid fin flapping back and forth comes back where it started (scallop theorem). What remains is the
+    regularisation below v_reg (1 mm/s, against ~80 mm/s at the arm's tip) and the real inertias: below 0.5 points
+    of eta, against 8.6 for the origami fin."""
+    run = swim(physical.replace(**{"fin.kind": "rigid", "gait.cycles": 2}), 2)
+    summary = run.summary()
+    assert abs(summary["eta_steady"]) < 5e-3
+    assert summary["D1_mm_steady"] > 10.0  # it moves, and comes back
+
+
+def test_physical_table_json_fields(capsys):
+    assert main(["table", "--preset", "physical", "--json", "--quiet", "--workers", "1"]) == 0
+    rows = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert len(rows) == 6
+    for row in rows:
+        for key in ("eta", "eta_first_cycle", "D1_mm", "D2_mm", "net_speed_mm_s", "paper_eta_exp",
+                    "paper_net_speed_exp_mm_s", "fitted"):
+            assert key in row
+        assert row["eta"] == pytest.approx((row["D1_mm"] - row["D2_mm"]) / row["D1_mm"])
+    assert [row["gait"] for row in rows if row["fitted"]] == ["Optimized"]

@@ -132,6 +132,11 @@ def steady(rows: list[dict[str, float]]) -> dict[str, float]:
             "D2_mm": back / len(kept), "net_speed_mm_s": sum(r["net_speed_mm_s"] for r in kept) / len(kept)}
 
 
+def steady_cycles(cycles: int) -> str:
+    """The cycles `steady` takes, in words."""
+    return "cycle 1" if cycles == 1 else "cycle 2" if cycles == 2 else f"cycles 2..{cycles}"
+
+
 def gait_drive(scene: RobotScene, cycles: int) -> Drive:
     """The servo's motion: from theta2 up to theta1 and back at omega, ``cycles`` times."""
     g = scene.gait
@@ -258,6 +263,6 @@ def table_markdown(rows: list[dict[str, Any]]) -> str:
                      f"{'fitted' if r['fitted'] else ''} |")
     cycles = rows[0]["cycles"] if rows else 1
     if cycles > 1:
-        lines.append(f"\nη, D1, D2 and the net speed over the steady cycles 2..{cycles}; η cycle 1 from rest.")
+        lines.append(f"\nη, D1, D2 and the net speed over the steady {steady_cycles(cycles)}; η cycle 1 from rest.")
     return "\n".join(lines)
 

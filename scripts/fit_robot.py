@@ -12,10 +12,13 @@ stiffness k as k times the preset's time constant b/k. eta is steady (finrft.swi
   (gamma0 x k), then Nelder-Mead from its best point (deterministic: no seed); and the plate measurements' RMSE at
   that gamma0 (the plate preset's other values kept). Optimized's eta is not monotonic in k near gamma0 = pi/2, so
   k is not bisected there.
+- loo: leave one out with the preset's shape: k fitted on each row alone (bisection), the other rows predicted at
+  it. The rigid fin is skipped (k does not act on a rigid fin); a row whose measured eta lies outside its etas at
+  both ends of K_RANGE is marked not bracketed, its k the end nearer it.
 
 Every evaluation is printed and, with --out, written to a CSV. One process, no workers.
 
-    python scripts/fit_robot.py [--shape preset|plate|free ...] [--out LOG.csv]
+    python scripts/fit_robot.py [--shape preset|plate|free|loo ...] [--out LOG.csv]
 """
 
 from __future__ import annotations
@@ -41,6 +44,7 @@ SPEED = np.array([row[7] for row in PAPER_TABLE])
 # The grid of the free fit; gamma0 denser near pi/2, where the fin's folding turns quickly with it.
 GAMMA0 = np.concatenate([np.arange(0.2, 1.41, 0.2), [1.43, 1.46, 1.48, 1.50, 1.52, 1.55]])  # rad
 STIFFNESS = np.geomspace(0.08, 3.0, 16)  # N m/rad
+K_RANGE = (0.05, 20.0)  # N m/rad: the bisection's bracket
 
 
 def broadside(rft: finrft.scene.RFT) -> float:
@@ -79,17 +83,18 @@ class Robot:
                                f"{out['eta']:.6f}", f"{out['net_speed_mm_s']:.4f}"])
         return out
 
-    def fit_k(self, row: int, low: float = 0.05, high: float = 20.0, steps: int = 14) -> float:
-        """k (N m/rad) at which the row's eta is its measured one, by bisection in log k: eta falls as k grows (the
-        fin folds less in the recovery stroke). A bracket end when the measured eta lies outside."""
+    def fit_k(self, row: int, low: float = K_RANGE[0], high: float = K_RANGE[1], steps: int = 14) -> float:
+        """k (N m/rad) at which the row's eta is its measured one, by bisection in log k between the bracket ends
+        (Optimized's eta falls as k grows: the fin folds less in the recovery stroke). The bracket end whose eta is
+        nearer the measured one when the measured eta lies outside theirs."""
         target = MEASURED[row]
-        if self.run(low, row)["eta"] < target:
-            return low
-        if self.run(high, row)["eta"] > target:
-            return high
+        ends = {low: self.run(low, row)["eta"], high: self.run(high, row)["eta"]}
+        above = ends[low] > target
+        if (ends[high] > target) == above:
+            return min(ends, key=lambda end: abs(ends[end] - target))
         for _ in range(steps):
             k = math.sqrt(low * high)
-            low, high = (k, high) if self.run(k, row)["eta"] > target else (low, k)
+            low, high = (k, high) if (self.run(k, row)["eta"] > target) == above else (low, k)
         return math.sqrt(low * high)
 
     def table(self, k: float, fitted: tuple[str, ...]) -> list[dict[str, float]]:
@@ -117,6 +122,31 @@ def show(title: str, robot: Robot, k: float, rows: list[dict[str, float]]) -> No
     sys.stdout.flush()
 
 
+def leave_one_out(robot: Robot) -> None:
+    """k fitted on each row alone, every row's eta at it, and the other rows' mean |eta - eta_exp|."""
+    print(f"\n### (d) leave one out, the preset's shape: k fitted on one row (bisection over {K_RANGE[0]:g}.."
+          f"{K_RANGE[1]:g} N m/rad), the others predicted\n")
+    print("| fitted on | k N m/rad | " + " | ".join(NAMES) + " | mean \\|Δη\\| others |")
+    print("|---|---:|" + "---:|" * len(NAMES) + "---:|")
+    notes = []
+    for held in range(len(NAMES)):
+        if PAPER_TABLE[held][4] == "rigid":
+            notes.append(f"{NAMES[held]}: skipped, k does not act on a rigid fin")
+            continue
+        k = robot.fit_k(held)
+        eta = np.array([robot.run(k, i)["eta"] for i in range(len(NAMES))])
+        others = np.arange(len(NAMES)) != held
+        if k in K_RANGE:
+            notes.append(f"{NAMES[held]}: eta_exp {100 * MEASURED[held]:.2f} % not bracketed by k {K_RANGE[0]:g}.."
+                         f"{K_RANGE[1]:g} N m/rad (nearest {100 * eta[held]:.2f} % at k {k:g})")
+        print(f"| {NAMES[held]}{' (not bracketed)' if k in K_RANGE else ''} | {k:.4g} | "
+              + " | ".join(f"{100 * e:.2f}" for e in eta)
+              + f" | {100 * np.mean(np.abs(eta - MEASURED)[others]):.2f} |")
+    print("| measured | | " + " | ".join(f"{100 * m:.2f}" for m in MEASURED) + " | |\n")
+    print("\n".join(notes))
+    sys.stdout.flush()
+
+
 def plate_rmse(gamma0: float) -> float:
     """The plate measurements' RMSE (deg) over the 10, 30 and 50 mm/s drags with the physical plate preset's
     gamma0 replaced, its other values kept."""
@@ -127,7 +157,8 @@ def plate_rmse(gamma0: float) -> float:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--shape", nargs="+", choices=("preset", "plate", "free"), default=["preset", "plate", "free"])
+    parser.add_argument("--shape", nargs="+", choices=("preset", "plate", "free", "loo"),
+                        default=["preset", "plate", "free", "loo"])
     parser.add_argument("--out", help="CSV log of every evaluation")
     args = parser.parse_args()
     warnings.simplefilter("ignore", finrft.laws.FeedsEnergy)
@@ -171,6 +202,8 @@ def main() -> None:
         plate = finrft.preset("physical", finrft.Scene).rft.gamma0
         print(f"\nplate RMSE (10, 30, 50 mm/s; the plate preset's b, c_s, c_f): {plate_rmse(plate):.2f} deg at its "
               f"gamma0 {plate:.4f} rad, {plate_rmse(gamma0):.2f} deg at the robot's {gamma0:.4f} rad")
+    if "loo" in args.shape:
+        leave_one_out(Robot(scene, "loo", log))
     if f:
         f.close()
 

@@ -26,7 +26,6 @@ from typing import TYPE_CHECKING, Callable
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from . import media
 from .drive import Drive
 
 if TYPE_CHECKING:
@@ -216,12 +215,10 @@ class _HalfRobot:
     is prescribed. Point masses j (body, arm centre, segment midpoints) at r_j(q, psi), with J_j = dr_j/dq and
     w_j = dr_j/dpsi:  M q'' = Q - sum_j m_j J_j^T (J_j' q' + w_j' psi'),  M = sum_j m_j J_j^T J_j + diag(I)."""
 
-    def __init__(self, scene: RobotScene, drive: Drive) -> None:
+    def __init__(self, scene: RobotScene, drive: Drive, arm: RFT | None, body_drag: float | None) -> None:
         f, a = scene.fin, scene.arm
         if scene.robot.model != "half" or scene.robot.servo != "prescribed":
             raise ValueError("the reference solves the half robot with a prescribed servo")
-        if media.immersion_properties(scene.medium) is not None:
-            raise ValueError("the reference takes the arm's and body's coefficients as given, not from a [medium]")
         if f.kind == "origami" and f.stop != "penalty":
             raise ValueError("the reference models the origami stop as the penalty spring (fin.stop = 'penalty')")
         self.scene, self.drive, self.n, self.l, self.L = scene, drive, f.segments, f.segment_length, a.length
@@ -232,10 +229,13 @@ class _HalfRobot:
         self.m_seg = f.segment_mass
         self.inertia = np.full(self.n, f.segment_inertia)
         self.fin_law = _scene_law(scene.rft)
-        # the arm: the paper law, its normal coefficient growing with the arm's length; the body: isotropic drag
-        self.arm_law = _paper_law(a.f_perp_base + a.f_perp_per_length * a.length, a.f_par, scene.rft.v_reg)
-        self.body_law = _paper_law(share * scene.body.drag, share * scene.body.drag, scene.body.v_reg)
-        self.stroke_drag = share * scene.body.drag
+        # the arm: the given law, or the paper law with a normal coefficient growing with the arm's length; the
+        # body: isotropic drag, the given one or the scene's
+        self.arm_law = _scene_law(arm) if arm else _paper_law(a.f_perp_base + a.f_perp_per_length * a.length,
+                                                             a.f_par, scene.rft.v_reg)
+        drag = share * (scene.body.drag if body_drag is None else body_drag)
+        self.body_law = _paper_law(drag, drag, scene.body.v_reg)
+        self.stroke_drag = drag
         self.rigid = f.kind == "rigid"
         self.penalty = f.stop_stiffness if f.kind == "origami" else 0.0
 
@@ -288,12 +288,14 @@ class _HalfRobot:
         return np.linalg.solve(M, -np.einsum("j,jak,ja->k", mass, J, w * jump))
 
 
-def solve_robot(scene: RobotScene, cycles: int, times: np.ndarray, *, rtol: float = 1e-9,
-                atol: float = 1e-12) -> RobotSolution:
-    """Integrate the half robot's flap cycles with Radau; the same start and reversals as finrft.swim."""
+def solve_robot(scene: RobotScene, cycles: int, times: np.ndarray, *, rtol: float = 1e-9, atol: float = 1e-12,
+                arm: RFT | None = None, body_drag: float | None = None) -> RobotSolution:
+    """Integrate the half robot's flap cycles with Radau; the same start and reversals as finrft.swim. A scene
+    whose [medium] gives the arm's law and the body's drag (N, the whole robot's) needs them given, as numbers:
+    ``arm`` and ``body_drag``."""
     g = scene.gait  # the arm swings from theta2 up to theta1 and back at omega
     drive = Drive(kind="rotate", speed=g.omega, stroke=g.theta1 - g.theta2, cycles=cycles, start=g.theta2)
-    robot = _HalfRobot(scene, drive)
+    robot = _HalfRobot(scene, drive, arm, body_drag)
     n, ts = robot.n, drive.stroke_time
     if robot.rigid:
         raise ValueError("the reference solves hinged fins")

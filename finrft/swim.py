@@ -87,8 +87,12 @@ class Swim:
 
     def independent(self, scene: RobotScene, times: np.ndarray, *, rtol: float, atol: float) -> np.ndarray:
         """The right fin's hinge angles (rad) of the independent solution (finrft.reference) at ``times``."""
+        from . import geometry
         from .reference import solve_robot  # scipy's integrators load only when asked for
-        return solve_robot(scene, self.cycles, times, rtol=rtol, atol=atol).hinge_angle
+        # the forces a [medium] gives, as numbers: the reference writes out the laws, not their derivation
+        given = {"arm": geometry.arm_law(scene), "body_drag": geometry.body_resistance(scene)["total"]} \
+            if geometry.properties(scene) else {}
+        return solve_robot(scene, self.cycles, times, rtol=rtol, atol=atol, **given).hinge_angle
 
     def cycle_table(self, run: Result) -> list[dict[str, float]]:
         """Per flap cycle: D2 (back in recovery), D1 (forward in the power stroke), eta, net distance and speed."""

@@ -89,3 +89,19 @@ def test_physical_table_json_fields(capsys):
             assert key in row
         assert row["eta"] == pytest.approx((row["D1_mm"] - row["D2_mm"]) / row["D1_mm"])
     assert [row["gait"] for row in rows if row["fitted"]] == ["Optimized"]
+
+
+def test_the_robot_in_its_medium_matches_the_independent_solution(physical):
+    # The hand-derived equations (finrft.reference), given the arm's law and the body's drag the medium derives, as
+    # numbers: the same hinge angles, body travel and eta as MuJoCo with the adaptive-newton method at a tight
+    # tolerance, over the first cycle (the fin slaps flat at the start and folds in the recovery stroke).
+    from finrft.reference import solve_robot
+    scene = physical.replace(**{"sim.tolerance": 1e-5})
+    run = swim(scene, 1, estimate_error=False)
+    ref = solve_robot(scene, 1, run.time, rtol=1e-8, atol=1e-11, arm=geometry.arm_law(scene),
+                      body_drag=geometry.body_resistance(scene)["total"])
+    assert np.degrees(np.abs(run.series["hinge_angle"] - ref.hinge_angle).max()) < 0.005
+    assert 1e3 * np.abs(run.body_y - ref.body_y).max() < 0.05                  # of ~180 mm strokes
+    eta_ref = (np.diff(ref.stroke_y)[1] + np.diff(ref.stroke_y)[0]) / np.diff(ref.stroke_y)[1]
+    assert abs(run.series["eta"][0] - eta_ref) < 1e-4
+    assert np.degrees(ref.hinge_angle.min()) < -10  # the fin folded in the recovery stroke (13 deg)

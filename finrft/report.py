@@ -13,7 +13,7 @@ import shutil
 import tempfile
 import time
 from pathlib import Path
-from typing import Callable, Iterator
+from typing import Any, Callable, Iterator
 
 import numpy as np
 
@@ -241,13 +241,7 @@ def robot(out: Path, quick: bool, workers: int | None) -> str:
     axes[0].set_xlabel("generation")
     axes[0].set_ylabel("best eta so far (%)")
     axes[0].grid(alpha=0.3)
-    for (name, *_), run in zip(PAPER_TABLE, runs):
-        axes[1].plot(run.time, 1e3 * run.body_y, label=name)
-    axes[1].set_xlabel("time (s)")
-    axes[1].set_ylabel("body position, forward (mm)")
-    axes[1].set_title(f"body trajectory, {cycles} flap cycle(s) per gait", fontsize=9)
-    axes[1].grid(alpha=0.3)
-    axes[1].legend(fontsize=8)
+    _trajectories(axes[1], runs, cycles)
     fig.tight_layout()
     fig.savefig(out / "robot.png", dpi=150)
     plt.close(fig)
@@ -258,6 +252,17 @@ def robot(out: Path, quick: bool, workers: int | None) -> str:
             f"evaluation is checked; those above 0.5 points score as failed). Recordings: "
             f"`robot_optimum.rrd`, `optimization.rrd`. See the README's robot section for why eta is negative on "
             f"the paper's definition and for the optimiser's sensitivity to dt.")
+
+
+def _trajectories(ax: Any, runs: list[Result], cycles: int) -> None:
+    """The body's forward position over time, one line per Table I gait."""
+    for (name, *_), run in zip(PAPER_TABLE, runs):
+        ax.plot(run.time, 1e3 * run.body_y, label=name)
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("body position, forward (mm)")
+    ax.set_title(f"body trajectory, {cycles} flap cycle(s) per gait", fontsize=9)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
 
 
 def robot_physical(out: Path, quick: bool, workers: int | None) -> str:
@@ -283,18 +288,13 @@ def robot_physical(out: Path, quick: bool, workers: int | None) -> str:
         ax.legend(fontsize=8)
     axes[0].set_title("swimming efficiency, model against experiment", fontsize=9)
     axes[1].set_title(f"net speed at the model's omega {math.degrees(scene.gait.omega):.0f} deg/s", fontsize=9)
-    for (name, *_), run in zip(PAPER_TABLE, runs):
-        axes[2].plot(run.time, 1e3 * run.body_y, label=name)
-    axes[2].set_xlabel("time (s)")
-    axes[2].set_ylabel("body position, forward (mm)")
-    axes[2].set_title(f"body trajectory, {gaits[0].gait.cycles} flap cycles per gait", fontsize=9)
-    axes[2].grid(alpha=0.3)
-    axes[2].legend(fontsize=8)
+    _trajectories(axes[2], runs, gaits[0].gait.cycles)
     fig.tight_layout()
     fig.savefig(out / "robot_physical.png", dpi=150)
     plt.close(fig)
     mean = np.mean([abs(r["eta"] - r["paper_eta_exp"]) for r in rows])
-    return (f"Physical preset (forces from 3D-RFT in its [medium], {scene.sim.method} method, dt {scene.sim.dt:g} s), eta "
+    return (f"Physical preset (forces from 3D-RFT in its [medium], {scene.sim.method} method, dt {scene.sim.dt:g} "
+            f"s), eta "
             f"over the steady {steady_cycles(gaits[0].gait.cycles)}; mean |eta - eta_exp| {100 * mean:.2f} points:\n\n"
             f"{table_markdown(rows)}\n\n![model against experiment, trajectories](robot_physical.png)\n\n"
             f"See the README's robot section for the model, what was fitted and where it fails.")

@@ -7,6 +7,7 @@ from scipy.optimize import brentq
 from finrft import models
 from finrft.drive import Drive
 from finrft.convergence import InaccurateResult, SimulationUnstable
+from finrft.scene import preset
 from finrft.simulate import simulate
 
 
@@ -146,8 +147,13 @@ def test_spatial_chain_stays_in_the_plane(paper):
     np.testing.assert_allclose(free.drive_force, planar.drive_force, atol=1e-9)
 
 
-def test_welded_segments_behave_as_one_rigid_body(paper):
-    rigid = paper.replace(**{"plate.kind": "rigid"})
+@pytest.mark.parametrize("name,f_perp", [("paper", None), ("physical", None), ("physical", 0.6)])
+def test_welded_segments_behave_as_one_rigid_body(name, f_perp):
+    # The drive's load of a welded plate is -armature qacc through the constraint solver, which once accepted its
+    # warm start (qacc = 0, a load of 0) on the physical plate with the paper law at f_perp = 0.6 N.
+    rigid = preset(name).replace(**{"plate.kind": "rigid", **({"rft.law": "paper", "rft.f_perp": f_perp,
+                                                              "rft.f_par": 0.1} if f_perp else {})})
     body, welded = simulate(rigid, Drive()), simulate(rigid.replace(**{"plate.rigid_as": "welds"}), Drive())
     assert np.degrees(np.abs(welded.hinge_angle)).max() < 1e-3  # the welds hold
+    assert body.peak_drive_force > 0.5
     np.testing.assert_allclose(welded.drive_force, body.drive_force, rtol=1e-3)

@@ -28,7 +28,7 @@ from typing import Iterator, Sequence
 import mujoco
 import numpy as np
 
-from . import coupling, media, native
+from . import coupling, laws, media, native
 from .laws import drft, li2013, rft3d
 from .scene import SceneError
 
@@ -202,6 +202,8 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str, law: str = "li2013"
         spec.activate_plugin(PLUGIN)
         for surface in surfaces:
             _bind(spec, attached, surface)
+    if law == "rft3d":
+        laws.warn_feeds_energy(law, rft3d.FEEDS_ENERGY, "kept as published")
     return attached
 
 

@@ -2,6 +2,8 @@
 law's `feeds_energy` says when it does not, and a run of a law that can feed energy in says so once on stderr and
 in its result file."""
 
+import warnings
+
 import h5py
 import numpy as np
 import pytest
@@ -90,3 +92,18 @@ def test_a_run_says_once_that_its_law_feeds_energy_in(tmp_path, capsys, monkeypa
     for out, expected in zip(outs, (reason, reason, "")):
         with h5py.File(out) as f:
             assert f.attrs["law_feeds_energy"] == expected
+
+
+def test_attaching_the_published_3d_rft_says_once_that_it_feeds_energy_in(monkeypatch):
+    import mujoco
+
+    from finrft.attach import attach
+    monkeypatch.setattr(laws, "_warned", [])  # as in a fresh process
+    spec = mujoco.MjSpec.from_string('<mujoco><worldbody><body name="box" pos="0 0 -0.02"><freejoint/>'
+                                     '<geom type="box" size="0.01 0.01 0.01"/></body></worldbody></mujoco>')
+    with pytest.warns(laws.FeedsEnergy, match="rft3d.*grazing.*kept as published"):
+        attach(spec, "box", law="rft3d", rho_c=1500.0, mu_int=0.4, mu_surf=0.3, backend="python")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        attach(mujoco.MjSpec.from_string(spec.to_xml()), "box", law="rft3d", rho_c=1500.0, mu_int=0.4, mu_surf=0.3,
+               backend="python")  # once is enough

@@ -97,14 +97,19 @@ def feeds_energy(scene: Any) -> str:
 _warned: list[str] = []  # the reason this process has warned of: once is enough
 
 
+def warn_feeds_energy(law: str, reason: str, kept: str) -> None:
+    """Warn (FeedsEnergy) that a law can feed energy in, and why it is kept, once per process."""
+    if reason and not _warned:
+        _warned.append(reason)
+        warnings.warn(f"RFT law '{law}' feeds energy in: {reason} ({kept})", FeedsEnergy, stacklevel=3)
+
+
 def warn_if_feeds_energy(scene: Any) -> None:
     """Warn (FeedsEnergy) when a scene's segment law can feed energy in, once per process; anything that is not
     such a scene passes."""
-    reason = "" if _warned else feeds_energy(scene)
-    if reason:
-        _warned.append(reason)
-        warnings.warn(f"RFT law '{scene.rft.law}' feeds energy in: {reason} (kept to reproduce published runs; "
-                      f"result files record it as law_feeds_energy)", FeedsEnergy, stacklevel=2)
+    if not _warned and getattr(scene, "rft", None) is not None:
+        warn_feeds_energy(scene.rft.law, feeds_energy(scene),
+                          "kept to reproduce published runs; result files record it as law_feeds_energy")
 
 
 def components(v: np.ndarray, x_axis: np.ndarray, y_axis: np.ndarray,

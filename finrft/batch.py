@@ -134,7 +134,8 @@ def rollout_plates(jobs: Sequence[tuple[Scene, Drive]], *, workers: int | None =
     gives those): for sweeps that need the states only, at the cores' full rate.
 
     Every job must share its drive, ``sim.dt`` and ``sim.record_dt``, and step explicitly with the native backend
-    (a Python force callback cannot run on rollout's threads); ValueError otherwise."""
+    (a Python force callback cannot run on rollout's threads); ValueError otherwise. Jobs whose laws or chains
+    differ are rolled out in turn, each group on all the threads."""
     from mujoco import rollout
 
     from .stepping import schedule
@@ -155,20 +156,30 @@ def rollout_plates(jobs: Sequence[tuple[Scene, Drive]], *, workers: int | None =
     datas = [mujoco.MjData(m) for m in models]
     trials = [test.start(scene, b, d, True) for (scene, _), b, d in zip(jobs, built, datas)]
     bounds = np.r_[starts, steps]
-    out = np.zeros((len(jobs), len(samples), mujoco.mj_stateSize(models[0], spec)))
     threads = workers or default_workers()
+    # Rollout steps every job on its threads' own MjData, whose plugin instances hold the law and the segments of
+    # the model they were made for: jobs run together only with an identical plugin config and structure.
+    groups: dict[tuple, list[int]] = {}
+    for j, m in enumerate(models):
+        groups.setdefault((m.plugin_attr.tobytes(), m.nbody, m.njnt, m.nsite, m.nq, m.nv), []).append(j)
+    out: list[np.ndarray] = [np.empty(0)] * len(jobs)
     with rollout.Rollout(nthread=threads) as pool:
-        scratch = [mujoco.MjData(models[0]) for _ in range(threads)]
-        for k, (first, last) in enumerate(zip(bounds[:-1], bounds[1:])):
-            initial = np.zeros((len(jobs), out.shape[2]))
-            for j, (m, d, trial) in enumerate(zip(models, datas, trials)):
-                trial.on_stroke(k)
-                mujoco.mj_getState(m, d, initial[j], spec)
-            state, _ = pool.rollout(models, scratch, initial, nstep=int(last - first))
-            inside = (samples >= first) & (samples <= last) if k == len(starts) - 1 else \
-                (samples >= first) & (samples < last)
-            index = samples[inside] - first
-            out[:, inside] = np.where((index == 0)[None, :, None], initial[:, None], state[:, index - 1])
-            for m, d, final in zip(models, datas, state[:, -1]):
-                mujoco.mj_setState(m, d, final, spec)
-    return list(out)
+        for members in groups.values():
+            group = [models[j] for j in members]
+            scratch = [mujoco.MjData(group[0]) for _ in range(threads)]
+            states = np.zeros((len(members), len(samples), mujoco.mj_stateSize(group[0], spec)))
+            for k, (first, last) in enumerate(zip(bounds[:-1], bounds[1:])):
+                initial = np.zeros((len(members), states.shape[2]))
+                for i, j in enumerate(members):
+                    trials[j].on_stroke(k)
+                    mujoco.mj_getState(models[j], datas[j], initial[i], spec)
+                state, _ = pool.rollout(group, scratch, initial, nstep=int(last - first))
+                inside = (samples >= first) & (samples <= last) if k == len(starts) - 1 else \
+                    (samples >= first) & (samples < last)
+                index = samples[inside] - first
+                states[:, inside] = np.where((index == 0)[None, :, None], initial[:, None], state[:, index - 1])
+                for j, final in zip(members, state[:, -1]):
+                    mujoco.mj_setState(models[j], datas[j], final, spec)
+            for i, j in enumerate(members):
+                out[j] = states[i]
+    return out

@@ -219,6 +219,11 @@ class _HalfRobot:
         f, a = scene.fin, scene.arm
         if scene.robot.model != "half" or scene.robot.servo != "prescribed":
             raise ValueError("the reference solves the half robot with a prescribed servo")
+        m = scene.medium
+        if (arm is None or body_drag is None) and (m.name or m.bulk_density or m.internal_friction or
+                                                   m.surface_friction):
+            raise ValueError("a robot in a [medium] takes its arm's law and body drag from it: give them to the "
+                             "reference as arm and body_drag")
         if f.kind == "origami" and f.stop != "penalty":
             raise ValueError("the reference models the origami stop as the penalty spring (fin.stop = 'penalty')")
         self.scene, self.drive, self.n, self.l, self.L = scene, drive, f.segments, f.segment_length, a.length

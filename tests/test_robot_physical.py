@@ -105,3 +105,5 @@ def test_the_robot_in_its_medium_matches_the_independent_solution(physical):
     eta_ref = (np.diff(ref.stroke_y)[1] + np.diff(ref.stroke_y)[0]) / np.diff(ref.stroke_y)[1]
     assert abs(run.series["eta"][0] - eta_ref) < 1e-4
     assert np.degrees(ref.hinge_angle.min()) < -10  # the fin folded in the recovery stroke (13 deg)
+    with pytest.raises(ValueError, match="arm and body_drag"):  # not the [arm] keys the medium replaces
+        solve_robot(scene, 1, run.time[:3])

@@ -221,7 +221,7 @@ def build_parser() -> argparse.ArgumentParser:
     swim.add_argument("--omega", type=_number("deg/s"), metavar="DEG_S",
                       help="arm angular speed in degrees/s (default: the scene's, 66 in the presets)")
     swim.add_argument("--cycles", type=_number("cycles", minimum=1, inclusive=True, integer=True),
-                      metavar="N", help="flap cycles (default: the scene's gait.cycles: 1 in the paper preset, 4 in "
+                      metavar="N", help="flap cycles (default: the scene's gait.cycles: 1 in the paper preset, 2 in "
                       "the physical one); figures are the last cycle's, and eta over cycles 2..N")
     _add_robot(swim)
     _add_max_error(swim)

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import contextlib
 import multiprocessing
+import multiprocessing.context
 import os
 import signal
 import warnings
@@ -46,9 +47,30 @@ def default_workers() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
+class _QuietProcess(multiprocessing.context.SpawnProcess):
+    """A spawned worker deaf to Ctrl-C from its first instruction. Ctrl-C reaches every process in the terminal's
+    group: the parent handles it and shuts the pool down, a worker would only print a traceback. The pool spawns
+    workers as jobs arrive, so one may be starting when Ctrl-C comes, before any initializer runs: the worker is
+    started with SIGINT blocked, which it inherits and keeps, while the parent receives a Ctrl-C of that moment as
+    soon as the worker is started."""
+
+    def start(self) -> None:
+        if not hasattr(signal, "pthread_sigmask"):  # Windows delivers Ctrl-C otherwise
+            return super().start()
+        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        try:
+            super().start()
+        finally:
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
+class _QuietSpawn(multiprocessing.context.SpawnContext):
+    Process = _QuietProcess
+
+
 def _ignore_interrupt() -> None:
-    # Ctrl-C reaches every process in the terminal's group: the parent handles it and shuts the pool down, a
-    # worker would only print a traceback. Likewise the parent says that a law feeds energy in (`map_jobs`).
+    # Where SIGINT cannot be blocked from the start (`_QuietProcess`), from here on. The parent says that a law
+    # feeds energy in (`map_jobs`), the workers do not.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     warnings.simplefilter("ignore", laws.FeedsEnergy)
 
@@ -56,8 +78,8 @@ def _ignore_interrupt() -> None:
 def local_executor(workers: int | None = None) -> ProcessPoolExecutor:
     """A process pool for `map_jobs`; spawned workers, so nothing of the parent's MuJoCo state is inherited, that
     leave Ctrl-C to the parent."""
-    return ProcessPoolExecutor(max_workers=workers or default_workers(),
-                               mp_context=multiprocessing.get_context("spawn"), initializer=_ignore_interrupt)
+    return ProcessPoolExecutor(max_workers=workers or default_workers(), mp_context=_QuietSpawn(),
+                               initializer=_ignore_interrupt)
 
 
 def map_jobs(fn: Callable[[T], R], jobs: Sequence[T], *, workers: int | None = None,

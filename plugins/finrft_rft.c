@@ -62,12 +62,6 @@ int finrft_read_number(const mjModel* m, int instance, const char* key, mjtNum* 
   return 0;
 }
 
-void finrft_site_axes(const mjData* d, int s, mjtNum x[3], mjtNum y[3]) {
-  const mjtNum* R = d->site_xmat + 9 * s;
-  x[0] = R[0]; x[1] = R[3]; x[2] = R[6];
-  y[0] = R[1]; y[1] = R[4]; y[2] = R[7];
-}
-
 static void free_instance(FinrftInstance* p) {
   if (!p) return;
   if (p->params) p->law->destroy(p->params);
@@ -184,15 +178,16 @@ static void rft_compute(const mjModel* m, mjData* d, int instance, int capabilit
     int s = p->site[i], b = p->body[i];
     const mjtNum* com = d->subtree_com + 3 * m->body_rootid[b];
     const mjtNum* cvel = d->cvel + 6 * b;
-    mju_sub3(offset, d->site_xpos + 3 * s, com);
-    mju_cross(v, cvel, offset);
-    mju_addTo3(v, cvel + 3);
+    const mjtNum* xpos = d->site_xpos + 3 * s;
+    for (int k = 0; k < 3; k++) offset[k] = xpos[k] - com[k];
+    finrft_cross(v, cvel, offset);
+    for (int k = 0; k < 3; k++) v[k] += cvel[3 + k];
     finrft_site_axes(d, s, x, y);
     p->law->force(p->params, p->v_reg, v, x, y, force);
-    mju_cross(moment, offset, force);
+    finrft_cross(moment, offset, force);
     for (int j = p->last_dof[i]; j >= 0; j = m->dof_parentid[j]) {
       const mjtNum* cdof = d->cdof + 6 * j;
-      d->qfrc_passive[j] += mju_dot3(cdof, moment) + mju_dot3(cdof + 3, force);
+      d->qfrc_passive[j] += finrft_dot3(cdof, moment) + finrft_dot3(cdof + 3, force);
     }
   }
   if (p->stop_stiffness > 0) {

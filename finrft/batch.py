@@ -15,6 +15,9 @@ Workers are spawned, and a spawned worker imports the main module again: in a sc
 from __future__ import annotations
 
 import contextlib
+import copy
+import ctypes
+import dataclasses
 import multiprocessing
 import multiprocessing.context
 import os
@@ -27,8 +30,8 @@ from typing import Any, Callable, Iterator, Sequence, TypeVar
 import mujoco
 import numpy as np
 
-from . import laws
-from .convergence import ErrorLimits
+from . import laws, models, native
+from .convergence import ErrorLimits, SimulationUnstable
 from .drive import Drive
 from .experiment import Experiment, Result, run
 from .scene import Scene
@@ -148,60 +151,152 @@ def run_many(jobs: Sequence[tuple[Scene, Drive]], **options) -> list[Result]:
 
 
 def rollout_plates(jobs: Sequence[tuple[Scene, Drive]], *, workers: int | None = None) -> list[np.ndarray]:
-    """The states (mjSTATE_FULLPHYSICS) at the recorded instants of every (scene, drive) plate test, stepped by
-    MuJoCo's threaded rollout on ``workers`` threads: no Python runs between the drive's reversals, which are
-    applied between strokes as `stepping.Prescribed` applies them. The same steps as `simulate`'s, so the same
-    states, bit for bit (a model with constraints, limit stops or welds, restarts its solver's warm start at each
-    reversal: the same to the solver's tolerance); but no readings, chatter probe or error estimate (`run_many`
-    gives those): for sweeps that need the states only, at the cores' full rate.
+    """The states (mjSTATE_FULLPHYSICS) at the recorded instants of every (scene, drive) plate test, stepped on
+    ``workers`` threads: one batch of a `PlateRollouts`, which a sweep of many batches should keep instead."""
+    with PlateRollouts(workers) as rollouts:
+        return rollouts(jobs)
 
-    Every job must share its drive, ``sim.dt`` and ``sim.record_dt``, and step explicitly with the native backend
-    (a Python force callback cannot run on rollout's threads); ValueError otherwise. Jobs whose laws or chains
-    differ are rolled out in turn, each group on all the threads."""
-    from mujoco import rollout
 
-    from .stepping import schedule
-    jobs = list(jobs)
-    if not jobs:
-        return []
-    scene0, drive = jobs[0]
-    for scene, other in jobs:
-        if other != drive or (scene.sim.dt, scene.sim.record_dt) != (scene0.sim.dt, scene0.sim.record_dt):
-            raise ValueError("rollout_plates: every job needs the same drive, sim.dt and sim.record_dt")
-        if scene.sim.method != "explicit" or scene.sim.backend != "native":
-            raise ValueError("rollout_plates: every job needs sim.method 'explicit' and sim.backend 'native'")
-    test = PlateTest(drive)
-    built = [test.build(scene) for scene, _ in jobs]
-    models = [b.model for b in built]
-    steps, starts, samples = schedule(drive, scene0.sim.dt, scene0.sim.record_dt)
-    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
-    datas = [mujoco.MjData(m) for m in models]
-    trials = [test.start(scene, b, d, True) for (scene, _), b, d in zip(jobs, built, datas)]
-    bounds = np.r_[starts, steps]
-    threads = workers or default_workers()
-    # Rollout steps every job on its threads' own MjData, whose plugin instances hold the law and the segments of
-    # the model they were made for: jobs run together only with an identical plugin config and structure.
-    groups: dict[tuple, list[int]] = {}
-    for j, m in enumerate(models):
-        groups.setdefault((m.plugin_attr.tobytes(), m.nbody, m.njnt, m.nsite, m.nq, m.nv), []).append(j)
-    out: list[np.ndarray] = [np.empty(0)] * len(jobs)
-    with rollout.Rollout(nthread=threads) as pool:
-        for members in groups.values():
-            group = [models[j] for j in members]
-            scratch = [mujoco.MjData(group[0]) for _ in range(threads)]
-            states = np.zeros((len(members), len(samples), mujoco.mj_stateSize(group[0], spec)))
-            for k, (first, last) in enumerate(zip(bounds[:-1], bounds[1:])):
-                initial = np.zeros((len(members), states.shape[2]))
-                for i, j in enumerate(members):
-                    trials[j].on_stroke(k)
-                    mujoco.mj_getState(models[j], datas[j], initial[i], spec)
-                state, _ = pool.rollout(group, scratch, initial, nstep=int(last - first))
-                inside = (samples >= first) & (samples <= last) if k == len(starts) - 1 else \
-                    (samples >= first) & (samples < last)
-                index = samples[inside] - first
-                states[:, inside] = np.where((index == 0)[None, :, None], initial[:, None], state[:, index - 1])
-                for j, final in zip(members, state[:, -1]):
-                    mujoco.mj_setState(models[j], datas[j], final, spec)
-            for i, j in enumerate(members):
-                out[j] = states[i]
-    return out
+class PlateRollouts:
+    """Plate tests' states stepped on threads, batch after batch: the threads, and the models of the last batch
+    for the next.
+
+    A thread steps one job's stroke at a time in C (the native library's `finrft_explicit_record`: MuJoCo's step,
+    the states kept at the recorded instants only), with no Python and no GIL between the drive's reversals, which
+    are applied between strokes as `stepping.Prescribed` applies them: the same steps as `simulate`'s, so the same
+    states, bit for bit. There are no readings, chatter probe or error estimate (`run_many` gives those): this is
+    for sweeps that need the states only, at the cores' full rate. (MuJoCo's threaded rollout steps the same way
+    but copies every step's state out, which cost it 5 % of a plate's steps.)
+
+    Every job of a batch must share its drive, ``sim.dt`` and ``sim.record_dt``, and step explicitly with the native
+    backend (a Python force callback would hold the GIL); ValueError otherwise. Jobs may differ in anything else:
+    a thread steps jobs of any law on one MjData per size, as the plugin takes each job's law from its model. A job
+    that differs from one of the last batch's only in the hinges' stiffness and damping (`models.RETUNABLE`) reuses
+    its compiled model. A run that goes unstable raises SimulationUnstable.
+
+    ``with PlateRollouts(workers) as rollouts: states = rollouts(jobs)``, or `close` when done.
+    """
+
+    def __init__(self, workers: int | None = None) -> None:
+        from concurrent.futures import ThreadPoolExecutor
+        self.threads = workers or default_workers()
+        self._pool = ThreadPoolExecutor(self.threads)
+        self._plates: dict[tuple, list[models.PlateModel]] = {}  # the last batch's models, by retune key
+        self._datas: dict[tuple, list[mujoco.MjData]] = {}       # by sizes: the drive's, then one per thread
+        self._record = ctypes.CDLL(str(native.library_path())).finrft_explicit_record
+        self._record.restype = ctypes.c_int
+        self._record.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int, ctypes.c_int, ctypes.c_void_p,
+                                 ctypes.c_void_p]
+
+    def __enter__(self) -> PlateRollouts:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    def close(self) -> None:
+        self._pool.shutdown()
+        self._plates, self._datas = {}, {}
+
+    def __call__(self, jobs: Sequence[tuple[Scene, Drive]]) -> list[np.ndarray]:
+        """The states (mjSTATE_FULLPHYSICS) at the recorded instants of every (scene, drive) plate test."""
+        from .stepping import schedule
+        jobs = list(jobs)
+        if not jobs:
+            return []
+        scene0, drive = jobs[0]
+        for scene, other in jobs:
+            if other != drive or (scene.sim.dt, scene.sim.record_dt) != (scene0.sim.dt, scene0.sim.record_dt):
+                raise ValueError("rollout_plates: every job needs the same drive, sim.dt and sim.record_dt")
+            if scene.sim.method != "explicit" or scene.sim.backend != "native":
+                raise ValueError("rollout_plates: every job needs sim.method 'explicit' and sim.backend 'native'")
+        test = PlateTest(drive)
+        plates = self._models(test, [scene for scene, _ in jobs])
+        steps, starts, samples = schedule(drive, scene0.sim.dt, scene0.sim.record_dt)
+        groups: dict[tuple, list[int]] = {}
+        for j, plate in enumerate(plates):
+            m = plate.model
+            groups.setdefault((m.nq, m.nv, m.na, m.nu, m.nbody, m.njnt, m.nsite, m.neq, m.nplugin, m.npluginstate),
+                              []).append(j)
+        out: list[np.ndarray] = [np.empty(0)] * len(jobs)
+        for sizes, members in groups.items():
+            states = self._roll(test, members, [jobs[j][0] for j in members], [plates[j] for j in members], sizes,
+                                steps, starts, samples)
+            for j, state in zip(members, states):
+                out[j] = state
+        return out
+
+    def _models(self, test: PlateTest, scenes: list[Scene]) -> list[models.PlateModel]:
+        """A compiled plate for every scene: the last batch's of its retune key, retuned, while there are enough;
+        then copies of one, or a compile."""
+        kept, self._plates = self._plates, {}
+        out = []
+        for scene in scenes:
+            key = (models.retune_key(scene), test.drive.kind, test.drive.attack_deg)
+            mine = self._plates.setdefault(key, [])
+            spare = kept.get(key, [])
+            if len(spare) > len(mine):
+                plate = spare[len(mine)]
+            elif mine or spare:
+                source = (mine or spare)[0]
+                plate = dataclasses.replace(source, model=copy.copy(source.model))
+            else:
+                plate = test.build(scene)
+            models.retune(plate, scene.plate)
+            mine.append(plate)
+            out.append(plate)
+        return out
+
+    def _roll(self, test: PlateTest, jobs: list[int], scenes: list[Scene], plates: list[models.PlateModel],
+              sizes: tuple, steps: int, starts: np.ndarray, samples: np.ndarray) -> list[np.ndarray]:
+        """The recorded states of jobs (their indices in the batch, their scenes and models) of one size."""
+        # A job's state between strokes: the physics and the solver's warm start, as one MjData would carry them.
+        carry, kept = mujoco.mjtState.mjSTATE_INTEGRATION, mujoco.mjtState.mjSTATE_FULLPHYSICS
+        group = [plate.model for plate in plates]
+        if sizes not in self._datas:
+            self._datas[sizes] = [mujoco.MjData(group[0]) for _ in range(1 + self.threads)]
+        d, *scratch = self._datas[sizes]
+        # One MjData applies every job's reversals, each job's state put in and taken out again.
+        trials = [test.start(scene, plate, d, True) for scene, plate in zip(scenes, plates)]
+        nstate = mujoco.mj_stateSize(group[0], kept)
+        states = np.zeros((len(plates), len(samples), nstate))
+        current = np.zeros((len(plates), mujoco.mj_stateSize(group[0], carry)))
+        bounds = np.r_[starts, steps]
+        for k, (first, last) in enumerate(zip(bounds[:-1], bounds[1:])):
+            for i, (m, trial) in enumerate(zip(group, trials)):
+                if k:
+                    mujoco.mj_setState(m, d, current[i], carry)
+                else:
+                    mujoco.mj_resetData(m, d)
+                trial.on_stroke(k)
+                mujoco.mj_getState(m, d, current[i], carry)
+                mujoco.mj_getState(m, d, states[i, np.flatnonzero(samples == first)[0]] if first in samples
+                                   else np.zeros(nstate), kept)
+            # The last step of a stroke that is not the run's last is the next one's start (after its reversal).
+            inside = (samples > first) & ((samples < last) | (last == steps))
+            at = np.ascontiguousarray(samples[inside] - first, dtype=np.int32)
+            rows = np.flatnonzero(inside)
+            queue = iter(range(len(plates)))  # shared: each job goes to the next thread free (next() holds the GIL)
+
+            def stroke(t: int) -> int | None:
+                """Jobs through the stroke on thread t's MjData; the first that went unstable, or None."""
+                data, record = scratch[t], np.zeros((len(at), nstate))
+                for i in queue:
+                    mujoco.mj_setState(group[i], data, current[i], carry)
+                    if self._record(group[i]._address, data._address, int(last - first), len(at), at.ctypes.data,
+                                    record.ctypes.data):
+                        return i
+                    states[i, rows] = record
+                    mujoco.mj_getState(group[i], data, current[i], carry)
+                return None
+
+            messages: list[str] = []
+            with native.untimed(), native.captured_warnings(messages):
+                failed = [i for i in self._pool.map(stroke, range(self.threads)) if i is not None]
+            if failed:
+                i, said = min(failed), f"; MuJoCo: {messages[0].strip()}" if messages else ""
+                raise SimulationUnstable(
+                    f"rollout_plates: job {jobs[i]} went unstable between t = {first * scenes[i].sim.dt:.4g} and "
+                    f"{last * scenes[i].sim.dt:.4g} s (its state is not finite{said}) with dt = "
+                    f"{scenes[i].sim.dt:g} s: reduce sim.dt, or run it with finrft.simulate for the newton method")
+        return list(states)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import platform
 import time
 from dataclasses import dataclass
@@ -12,7 +13,7 @@ from typing import Any, Callable, Protocol
 import mujoco
 import numpy as np
 
-from . import batch, models
+from . import batch, models, native
 from .drive import Drive
 from .convergence import ErrorLimits, SimulationFailed
 from .experiment import Experiment, run as run_experiment
@@ -61,16 +62,20 @@ def backends(scene: Scene | None = None, *, batch_size: int = 64, workers: int |
         _tick(progress, i + 1, 4)
 
     # The step alone, with and without the plugin: the same model, integrator and motion (the drive at its
-    # speed), stepped in C (mj_step's nstep) so that neither pays Python per step; interleaved, so that the
-    # machine's load weighs on both alike.
-    loops = {name: _stepping(scene.replace(**{"sim.backend": backend}), drive, steps)
-             for name, backend in (("bare", "python"), ("native_step", "native"))}
+    # speed), stepped in C (mj_step's nstep) so that neither pays Python per step, without MuJoCo's profiling
+    # timer as finrft steps (native.untimed); interleaved, so that the machine's load weighs on both alike. The
+    # bare step with the timer that MuJoCo's Python bindings install gives its cost.
+    bare = scene.replace(**{"sim.backend": "python"})
+    loops = {"bare": _stepping(bare, drive, steps), "native_step": _stepping(scene, drive, steps),
+             "bare_timed": _stepping(bare, drive, steps, timed=True)}
     walls = {name: min(times) for name, times in _interleaved(loops, max(repeat, 7)).items()}
     _tick(progress, 3, 4)
     for name, wall in walls.items():
         out[f"{name}_wall_s"], out[f"{name}_steps_per_s"] = wall, steps / wall
+    out["timer_cost"] = walls["bare_timed"] / walls["bare"] - 1
     log(f"  bare mj_step, same model without RFT: {walls['bare'] * 1e3:8.1f} ms, {steps / walls['bare']:10.0f} "
-        f"steps/s; with the RFT plugin {walls['native_step'] * 1e3:8.1f} ms")
+        f"steps/s; with the RFT plugin {walls['native_step'] * 1e3:8.1f} ms; MuJoCo's profiling timer, which finrft "
+        f"turns off while it steps, would add {100 * out['timer_cost']:.0f} % to the bare step")
     out["native_over_python"] = out["python_wall_s"] / out["native_wall_s"]
     out["native_over_bare"] = walls["native_step"] / walls["bare"]
     out["drag_over_bare"] = out["native_wall_s"] / walls["bare"]
@@ -85,29 +90,34 @@ def backends(scene: Scene | None = None, *, batch_size: int = 64, workers: int |
 
     jobs = _drags(scene, drive, batch_size)
     serial = _best(lambda: batch.run_many(jobs, workers=1), 1)
-    parallel, rolled = _pool_rate(jobs, workers), _rollout_rate(jobs, workers)
+    parallel = _pool_rate(jobs, workers)
+    first, rolled = _rollout_rate(scene, drive, batch_size, workers)
     _tick(progress, 4, 4)
     total = steps * batch_size
     bare = workers * out["bare_steps_per_s"]
     out.update(batch_size=batch_size, workers=workers, batch_serial_steps_per_s=total / serial,
                batch_parallel_steps_per_s=total / parallel, batch_speedup=serial / parallel,
                batch_parallel_over_bare=total / parallel / bare, batch_rollout_steps_per_s=total / rolled,
-               batch_rollout_over_bare=total / rolled / bare)
+               batch_rollout_over_bare=total / rolled / bare, batch_rollout_first_steps_per_s=total / first,
+               batch_rollout_first_over_bare=total / first / bare)
     log(f"batch of {batch_size} drags: {total / serial:10.0f} steps/s on 1 core, {total / parallel:10.0f} steps/s "
         f"on {workers} workers ({serial / parallel:.2f}x; {out['batch_parallel_over_bare']:.2f} of workers x bare), "
         f"rollout of their states {total / rolled:10.0f} steps/s ({out['batch_rollout_over_bare']:.2f} of workers x "
-        f"bare; target >= 0.8)")
+        f"bare; target >= 0.8; the first batch, which compiles its models, "
+        f"{out['batch_rollout_first_over_bare']:.2f})")
     return out
 
 
-def _stepping(scene: Scene, drive: Drive, steps: int) -> Callable[[], None]:
-    """``steps`` of mj_step, in C, of the plate's model with the drive at its speed."""
+def _stepping(scene: Scene, drive: Drive, steps: int, timed: bool = False) -> Callable[[], None]:
+    """``steps`` of mj_step, in C, of the plate's model with the drive at its speed: without MuJoCo's profiling
+    timer, as finrft steps, unless ``timed``."""
     plate = models.build_plate(scene)
 
     def run() -> None:
         d = mujoco.MjData(plate.model)
         d.qvel[plate.drive_dof] = drive.stroke_velocity(0)
-        mujoco.mj_step(plate.model, d, steps)
+        with contextlib.nullcontext() if timed else native.untimed():
+            mujoco.mj_step(plate.model, d, steps)
     return run
 
 
@@ -120,9 +130,9 @@ def _interleaved(runs: dict[str, Callable[[], Any]], rounds: int) -> dict[str, l
     return times
 
 
-def _drags(scene: Scene, drive: Drive, n: int) -> list[tuple[Scene, Drive]]:
+def _drags(scene: Scene, drive: Drive, n: int, seed: int = 0) -> list[tuple[Scene, Drive]]:
     """``n`` drags of the scene with the plate's damping drawn from 0.5 to 2.5 N m s/rad."""
-    rng = np.random.default_rng(0)
+    rng = np.random.default_rng(seed)
     return [(scene.replace(**{"plate.damping": float(b)}), drive) for b in rng.uniform(0.5, 2.5, n)]
 
 
@@ -135,9 +145,14 @@ def _pool_rate(jobs: list[tuple[Scene, Drive]], workers: int) -> float:
         return _best(lambda: batch.run_many(jobs, executor=pool), 1)
 
 
-def _rollout_rate(jobs: list[tuple[Scene, Drive]], workers: int) -> float:
-    """Wall time of `batch.rollout_plates` of the jobs on ``workers`` threads (best of two)."""
-    return _best(lambda: batch.rollout_plates(jobs, workers=workers), 2)
+def _rollout_rate(scene: Scene, drive: Drive, n: int, workers: int) -> tuple[float, float]:
+    """Wall times of batches of ``n`` drags (`_drags`) on one `batch.PlateRollouts` of ``workers`` threads: the
+    first, which compiles its models, and the best of the next two, each with other dampings, which reuse them as a
+    sweep's batches do."""
+    with batch.PlateRollouts(workers) as rollouts:
+        first = _best(lambda: rollouts(_drags(scene, drive, n)), 1)
+        later = [_drags(scene, drive, n, seed) for seed in (1, 2)]
+        return first, min(_best(lambda: rollouts(jobs), 1) for jobs in later)
 
 
 def scaling(path: str | Path, scene: Scene | None = None, *, batch_size: int = 64,
@@ -158,7 +173,8 @@ def scaling(path: str | Path, scene: Scene | None = None, *, batch_size: int = 6
     rows = []
     for n in counts:
         rows.append({"workers": n, "pool_steps_per_s": total / _pool_rate(jobs, n),
-                     "rollout_steps_per_s": total / _rollout_rate(jobs, n), "bare_steps_per_s": n * bare})
+                     "rollout_steps_per_s": total / _rollout_rate(scene, drive, batch_size, n)[1],
+                     "bare_steps_per_s": n * bare})
         log(f"{n} workers: pool {rows[-1]['pool_steps_per_s']:10.0f}, rollout {rows[-1]['rollout_steps_per_s']:10.0f}"
             f" steps/s (bare x workers {n * bare:10.0f})")
     fig, ax = plt.subplots(figsize=(5, 3.5))

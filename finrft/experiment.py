@@ -17,7 +17,7 @@ from typing import Any, Callable, Protocol
 import mujoco
 import numpy as np
 
-from . import laws
+from . import laws, native
 from .convergence import ErrorLimits, Estimated, checked, max_difference, paired, require_finite
 from .coupling import PythonCoupling, installed
 from .drive import Drive
@@ -216,7 +216,7 @@ def _once(experiment: Experiment, scene: Any, built: Any, progress: Callable[[fl
             readings[name][i] = value
 
     advance = stepper(m, scene.sim, built.backend, built.groups)
-    with installed(python_forces(built) if built.backend == "python" else None):
+    with installed(python_forces(built) if built.backend == "python" else None), native.untimed():
         step_through(m, d, scene, advance, steps, starts, samples, trial.on_stroke, on_sample, progress,
                      [] if companion else trial.watch, forward=not companion, stroke_time=drive.stroke_time)
     series, values = trial.finish(d, readings)

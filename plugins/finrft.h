@@ -56,8 +56,9 @@ static inline void finrft_cross(mjtNum out[3], const mjtNum a[3], const mjtNum b
 static inline void finrft_components(mjtNum v_reg, const mjtNum v[3], const mjtNum x[3], const mjtNum y[3],
                                      mjtNum* ramp, mjtNum* vx, mjtNum* vy) {
   mjtNum speed = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
-  mjtNum safe = speed > 0 ? speed : 1;
-  *ramp = tanh(speed / v_reg);
+  mjtNum safe = speed > 0 ? speed : 1, ratio = speed / v_reg;
+  // tanh is 1 in double from 19.1 on: the same number without the call, for a segment well above v_reg
+  *ramp = ratio < 20 ? tanh(ratio) : 1;
   *vx = (v[0] * x[0] + v[1] * x[1] + v[2] * x[2]) / safe;
   *vy = (v[0] * y[0] + v[1] * y[1] + v[2] * y[2]) / safe;
 }
@@ -74,6 +75,7 @@ static inline mjtNum finrft_stop_torque(mjtNum q, mjtNum k, mjtNum* slope) {
 
 // An instance of the plugin: one force group's law, the segments it acts on and the hinges carrying its stop.
 typedef struct {
+  const mjModel* model;  // the model it was made for (finrft_instance)
   const FinrftLaw* law;
   void* params;
   mjtNum v_reg, stop_stiffness;
@@ -86,6 +88,17 @@ typedef struct {
   int* hinge_dof;
 } FinrftInstance;
 
+
+// The instance of finrft.rft with index `instance` for the model `m` that `d` is stepped with. MuJoCo's rollout
+// steps one mjData with every model of a batch that has the same sizes, while an instance holds what it read from
+// the model it was made for (law, coefficients, segments): an instance made for another model is made again for
+// this one. NULL (with every generalized force NaN, so that the run stops as unstable) should that fail.
+const FinrftInstance* finrft_instance(const mjModel* m, mjData* d, int instance);
+
+// Fill the passive forces with NaN: a plugin that cannot compute its forces must not let a run go on without them.
+static inline void finrft_poison(const mjModel* m, mjData* d) {
+  for (int i = 0; i < m->nv; i++) d->qfrc_passive[i] = NAN;
+}
 
 // A segment's axis x and normal y (world frame): its site's x and y axes.
 static inline void finrft_site_axes(const mjData* d, int s, mjtNum x[3], mjtNum y[3]) {

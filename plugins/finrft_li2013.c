@@ -16,7 +16,7 @@
 //   elements      "cx cy cz nx ny nz area ..." per element: centre and outward unit normal in the body frame, m^2
 //
 // No static state: everything lives in the per-mjData struct, so instances and threads never share memory; the
-// compute callback allocates nothing.
+// compute callback allocates nothing, unless it is stepped with another model than its instance's (rollout).
 
 #include <math.h>
 #include <stdint.h>
@@ -25,11 +25,7 @@
 
 #include <mujoco/mujoco.h>
 
-#if defined(_WIN32)
-#define FINRFT_LI2013_EXPORT __declspec(dllexport)
-#else
-#define FINRFT_LI2013_EXPORT __attribute__((visibility("default")))
-#endif
+#include "finrft.h"
 
 #define NCOEF 9
 #define NTERMS 20
@@ -38,8 +34,8 @@
 #define VERTICAL 1e-12
 
 // (alpha_x, alpha_z), N/m^3, for any beta and gamma: see finrft/laws/li2013.py for the signs and the folding.
-FINRFT_LI2013_EXPORT void finrft_li2013_alpha(const double coef[NCOEF], double zeta, double beta, double gamma,
-                                              double out[2]) {
+FINRFT_EXPORT void finrft_li2013_alpha(const double coef[NCOEF], double zeta, double beta, double gamma,
+                                       double out[2]) {
   if (fabs(gamma) > mjPI) gamma = atan2(sin(gamma), cos(gamma));
   int mirrored = fabs(gamma) > mjPI / 2;
   if (mirrored) {
@@ -57,9 +53,9 @@ FINRFT_LI2013_EXPORT void finrft_li2013_alpha(const double coef[NCOEF], double z
 
 // The force on one element (world frame, z up): outward unit normal n, velocity v, depth below the surface,
 // area. As element_forces in li2013.py.
-FINRFT_LI2013_EXPORT void finrft_li2013_element_force(const double coef[NCOEF], double zeta, const double n[3],
-                                                      const double v[3], double depth, double area,
-                                                      double force[3]) {
+FINRFT_EXPORT void finrft_li2013_element_force(const double coef[NCOEF], double zeta, const double n[3],
+                                               const double v[3], double depth, double area,
+                                               double force[3]) {
   force[0] = force[1] = force[2] = 0;
   if (!(depth > 0) || !(n[0] * v[0] + n[1] * v[1] + n[2] * v[2] > 0)) return;
   double horizontal = hypot(v[0], v[1]);
@@ -96,9 +92,9 @@ static void rft3d_terms(double p1, double p2, double p3, double t[NTERMS]) {
 // The 3D-RFT force on one element (world frame, z up): coefficients c1, c2, c3, the medium's scale xi (N/m^3),
 // the surface friction, outward unit normal n, velocity v, depth below the surface, area. As element_forces in
 // rft3d.py.
-FINRFT_LI2013_EXPORT void finrft_rft3d_element_force(const double coef[NCOEF_RFT3D], double xi, double mu_surf,
-                                                     const double n[3], const double v[3], double depth,
-                                                     double area, double force[3]) {
+FINRFT_EXPORT void finrft_rft3d_element_force(const double coef[NCOEF_RFT3D], double xi, double mu_surf,
+                                              const double n[3], const double v[3], double depth,
+                                              double area, double force[3]) {
   force[0] = force[1] = force[2] = 0;
   if (!(depth > 0) || !(n[0] * v[0] + n[1] * v[1] + n[2] * v[2] > 0)) return;
   double speed = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
@@ -127,9 +123,9 @@ FINRFT_LI2013_EXPORT void finrft_rft3d_element_force(const double coef[NCOEF_RFT
 
 // DRFT's dynamic inertial force on one element (world frame): -lambda rho_c (n . v)^2 n area on a leading element
 // below the surface, else 0. As element_forces in drft.py.
-FINRFT_LI2013_EXPORT void finrft_drft_element_force(double drft_lambda, double rho_c, const double n[3],
-                                                    const double v[3], double depth, double area,
-                                                    double force[3]) {
+FINRFT_EXPORT void finrft_drft_element_force(double drft_lambda, double rho_c, const double n[3],
+                                             const double v[3], double depth, double area,
+                                             double force[3]) {
   force[0] = force[1] = force[2] = 0;
   double v_n = n[0] * v[0] + n[1] * v[1] + n[2] * v[2];
   if (!(depth > 0) || !(v_n > 0)) return;
@@ -140,6 +136,7 @@ FINRFT_LI2013_EXPORT void finrft_drft_element_force(double drft_lambda, double r
 enum { LAW_LI2013, LAW_RFT3D };
 
 typedef struct {
+  const mjModel* model;  // the model it was made for (surface_instance)
   int law;
   double coef[NCOEF_RFT3D];  // the first NCOEF for li2013
   double zeta, xi, mu_surf, surface_z;
@@ -267,6 +264,7 @@ static int surface_init(const mjModel* m, mjData* d, int instance) {
     return -1;
   }
   read_numbers(text, p->element, count);
+  p->model = m;
   d->plugin_data[instance] = (uintptr_t)p;
   return 0;
 }
@@ -282,10 +280,22 @@ static void surface_destroy(mjData* d, int instance) {
 
 static void surface_reset(const mjModel* m, mjtNum* plugin_state, void* plugin_data, int instance) {}
 
+// The instance for the model `d` is stepped with, made again when it was made for another: as finrft_instance.
+static const SurfaceData* surface_instance(const mjModel* m, mjData* d, int instance) {
+  const SurfaceData* p = (const SurfaceData*)d->plugin_data[instance];
+  if (p && p->model == m) return p;
+  surface_destroy(d, instance);
+  if (surface_init(m, d, instance)) {
+    finrft_poison(m, d);
+    return NULL;
+  }
+  return (const SurfaceData*)d->plugin_data[instance];
+}
+
 // Every element's force, summed into one force and one torque about the body's origin, applied once.
 static void surface_compute(const mjModel* m, mjData* d, int instance, int capability_bit) {
   if (!(capability_bit & mjPLUGIN_PASSIVE)) return;
-  const SurfaceData* p = (const SurfaceData*)d->plugin_data[instance];
+  const SurfaceData* p = surface_instance(m, d, instance);
   if (!p) return;
   const mjtNum* origin = d->xpos + 3 * p->body;
   const mjtNum* R = d->xmat + 9 * p->body;

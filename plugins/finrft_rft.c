@@ -45,6 +45,15 @@ static int nattribute;
 #define FINRFT_VALUE_TEXT(x) FINRFT_TEXT(x)
 FINRFT_EXPORT const char finrft_mujoco_header[] = "finrft_mujoco_header=" FINRFT_VALUE_TEXT(mjVERSION_HEADER);
 
+// MuJoCo's timer callback, swapped for `timer`; the one it had is returned. MuJoCo's Python bindings install a
+// clock that every step calls about twenty times, a third of a small model's step: finrft.native.untimed clears it
+// while finrft steps, and puts it back.
+FINRFT_EXPORT mjfTime finrft_swap_timer(mjfTime timer) {
+  mjfTime previous = mjcb_time;
+  mjcb_time = timer;
+  return previous;
+}
+
 int finrft_read_number(const mjModel* m, int instance, const char* key, mjtNum* out) {
   const char* text = mj_getPluginConfig(m, instance, key);
   if (!text || !text[0]) {
@@ -154,6 +163,7 @@ static int rft_init(const mjModel* m, mjData* d, int instance) {
       }
     }
   }
+  p->model = m;
   d->plugin_data[instance] = (uintptr_t)p;
   return 0;
 }
@@ -161,6 +171,18 @@ static int rft_init(const mjModel* m, mjData* d, int instance) {
 static void rft_destroy(mjData* d, int instance) {
   free_instance((FinrftInstance*)d->plugin_data[instance]);
   d->plugin_data[instance] = 0;
+}
+
+const FinrftInstance* finrft_instance(const mjModel* m, mjData* d, int instance) {
+  const FinrftInstance* p = (const FinrftInstance*)d->plugin_data[instance];
+  if (p && p->model == m) return p;
+  rft_destroy(d, instance);
+  // The config was checked when the model compiled: this fails only when memory runs out.
+  if (rft_init(m, d, instance)) {
+    finrft_poison(m, d);
+    return NULL;
+  }
+  return (const FinrftInstance*)d->plugin_data[instance];
 }
 
 static void rft_reset(const mjModel* m, mjtNum* plugin_state, void* plugin_data, int instance) {}
@@ -171,7 +193,7 @@ static void rft_reset(const mjModel* m, mjtNum* plugin_state, void* plugin_data,
 // cost a spatial transform and a full 3 x nv Jacobian per segment).
 static void rft_compute(const mjModel* m, mjData* d, int instance, int capability_bit) {
   if (!(capability_bit & mjPLUGIN_PASSIVE)) return;
-  const FinrftInstance* p = (const FinrftInstance*)d->plugin_data[instance];
+  const FinrftInstance* p = finrft_instance(m, d, instance);
   if (!p) return;
   mjtNum offset[3], v[3], x[3], y[3], force[3], moment[3];
   for (int i = 0; i < p->nseg; i++) {

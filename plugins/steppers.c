@@ -1,6 +1,7 @@
 // The time-stepping methods of finrft (the twins of finrft/integrate.py), called through ctypes:
 //   finrft_implicit_step     the "implicit" and "newton" methods
 //   finrft_adaptive_advance  the "adaptive" and "adaptive-newton" methods
+//   finrft_explicit_record   MuJoCo's own step, recording the state at given steps (finrft.batch)
 // They return 0 or a code of finrft.native.Code (FINRFT_UNSTABLE, ...). A step allocates nothing on the heap: its
 // workspace lives on the mjData stack (mj_markStack ... mj_freeStack), sized once per call.
 //
@@ -68,7 +69,7 @@ static int workspace_make(const mjModel* m, mjData* d, Workspace* ws, int extra,
   int slot = -1;
   mjp_getPlugin(FINRFT_PLUGIN, &slot);
   for (int i = 0; i < m->nplugin; i++) {
-    const FinrftInstance* p = m->plugin[i] == slot ? (const FinrftInstance*)d->plugin_data[i] : NULL;
+    const FinrftInstance* p = m->plugin[i] == slot ? finrft_instance(m, d, i) : NULL;
     if (!p) continue;
     s->ninst++;
     s->n += p->nseg;
@@ -86,7 +87,8 @@ static int workspace_make(const mjModel* m, mjData* d, Workspace* ws, int extra,
   s->stop_k = mj_stackAllocNum(d, s->nstop + 1);
   s->stop_q = mj_stackAllocNum(d, s->nstop + 1);
   for (int i = 0, k = 0; i < m->nplugin; i++) {
-    if (m->plugin[i] == slot && d->plugin_data[i]) s->inst[k++] = (const FinrftInstance*)d->plugin_data[i];
+    const FinrftInstance* p = m->plugin[i] == slot ? finrft_instance(m, d, i) : NULL;
+    if (p) s->inst[k++] = p;
   }
   Newton* w = &ws->w;
   mjtNum** squares[] = {&w->matrix, &w->jacobian, &w->slope, &ws->mass};
@@ -399,4 +401,26 @@ FINRFT_EXPORT int finrft_adaptive_advance(const mjModel* m, mjData* d, mjtNum du
   }
   mj_freeStack(d);
   return failed;
+}
+
+// `nstep` of MuJoCo's steps, with the mjSTATE_FULLPHYSICS state after step at[j] (1 <= at[0] < at[1] < ... <=
+// nstep) written to out + j * nstate. As MuJoCo's rollout, but recording the states a batch keeps, not every step's:
+// the copy of each step's state cost rollout 5 % of a plate's steps. FINRFT_UNSTABLE, at once, when a recorded or
+// the final state is not finite.
+FINRFT_EXPORT int finrft_explicit_record(const mjModel* m, mjData* d, int nstep, int nrecord, const int* at,
+                                         mjtNum* out) {
+  int spec = mjSTATE_FULLPHYSICS, nstate = mj_stateSize(m, spec);
+  for (int i = 1, j = 0; i <= nstep; i++) {
+    mj_step(m, d);
+    int record = j < nrecord && at[j] == i;
+    if (!record && i < nstep) continue;
+    for (int k = 0; k < m->nq; k++) {
+      if (!isfinite(d->qpos[k])) return FINRFT_UNSTABLE;
+    }
+    for (int k = 0; k < m->nv; k++) {
+      if (!isfinite(d->qvel[k])) return FINRFT_UNSTABLE;
+    }
+    if (record) mj_getState(m, d, out + (size_t)nstate * j++, spec);
+  }
+  return 0;
 }

@@ -18,7 +18,7 @@ The API, by topic:
 - plate tests: `Drive`, `simulate` (`run` of a `PlateTest`)
 - the robot: `swim` (`run` of a `Swim`); the paper's Table I with `table_scenes` and `table_rows`
 - many runs on all cores: `run_experiments` (any experiment), `run_many` (plate tests), `map_jobs` (any
-  module-level function), `local_executor`; `rollout_plates` (plate tests' states on MuJoCo's threaded rollout)
+  module-level function), `local_executor`; `PlateRollouts`, `rollout_plates` (plate tests' states stepped in C on threads)
 - RFT on any MuJoCo model: `attach` (the Li, Zhang & Goldman 2013 law on the named bodies of an MjSpec)
 - granular media: `medium(name)`, one of the catalogue of named media (every one: ``finrft.media.media()``), each
   value with its unit and source; ``finrft.media.sandswim_coefficients`` derives a segment's sand-swimming law
@@ -38,7 +38,7 @@ from importlib import import_module
 from typing import Any
 
 from .attach import attach
-from .batch import local_executor, map_jobs, rollout_plates, run_experiments, run_many
+from .batch import PlateRollouts, local_executor, map_jobs, rollout_plates, run_experiments, run_many
 from .convergence import SimulationUnstable
 from .drive import Drive
 from .experiment import Experiment, Result, run
@@ -53,7 +53,7 @@ from .user_model import UserModel
 
 _RECORDING = ("write_h5", "write_rrd")
 
-__all__ = ["Drive", "Experiment", "Fit", "Intrusion", "IntrusionScene", "PlateTest", "Result", "RobotScene", "Scene",
+__all__ = ["Drive", "Experiment", "Fit", "Intrusion", "IntrusionScene", "PlateRollouts", "PlateTest", "Result", "RobotScene", "Scene",
            "SceneError", "SimulationUnstable", "Swim", "UserModel", "UserScene", "Variable", "attach", "fit",
            "load_scene", "local_executor", "map_jobs", "medium", "optimize", "preset", "read_drag",
            "resolve_params", "rollout_plates", "run", "run_experiments", "run_many", "simulate", "swim", "table_rows", "table_scenes",

@@ -1,10 +1,10 @@
 """Many runs at once on all cores: a pool of worker processes, each running `finrft.experiment.run` of any
-experiment (`run_experiments`; `run_many` for plate tests), and MuJoCo's threaded rollout of plate tests' states
-(`rollout_plates`).
+experiment (`run_experiments`; `run_many` for plate tests), and plate tests' states stepped in C on threads
+(`PlateRollouts`, `rollout_plates`).
 
 Whole runs go to processes: a run reads, checks and estimates its error in Python at every recorded instant,
-which threads would serialise. Where only the states are wanted, rollout steps them with no Python between the
-drive's reversals, which it applies between strokes (an impulse computed in Python, once per stroke). Every worker
+which threads would serialise. Where only the states are wanted, threads step them in C with no Python between the
+drive's reversals, which are applied between strokes (an impulse computed in Python, once per stroke). Every worker
 loads the native plugin when it imports MuJoCo; a result is the same, bit for bit, as the single run of the same
 job.
 

@@ -45,7 +45,7 @@ def backends(scene: Scene | None = None, *, batch_size: int = 64, workers: int |
              repeat: int = 3, log: Callable[[str], None] = print, progress: Progress = None) -> dict[str, Any]:
     """The paper plate drag (200 mm at 30 mm/s) with each backend, against bare MuJoCo stepping of the same
     model without RFT, and the batch throughput of ``batch_size`` drags on ``workers`` cores: a process pool of
-    whole runs (`batch.run_many`) and MuJoCo's threaded rollout of their states (`batch.rollout_plates`)."""
+    whole runs (`batch.run_many`) and their states stepped on threads (`batch.PlateRollouts`)."""
     scene = scene or preset("paper")
     drive = Drive(speed=0.03, stroke=0.2)
     workers = workers or batch.default_workers()
@@ -102,7 +102,7 @@ def backends(scene: Scene | None = None, *, batch_size: int = 64, workers: int |
                batch_rollout_first_over_bare=total / first / bare)
     log(f"batch of {batch_size} drags: {total / serial:10.0f} steps/s on 1 core, {total / parallel:10.0f} steps/s "
         f"on {workers} workers ({serial / parallel:.2f}x; {out['batch_parallel_over_bare']:.2f} of workers x bare), "
-        f"rollout of their states {total / rolled:10.0f} steps/s ({out['batch_rollout_over_bare']:.2f} of workers x "
+        f"their states on threads {total / rolled:10.0f} steps/s ({out['batch_rollout_over_bare']:.2f} of workers x "
         f"bare; target >= 0.8; the first batch, which compiles its models, "
         f"{out['batch_rollout_first_over_bare']:.2f})")
     return out
@@ -158,7 +158,7 @@ def _rollout_rate(scene: Scene, drive: Drive, n: int, workers: int) -> tuple[flo
 def scaling(path: str | Path, scene: Scene | None = None, *, batch_size: int = 64,
             counts: list[int] | None = None, log: Callable[[str], None] = print) -> dict[str, Any]:
     """Batch throughput (steps/s) of the paper drag against the number of workers (1, 2 and up to the cores):
-    the process pool of whole runs and the threaded rollout of their states, with bare mj_step on one core times
+    the process pool of whole runs and the threaded batch of their states, with bare mj_step on one core times
     the workers for scale; a chart at ``path``."""
     import matplotlib
     matplotlib.use("Agg")
@@ -175,10 +175,10 @@ def scaling(path: str | Path, scene: Scene | None = None, *, batch_size: int = 6
         rows.append({"workers": n, "pool_steps_per_s": total / _pool_rate(jobs, n),
                      "rollout_steps_per_s": total / _rollout_rate(scene, drive, batch_size, n)[1],
                      "bare_steps_per_s": n * bare})
-        log(f"{n} workers: pool {rows[-1]['pool_steps_per_s']:10.0f}, rollout {rows[-1]['rollout_steps_per_s']:10.0f}"
+        log(f"{n} workers: pool {rows[-1]['pool_steps_per_s']:10.0f}, threads {rows[-1]['rollout_steps_per_s']:10.0f}"
             f" steps/s (bare x workers {n * bare:10.0f})")
     fig, ax = plt.subplots(figsize=(5, 3.5))
-    for key, label, style in (("rollout_steps_per_s", "threaded rollout (states)", "o-"),
+    for key, label, style in (("rollout_steps_per_s", "threaded batch (states)", "o-"),
                               ("pool_steps_per_s", "process pool (whole runs)", "s-"),
                               ("bare_steps_per_s", "bare mj_step x workers", "k--")):
         ax.plot(counts, [r[key] / 1e3 for r in rows], style, label=label)

@@ -394,7 +394,7 @@ def build_parser() -> argparse.ArgumentParser:
     backends.add_argument("--batch", type=_number("simulations", minimum=1, inclusive=True, integer=True),
                           default=64, metavar="N", help="simulations in the batch (default: %(default)s)")
     backends.add_argument("--scaling", metavar="FILE.png", help="also chart the batch throughput against the "
-                          "number of workers (1, 2, ... up to the cores): process pool and threaded rollout")
+                          "number of workers (1, 2, ... up to the cores): process pool and threaded batch")
     _add_workers(backends)
     robot = kinds.add_parser("robot", help="one gait evaluation and a full optimisation",
                              description="Time one gait evaluation (one flap cycle) and a CMA-ES optimisation of "

@@ -94,8 +94,9 @@ def untimed() -> Iterator[None]:
     """Step without MuJoCo's profiling timer inside the block (restored after it; blocks may nest and overlap in
     threads). MuJoCo's Python bindings install a clock (mjcb_time) that every mj_step calls about twenty times to
     fill ``MjData.timer``: a third of the step of a small model such as the plate (9.9 ms for the paper drag without
-    it, 14.9 ms with it). finrft reads no timer. Creating an MjData puts the clock back, so enter the block after
-    making the data it steps. Without the native library (which sets the callback) the block changes nothing."""
+    it, 14.9 ms with it). finrft reads no timer. Some releases of the bindings put the clock back when an MjData is
+    made: enter the block after making the data it steps. Without the native library (which sets the callback) the
+    block changes nothing."""
     if not available():
         yield
         return

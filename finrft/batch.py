@@ -263,6 +263,7 @@ class PlateRollouts:
         current = np.zeros((len(plates), mujoco.mj_stateSize(group[0], carry)))
         bounds = np.r_[starts, steps]
         for k, (first, last) in enumerate(zip(bounds[:-1], bounds[1:])):
+            recorded = np.flatnonzero(samples == first)  # the stroke's start, when it is a recorded instant
             for i, (m, trial) in enumerate(zip(group, trials)):
                 if k:
                     mujoco.mj_setState(m, d, current[i], carry)
@@ -270,8 +271,8 @@ class PlateRollouts:
                     mujoco.mj_resetData(m, d)
                 trial.on_stroke(k)
                 mujoco.mj_getState(m, d, current[i], carry)
-                mujoco.mj_getState(m, d, states[i, np.flatnonzero(samples == first)[0]] if first in samples
-                                   else np.zeros(nstate), kept)
+                if recorded.size:
+                    mujoco.mj_getState(m, d, states[i, recorded[0]], kept)
             # The last step of a stroke that is not the run's last is the next one's start (after its reversal).
             inside = (samples > first) & ((samples < last) | (last == steps))
             at = np.ascontiguousarray(samples[inside] - first, dtype=np.int32)

@@ -53,11 +53,11 @@ from .user_model import UserModel
 
 _RECORDING = ("write_h5", "write_rrd")
 
-__all__ = ["Drive", "Experiment", "Fit", "Intrusion", "IntrusionScene", "PlateRollouts", "PlateTest", "Result", "RobotScene", "Scene",
-           "SceneError", "SimulationUnstable", "Swim", "UserModel", "UserScene", "Variable", "attach", "fit",
-           "load_scene", "local_executor", "map_jobs", "medium", "optimize", "preset", "read_drag",
-           "resolve_params", "rollout_plates", "run", "run_experiments", "run_many", "simulate", "swim", "table_rows", "table_scenes",
-           "to_toml", *_RECORDING]
+__all__ = ["Drive", "Experiment", "Fit", "Intrusion", "IntrusionScene", "PlateRollouts", "PlateTest", "Result",
+           "RobotScene", "Scene", "SceneError", "SimulationUnstable", "Swim", "UserModel", "UserScene", "Variable",
+           "attach", "fit", "load_scene", "local_executor", "map_jobs", "medium", "optimize", "preset", "read_drag",
+           "resolve_params", "rollout_plates", "run", "run_experiments", "run_many", "simulate", "swim",
+           "table_rows", "table_scenes", "to_toml", *_RECORDING]
 
 
 def __getattr__(name: str) -> Any:

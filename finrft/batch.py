@@ -23,7 +23,7 @@ import multiprocessing.context
 import os
 import signal
 import warnings
-from concurrent.futures import Executor, ProcessPoolExecutor
+from concurrent.futures import Executor, ProcessPoolExecutor, ThreadPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any, Callable, Iterator, Sequence, TypeVar
 
@@ -178,15 +178,12 @@ class PlateRollouts:
     """
 
     def __init__(self, workers: int | None = None) -> None:
-        from concurrent.futures import ThreadPoolExecutor
         self.threads = workers or default_workers()
         self._pool = ThreadPoolExecutor(self.threads)
         self._plates: dict[tuple, list[models.PlateModel]] = {}  # the last batch's models, by retune key
         self._datas: dict[tuple, list[mujoco.MjData]] = {}       # by sizes: the drive's, then one per thread
-        self._record = ctypes.CDLL(str(native.library_path())).finrft_explicit_record
-        self._record.restype = ctypes.c_int
-        self._record.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int, ctypes.c_int, ctypes.c_void_p,
-                                 ctypes.c_void_p]
+        self._record = native.function("finrft_explicit_record", ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p,
+                                       ctypes.c_int, ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p)
 
     def __enter__(self) -> PlateRollouts:
         return self

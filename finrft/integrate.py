@@ -54,10 +54,8 @@ NEWTON_SHARE = 1e-2  # the adaptive newton method stops Newton's method at this 
 
 
 def _native(name: str, *argtypes) -> Callable[..., int]:
-    function = getattr(ctypes.CDLL(str(native.library_path())), name)
-    function.argtypes = [ctypes.c_void_p, ctypes.c_void_p, *argtypes]
-    function.restype = ctypes.c_int
-    return function
+    """A native stepper: (mjModel*, mjData*, *argtypes) -> a return code."""
+    return native.function(name, ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p, *argtypes)
 
 
 class Stepper(Protocol):

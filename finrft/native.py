@@ -21,7 +21,7 @@ import sys
 import threading
 import warnings
 from pathlib import Path
-from typing import Iterator
+from typing import Any, Callable, Iterator
 
 # Named as MuJoCo's own plugins are on each platform.
 LIBRARY = {"win32": "finrft_rft.dll", "darwin": "libfinrft_rft.dylib"}.get(sys.platform, "libfinrft_rft.so")
@@ -79,14 +79,19 @@ def captured_warnings(messages: list[str]) -> Iterator[None]:
         mujoco.set_mju_user_warning(previous)
 
 
+def function(name: str, restype: Any, *argtypes: Any) -> Callable[..., Any]:
+    """A function of the native library (the handle MuJoCo has loaded) with its C signature; ctypes releases the
+    GIL while it runs."""
+    found = getattr(ctypes.CDLL(str(library_path())), name)
+    found.restype, found.argtypes = restype, list(argtypes)
+    return found
+
+
 def _swap_timer(timer: int | None) -> int | None:
     """Set MuJoCo's timer callback (mjcb_time, a C function pointer) and return the one it had."""
-    swap = _timer["swap"]
-    if swap is None:
-        swap = ctypes.CDLL(str(library_path())).finrft_swap_timer  # the handle MuJoCo has loaded
-        swap.restype, swap.argtypes = ctypes.c_void_p, [ctypes.c_void_p]
-        _timer["swap"] = swap
-    return swap(timer)
+    if _timer["swap"] is None:
+        _timer["swap"] = function("finrft_swap_timer", ctypes.c_void_p, ctypes.c_void_p)
+    return _timer["swap"](timer)
 
 
 @contextlib.contextmanager

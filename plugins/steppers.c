@@ -407,6 +407,13 @@ FINRFT_EXPORT int finrft_adaptive_advance(const mjModel* m, mjData* d, mjtNum du
 // nstep) written to out + j * nstate. As MuJoCo's rollout, but recording the states a batch keeps, not every step's:
 // the copy of each step's state cost rollout 5 % of a plate's steps. FINRFT_UNSTABLE, at once, when a recorded or
 // the final state is not finite.
+static int all_finite(const mjtNum* x, int n) {
+  for (int i = 0; i < n; i++) {
+    if (!isfinite(x[i])) return 0;
+  }
+  return 1;
+}
+
 FINRFT_EXPORT int finrft_explicit_record(const mjModel* m, mjData* d, int nstep, int nrecord, const int* at,
                                          mjtNum* out) {
   int spec = mjSTATE_FULLPHYSICS, nstate = mj_stateSize(m, spec);
@@ -414,12 +421,7 @@ FINRFT_EXPORT int finrft_explicit_record(const mjModel* m, mjData* d, int nstep,
     mj_step(m, d);
     int record = j < nrecord && at[j] == i;
     if (!record && i < nstep) continue;
-    for (int k = 0; k < m->nq; k++) {
-      if (!isfinite(d->qpos[k])) return FINRFT_UNSTABLE;
-    }
-    for (int k = 0; k < m->nv; k++) {
-      if (!isfinite(d->qvel[k])) return FINRFT_UNSTABLE;
-    }
+    if (!all_finite(d->qpos, m->nq) || !all_finite(d->qvel, m->nv)) return FINRFT_UNSTABLE;
     if (record) mj_getState(m, d, out + (size_t)nstate * j++, spec);
   }
   return 0;

@@ -39,6 +39,10 @@ typedef struct {
   const FinrftInstance** law;   // n: each segment's instance
   mjtNum* jacp;                 // n x 3 x nv
   mjtNum* axes;                 // n x 6: x axis, then normal y
+  int* ncol;                    // n: how many dofs move the segment (its body's chain)
+  int* col;                     // n x nv: those dofs, ascending; the Jacobian's other columns are zero
+  mjtNum* vel;                  // n x 3: each segment's velocity at the last rft_force, world frame
+  mjtNum* seg_force;            // n x 3: the law's force there
   int* stop_dof;                // nstop
   mjtNum* stop_k;               // nstop, N m/rad
   mjtNum* stop_q;               // nstop, deflection from the rest angle
@@ -75,14 +79,19 @@ static int workspace_make(const mjModel* m, mjData* d, Workspace* ws, int extra,
     s->n += p->nseg;
     if (p->stop_stiffness > 0) s->nstop += p->nhinge;
   }
-  size_t numbers = 3 * (size_t)s->n * nv + 6 * (size_t)s->n + 2 * (size_t)s->nstop + 4 * (size_t)nv * nv +
+  size_t numbers = 3 * (size_t)s->n * nv + 12 * (size_t)s->n + 2 * (size_t)s->nstop + 4 * (size_t)nv * nv +
                    12 * (size_t)nv + extra;
-  size_t bytes = numbers * sizeof(mjtNum) + (s->ninst + s->n) * sizeof(void*) + s->nstop * sizeof(int) + 1024;
+  size_t ints = (size_t)s->n * (nv + 1) + s->nstop;
+  size_t bytes = numbers * sizeof(mjtNum) + (s->ninst + s->n) * sizeof(void*) + ints * sizeof(int) + 1024;
   if (bytes + d->maxuse_stack > d->narena - d->pstack - d->parena) return FINRFT_ARENA_FULL;
   s->inst = (const FinrftInstance**)mj_stackAllocByte(d, (s->ninst + 1) * sizeof(void*), sizeof(void*));
   s->law = (const FinrftInstance**)mj_stackAllocByte(d, (s->n + 1) * sizeof(void*), sizeof(void*));
   s->jacp = mj_stackAllocNum(d, 3 * (size_t)s->n * nv + 1);
   s->axes = mj_stackAllocNum(d, 6 * (size_t)s->n + 1);
+  s->ncol = mj_stackAllocInt(d, s->n + 1);
+  s->col = mj_stackAllocInt(d, (size_t)s->n * nv + 1);
+  s->vel = mj_stackAllocNum(d, 3 * (size_t)s->n + 1);
+  s->seg_force = mj_stackAllocNum(d, 3 * (size_t)s->n + 1);
   s->stop_dof = mj_stackAllocInt(d, s->nstop + 1);
   s->stop_k = mj_stackAllocNum(d, s->nstop + 1);
   s->stop_q = mj_stackAllocNum(d, s->nstop + 1);
@@ -110,6 +119,13 @@ static void segments_update(const mjModel* m, mjData* d, Segments* s) {
       s->law[i] = p;
       finrft_site_axes(d, p->site[k], s->axes + 6 * i, s->axes + 6 * i + 3);
       mj_jacSite(m, d, s->jacp + 3 * (size_t)s->nv * i, NULL, p->site[k]);
+      int* col = s->col + (size_t)s->nv * i;
+      int c = 0;
+      for (int dof = p->last_dof[k]; dof >= 0; dof = m->dof_parentid[dof]) col[c++] = dof;
+      for (int a = 0, b = c - 1; a < b; a++, b--) {
+        int t = col[a]; col[a] = col[b]; col[b] = t;
+      }
+      s->ncol[i] = c;
     }
     for (int k = 0; p->stop_stiffness > 0 && k < p->nhinge; k++, h++) {
       s->stop_dof[h] = p->hinge_dof[k];
@@ -140,36 +156,57 @@ static void segment_jacobian(const FinrftInstance* p, const mjtNum v[3], const m
   }
 }
 
-// At generalised velocity u: the RFT force plus the penalty stops' torque at the deflection they reach after
-// `ahead` seconds at u (nv), and, when slope is not NULL, its derivative in u (nv x nv), the law's by forward
-// differences when `forward`, else central ones.
-static void segments_force(const Segments* s, const mjtNum* u, mjtNum ahead, mjtNum* force, mjtNum* slope,
-                           int forward) {
+// The RFT force at generalised velocity u (nv), each segment's velocity and force kept for rft_slope.
+static void rft_force(const Segments* s, const mjtNum* u, mjtNum* force) {
   int nv = s->nv;
   mju_zero(force, nv);
-  if (slope) mju_zero(slope, nv * nv);
   for (int i = 0; i < s->n; i++) {
     const FinrftInstance* p = s->law[i];
     const mjtNum* jac = s->jacp + 3 * (size_t)nv * i;
-    const mjtNum *x = s->axes + 6 * i, *y = s->axes + 6 * i + 3;
-    mjtNum v[3], f[3], c[9], cj[3];
-    mju_mulMatVec(v, jac, u, 3, nv);
-    p->law->force(p->params, p->v_reg, v, x, y, f);
-    for (int col = 0; col < nv; col++) force[col] += jac[col] * f[0] + jac[nv + col] * f[1] + jac[2 * nv + col] * f[2];
-    if (!slope) continue;
-    segment_jacobian(p, v, x, y, forward ? f : NULL, c);
-    for (int col = 0; col < nv; col++) {
-      for (int r = 0; r < 3; r++) cj[r] = c[3 * r] * jac[col] + c[3 * r + 1] * jac[nv + col] + c[3 * r + 2] * jac[2 * nv + col];
-      for (int row = 0; row < nv; row++) {
-        slope[row * nv + col] += jac[row] * cj[0] + jac[nv + row] * cj[1] + jac[2 * nv + row] * cj[2];
+    const int* col = s->col + (size_t)nv * i;
+    mjtNum *v = s->vel + 3 * i, *f = s->seg_force + 3 * i;
+    for (int r = 0; r < 3; r++) {
+      v[r] = 0;
+      for (int c = 0; c < s->ncol[i]; c++) v[r] += jac[r * nv + col[c]] * u[col[c]];
+    }
+    p->law->force(p->params, p->v_reg, v, s->axes + 6 * i, s->axes + 6 * i + 3, f);
+    for (int c = 0; c < s->ncol[i]; c++) {
+      int k = col[c];
+      force[k] += jac[k] * f[0] + jac[nv + k] * f[1] + jac[2 * nv + k] * f[2];
+    }
+  }
+}
+
+// The derivative of the RFT force (nv x nv) at the velocity of the last rft_force, the law's by forward
+// differences when `forward`, else central ones.
+static void rft_slope(const Segments* s, mjtNum* slope, int forward) {
+  int nv = s->nv;
+  mju_zero(slope, nv * nv);
+  for (int i = 0; i < s->n; i++) {
+    const mjtNum* jac = s->jacp + 3 * (size_t)nv * i;
+    const int* col = s->col + (size_t)nv * i;
+    mjtNum c[9], cj[3];
+    segment_jacobian(s->law[i], s->vel + 3 * i, s->axes + 6 * i, s->axes + 6 * i + 3,
+                     forward ? s->seg_force + 3 * i : NULL, c);
+    for (int b = 0; b < s->ncol[i]; b++) {
+      int k = col[b];
+      for (int r = 0; r < 3; r++) cj[r] = c[3 * r] * jac[k] + c[3 * r + 1] * jac[nv + k] + c[3 * r + 2] * jac[2 * nv + k];
+      for (int a = 0; a < s->ncol[i]; a++) {
+        int row = col[a];
+        slope[row * nv + k] += jac[row] * cj[0] + jac[nv + row] * cj[1] + jac[2 * nv + row] * cj[2];
       }
     }
   }
+}
+
+// Add the penalty stops' torque at the deflection they reach after `ahead` seconds at u to force (when not NULL),
+// and its derivative in u to slope (when not NULL).
+static void stops_add(const Segments* s, const mjtNum* u, mjtNum ahead, mjtNum* force, mjtNum* slope) {
   for (int h = 0; h < s->nstop; h++) {
     int dof = s->stop_dof[h];
-    mjtNum stiffening;
-    force[dof] += finrft_stop_torque(s->stop_q[h] + ahead * u[dof], s->stop_k[h], &stiffening);
-    if (slope) slope[dof * nv + dof] += stiffening * ahead;
+    mjtNum stiffening, torque = finrft_stop_torque(s->stop_q[h] + ahead * u[dof], s->stop_k[h], &stiffening);
+    if (force) force[dof] += torque;
+    if (slope) slope[dof * s->nv + dof] += stiffening * ahead;
   }
 }
 
@@ -204,7 +241,8 @@ static mjtNum newton_residual(const Segments* s, Newton* w, const mjtNum* qvel, 
                               mjtNum* out) {
   int nv = s->nv;
   for (int i = 0; i < nv; i++) w->u[i] = qvel[i] + dv[i];
-  segments_force(s, w->u, dt, w->force, NULL, 0);
+  rft_force(s, w->u, w->force);
+  stops_add(s, w->u, dt, w->force, NULL);
   mju_mulMatVec(out, w->matrix, dv, nv, nv);
   for (int i = 0; i < nv; i++) out[i] -= dt * (w->other[i] + w->force[i]);
   return mju_norm(out, nv);
@@ -217,11 +255,13 @@ static int newton_solve(const Segments* s, Newton* w, const mjtNum* qvel, const 
                         int iterations, mjtNum tolerance) {
   int nv = s->nv;
   mjtNum ahead = iterations > 1 ? dt : 0;
-  segments_force(s, qvel, ahead, w->force, w->slope, iterations > 1);
+  rft_force(s, qvel, w->force);
+  rft_slope(s, w->slope, iterations > 1);
   // other: every force but F, taken out at the stops' present deflection (w->trial is free until the search)
-  if (ahead > 0) segments_force(s, qvel, 0, w->trial, NULL, 0);
-  const mjtNum* now = ahead > 0 ? w->trial : w->force;
-  for (int i = 0; i < nv; i++) w->other[i] = rhs[i] - now[i];
+  mju_copy(w->trial, w->force, nv);
+  stops_add(s, qvel, 0, w->trial, NULL);
+  stops_add(s, qvel, ahead, w->force, w->slope);
+  for (int i = 0; i < nv; i++) w->other[i] = rhs[i] - w->trial[i];
   for (int i = 0; i < nv; i++) {
     w->dv[i] = 0;
     w->g[i] = -dt * (w->other[i] + w->force[i]);
@@ -251,8 +291,9 @@ static int newton_solve(const Segments* s, Newton* w, const mjtNum* qvel, const 
     }
     norm = trial_norm;
     if (change <= tolerance * (1 + scale)) return 0;
-    for (int i = 0; i < nv; i++) w->u[i] = qvel[i] + w->dv[i];
-    segments_force(s, w->u, dt, w->force, w->slope, 1);
+    // the search's last residual was taken at the accepted iterate: rft_force's segments are there
+    rft_slope(s, w->slope, 1);
+    stops_add(s, w->u, dt, NULL, w->slope);
   }
   return FINRFT_NOT_CONVERGED;
 }

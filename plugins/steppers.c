@@ -58,6 +58,10 @@ typedef struct {
   Newton w;
   mjtNum* rhs;
   mjtNum* mass;     // nv x nv, the mass matrix at the step's start
+  // The RFT force (nv) and its slope (nv x nv) at the start: a whole step and its first half, from the same
+  // start, both begin Newton's method there. start_ready is 0 until computed after each step_prepare.
+  mjtNum *start_force, *start_slope;
+  int start_ready;
   int64_t* counts;  // NULL, or where to add the steps taken and rejected (halved by the newton method)
   mjtNum newton_tolerance;  // Newton's method stops when the change is below this times (1 + |qvel|)
 } Workspace;
@@ -79,8 +83,8 @@ static int workspace_make(const mjModel* m, mjData* d, Workspace* ws, int extra,
     s->n += p->nseg;
     if (p->stop_stiffness > 0) s->nstop += p->nhinge;
   }
-  size_t numbers = 3 * (size_t)s->n * nv + 12 * (size_t)s->n + 2 * (size_t)s->nstop + 4 * (size_t)nv * nv +
-                   12 * (size_t)nv + extra;
+  size_t numbers = 3 * (size_t)s->n * nv + 12 * (size_t)s->n + 2 * (size_t)s->nstop + 5 * (size_t)nv * nv +
+                   13 * (size_t)nv + extra;
   size_t ints = (size_t)s->n * (nv + 1) + s->nstop;
   size_t bytes = numbers * sizeof(mjtNum) + (s->ninst + s->n) * sizeof(void*) + ints * sizeof(int) + 1024;
   if (bytes + d->maxuse_stack > d->narena - d->pstack - d->parena) return FINRFT_ARENA_FULL;
@@ -100,10 +104,12 @@ static int workspace_make(const mjModel* m, mjData* d, Workspace* ws, int extra,
     if (p) s->inst[k++] = p;
   }
   Newton* w = &ws->w;
-  mjtNum** squares[] = {&w->matrix, &w->jacobian, &w->slope, &ws->mass};
-  mjtNum** vectors[] = {&w->other, &w->force, &w->dv, &w->step, &w->g, &w->trial, &w->candidate, &w->u, &ws->rhs};
-  for (int i = 0; i < 4; i++) *squares[i] = mj_stackAllocNum(d, (size_t)nv * nv + 1);
-  for (int i = 0; i < 9; i++) *vectors[i] = mj_stackAllocNum(d, nv + 1);
+  mjtNum** squares[] = {&w->matrix, &w->jacobian, &w->slope, &ws->mass, &ws->start_slope};
+  mjtNum** vectors[] = {&w->other,     &w->force, &w->dv, &w->step,  &w->g,
+                        &w->trial,     &w->candidate, &w->u, &ws->rhs, &ws->start_force};
+  for (int i = 0; i < 5; i++) *squares[i] = mj_stackAllocNum(d, (size_t)nv * nv + 1);
+  for (int i = 0; i < 10; i++) *vectors[i] = mj_stackAllocNum(d, nv + 1);
+  ws->start_ready = 0;
   if (extra_out) *extra_out = mj_stackAllocNum(d, extra);
   ws->counts = NULL;
   ws->newton_tolerance = NEWTON_TOLERANCE;
@@ -248,15 +254,22 @@ static mjtNum newton_residual(const Segments* s, Newton* w, const mjtNum* qvel, 
   return mju_norm(out, nv);
 }
 
-// The velocity change of one step into w->dv; rhs = M qacc at v. With iterations == 1 the linearly implicit step
+// The velocity change of one step from the start step_prepare saw into ws->w.dv (ws->rhs = M qacc at v). With iterations == 1 the linearly implicit step
 // in the RFT force (the first Newton iterate, no line search, stops as MuJoCo computed them); otherwise the root
 // of G, with the stops' torque taken at the new positions too, by Newton's method, or FINRFT_NOT_CONVERGED.
-static int newton_solve(const Segments* s, Newton* w, const mjtNum* qvel, const mjtNum* rhs, mjtNum dt,
-                        int iterations, mjtNum tolerance) {
+static int newton_solve(Workspace* ws, const mjtNum* qvel, mjtNum dt, int iterations) {
+  const Segments* s = &ws->segments;
+  Newton* w = &ws->w;
   int nv = s->nv;
-  mjtNum ahead = iterations > 1 ? dt : 0;
-  rft_force(s, qvel, w->force);
-  rft_slope(s, w->slope, iterations > 1);
+  mjtNum ahead = iterations > 1 ? dt : 0, tolerance = ws->newton_tolerance;
+  const mjtNum* rhs = ws->rhs;
+  if (!ws->start_ready) {
+    rft_force(s, qvel, ws->start_force);
+    rft_slope(s, ws->start_slope, iterations > 1);
+    ws->start_ready = 1;
+  }
+  mju_copy(w->force, ws->start_force, nv);
+  mju_copy(w->slope, ws->start_slope, nv * nv);
   // other: every force but F, taken out at the stops' present deflection (w->trial is free until the search)
   mju_copy(w->trial, w->force, nv);
   stops_add(s, qvel, 0, w->trial, NULL);
@@ -304,6 +317,7 @@ static void step_prepare(const mjModel* m, mjData* d, Workspace* ws) {
   mj_mulM(m, d, ws->rhs, d->qacc);
   mj_fullM(m, d, ws->mass);
   segments_update(m, d, &ws->segments);
+  ws->start_ready = 0;
 }
 
 // One implicit step of size dt from the start step_prepare saw:
@@ -321,7 +335,7 @@ static int step_take(const mjModel* m, mjData* d, mjtNum dt, int iterations, Wor
     mjtNum gear = m->actuator_gear[6 * a];
     w->matrix[dof * nv + dof] -= dt * gear * gear * m->actuator_biasprm[mjNBIAS * a + 2];
   }
-  if (newton_solve(&ws->segments, w, d->qvel, ws->rhs, dt, iterations, ws->newton_tolerance)) return FINRFT_NOT_CONVERGED;
+  if (newton_solve(ws, d->qvel, dt, iterations)) return FINRFT_NOT_CONVERGED;
   for (int a = 0; a < m->nu; a++) {
     int adr = m->actuator_actadr[a];
     if (adr < 0) continue;

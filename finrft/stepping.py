@@ -133,7 +133,8 @@ def step_through(m: mujoco.MjModel, d: mujoco.MjData, scene: Any, advance: Stepp
     ``forward`` is False: then only the state is current) at recorded step ``samples[i]``; ``advance`` steps in
     chunks in between. Stops loudly if the state blows up, or if the ``watch`` dofs chatter (fixed-step methods:
     the three steps before every PROBE_EVERY-th sample are taken one by one and checked when the run ends).
-    An adaptive method steps to each event's `instants` (the drive's strokes last ``stroke_time``)."""
+    An adaptive method steps to each event's `instants` (the drive's strokes last ``stroke_time``) and restarts its
+    step size at each reversal."""
     adaptive = scene.sim.method in ADAPTIVE
     probe = len(watch) > 0 and not adaptive
     # velocity[i, j]: the watched velocities 3 - j steps before sample i (j = 3: at the sample)
@@ -154,6 +155,8 @@ def step_through(m: mujoco.MjModel, d: mujoco.MjData, scene: Any, advance: Stepp
             k = stroke_of[i]
             if step == starts[k]:
                 on_stroke(k)
+                if adaptive and k:
+                    advance.restart()
             for at in slot.get(step, ()):
                 velocity[at] = d.qvel[watch]
             if sample < len(samples) and step == samples[sample]:

@@ -36,7 +36,7 @@ FINER = 0.5
 MIN_STROKE_STEPS = 8
 COMPARE_EVERY = 4
 # Richardson's estimate holds once the error falls as the step's first power; at stroke reversals, stops and
-# stiff arms it can fall slower (the paper robot's adaptive steps near theta = 90 deg: 0.83 -> 0.62 points of eta
+# stiff arms it can fall slower (the paper robot's adaptive steps near theta = 90 deg: 0.80 -> 0.97 points of eta
 # when the largest step halves). The estimate is multiplied by a safety factor, as Roache's grid convergence index
 # does for a two-grid study.
 SAFETY = 2.0

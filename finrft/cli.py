@@ -758,9 +758,11 @@ def _table(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
         runs = run_experiments(jobs, max_error=_limits(args), workers=args.workers,
                                progress=bar and (lambda done, total: bar(done)))
     rows = table_rows(runs, PHYSICAL_FITTED if args.preset == "physical" and not args.scene else ())
-    _say(args, table_markdown(rows))
     if args.json:
+        _say(args, table_markdown(rows))
         print(_json(rows))
+    else:  # the table is what was asked for: --quiet leaves it
+        print(table_markdown(rows))
     return 0
 
 

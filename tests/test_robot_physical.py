@@ -107,3 +107,10 @@ def test_the_robot_in_its_medium_matches_the_independent_solution(physical):
     assert np.degrees(ref.hinge_angle.min()) < -10  # the fin folded in the recovery stroke (13 deg)
     with pytest.raises(ValueError, match="arm and body_drag"):  # not the [arm] keys the medium replaces
         solve_robot(scene, 1, run.time[:3])
+
+
+def test_quiet_table_still_prints_the_table(capsys):
+    # --quiet drops the progress bar and commentary, not the result the command was asked for
+    assert main(["table", "--preset", "physical", "--quiet", "--workers", "1"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert lines[0].startswith("| gait |") and sum(line.startswith("| Optimized |") for line in lines) == 1

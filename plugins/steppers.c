@@ -41,6 +41,8 @@ typedef struct {
   mjtNum* axes;                 // n x 6: x axis, then normal y
   int* ncol;                    // n: how many dofs move the segment (its body's chain)
   int* col;                     // n x nv: those dofs, ascending; the Jacobian's other columns are zero
+  int* moves;                   // n: bit k set when the segment's velocity has a component k (a planar chain's
+                                // segments have no z row): dF/dv needs no difference along the others
   mjtNum* vel;                  // n x 3: each segment's velocity at the last rft_force, world frame
   mjtNum* seg_force;            // n x 3: the law's force there
   int* stop_dof;                // nstop
@@ -85,7 +87,7 @@ static int workspace_make(const mjModel* m, mjData* d, Workspace* ws, int extra,
   }
   size_t numbers = 3 * (size_t)s->n * nv + 12 * (size_t)s->n + 2 * (size_t)s->nstop + 5 * (size_t)nv * nv +
                    13 * (size_t)nv + extra;
-  size_t ints = (size_t)s->n * (nv + 1) + s->nstop;
+  size_t ints = (size_t)s->n * (nv + 2) + s->nstop;
   size_t bytes = numbers * sizeof(mjtNum) + (s->ninst + s->n) * sizeof(void*) + ints * sizeof(int) + 1024;
   if (bytes + d->maxuse_stack > d->narena - d->pstack - d->parena) return FINRFT_ARENA_FULL;
   s->inst = (const FinrftInstance**)mj_stackAllocByte(d, (s->ninst + 1) * sizeof(void*), sizeof(void*));
@@ -94,6 +96,7 @@ static int workspace_make(const mjModel* m, mjData* d, Workspace* ws, int extra,
   s->axes = mj_stackAllocNum(d, 6 * (size_t)s->n + 1);
   s->ncol = mj_stackAllocInt(d, s->n + 1);
   s->col = mj_stackAllocInt(d, (size_t)s->n * nv + 1);
+  s->moves = mj_stackAllocInt(d, s->n + 1);
   s->vel = mj_stackAllocNum(d, 3 * (size_t)s->n + 1);
   s->seg_force = mj_stackAllocNum(d, 3 * (size_t)s->n + 1);
   s->stop_dof = mj_stackAllocInt(d, s->nstop + 1);
@@ -132,6 +135,13 @@ static void segments_update(const mjModel* m, mjData* d, Segments* s) {
         int t = col[a]; col[a] = col[b]; col[b] = t;
       }
       s->ncol[i] = c;
+      const mjtNum* jac = s->jacp + 3 * (size_t)s->nv * i;
+      s->moves[i] = 0;
+      for (int r = 0; r < 3; r++) {
+        for (int a = 0; a < c; a++) {
+          if (jac[r * s->nv + col[a]] != 0) s->moves[i] |= 1 << r;
+        }
+      }
     }
     for (int k = 0; p->stop_stiffness > 0 && k < p->nhinge; k++, h++) {
       s->stop_dof[h] = p->hinge_dof[k];
@@ -142,17 +152,25 @@ static void segments_update(const mjModel* m, mjData* d, Segments* s) {
 }
 
 // dF/dv (3 x 3, row-major) of one segment at velocity v, by central differences, or, given the force f0 at v,
-// forward ones: half the law's calls, for Newton's method, whose root does not depend on the derivative.
+// forward ones: half the law's calls, for Newton's method, whose root does not depend on the derivative. Only
+// along the directions in `moves` (bit k: v_k); the other columns are 0, as the segment's Jacobian has no row
+// there to take them.
 static void segment_jacobian(const FinrftInstance* p, const mjtNum v[3], const mjtNum x[3], const mjtNum y[3],
-                             const mjtNum* f0, mjtNum jac[9]) {
+                             const mjtNum* f0, int moves, mjtNum jac[9]) {
   mjtNum h = 1e-6 * (sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]) + p->v_reg);
+  for (int k = 0; k < 3; k++) {
+    if (moves >> k & 1) continue;
+    for (int r = 0; r < 3; r++) jac[3 * r + k] = 0;
+  }
   for (int k = 0; f0 && k < 3; k++) {
+    if (!(moves >> k & 1)) continue;
     mjtNum up[3] = {v[0], v[1], v[2]}, fu[3];
     up[k] += h;
     p->law->force(p->params, p->v_reg, up, x, y, fu);
     for (int r = 0; r < 3; r++) jac[3 * r + k] = (fu[r] - f0[r]) / h;
   }
   for (int k = 0; !f0 && k < 3; k++) {
+    if (!(moves >> k & 1)) continue;
     mjtNum up[3] = {v[0], v[1], v[2]}, down[3] = {v[0], v[1], v[2]}, fu[3], fd[3];
     up[k] += h;
     down[k] -= h;
@@ -193,7 +211,7 @@ static void rft_slope(const Segments* s, mjtNum* slope, int forward) {
     const int* col = s->col + (size_t)nv * i;
     mjtNum c[9], cj[3];
     segment_jacobian(s->law[i], s->vel + 3 * i, s->axes + 6 * i, s->axes + 6 * i + 3,
-                     forward ? s->seg_force + 3 * i : NULL, c);
+                     forward ? s->seg_force + 3 * i : NULL, s->moves[i], c);
     for (int b = 0; b < s->ncol[i]; b++) {
       int k = col[b];
       for (int r = 0; r < 3; r++) cj[r] = c[3 * r] * jac[k] + c[3 * r + 1] * jac[nv + k] + c[3 * r + 2] * jac[2 * nv + k];

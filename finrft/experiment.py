@@ -186,8 +186,18 @@ def run(experiment: Experiment, scene: Any, *, progress: Callable[[float], None]
     skips the estimate, for studies that measure the error themselves. A scene whose law can feed energy in (the
     paper's model) runs, with a warning once per process (`laws.FeedsEnergy`)."""
     laws.warn_if_feeds_energy(scene)
-    return checked(experiment.build, lambda s, built, p, companion: _once(experiment, s, built, p, companion),
-                   scene, progress, max_error, estimate_error)
+    # A companion on the run's model (the adaptive methods') steps the run's MjData again, reset: a new one costs
+    # a tenth of a physical gait's companion (the bindings' wrappers).
+    datas: dict[int, mujoco.MjData] = {}
+
+    def once(s: Any, built: Any, p: Callable[[float], None] | None, companion: bool) -> Result:
+        d = datas.get(id(built.model))
+        if d is None:
+            d = datas[id(built.model)] = mujoco.MjData(built.model)
+        else:
+            mujoco.mj_resetData(built.model, d)
+        return _once(experiment, s, built, d, p, companion)
+    return checked(experiment.build, once, scene, progress, max_error, estimate_error)
 
 
 def python_forces(built: Any) -> Callable[[mujoco.MjModel, mujoco.MjData], None]:
@@ -197,11 +207,11 @@ def python_forces(built: Any) -> Callable[[mujoco.MjModel, mujoco.MjData], None]
     return own() if own is not None else PythonCoupling(built.groups)
 
 
-def _once(experiment: Experiment, scene: Any, built: Any, progress: Callable[[float], None] | None,
+def _once(experiment: Experiment, scene: Any, built: Any, d: mujoco.MjData, progress: Callable[[float], None] | None,
           companion: bool) -> Result:
+    """One run of an experiment on a built model, from the state of a new MjData ``d`` of it."""
     start = time.perf_counter()
     m = built.model
-    d = mujoco.MjData(m)
     dt = scene.sim.dt
     drive = experiment.drive_for(scene)
     steps, starts, samples = schedule(drive, dt, scene.sim.record_dt)

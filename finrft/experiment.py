@@ -209,7 +209,7 @@ def python_forces(built: Any) -> Callable[[mujoco.MjModel, mujoco.MjData], None]
 
 def _once(experiment: Experiment, scene: Any, built: Any, d: mujoco.MjData, progress: Callable[[float], None] | None,
           companion: bool) -> Result:
-    """One run of an experiment on a built model, from the state of a new MjData ``d`` of it."""
+    """One run of an experiment on a built model, from the state of ``d``, an MjData of it new or reset."""
     start = time.perf_counter()
     m = built.model
     dt = scene.sim.dt

@@ -108,8 +108,8 @@ static int workspace_make(const mjModel* m, mjData* d, Workspace* ws, int extra,
   }
   Newton* w = &ws->w;
   mjtNum** squares[] = {&w->matrix, &w->jacobian, &w->slope, &ws->mass, &ws->start_slope};
-  mjtNum** vectors[] = {&w->other,     &w->force, &w->dv, &w->step,  &w->g,
-                        &w->trial,     &w->candidate, &w->u, &ws->rhs, &ws->start_force};
+  mjtNum** vectors[] = {&w->other, &w->force,     &w->dv, &w->step, &w->g,
+                        &w->trial, &w->candidate, &w->u,  &ws->rhs, &ws->start_force};
   for (int i = 0; i < 5; i++) *squares[i] = mj_stackAllocNum(d, (size_t)nv * nv + 1);
   for (int i = 0; i < 10; i++) *vectors[i] = mj_stackAllocNum(d, nv + 1);
   ws->start_ready = 0;
@@ -214,7 +214,9 @@ static void rft_slope(const Segments* s, mjtNum* slope, int forward) {
                      forward ? s->seg_force + 3 * i : NULL, s->moves[i], c);
     for (int b = 0; b < s->ncol[i]; b++) {
       int k = col[b];
-      for (int r = 0; r < 3; r++) cj[r] = c[3 * r] * jac[k] + c[3 * r + 1] * jac[nv + k] + c[3 * r + 2] * jac[2 * nv + k];
+      for (int r = 0; r < 3; r++) {
+        cj[r] = c[3 * r] * jac[k] + c[3 * r + 1] * jac[nv + k] + c[3 * r + 2] * jac[2 * nv + k];
+      }
       for (int a = 0; a < s->ncol[i]; a++) {
         int row = col[a];
         slope[row * nv + k] += jac[row] * cj[0] + jac[nv + row] * cj[1] + jac[2 * nv + row] * cj[2];
@@ -272,9 +274,10 @@ static mjtNum newton_residual(const Segments* s, Newton* w, const mjtNum* qvel, 
   return mju_norm(out, nv);
 }
 
-// The velocity change of one step from the start step_prepare saw into ws->w.dv (ws->rhs = M qacc at v). With iterations == 1 the linearly implicit step
-// in the RFT force (the first Newton iterate, no line search, stops as MuJoCo computed them); otherwise the root
-// of G, with the stops' torque taken at the new positions too, by Newton's method, or FINRFT_NOT_CONVERGED.
+// The velocity change of one step from the start step_prepare saw into ws->w.dv (ws->rhs = M qacc at v). With
+// iterations == 1 the linearly implicit step in the RFT force (the first Newton iterate, no line search, stops as
+// MuJoCo computed them); otherwise the root of G, with the stops' torque taken at the new positions too, by
+// Newton's method, or FINRFT_NOT_CONVERGED.
 static int newton_solve(Workspace* ws, const mjtNum* qvel, mjtNum dt, int iterations) {
   const Segments* s = &ws->segments;
   Newton* w = &ws->w;
@@ -409,9 +412,10 @@ FINRFT_EXPORT int finrft_implicit_step(const mjModel* m, mjData* d, int nstep, i
 // The adaptive methods: steps over `duration` seconds, implicit (iterations == 1: "adaptive") or newton
 // ("adaptive-newton"), each accepted when one step of h and two of h/2 agree to `tol` (max over qpos, qvel of
 // |difference| / (1e-3 + |value|); newton steps: over qpos only, as a light segment's velocity jumps onto the
-// stiff force's balance within any step, which shows in the positions as h times the jump, see integrate.py). Both are first order, so the accepted positions and velocities are
-// extrapolated, 2 (two halves) - (one step), which cancels the first-order error. The step grows or shrinks by
-// 0.9 sqrt(tol / error) (within 0.2x..2x), never above hmax; *h carries it over calls. A newton step whose solve
+// stiff force's balance within any step, which shows in the positions as h times the jump, see integrate.py).
+// Both are first order, so the accepted positions and velocities are extrapolated, 2 (two halves) - (one step),
+// which cancels the first-order error. The step grows or shrinks by 0.9 sqrt(tol / error) (within 0.2x..2x), never
+// above hmax; *h carries it over calls (the caller sets it small again after a reversal). A newton step whose solve
 // finds no root is rejected like one over the tolerance, its size divided by 4 (no halving inside the step).
 // counts (or NULL): the steps accepted and rejected are added to counts[0] and counts[1].
 // Returns 0, FINRFT_UNSTABLE, FINRFT_STEP_TOO_SMALL when the step falls below 1e-9 s, or another failure's code.

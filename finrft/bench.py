@@ -156,10 +156,12 @@ def _rollout_rate(scene: Scene, drive: Drive, n: int, workers: int) -> tuple[flo
 
 
 def scaling(path: str | Path, scene: Scene | None = None, *, batch_size: int = 64,
-            counts: list[int] | None = None, log: Callable[[str], None] = print) -> dict[str, Any]:
+            counts: list[int] | None = None, measured: dict[str, Any] | None = None,
+            log: Callable[[str], None] = print) -> dict[str, Any]:
     """Batch throughput (steps/s) of the paper drag against the number of workers (1, 2 and up to the cores):
     the process pool of whole runs and the threaded batch of their states, with bare mj_step on one core times
-    the workers for scale; a chart at ``path``."""
+    the workers for scale; a chart at ``path``. ``measured``: the figures of `backends` in the same run, whose bare
+    rate and batches on its workers the chart takes rather than measure them again (and disagree by the noise)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -167,13 +169,18 @@ def scaling(path: str | Path, scene: Scene | None = None, *, batch_size: int = 6
     drive = Drive(speed=0.03, stroke=0.2)
     counts = counts or list(range(1, max(2, batch.default_workers()) + 1))
     steps = simulate(scene, drive, estimate_error=False).steps
-    bare = steps / _best(_stepping(scene.replace(**{"sim.backend": "python"}), drive, steps), 7)
+    measured = measured if measured and measured.get("batch_size") == batch_size else {}
+    bare = measured.get("bare_steps_per_s") or steps / _best(_stepping(scene.replace(**{"sim.backend": "python"}),
+                                                                       drive, steps), 7)
     jobs = _drags(scene, drive, batch_size)
     total = steps * batch_size
     rows = []
     for n in counts:
-        rows.append({"workers": n, "pool_steps_per_s": total / _pool_rate(jobs, n),
-                     "rollout_steps_per_s": total / _rollout_rate(scene, drive, batch_size, n)[1],
+        if n == measured.get("workers"):
+            pool, rolled = measured["batch_parallel_steps_per_s"], measured["batch_rollout_steps_per_s"]
+        else:
+            pool, rolled = total / _pool_rate(jobs, n), total / _rollout_rate(scene, drive, batch_size, n)[1]
+        rows.append({"workers": n, "pool_steps_per_s": pool, "rollout_steps_per_s": rolled,
                      "bare_steps_per_s": n * bare})
         log(f"{n} workers: pool {rows[-1]['pool_steps_per_s']:10.0f}, threads {rows[-1]['rollout_steps_per_s']:10.0f}"
             f" steps/s (bare x workers {n * bare:10.0f})")

@@ -396,6 +396,7 @@ def build_parser() -> argparse.ArgumentParser:
     backends.add_argument("--scaling", metavar="FILE.png", help="also chart the batch throughput against the "
                           "number of workers (1, 2, ... up to the cores): process pool and threaded batch")
     _add_workers(backends)
+    _add_force(backends)
     robot = kinds.add_parser("robot", help="one gait evaluation and a full optimisation",
                              description="Time one gait evaluation (one flap cycle) and a CMA-ES optimisation of "
                              "--budget evaluations on all cores, for a robot preset.")
@@ -995,10 +996,8 @@ def _bench(args: argparse.Namespace) -> int:
             figures = bench.fit_speed(args.data, budget=args.budget, workers=args.workers, log=log,
                                       progress=bar and (lambda done, total: bar(done)))
     else:
-        if args.bench == "backends" and args.scaling:
-            target = Path(args.scaling)
-            if target.suffix.lower() != ".png" or not target.parent.is_dir():
-                raise UsageError(f"--scaling {args.scaling}: give a .png file in an existing folder")
+        if args.bench == "backends":
+            _check_output(args.scaling, ".png", "--scaling", args.force)
         run = {"modelling": lambda **kw: bench.modelling(**kw),
                "robot": lambda **kw: bench.robot(scenes.preset(args.preset, scenes.RobotScene), budget=args.budget,
                                                  workers=args.workers, **kw),
@@ -1006,7 +1005,8 @@ def _bench(args: argparse.Namespace) -> int:
         with _progress(args, 1, f"bench {args.bench}", "%") as bar:
             figures = run[args.bench](log=log, progress=bar and (lambda done, total: bar(done / total)))
         if args.bench == "backends" and args.scaling:
-            figures["scaling"] = bench.scaling(args.scaling, batch_size=args.batch, log=log)["rows"]
+            figures["scaling"] = bench.scaling(args.scaling, batch_size=args.batch, measured=figures,
+                                               log=log)["rows"]
             _say(args, f"wrote {args.scaling}")
     if args.json:
         print(_json(figures))

@@ -202,6 +202,7 @@ WRITERS = [
     (["fit-rft", "--data", "forces.csv"], "--table", "rft.csv"),
     (["report"], "--out", "report"),
     (["bench", "accuracy"], "--out", "accuracy"),
+    (["bench", "backends"], "--scaling", "scaling.png"),
     (["run", "model.xml", "--scene", "scene.toml"], "--out", "run.h5"),
     (["run", "model.xml", "--scene", "scene.toml"], "--rrd", "run.rrd"),
     (["intrude"], "--plot", "curves.png"),

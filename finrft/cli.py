@@ -398,8 +398,10 @@ def build_parser() -> argparse.ArgumentParser:
     _add_workers(backends)
     _add_force(backends)
     robot = kinds.add_parser("robot", help="one gait evaluation and a full optimisation",
-                             description="Time one gait evaluation (one flap cycle) and a CMA-ES optimisation of "
-                             "--budget evaluations on all cores, for a robot preset.")
+                             description="Time one gait evaluation as the optimiser runs it (the preset's "
+                             "gait.cycles flap cycles, eta over the steady ones), measure its eta against a converged "
+                             "run of the same gait, and time a CMA-ES optimisation of --budget evaluations on all "
+                             "cores, for a robot preset.")
     robot.add_argument("--preset", default="paper", choices=scenes.PRESETS[scenes.RobotScene],
                        help="robot preset (default: %(default)s)")
     robot.add_argument("--budget", type=_number("evaluations", minimum=1, inclusive=True, integer=True),

@@ -36,9 +36,9 @@ FINER = 0.5
 MIN_STROKE_STEPS = 8
 COMPARE_EVERY = 4
 # Richardson's estimate holds once the error falls as the step's first power; at stroke reversals, stops and
-# stiff arms it can fall slower (the paper robot's adaptive steps near theta = 90 deg: 0.80 -> 0.97 points of eta
-# when the largest step halves). The estimate is multiplied by a safety factor, as Roache's grid convergence index
-# does for a two-grid study.
+# stiff arms it can fall slower or not at all (the paper robot's adaptive steps near theta = 90 deg: 0.80 -> 0.97
+# points of eta when the largest step halves). The estimate is multiplied by a safety factor, as Roache's grid
+# convergence index does for a two-grid study.
 SAFETY = 2.0
 
 

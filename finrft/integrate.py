@@ -17,8 +17,8 @@
   ``sim.max_step``; the accepted state is extrapolated, 2 (two halves) - (one step), which cancels the implicit
   step's first-order error. ``sim.dt`` is then only the time grid of reversals and recorded samples.
   A step cut short to land on a sample or a reversal leaves the next step's size as it was; after a reversal
-  (`Adaptive.restart`) the steps start again from ``sim.max_step * sqrt(sim.tolerance)``: the drive's velocity
-  jumps there, and the size the sweep before allowed says nothing of the transient after it.
+  (`Adaptive.restart`) the steps start again from at most ``sim.max_step * sqrt(sim.tolerance)``: the drive's
+  velocity jumps there, and the size the sweep before allowed says nothing of the transient after it.
 - ``adaptive-newton``: the same control on newton steps, the error measured on qpos only: the stiff RFT force
   slaves a light segment's velocity to its position, so the velocity jumps within microseconds (at the start, at
   each reversal) and the newton step lands on the jumped value whatever its size; the halves and the whole step
@@ -146,12 +146,12 @@ class Adaptive(_Counted):
         return self.until(d, d.time + n * self.m.opt.timestep)
 
     def restart(self) -> None:
-        """Take the next step small again, as after a discontinuity (a reversal of the drive): max_step x
+        """Take the next step small again, as after a discontinuity (a reversal of the drive): at most max_step x
         sqrt(tolerance), the step the control would choose after a largest step whose error were of order one.
         Carried over, a step grown through the sweep before a reversal took the transient after it in one piece,
         its halves fooled alike: eta 0.1 points off on the physical robot's symmetric gaits at every tolerance
         from 2.5e-2 to 2.5e-4. Not sim.dt, which is only the grid of the reversals."""
-        self.h = self.max_step * np.sqrt(self.tolerance)
+        self.h = min(self.h, self.max_step * np.sqrt(self.tolerance))
 
     def until(self, d: mujoco.MjData, end: float) -> int:
         """Steps to time ``end`` exactly, off the grid of ``sim.dt`` if need be (a reversal of the drive)."""

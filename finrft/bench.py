@@ -18,7 +18,7 @@ from .drive import Drive
 from .convergence import ErrorLimits, SimulationFailed
 from .experiment import Experiment, run as run_experiment
 from .optimize import evaluation_scene, optimize
-from .scene import ADAPTIVE, PRESETS, RobotScene, Scene, preset
+from .scene import ADAPTIVE, PRESETS, RobotScene, Scene, preset, resolution
 from .simulate import PlateTest, simulate
 from .swim import Swim, steady_cycles, swim
 
@@ -219,8 +219,7 @@ def robot(scene: RobotScene | None = None, *, budget: int = 300, workers: int | 
                gait_eta_error=abs(eta - eta_reference), gait_reference=label,
                error_estimate_overhead=_estimate_overhead(lambda **o: swim(evaluated, cycles, max_error=None, **o),
                                                           repeat))
-    log(f"one gait evaluation ({cycles} flap cycle(s), eta over {steady_cycles(cycles)}; {scene.sim.method}, "
-        f"dt {scene.sim.dt:g} s, "
+    log(f"one gait evaluation ({cycles} flap cycle(s), eta over {steady_cycles(cycles)}; {resolution(scene.sim)}, "
         f"{run.steps} steps): {wall * 1e3:.1f} ms (target <= 10 ms; the authors' model ~15 s); its error estimate "
         f"costs {100 * out['error_estimate_overhead']:.0f} % more (target <= 30 %); eta {100 * eta:.3f} %, "
         f"{100 * out['gait_eta_error']:.4f} points from the reference ({label}: {100 * eta_reference:.3f} %; "

@@ -643,7 +643,7 @@ def _swim(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
     _write(args, run)
     _say(args, f"{scene.robot.model} robot, {scene.fin.kind} fin, theta1 {summary['theta1_deg']:g} deg, theta2 "
          f"{summary['theta2_deg']:g} deg, arm {summary['arm_length_mm']:g} mm, omega {summary['omega_deg_s']:g} "
-         f"deg/s, {scene.sim.method} method (dt {scene.sim.dt:g} s, {run.backend}): {_steps(summary)} in "
+         f"deg/s, {scenes.resolution(scene.sim)} ({run.backend}): {_steps(summary)} in "
          f"{run.wall_s:.2f} s")
     for i, row in enumerate(run.cycle_table(), start=1):
         _say(args, f"cycle {i}: eta {100 * row['eta']:+.2f} %, forward D1 {row['D1_mm']:.2f} mm, back D2 "

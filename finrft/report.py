@@ -23,7 +23,7 @@ from .drive import Drive
 from .experiment import Result
 from .fit import DragData, fit, read_drag, resolve_params, simulated_angles
 from .optimize import optimize
-from .scene import ADAPTIVE, RobotScene, Scene, SceneError, preset
+from .scene import RobotScene, Scene, SceneError, preset, resolution
 from .swim import (PAPER_TABLE, PHYSICAL_FITTED, Swim, steady_cycles, swim, table_markdown, table_rows,
                    table_scenes)
 
@@ -245,22 +245,13 @@ def robot(out: Path, quick: bool, workers: int | None) -> str:
     fig.tight_layout()
     fig.savefig(out / "robot.png", dpi=150)
     plt.close(fig)
-    return (f"Paper preset ({_resolution(scene)}), one flap cycle from rest:\n\n"
+    return (f"Paper preset ({resolution(scene.sim)}), one flap cycle from rest:\n\n"
             f"{table_markdown(rows)}\n\n![optimisation and trajectories](robot.png)\n\n"
             f"CMA-ES: {search.evaluations} evaluations in {search.wall_s:.1f} s; its optimum, eta "
             f"{100 * (1 - search.cost):.2f} %, carries an estimated discretisation error of {error:.2g} points (every "
             f"evaluation is checked; those above 0.5 points score as failed). Recordings: "
             f"`robot_optimum.rrd`, `optimization.rrd`. See the README's robot section for why eta is negative on "
             f"the paper's definition and for the optimiser's sensitivity to dt.")
-
-
-def _resolution(scene: RobotScene) -> str:
-    """The scene's method and what sets its steps: the tolerance and largest step of an adaptive method (its dt is
-    only the grid of the reversals), else the step."""
-    sim = scene.sim
-    if sim.method in ADAPTIVE:
-        return f"{sim.method} method, tolerance {sim.tolerance:g}, steps up to {sim.max_step:g} s"
-    return f"{sim.method} method, dt {sim.dt:g} s"
 
 
 def _trajectories(ax: Any, runs: list[Result], cycles: int) -> None:
@@ -302,7 +293,7 @@ def robot_physical(out: Path, quick: bool, workers: int | None) -> str:
     fig.savefig(out / "robot_physical.png", dpi=150)
     plt.close(fig)
     mean = np.mean([abs(r["eta"] - r["paper_eta_exp"]) for r in rows])
-    return (f"Physical preset (forces from 3D-RFT in its [medium], {_resolution(scene)}), eta over the steady "
+    return (f"Physical preset (forces from 3D-RFT in its [medium], {resolution(scene.sim)}), eta over the steady "
             f"{steady_cycles(gaits[0].gait.cycles)}; mean |eta - eta_exp| {100 * mean:.2f} points:\n\n"
             f"{table_markdown(rows)}\n\n![model against experiment, trajectories](robot_physical.png)\n\n"
             f"See the README's robot section for the model, what was fitted and where it fails.")

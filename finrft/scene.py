@@ -232,6 +232,14 @@ def _check_medium(m: Medium) -> None:
 # The methods whose steps follow an error estimate (sim.tolerance, sim.max_step) on the time grid sim.dt.
 ADAPTIVE = ("adaptive", "adaptive-newton")
 
+
+def resolution(sim: Any) -> str:
+    """A scene's method and what sets its steps, in words: the tolerance and largest step of an adaptive method
+    (its dt is only the grid of reversals and samples), else the step."""
+    if sim.method in ADAPTIVE:
+        return f"{sim.method} method, tolerance {sim.tolerance:g}, steps up to {sim.max_step:g} s"
+    return f"{sim.method} method, dt {sim.dt:g} s"
+
 # Newton, implicit and adaptive steps take implicitly only the forces of the segment law's force groups (the
 # plugin finrft.rft); the surface elements of `attach` are not among them, so a user's model runs MuJoCo's step.
 EXPLICIT_ONLY = ("explicit",)

@@ -801,7 +801,7 @@ def _interrupted(command: str, log: str | None, schema: str) -> "Interrupted":
 
 def _fit(args: argparse.Namespace) -> int:
     from . import searchlog
-    from .fit import drag_for, fit, fit_summary, logged_problem, plot, read_drag, resolve_params
+    from .fit import ALIASES, drag_for, fit, fit_summary, logged_problem, plot, read_drag, resolve_params
     for path, suffix, flag in ((args.write_scene, ".toml", "--write-scene"), (args.plot, ".png", "--plot"),
                                (args.rrd, ".rrd", "--rrd")):
         _check_output(path, suffix, flag, args.force)
@@ -815,7 +815,7 @@ def _fit(args: argparse.Namespace) -> int:
         scene = _resolve_scene(args)
         data = [read_drag(p) for p in args.data]
         names = [n.strip() for n in (args.params or "b").split(",") if n.strip()]
-        variables = resolve_params(names, _parse_bounds(args.bounds))
+        variables = resolve_params(names, _parse_bounds(args.bounds, scenes.Scene, ALIASES))
     validate = [read_drag(p) for p in args.validate]
     with _progress(args, args.budget, "fit", "evaluations") as bar:
         def on_generation(g: int, values: np.ndarray, extras: dict[str, np.ndarray], es: Any) -> None:
@@ -871,7 +871,14 @@ def _fit_rft(args: argparse.Namespace) -> int:
     return 0
 
 
-def _parse_bounds(items: list[str]) -> dict[str, tuple[float, float]]:
+# The unit suffixes --bounds takes, each for the keys of one SI unit.
+_BOUND_UNITS = {"deg": ("rad", math.pi / 180), "mm": ("m", 1e-3)}
+
+
+def _parse_bounds(items: list[str], cls: type,
+                  aliases: dict[str, str] | None = None) -> dict[str, tuple[float, float]]:
+    """--bounds KEY=LOW:HIGH items of ``cls``'s scene keys (or their ``aliases``) in SI, or in deg or mm where the
+    key's unit is rad or m."""
     bounds = {}
     for item in items:
         key, sep, span = item.partition("=")
@@ -879,8 +886,16 @@ def _parse_bounds(items: list[str]) -> dict[str, tuple[float, float]]:
         if not sep or not sep2:
             raise UsageError(f"--bounds expects KEY=LOW:HIGH, got '{item}'")
         scale = 1.0
-        for suffix, factor in (("deg", math.pi / 180), ("mm", 1e-3)):
+        for suffix, (si, factor) in _BOUND_UNITS.items():
             if high.strip().endswith(suffix):
+                try:
+                    unit = scenes.field_of(cls, (aliases or {}).get(key.strip(), key.strip())).metadata["unit"]
+                except scenes.SceneError:
+                    unit = si  # an unknown key: the search names it
+                if unit != si:
+                    other = next((f" or {s}" for s, (u, _) in _BOUND_UNITS.items() if u == unit), "")
+                    raise UsageError(f"--bounds {item}: {suffix} is no unit of {key.strip()}, whose unit is "
+                                     f"{unit or 'none'}: give its bounds in {unit or 'plain numbers'}{other}")
                 scale, low, high = factor, low.strip().removesuffix(suffix), high.strip().removesuffix(suffix)
         try:
             bounds[key.strip()] = (float(low) * scale, float(high) * scale)
@@ -903,7 +918,7 @@ def _optimize(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
         past = read_log(args.resume)
         generations = [(_display_units(list(variables), past["x"][past["generation"] == g]),
                         past["eta"][past["generation"] == g]) for g in range(len(past["state/sigma"]))]
-    for key, (low, high) in _parse_bounds(args.bounds).items():
+    for key, (low, high) in _parse_bounds(args.bounds, scenes.RobotScene).items():
         variables[key] = Variable(key, low, high)
     executor = None
     if args.executor == "dask":

@@ -187,7 +187,7 @@ def cmaes(evaluate: Evaluate, variables: Sequence[Variable], *, budget: int | No
           columns: dict[str, tuple[str, int, str]] | None = None,
           on_generation: Callable[[int, np.ndarray, dict[str, np.ndarray], Any], None] | None = None) -> Search:
     """Minimise a population cost over ``variables`` with CMA-ES (normalised to [0, 1], sigma0 = 0.25, from
-    ``start`` or the middle of the bounds).
+    ``start`` where it lies within the bounds, else the middle of the bounds).
 
     ``log`` (HDF5, schema ``schema``) is rewritten after each generation with every evaluation, its ``columns``
     (name -> (unit, width (0 for one value), description)) and the optimiser's state, next to the variables (SI
@@ -217,7 +217,9 @@ def cmaes(evaluate: Evaluate, variables: Sequence[Variable], *, budget: int | No
     else:
         budget = 300 if budget is None else budget
         seed = 1 if seed is None else seed
-        x0 = np.array([v.to_unit((start or {}).get(v.key, v.from_unit(0.5))) for v in variables])
+        # a start outside its variable's bounds (the paper's, under narrower --bounds) gives way to their middle
+        x0 = np.array([v.to_unit(x) if v.low <= (x := (start or {}).get(v.key, v.from_unit(0.5))) <= v.high else 0.5
+                       for v in variables])
         attrs = {"schema": schema, **provenance(), "cma_version": cma.__version__, "seed": seed,
                  "budget": budget, "sigma0": 0.25, "variables": [v.key for v in variables], **(problem or {})}
     if budget < 1:

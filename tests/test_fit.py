@@ -121,6 +121,7 @@ def test_bad_data_files(tmp_path, capsys, name):
     (["fit", "--data", "missing.csv"], "missing.csv"),
     (["fit", "--data", f"{DATA}/origami_v30.csv", "--params", "colour"], "colour"),
     (["fit", "--data", f"{DATA}/origami_v30.csv", "--params", "b", "--bounds", "plate.damping=2:1"], "lower"),
+    (["fit", "--data", f"{DATA}/origami_v30.csv", "--params", "k", "--bounds", "k=1:2deg"], "deg is no unit of k"),
     (["fit-rft", "--data", f"{DATA}/origami_v30.csv"], "columns"),
 ])
 def test_bad_fit_input(capsys, argv, named):

@@ -128,12 +128,24 @@ def test_dask_executor_gives_the_local_result(paper):
     (["optimize", "--budget", "0"], "--budget"),
     (["optimize", "--bounds", "gait.theta1=80:10deg"], "lower"),
     (["optimize", "--bounds", "body.colour=1:2"], "body.colour"),
+    # a unit suffix of another quantity: 3:5 deg read as 52..87 mm of arm
+    (["optimize", "--bounds", "arm.length=3:5deg"], "deg is no unit of arm.length, whose unit is m"),
+    (["optimize", "--bounds", "gait.theta1=10:80mm"], "mm is no unit of gait.theta1"),
     (["optimize", "--executor", "dask", "--address", "tcp://127.0.0.1:9"], "127.0.0.1:9"),
 ])
 def test_robot_bad_input(capsys, argv, named):
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert named in err and len(err.strip().splitlines()) == 1
+
+
+def test_optimize_starts_inside_bounds_that_leave_out_the_papers_start(capsys):
+    # The paper's start (theta1 50 deg) lies outside 60..90 deg: the search starts in their middle (it raised
+    # cma's "argument of inverse must be within the given bounds")
+    assert main(["optimize", "--bounds", "gait.theta1=60:90deg", "--budget", "6", "--workers", "1", "--json",
+                 "--quiet"]) == 0
+    result = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert 60 <= result["theta1_deg"] <= 90
 
 
 def test_optimize_never_overwrites_and_rejects_foreign_logs(tmp_path, capsys):

@@ -29,7 +29,7 @@ from typing import Any, Callable, Protocol, TypeVar
 
 import numpy as np
 
-from .scene import ADAPTIVE, SceneError
+from .scene import ADAPTIVE, ExplicitSim, SceneError
 
 COARSER = 5
 FINER = 0.5
@@ -188,7 +188,7 @@ def advice(scene: Any) -> str:
     sim = scene.sim
     if sim.method in ADAPTIVE:
         return f"tighten sim.tolerance (now {sim.tolerance:g}) or sim.max_step (now {sim.max_step:g} s)"
-    if sim.method == "newton":
+    if sim.method == "newton" or isinstance(sim, ExplicitSim):  # an ExplicitSim scene has no other method
         return f"reduce sim.dt (now {sim.dt:g} s)"
     return f"reduce sim.dt (now {sim.dt:g} s) or use sim.method = 'newton'"
 

@@ -9,13 +9,20 @@ from typing import Any, Callable, Sequence
 import mujoco
 import numpy as np
 
-from .convergence import SimulationUnstable, check_resolution, check_size, record_every
+from .convergence import SimulationFailed, SimulationUnstable, check_resolution, check_size, record_every
 from .drive import Drive
 from .integrate import Stepper
+from .models import ARMATURE_RATIO
 from .native import Code, captured_warnings
-from .scene import ADAPTIVE
+from .scene import ADAPTIVE, ExplicitSim
 
 _BAD_STATE = (mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL)
+
+# The largest distance a prescribed drive may fall behind (or run ahead of) its motion within a stroke, as a share
+# of the stroke. Its armature holds it there only while the load is small against armature / time^2: a light driven
+# body under a large force (a user's 1 g plate dragged 500 mm: 0.7 %) drifts, and the run would report the wrong
+# travel. The presets drift by at most 2e-6.
+DRIVE_LAG = 1e-4
 
 
 class Prescribed:
@@ -23,7 +30,8 @@ class Prescribed:
     each reversal the rest of the system takes the impulse an ideal kinematic constraint would give it.
 
     The drive's impulse over a stroke is exactly -armature times the change of its velocity (summed over the
-    joints), and its instantaneous force or torque is -armature * qacc.
+    joints), and its instantaneous force or torque is -armature * qacc. A stroke whose joints end more than
+    DRIVE_LAG of the stroke off the prescribed motion stops the run (SimulationFailed).
     """
 
     def __init__(self, dofs: Sequence[int], qpos: Sequence[int], armature: float, drive: Drive) -> None:
@@ -31,6 +39,7 @@ class Prescribed:
         self.impulse = np.zeros(drive.strokes)
         self._stroke_velocity = np.zeros(len(self.dofs))
         self._stroke = 0
+        self._stroke_start = (0.0, np.zeros(len(self.qpos)))  # the time and the joints' positions as it started
 
     def start_stroke(self, m: mujoco.MjModel, d: mujoco.MjData, k: int) -> None:
         if k:
@@ -40,6 +49,7 @@ class Prescribed:
         else:
             d.qvel[self.dofs] = self.drive.stroke_velocity(0)
         self._stroke, self._stroke_velocity = k, d.qvel[self.dofs].copy()
+        self._stroke_start = (d.time, d.qpos[self.qpos].copy())
 
     def finish(self, d: mujoco.MjData) -> None:
         self._close(d)
@@ -50,6 +60,17 @@ class Prescribed:
 
     def _close(self, d: mujoco.MjData) -> None:
         self.impulse[self._stroke] = -self.armature * np.sum(d.qvel[self.dofs] - self._stroke_velocity)
+        start, q0 = self._stroke_start
+        lag = float(np.max(np.abs(d.qpos[self.qpos] - q0 - self.drive.stroke_velocity(self._stroke) *
+                                  (d.time - start))))
+        if lag > DRIVE_LAG * self.drive.stroke:
+            rotary = self.drive.kind == "rotate"
+            raise SimulationFailed(
+                f"the drive ended stroke {self._stroke + 1} {np.degrees(lag) if rotary else 1e3 * lag:.3g} "
+                f"{'deg' if rotary else 'mm'} off its prescribed motion ({100 * lag / self.drive.stroke:.2g} % of "
+                f"the stroke; at most {100 * DRIVE_LAG:g} %): the load outweighs the drive's armature "
+                f"({self.armature:.3g} {'kg m^2' if rotary else 'kg'}, {ARMATURE_RATIO:g} times what it moves), so "
+                f"the reported travel would be wrong: give the driven body more mass, or lighten the load")
 
     def _reverse(self, m: mujoco.MjModel, d: mujoco.MjData, jump: np.ndarray) -> None:
         """Velocity jumps ``jump`` on the driven joints: M0 dq = E mu with E^T dq = jump, where M0 is the mass
@@ -77,7 +98,8 @@ def unstable(scene: Any, t: float, messages: list[str], code: int = 1) -> Simula
             f"Newton's method of the implicit step did not converge at t = {t:.4g} s (dt = {sim.dt:g} s): reduce "
             f"sim.dt or raise rft.v_reg")
     what = messages[0].rstrip(".") if messages else "the velocity became NaN or Inf"
-    advice = ("reduce sim.dt, raise the inertias or rft.v_reg, or use sim.method = 'newton'"
+    advice = ("reduce sim.dt or raise the inertias" if isinstance(sim, ExplicitSim)  # its only method
+              else "reduce sim.dt, raise the inertias or rft.v_reg, or use sim.method = 'newton'"
               if sim.method == "explicit" else "reduce sim.dt (or sim.max_step), or raise rft.v_reg")
     return SimulationUnstable(f"simulation went unstable at t = {t:.4g} s ({what}) with method {sim.method}, "
                               f"integrator {sim.integrator}, dt = {sim.dt:g} s: {advice}")
@@ -85,9 +107,11 @@ def unstable(scene: Any, t: float, messages: list[str], code: int = 1) -> Simula
 
 def chatter(scene: Any, t: float) -> SimulationUnstable:
     sim = scene.sim
+    advice = ("reduce sim.dt or raise the inertias" if isinstance(sim, ExplicitSim)  # its only method
+              else "use sim.method = 'newton', or reduce sim.dt")
     return SimulationUnstable(
         f"the RFT force chatters at t = {t:.4g} s (it reverses every step: the segments overshoot) with method "
-        f"{sim.method}, dt = {sim.dt:g} s: use sim.method = 'newton', or reduce sim.dt")
+        f"{sim.method}, dt = {sim.dt:g} s: {advice}")
 
 
 def schedule(drive: Drive, dt: float, record_dt: float) -> tuple[int, np.ndarray, np.ndarray]:

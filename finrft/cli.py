@@ -281,7 +281,6 @@ def build_parser() -> argparse.ArgumentParser:
     ig.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="override a scene key in SI units, e.g. --set medium.zeta=0.5 (repeatable)")
     ig.add_argument("--backend", choices=("native", "python"), help="where the RFT force is computed")
-    _add_max_error(intrude)
     intrude.add_argument("--plot", metavar="FILE.png", help="write the force-depth curves as a figure")
     _add_force(intrude)
     _add_json(intrude, "each angle's summary and curve")
@@ -292,7 +291,7 @@ def build_parser() -> argparse.ArgumentParser:
                             "(medium.name) and `finrft law --medium` take: each value with its unit and source, "
                             "what is unverified, and what could not be found.")
     medium.add_argument("name", nargs="?", metavar="NAME", help="one medium (default: --list)")
-    medium.add_argument("--list", action="store_true", help="every medium")
+    medium.add_argument("--list", action="store_true", help="every medium (the default)")
     _add_json(medium, "the media (each value with its unit and source)")
     _add_quiet(medium)
 
@@ -315,7 +314,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_quiet(law)
 
     table = sub.add_parser("table", help="the paper's Table I: six gaits, eta next to the paper's",
-                           description="Evaluate the six gaits of the paper's Table I (one flap cycle each) and "
+                           description="Evaluate the six gaits of the paper's Table I (the preset's gait.cycles flap "
+                           "cycles each, eta over the steady ones) and "
                            "print eta, the authors' script measure |net|/D1, D1, D2 and the net speed next to the "
                            "paper's eta_sim and eta_exp, as a Markdown table.")
     _add_workers(table)
@@ -704,7 +704,7 @@ def _intrude(args: argparse.Namespace) -> int:
     scene = (scenes.load_scene(args.scene, overrides=overrides, cls=scenes.IntrusionScene) if args.scene else
              scenes.scene_from_dict({}, scenes.IntrusionScene).replace(**overrides))
     with _progress(args, 1, "intrude", "%") as bar:
-        runs = intrude(scene, angles, progress=bar, max_error=_limits(args))
+        runs = intrude(scene, angles, progress=bar)
     if args.plot:
         with atomic_path(args.plot) as tmp:
             plot_curves(runs, tmp)
@@ -722,9 +722,9 @@ def _intrude(args: argparse.Namespace) -> int:
 
 def _medium(args: argparse.Namespace) -> int:
     from . import media
-    if args.name is None and not args.list:
-        raise UsageError("give a medium's NAME or --list (see 'finrft medium --help')")
-    chosen = media.media() if args.list else (media.medium(args.name),)
+    if args.name is not None and args.list:
+        raise UsageError(f"give a medium's NAME ({args.name}) or --list, not both")
+    chosen = (media.medium(args.name),) if args.name is not None else media.media()
     _say(args, "\n\n".join(media.describe(m) for m in chosen))
     if args.json:
         print(_json([m.to_dict() for m in chosen]))

@@ -83,6 +83,8 @@ def test_medium_list_json_shows_units_and_sources(capsys):
                                                  "source": media.medium("glass_beads_3mm").get("grain_diameter").source,
                                                  "status": ""}
     assert "zeta = 1 N/cm^3" in out and "(unverified)" in out and "not found: zeta" in out
+    assert main(["medium", "--json"]) == 0  # --list is the default, as its help says
+    assert _last_json(capsys.readouterr().out) == listed
 
 
 def test_law_li2013_json_is_the_law_on_its_grid(capsys):
@@ -127,7 +129,7 @@ def test_law_plot_is_written_and_not_overwritten(tmp_path, capsys):
     (["law", "li2013", "--medium", "glass_beads_3mm", "--plot", "m.png"], "glass_beads_3mm"),
     (["law", "li2013", "--plot", "m.pdf"], "must end in .png"),
     (["medium", "sand"], "unknown medium 'sand'"),
-    (["medium"], "--list"),
+    (["medium", "poppy_seeds_lp", "--list"], "not both"),
 ])
 def test_bad_input_is_one_line_exit_2_and_writes_nothing(argv, named, tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)

@@ -749,7 +749,9 @@ def _law(args: argparse.Namespace) -> int:
     if args.plot:
         _say(args, f"wrote figure: {args.plot}")
     if args.json:
-        print(_json({"law": args.name, **data}))
+        # the fields are in the law's map units (N/cm^3 for li2013), not SI: "units" names them
+        units = lawmap.law_module(args.name).MAP_UNITS
+        print(_json({"law": args.name, "units": {key: units[key] for key in list(data)[2:]}, **data}))
     return 0
 
 

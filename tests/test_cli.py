@@ -387,8 +387,8 @@ def test_law_sandswim_is_the_papers_magnitudes_per_unit_coefficient(tmp_path, ca
     assert main(["law", "sandswim", "--json", "--plot", str(tmp_path / "map.png")]) == 0
     out = capsys.readouterr().out
     data = _last_json(out)
-    assert list(data) == ["law", "psi_deg", "gamma0_deg", "f_perp_c_s", "f_perp_c_f", "f_par_c_f"]
-    assert {len(data[k]) for k in list(data)[1:]} == {91 * 18} and "F_perp = C_S f_perp_c_s" in out
+    assert list(data) == ["law", "units", "psi_deg", "gamma0_deg", "f_perp_c_s", "f_perp_c_f", "f_par_c_f"]
+    assert {len(data[k]) for k in list(data)[2:]} == {91 * 18} and "F_perp = C_S f_perp_c_s" in out
     assert sorted(set(data["psi_deg"])) == list(range(91))  # every degree
     psi, gamma0 = np.radians(data["psi_deg"]), np.radians(data["gamma0_deg"])
     # recombined with coefficients, the map is the law's magnitudes (the papers' form)

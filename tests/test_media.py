@@ -90,7 +90,8 @@ def test_medium_list_json_shows_units_and_sources(capsys):
 def test_law_li2013_json_is_the_law_on_its_grid(capsys):
     assert main(["law", "li2013", "--json", "--quiet"]) == 0
     data = _last_json(capsys.readouterr().out)
-    assert list(data) == ["law", "beta_deg", "gamma_deg", "alpha_x", "alpha_z"] and data["law"] == "li2013"
+    assert list(data) == ["law", "units", "beta_deg", "gamma_deg", "alpha_x", "alpha_z"] and data["law"] == "li2013"
+    assert data["units"] == {"alpha_x": "N/cm^3", "alpha_z": "N/cm^3"}  # not SI: the JSON says so
     beta, gamma = np.array(data["beta_deg"]), np.array(data["gamma_deg"])
     assert all(len(data[k]) == 37 * 37 for k in ("beta_deg", "gamma_deg", "alpha_x", "alpha_z"))
     # every (beta, gamma) pair of [-90, 90] deg at 5 deg, once

@@ -258,8 +258,8 @@ def _last_json(out):
 def test_law_rft3d_json_is_the_vertical_plane_in_units_of_xi(capsys):
     assert main(["law", "rft3d", "--json", "--quiet"]) == 0
     data = _last_json(capsys.readouterr().out)
-    assert list(data) == ["law", "beta_deg", "gamma_deg", "alpha_x", "alpha_z"] and data["law"] == "rft3d"
-    assert {len(data[k]) for k in list(data)[1:]} == {37 * 37}
+    assert list(data) == ["law", "units", "beta_deg", "gamma_deg", "alpha_x", "alpha_z"] and data["law"] == "rft3d"
+    assert {len(data[k]) for k in list(data)[2:]} == {37 * 37}
     at = {(b, g): (x, z) for b, g, x, z in zip(data["beta_deg"], data["gamma_deg"], data["alpha_x"], data["alpha_z"])}
     # the generic medium has no bulk density: xi_n = 1 N/cm^3, so a horizontal plate pushed down takes 0.87504
     assert at[(0, 90)] == pytest.approx((0.0, 0.87504), abs=1e-6)

@@ -599,11 +599,9 @@ def _run_test(args: argparse.Namespace) -> int:
     if forces_csv:
         append_forces(forces_csv, plate_forces(run))
     summary = run.summary()
-    _write(args, run)
     _say(args, _describe(run, summary))
-    for flag, path in (("HDF5", args.out), ("rerun recording", args.rrd), ("forces", forces_csv)):
-        if path:
-            _say(args, f"wrote {flag}: {path}")
+    _write(args, run)
+    _said_written(args, (("forces", forces_csv),))
     if args.json:
         print(_json(summary))
     return 0
@@ -632,6 +630,14 @@ def _write(args: argparse.Namespace, result: Result) -> None:
             record.write_h5(result, args.out)
         if args.rrd:
             record.write_rrd(result, args.rrd)
+    _said_written(args, (("HDF5", args.out), ("rerun recording", args.rrd)))
+
+
+def _said_written(args: argparse.Namespace, files: Sequence[tuple[str, str | None]]) -> None:
+    """One line for each file written, (what, path) with path None for one not asked for."""
+    for what, path in files:
+        if path:
+            _say(args, f"wrote {what}: {path}")
 
 
 def _swim(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
@@ -844,6 +850,8 @@ def _fit(args: argparse.Namespace) -> int:
         for name, rmse in table.items():
             _say(args, f"RMSE {name} ({label}): {rmse:.2f} deg")
     _say(args, f"{result.search.evaluations} evaluations in {result.search.wall_s:.1f} s")
+    _said_written(args, (("search log", log), ("scene", args.write_scene), ("figure", args.plot),
+                         ("rerun recording", args.rrd)))
     if args.json:
         print(_json(fit_summary(result)))
     return 0
@@ -956,6 +964,7 @@ def _optimize(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
     _say(args, f"best eta {100 * eta:.2f} % at theta1 {summary['theta1_deg']:.1f} deg, theta2 "
          f"{summary['theta2_deg']:.1f} deg, arm {summary['arm_length_mm']:.1f} mm after {result.evaluations} "
          f"evaluations in {result.wall_s:.1f} s")
+    _said_written(args, (("search log", log), ("rerun recording", args.rrd)))
     if args.json:
         print(_json(summary))
     return 0

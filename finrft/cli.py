@@ -718,8 +718,7 @@ def _intrude(args: argparse.Namespace) -> int:
         s = r.summary()
         _say(args, f"beta {s['angle_deg']:g} deg: at {s['final_depth_mm']:.1f} mm, vertical force "
              f"{s['final_force_z_N']:.4g} N, horizontal {s['final_force_x_N']:+.4g} N")
-    if args.plot:
-        _say(args, f"wrote figure: {args.plot}")
+    _said_written(args, (("figure", args.plot),))
     if args.json:
         print(_json([{**r.summary(), "depth_mm": 1e3 * r.depth, "force_z_N": r.force_z, "force_x_N": r.force_x}
                      for r in runs]))
@@ -746,17 +745,15 @@ def _law(args: argparse.Namespace) -> int:
             lawmap.plot(args.name, args.medium, data, tmp)
     (xkey, x), (ykey, y), *fields = data.items()
     units = lawmap.law_module(args.name).MAP_UNITS
-    _say(args, f"{args.name} in {args.medium}: {len(x)} points, {xkey} and {ykey} in "
-         f"[{min(x.min(), y.min()):g}, {max(x.max(), y.max()):g}]")
+    _say(args, f"{args.name} in {args.medium}: {len(x)} points, {xkey} in [{x.min():g}, {x.max():g}], {ykey} in "
+         f"[{y.min():g}, {y.max():g}]")
     for key, values in fields:
         _say(args, f"  {key}: {values.min():.4g} to {values.max():.4g} {units[key]}")
     if lawmap.note(args.name, args.medium):
         _say(args, f"  {lawmap.note(args.name, args.medium)}")
-    if args.plot:
-        _say(args, f"wrote figure: {args.plot}")
+    _said_written(args, (("figure", args.plot),))
     if args.json:
         # the fields are in the law's map units (N/cm^3 for li2013), not SI: "units" names them
-        units = lawmap.law_module(args.name).MAP_UNITS
         print(_json({"law": args.name, "units": {key: units[key] for key in list(data)[2:]}, **data}))
     return 0
 
@@ -872,7 +869,7 @@ def _fit_rft(args: argparse.Namespace) -> int:
             write_table(tmp, table)
     if args.out:
         _write_text(args.out, fragment)
-        _say(args, f"wrote {args.out}" + (f" and {table_path}" if table_path else ""))
+        _said_written(args, (("law", args.out), ("table", table_path)))
     else:
         print(fragment, end="")
     if args.json:
@@ -1006,7 +1003,7 @@ def _report(args: argparse.Namespace) -> int:
         path = write_report(args.out, quick=args.quick, workers=args.workers, data_dir=args.data,
                             plate=scenes.preset(args.preset),
                             progress=bar and (lambda done, total, part: bar(done / total, part)))
-    _say(args, f"wrote {path}")
+    _said_written(args, (("report", path),))
     return 0
 
 
@@ -1035,7 +1032,7 @@ def _bench(args: argparse.Namespace) -> int:
         if args.bench == "backends" and args.scaling:
             figures["scaling"] = bench.scaling(args.scaling, batch_size=args.batch, measured=figures,
                                                log=log)["rows"]
-            _say(args, f"wrote {args.scaling}")
+            _said_written(args, (("figure", args.scaling),))
     if args.json:
         print(_json(figures))
     return 0

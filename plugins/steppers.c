@@ -106,6 +106,20 @@ static int workspace_make(const mjModel* m, mjData* d, Workspace* ws, int extra,
     const FinrftInstance* p = m->plugin[i] == slot ? finrft_instance(m, d, i) : NULL;
     if (p) s->inst[k++] = p;
   }
+  // Each segment's law and the dofs that move it (its body's chain, ascending): the model's, for every step.
+  for (int j = 0, i = 0; j < s->ninst; j++) {
+    const FinrftInstance* p = s->inst[j];
+    for (int k = 0; k < p->nseg; k++, i++) {
+      s->law[i] = p;
+      int* col = s->col + (size_t)nv * i;
+      int c = 0;
+      for (int dof = p->last_dof[k]; dof >= 0; dof = m->dof_parentid[dof]) col[c++] = dof;
+      for (int a = 0, b = c - 1; a < b; a++, b--) {
+        int t = col[a]; col[a] = col[b]; col[b] = t;
+      }
+      s->ncol[i] = c;
+    }
+  }
   Newton* w = &ws->w;
   mjtNum** squares[] = {&w->matrix, &w->jacobian, &w->slope, &ws->mass, &ws->start_slope};
   mjtNum** vectors[] = {&w->other, &w->force,     &w->dv, &w->step, &w->g,
@@ -119,26 +133,19 @@ static int workspace_make(const mjModel* m, mjData* d, Workspace* ws, int extra,
   return 0;
 }
 
-// Fill in the Jacobians, axes and deflections at the current positions (after mj_forward).
+// Fill in the Jacobians, axes, moved directions and deflections at the current positions (after mj_forward).
 static void segments_update(const mjModel* m, mjData* d, Segments* s) {
   int i = 0, h = 0;
   for (int j = 0; j < s->ninst; j++) {
     const FinrftInstance* p = s->inst[j];
     for (int k = 0; k < p->nseg; k++, i++) {
-      s->law[i] = p;
       finrft_site_axes(d, p->site[k], s->axes + 6 * i, s->axes + 6 * i + 3);
-      mj_jacSite(m, d, s->jacp + 3 * (size_t)s->nv * i, NULL, p->site[k]);
-      int* col = s->col + (size_t)s->nv * i;
-      int c = 0;
-      for (int dof = p->last_dof[k]; dof >= 0; dof = m->dof_parentid[dof]) col[c++] = dof;
-      for (int a = 0, b = c - 1; a < b; a++, b--) {
-        int t = col[a]; col[a] = col[b]; col[b] = t;
-      }
-      s->ncol[i] = c;
-      const mjtNum* jac = s->jacp + 3 * (size_t)s->nv * i;
+      mjtNum* jac = s->jacp + 3 * (size_t)s->nv * i;
+      mj_jacSite(m, d, jac, NULL, p->site[k]);
+      const int* col = s->col + (size_t)s->nv * i;
       s->moves[i] = 0;
       for (int r = 0; r < 3; r++) {
-        for (int a = 0; a < c; a++) {
+        for (int a = 0; a < s->ncol[i]; a++) {
           if (jac[r * s->nv + col[a]] != 0) s->moves[i] |= 1 << r;
         }
       }

@@ -84,6 +84,11 @@ class Prescribed:
         d.qvel[:] += columns @ np.linalg.solve(columns[self.dofs], jump)
 
 
+# What a scene that steps explicitly only (a user's model, an intrusion: ExplicitSim) can change; such scenes have
+# no other method and no [rft] section.
+_EXPLICIT_ONLY = "reduce sim.dt or raise the inertias"
+
+
 def unstable(scene: Any, t: float, messages: list[str], code: int = 1) -> SimulationUnstable:
     sim = scene.sim
     if code == Code.STEP_TOO_SMALL:
@@ -99,17 +104,19 @@ def unstable(scene: Any, t: float, messages: list[str], code: int = 1) -> Simula
             f"Newton's method of the implicit step did not converge at t = {t:.4g} s (dt = {sim.dt:g} s): reduce "
             f"sim.dt or raise rft.v_reg")
     what = messages[0].rstrip(".") if messages else "the velocity became NaN or Inf"
-    advice = ("reduce sim.dt or raise the inertias" if isinstance(sim, ExplicitSim)  # its only method
-              else "reduce sim.dt, raise the inertias or rft.v_reg, or use sim.method = 'newton'"
-              if sim.method == "explicit" else "reduce sim.dt (or sim.max_step), or raise rft.v_reg")
+    if isinstance(sim, ExplicitSim):
+        advice = _EXPLICIT_ONLY
+    elif sim.method == "explicit":
+        advice = "reduce sim.dt, raise the inertias or rft.v_reg, or use sim.method = 'newton'"
+    else:
+        advice = "reduce sim.dt (or sim.max_step), or raise rft.v_reg"
     return SimulationUnstable(f"simulation went unstable at t = {t:.4g} s ({what}) with method {sim.method}, "
                               f"integrator {sim.integrator}, dt = {sim.dt:g} s: {advice}")
 
 
 def chatter(scene: Any, t: float) -> SimulationUnstable:
     sim = scene.sim
-    advice = ("reduce sim.dt or raise the inertias" if isinstance(sim, ExplicitSim)  # its only method
-              else "use sim.method = 'newton', or reduce sim.dt")
+    advice = _EXPLICIT_ONLY if isinstance(sim, ExplicitSim) else "use sim.method = 'newton', or reduce sim.dt"
     return SimulationUnstable(
         f"the RFT force chatters at t = {t:.4g} s (it reverses every step: the segments overshoot) with method "
         f"{sim.method}, dt = {sim.dt:g} s: {advice}")

@@ -30,7 +30,7 @@ import numpy as np
 
 from . import coupling, laws, media, native
 from .laws import drft, li2013, rft3d
-from .scene import SceneError
+from .errors import SceneError
 
 LAWS = ("li2013", "rft3d")
 BACKENDS = ("native", "python")

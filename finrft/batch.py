@@ -30,12 +30,13 @@ from typing import Any, Callable, Iterator, Sequence, TypeVar
 import mujoco
 import numpy as np
 
-from . import laws, models, native
+from . import laws, methods, models, native
 from .convergence import ErrorLimits, SimulationUnstable
 from .drive import Drive
 from .experiment import Experiment, Result, run
 from .scene import Scene
 from .simulate import PlateTest
+from .stepping import schedule
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -197,7 +198,6 @@ class PlateRollouts:
 
     def __call__(self, jobs: Sequence[tuple[Scene, Drive]]) -> list[np.ndarray]:
         """The states (mjSTATE_FULLPHYSICS) at the recorded instants of every (scene, drive) plate test."""
-        from .stepping import schedule
         jobs = list(jobs)
         if not jobs:
             return []
@@ -205,7 +205,7 @@ class PlateRollouts:
         for scene, other in jobs:
             if other != drive or (scene.sim.dt, scene.sim.record_dt) != (scene0.sim.dt, scene0.sim.record_dt):
                 raise ValueError("rollout_plates: every job needs the same drive, sim.dt and sim.record_dt")
-            if scene.sim.method != "explicit" or scene.sim.backend != "native":
+            if methods.get(scene.sim.method).stepper or scene.sim.backend != "native":
                 raise ValueError("rollout_plates: every job needs sim.method 'explicit' and sim.backend 'native'")
         test = PlateTest(drive)
         plates = self._models(test, [scene for scene, _ in jobs])

@@ -13,12 +13,14 @@ from typing import Any, Callable, Protocol
 import mujoco
 import numpy as np
 
-from . import batch, models, native
+from . import batch, methods, models, native
 from .drive import Drive
-from .convergence import ErrorLimits, SimulationFailed
+from .convergence import ErrorLimits
+from .errors import Chatter, NotConverged, SimulationFailed, StepUnderflow, UndefinedResult
 from .experiment import Experiment, run as run_experiment
 from .optimize import evaluation_scene, optimize
-from .scene import ADAPTIVE, PRESETS, RobotScene, Scene, preset, resolution
+from .scene import PRESETS, RobotScene, Scene, preset, resolution
+from .schema import field_of
 from .simulate import PlateTest, simulate
 from .swim import Swim, steady_cycles, swim
 
@@ -239,7 +241,7 @@ def _converged(scene: Any) -> tuple[Any, str]:
     1/100 of the tolerance (its reversals fall on the drive's instants, so its grid does not matter), a fixed step
     at 1/10 of the step."""
     sim = scene.sim
-    if sim.method in ADAPTIVE:
+    if methods.get(sim.method).adaptive:
         return (scene.replace(**{"sim.tolerance": sim.tolerance / 100}),
                 f"{sim.method}, tolerance {sim.tolerance / 100:g}")
     return scene.replace(**{"sim.dt": sim.dt / 10}), f"{sim.method}, dt {sim.dt / 10:g} s"
@@ -355,8 +357,15 @@ def modelling(*, repeat: int = 3, log: Callable[[str], None] = print, progress: 
 # ---------------------------------------------------------------------------------------------------------
 # Speed against accuracy
 
-FIXED = (("explicit", "euler"), ("explicit", "implicitfast"), ("explicit", "implicit"), ("explicit", "rk4"),
-         ("implicit", "implicitfast"), ("newton", "implicitfast"))
+# Every fixed-step method, with each MuJoCo integrator it runs on: all of them for a method that takes no force
+# implicitly, implicitfast for one that extends it.
+FIXED = tuple((name, integrator) for name, m in methods.METHODS.items() if not m.adaptive
+              for integrator in (field_of(Scene, "sim.integrator").metadata["choices"] if not m.implicit
+                                 else ("implicitfast",)))
+ADAPTIVE = tuple(name for name, m in methods.METHODS.items() if m.adaptive)
+# How the study names a failure, by its kind; any other is "unstable".
+FAILURES = ((Chatter, "chatter"), (StepUnderflow, "step underflow"), (NotConverged, "no root"),
+            (UndefinedResult, "eta undefined"))
 STEPS = (1e-5, 3e-5, 1e-4, 3e-4, 1e-3, 3e-3, 1e-2)
 TOLERANCES = (1e-1, 1e-2, 1e-3, 1e-4, 1e-5)
 V_REGS = (1e-4, 1e-3, 1e-2)
@@ -398,7 +407,7 @@ def study_cases() -> dict[str, StudyCase]:
 
 
 def _label(method: str, integrator: str) -> str:
-    return f"{method} ({integrator})" if method == "explicit" else method
+    return method if methods.get(method).implicit else f"{method} ({integrator})"
 
 
 def _trial(job: tuple[Studied, Scene | RobotScene, bool]) -> dict[str, Any]:
@@ -411,11 +420,8 @@ def _trial(job: tuple[Studied, Scene | RobotScene, bool]) -> dict[str, Any]:
         with np.errstate(over="ignore", invalid="ignore"):  # a diverging run is reported, not warned about
             run = run_experiment(experiment, scene, max_error=None, estimate_error=estimate)
     except SimulationFailed as exc:
-        text = str(exc)
-        failure = ("chatter" if "chatters" in text else "step underflow" if "fell below" in text
-                   else "no root" if "did not converge" in text else "eta undefined" if "undefined" in text
-                   else "unstable")
-        return {"failure": failure, "detail": text, "wall_s": time.perf_counter() - start}
+        failure = next((name for kind, name in FAILURES if isinstance(exc, kind)), "unstable")
+        return {"failure": failure, "detail": str(exc), "wall_s": time.perf_counter() - start}
     angles, load = np.degrees(run.series[experiment.shape]), run.series[experiment.load]
     eta = float(run.series["eta"][0]) if "eta" in run.series else float("nan")
     if not np.all(np.isfinite(angles)):

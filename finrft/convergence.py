@@ -29,7 +29,10 @@ from typing import Any, Callable, Protocol, TypeVar
 
 import numpy as np
 
-from .scene import ADAPTIVE, ExplicitSim, SceneError
+from . import methods
+# The run's failures, importable from here as before (their home is finrft.errors).
+from .errors import InaccurateResult, SceneError, SimulationFailed, SimulationUnstable
+from .scene import ExplicitSim
 
 COARSER = 5
 FINER = 0.5
@@ -40,18 +43,6 @@ COMPARE_EVERY = 4
 # points of eta when the largest step halves). The estimate is multiplied by a safety factor, as Roache's grid
 # convergence index does for a two-grid study.
 SAFETY = 2.0
-
-
-class SimulationFailed(RuntimeError):
-    """A run that cannot give a trustworthy result; the message says what happened and what to change."""
-
-
-class SimulationUnstable(SimulationFailed):
-    """The integration blew up, chattered or did not converge."""
-
-
-class InaccurateResult(SimulationFailed):
-    """The run's estimated discretisation error exceeds the limit."""
 
 
 @dataclass(frozen=True)
@@ -104,7 +95,7 @@ def _companion(scene: Any, ratio: float, record_interval: float) -> tuple[Any, s
     """The scene at ``ratio`` times the step (the adaptive method: ratio^2 times the tolerance, ratio times the
     largest step), recording at the run's own instants."""
     sim = scene.sim
-    if sim.method in ADAPTIVE:
+    if methods.get(sim.method).adaptive:
         updates = {"sim.tolerance": sim.tolerance * ratio ** 2, "sim.max_step": sim.max_step * ratio}
         label = f"tolerance {sim.tolerance * ratio ** 2:g}, largest step {sim.max_step * ratio:g} s"
     else:
@@ -148,9 +139,10 @@ def checked(build: Callable[[Any], M], run_once: Callable[[Any, M, Callable[[flo
     tail = None if progress is None else lambda f: progress(0.8 + 0.2 * f)
     # A companion records every COMPARE_EVERY-th instant the run records (the adaptive one keeps the time grid, a
     # coarse one samples where both grids meet): its samples are much of its cost, and they bound its steps.
-    coarse = COMPARE_EVERY * (every if sim.method in ADAPTIVE else math.lcm(every, COARSER)) * sim.dt
+    adaptive = methods.get(sim.method).adaptive
+    coarse = COMPARE_EVERY * (every if adaptive else math.lcm(every, COARSER)) * sim.dt
     ratios = [(FINER, COMPARE_EVERY * every * sim.dt)]
-    if sim.method in ADAPTIVE or run.stroke_time >= MIN_STROKE_STEPS * COARSER * sim.dt:
+    if adaptive or run.stroke_time >= MIN_STROKE_STEPS * COARSER * sim.dt:
         ratios.insert(0, (COARSER, coarse))
     for n, (ratio, interval) in enumerate(ratios, start=1):
         companion, label = _companion(scene, ratio, interval)
@@ -186,9 +178,10 @@ def paired(time: np.ndarray, other: np.ndarray) -> tuple[np.ndarray, np.ndarray]
 def advice(scene: Any) -> str:
     """What to change for a finer result."""
     sim = scene.sim
-    if sim.method in ADAPTIVE:
+    method = methods.get(sim.method)
+    if method.adaptive:
         return f"tighten sim.tolerance (now {sim.tolerance:g}) or sim.max_step (now {sim.max_step:g} s)"
-    if sim.method == "newton" or isinstance(sim, ExplicitSim):  # an ExplicitSim scene has no other method
+    if method.newton or isinstance(sim, ExplicitSim):  # an ExplicitSim scene has no other method
         return f"reduce sim.dt (now {sim.dt:g} s)"
     return f"reduce sim.dt (now {sim.dt:g} s) or use sim.method = 'newton'"
 

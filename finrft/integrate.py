@@ -1,4 +1,4 @@
-"""Time stepping, ``sim.method``:
+"""Time stepping, ``sim.method`` (what each method is and can do: `finrft.methods`):
 
 - ``explicit``: MuJoCo's own step. The RFT force enters as it is, so light segments under a rate-independent
   law need dt < 2 m v_reg / F or they chatter (MuJoCo's implicit integrators cannot see a plugin's derivative).
@@ -43,7 +43,7 @@ from typing import Callable, Protocol, Sequence
 import mujoco
 import numpy as np
 
-from . import laws, native
+from . import laws, methods, native
 from .coupling import penalty_stop
 from .models import ForceGroup
 from .native import Code
@@ -74,8 +74,15 @@ Counts = ctypes.c_int64 * 2  # steps taken, steps rejected: the native functions
 
 
 def stepper(m: mujoco.MjModel, sim: Sim, backend: str, groups: Sequence[ForceGroup]) -> Stepper:
-    """The step function for a model: MuJoCo's step, or the implicit or adaptive method (native or numpy)."""
-    return METHODS[sim.method](m, sim, backend, groups)
+    """The step function for a model: MuJoCo's step, or the implicit or adaptive method (native or numpy), as the
+    method's entry in `finrft.methods` says."""
+    method = methods.get(sim.method)
+    iterations = NEWTON_ITERATIONS if method.newton else 1
+    if method.adaptive:
+        return Adaptive(m, sim, method.stepper, iterations, backend, groups)
+    if method.implicit:
+        return Implicit(m, method.stepper, iterations, backend, groups)
+    return Explicit(m)
 
 
 class _Counted:
@@ -107,11 +114,12 @@ class Explicit(_Counted):
 class Implicit(_Counted):
     """The implicit (one Newton iteration) or newton method, native or numpy."""
 
-    def __init__(self, m: mujoco.MjModel, iterations: int, backend: str, groups: Sequence[ForceGroup]) -> None:
+    def __init__(self, m: mujoco.MjModel, native_stepper: str, iterations: int, backend: str,
+                 groups: Sequence[ForceGroup]) -> None:
         super().__init__()
         self.m, self.iterations = m, iterations
         if backend == "native":
-            self._native = _native("finrft_implicit_step", ctypes.c_int, ctypes.c_int, ctypes.POINTER(ctypes.c_int64))
+            self._native = _native(native_stepper, ctypes.c_int, ctypes.c_int, ctypes.POINTER(ctypes.c_int64))
         else:
             self._native, self._python = None, PythonImplicit(m, groups)
 
@@ -125,14 +133,14 @@ class Adaptive(_Counted):
     """The adaptive methods on implicit (``iterations`` 1) or newton steps; the step size carries over from one
     call to the next."""
 
-    def __init__(self, m: mujoco.MjModel, sim: Sim, iterations: int, backend: str,
+    def __init__(self, m: mujoco.MjModel, sim: Sim, native_stepper: str, iterations: int, backend: str,
                  groups: Sequence[ForceGroup]) -> None:
         super().__init__()
         self.m, self.max_step, self.tolerance, self.h = m, sim.max_step, sim.tolerance, sim.dt
         self.iterations = iterations
         self._native = None
         if backend == "native":
-            self._native = _native("finrft_adaptive_advance", ctypes.c_double, ctypes.c_double, ctypes.c_double,
+            self._native = _native(native_stepper, ctypes.c_double, ctypes.c_double, ctypes.c_double,
                                    ctypes.c_int, ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int64))
         else:
             self._implicit = PythonImplicit(m, groups)
@@ -336,13 +344,3 @@ class PythonImplicit:
         mujoco.mj_integratePos(m, d.qpos, d.qvel, dt)
         d.time += dt
         return 0
-
-
-# The methods by name, the choices of ``sim.method``: each makes its stepper from (model, sim, backend, groups).
-METHODS: dict[str, Callable[[mujoco.MjModel, Sim, str, Sequence[ForceGroup]], Stepper]] = {
-    "explicit": lambda m, sim, backend, groups: Explicit(m),
-    "implicit": lambda m, sim, backend, groups: Implicit(m, 1, backend, groups),
-    "newton": lambda m, sim, backend, groups: Implicit(m, NEWTON_ITERATIONS, backend, groups),
-    "adaptive": lambda m, sim, backend, groups: Adaptive(m, sim, 1, backend, groups),
-    "adaptive-newton": lambda m, sim, backend, groups: Adaptive(m, sim, NEWTON_ITERATIONS, backend, groups),
-}

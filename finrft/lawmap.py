@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from . import laws, media
-from .scene import SceneError
+from .errors import SceneError
 
 
 def law_module(name: str):

@@ -21,7 +21,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from .laws import rft3d, sandswim
-from .scene import SceneError
+from .errors import SceneError
 
 UNVERIFIED = "unverified"  # the one status: from a secondary source, not checked against the primary one
 # How the command line shows SI units (it speaks mm and degrees).

@@ -11,25 +11,19 @@ everything else reads a validated scene.
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
-import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Any, Mapping
 
-from . import laws
-
-
-class SceneError(ValueError):
-    """A scene file, preset or override that cannot be used; the message names the key and what is allowed."""
-
-
-def _f(default: Any, unit: str, doc: str, *, choices: tuple[str, ...] | Callable[[], tuple[str, ...]] = (),
-       minimum: float | None = None, exclusive: bool = True, maximum: float | None = None, why_maximum: str = "") -> Any:
-    return field(default=default, metadata={"unit": unit, "doc": doc, "choices": choices, "minimum": minimum,
-                                            "exclusive": exclusive, "maximum": maximum, "why_maximum": why_maximum})
+from . import laws, media, methods, schema
+from .errors import SceneError
+from .files import read_text, read_toml
+from .laws import drft, li2013
+from .schema import field as _f
+# Importable from here as before; their homes are the schema engine, the errors and the file reader.
+from .schema import field_of, sections, split_key, to_toml  # noqa: F401
 
 
 # A chain's mass matrix is dense (every hinge moves the segments beyond it), so the cost of a step grows as N^2 to
@@ -72,22 +66,14 @@ class Plate(Chain):
                        choices=("body", "welds"))
 
 
-@dataclass(frozen=True)
-class RFT:
-    law: str = _f("paper", "", "paper: direction-cosine law; table: F_perp(theta), F_par(theta) from a CSV; "
-                  "sandswim: the sand-swimming law of Maladen et al. 2009", choices=laws.names)
-    f_perp: float = _f(1.2, "N", "normal force coefficient per segment (paper law); < 0 would pull the plate along",
-                       minimum=0.0, exclusive=False)
-    f_par: float = _f(-0.2, "N", "tangential force coefficient per segment (paper law; < 0 feeds energy in)")
-    v_reg: float = _f(0.001, "m/s", "speed below which the rate-independent force fades out (tanh)", minimum=0.0)
-    table: str = _f("", "", "table law: CSV with columns attack_deg, f_perp_N, f_par_N (relative to the scene file)")
-    c_s: float = _f(0.0, "N", "sandswim law: C_S per segment (the medium's normal-force scale)", minimum=0.0,
-                    exclusive=False)
-    c_f: float = _f(0.0, "N", "sandswim law: C_F per segment (the medium's friction-like drag)", minimum=0.0,
-                    exclusive=False)
-    gamma0: float = _f(0.0, "rad", "sandswim law: gamma0, how fast F_perp saturates with the angle of motion",
-                       minimum=0.0, exclusive=False, maximum=math.pi / 2,
-                       why_maximum="beyond it the normal force would push a segment along its motion")
+RFT = schema.section("RFT", (
+    ("law", str, _f("paper", "", "paper: direction-cosine law; table: F_perp(theta), F_par(theta) from a CSV; "
+                    "sandswim: the sand-swimming law of Maladen et al. 2009", choices=laws.names)),
+    ("v_reg", float, _f(0.001, "m/s", "speed below which the rate-independent force fades out (tanh)",
+                        minimum=0.0)),
+    *laws.keys()), __name__,
+    "The segment law of a chain's segments: its name, its regularisation speed, and the keys every segment law "
+    "declares (``KEYS`` in its module, `finrft.laws`); a law reads its own.")
 
 
 @dataclass(frozen=True)
@@ -102,7 +88,7 @@ class Sim:
                      "velocity, solved by Newton's method (stable and accurate at large steps on light segments); "
                      "adaptive: implicit steps sized by an error estimate (dt is then the grid of samples); "
                      "adaptive-newton: newton steps sized by the same estimate",
-                     choices=lambda: tuple(_methods()))
+                     choices=methods.names())
     max_step: float = _f(1e-3, "s", "adaptive methods: largest step", minimum=0.0)
     tolerance: float = _f(1e-4, "", "adaptive methods: error per step, relative (absolute below 1e-3)", minimum=0.0,
                           maximum=0.1, why_maximum="a looser step-doubling test accepts steps of any error")
@@ -217,8 +203,6 @@ class JointDrive:
 
 
 def _check_medium(m: Medium) -> None:
-    from . import media  # the catalogue's module imports this one
-    from .laws import drft, li2013
     catalogued = media.medium(m.name).get("bulk_density") if m.name else None
     drft.density(m.drft_lambda, m.bulk_density or None, None if catalogued is None else catalogued.value,
                  "medium.bulk_density", "medium")
@@ -229,20 +213,16 @@ def _check_medium(m: Medium) -> None:
     li2013.medium_parameters(media.medium(m.name))
 
 
-# The methods whose steps follow an error estimate (sim.tolerance, sim.max_step) on the time grid sim.dt.
-ADAPTIVE = ("adaptive", "adaptive-newton")
-
-
 def resolution(sim: Any) -> str:
     """A scene's method and what sets its steps, in words: the tolerance and largest step of an adaptive method
     (its dt is only the grid of reversals and samples), else the step."""
-    if sim.method in ADAPTIVE:
+    if methods.get(sim.method).adaptive:
         return f"{sim.method} method, tolerance {sim.tolerance:g}, steps up to {sim.max_step:g} s"
     return f"{sim.method} method, dt {sim.dt:g} s"
 
 # Newton, implicit and adaptive steps take implicitly only the forces of the segment law's force groups (the
 # plugin finrft.rft); the surface elements of `attach` are not among them, so a user's model runs MuJoCo's step.
-EXPLICIT_ONLY = ("explicit",)
+EXPLICIT_ONLY = methods.explicit()
 
 
 @dataclass(frozen=True)
@@ -275,20 +255,11 @@ class _Sections:
         data = self.to_dict()
         if getattr(self, "_rft_from_medium", False) and not any(f"rft.{k}" in updates for k in SANDSWIM_KEYS):
             data["rft"].update(dict.fromkeys(SANDSWIM_KEYS, 0.0))
-        for key, value in updates.items():
-            section, name = split_key(type(self), key)
-            data[section][name] = value
-        return scene_from_dict(data, type(self))
-
-
-def _methods():
-    from .integrate import METHODS  # finrft.integrate imports the scene
-
-    return METHODS
+        return scene_from_dict(schema.updated(data, type(self), updates), type(self))
 
 
 def _check_sim(sim: Sim) -> None:
-    if sim.method != "explicit" and sim.integrator != "implicitfast":
+    if methods.get(sim.method).implicit and sim.integrator != "implicitfast":
         raise SceneError(f"sim.method = {sim.method!r} extends MuJoCo's implicitfast integrator: set "
                          f"sim.integrator = 'implicitfast' (got {sim.integrator!r}) or use sim.method = 'explicit'")
 
@@ -333,8 +304,6 @@ class RobotScene(_Sections):
         if g.theta1 <= g.theta2:
             raise SceneError(f"gait.theta1 ({math.degrees(g.theta1):g} deg) must be greater than gait.theta2 "
                              f"({math.degrees(g.theta2):g} deg)")
-        from . import media  # the catalogue's module imports this one
-
         if self.body.drag_law != "velocity" and media.immersion_properties(self.medium) is not None:
             raise SceneError("a robot in a [medium] is resisted against its body's velocity (its faces and the "
                              "cart): set body.drag_law = 'velocity'")
@@ -388,8 +357,6 @@ def _law_from_medium(scene: Any, segment_length: float) -> None:
     """Check a chain scene's medium and law; a sandswim law with c_s, c_f and gamma0 all 0 takes them from the
     medium when it gives what they follow from (the scene then holds them, and remembers where they came from).
     A derived C_S or C_F may be 0 (3D-RFT gives a thin plate no drag along itself without surface friction)."""
-    from . import media  # the catalogue's module imports this one
-
     rft = scene.rft
     properties = media.immersion_properties(scene.medium)
     if rft.law == "sandswim" and not any(getattr(rft, k) for k in SANDSWIM_KEYS) and properties is not None:
@@ -405,109 +372,10 @@ PRESETS: dict[type, tuple[str, ...]] = {Scene: ("paper", "physical"), RobotScene
 _PRESET_PREFIX = {Scene: "plate", RobotScene: "robot"}
 
 
-def sections(cls: type) -> dict[str, type]:
-    """A scene class's sections and their types, in order."""
-    hints = {"Plate": Plate, "RFT": RFT, "Sim": Sim, "Robot": Robot, "Body": Body, "Arm": Arm, "Chain": Chain,
-             "Gait": Gait, "Model": Model, "Medium": Medium, "JointDrive": JointDrive, "ExplicitSim": ExplicitSim,
-             "IntrusionPlate": IntrusionPlate, "Immersion": Immersion}
-    return {f.name: hints[f.type] if isinstance(f.type, str) else f.type for f in dataclasses.fields(cls)}
-
-
-def split_key(cls: type, key: str) -> tuple[str, str]:
-    """``"plate.kind"`` -> ("plate", "kind"), or SceneError naming what exists."""
-    known = sections(cls)
-    section, _, name = key.partition(".")
-    if section not in known or not name:
-        raise SceneError(f"unknown scene key '{key}': keys look like SECTION.NAME with SECTION one of "
-                         f"{', '.join(known)}")
-    names = [f.name for f in dataclasses.fields(known[section])]
-    if name not in names:
-        raise SceneError(f"unknown scene key '{key}': [{section}] has {', '.join(names)}")
-    return section, name
-
-
-def field_of(cls: type, key: str) -> dataclasses.Field:
-    """The schema entry of a dotted key (its type, unit, bounds)."""
-    section, name = split_key(cls, key)
-    return next(f for f in dataclasses.fields(sections(cls)[section]) if f.name == name)
-
-
-def _check(section: str, f: dataclasses.Field, value: Any) -> Any:
-    key, meta = f"{section}.{f.name}", f.metadata
-    if f.type in ("float", float):
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise SceneError(f"{key} must be a number ({meta['unit'] or 'dimensionless'}), got {value!r}")
-        value = float(value)
-        if not math.isfinite(value):
-            raise SceneError(f"{key} must be finite, got {value!r}")
-    elif f.type in ("int", int):
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise SceneError(f"{key} must be a whole number, got {value!r}")
-    elif f.type == "tuple[str, ...]":
-        if isinstance(value, str):
-            value = [value]
-        if not isinstance(value, (list, tuple)) or not all(isinstance(v, str) and v for v in value):
-            raise SceneError(f"{key} must be a list of names, e.g. [\"box\"], got {value!r}")
-        return tuple(value)
-    elif not isinstance(value, str):
-        raise SceneError(f"{key} must be a string, got {value!r}")
-    # a callable: the choices of a registry, whose modules may import the scene
-    choices = meta["choices"]() if callable(meta["choices"]) else meta["choices"]
-    if choices:
-        # Names match whatever their case, so MuJoCo's own spellings (Euler, RK4) name the schema's choices.
-        canonical = {choice.lower(): choice for choice in choices}
-        if value.lower() not in canonical:
-            raise SceneError(f"{key} = {value!r} is not allowed: use one of {', '.join(choices)}")
-        value = canonical[value.lower()]
-    low = meta["minimum"]
-    if low is not None and (value <= low if meta["exclusive"] else value < low):
-        relation = ">" if meta["exclusive"] else ">="
-        raise SceneError(f"{key} must be {relation} {low:g} {meta['unit']}".rstrip() + f", got {value!r}")
-    high = meta["maximum"]
-    if high is not None and value > high:
-        raise SceneError(f"{key} must be <= {high:g} {meta['unit']}".rstrip() + f" ({meta['why_maximum']}), got "
-                         f"{value!r}")
-    return value
-
-
 def scene_from_dict(data: Mapping[str, Any], cls: type = Scene):
     """Validate a nested mapping (as read from TOML) into a scene of class ``cls``; missing keys take the
     schema's defaults."""
-    if not isinstance(data, Mapping):
-        raise SceneError("a scene must be a table of sections")
-    known = sections(cls)
-    for section in data:
-        if section not in known:
-            raise SceneError(f"unknown scene section [{section}]: use {', '.join(known)}")
-    defaults = cls()
-    parts = {}
-    for section, section_cls in known.items():
-        given = data.get(section, {})
-        if not isinstance(given, Mapping):
-            raise SceneError(f"[{section}] must be a table")
-        for name in given:
-            split_key(cls, f"{section}.{name}")
-        values = {f.name: _check(section, f, given[f.name])
-                  for f in dataclasses.fields(section_cls) if f.name in given}
-        parts[section] = dataclasses.replace(getattr(defaults, section), **values)
-    return cls(**parts)
-
-
-def read_text(path: str | Path, what: str) -> str:
-    """A text file's contents; SceneError naming the file when it cannot be read or is not UTF-8 text."""
-    try:
-        return Path(path).read_text(encoding="utf-8")
-    except OSError as exc:
-        raise SceneError(f"cannot read {what} {path}: {exc.strerror or exc}") from None
-    except UnicodeDecodeError:
-        raise SceneError(f"{what} {path} is not a text file (UTF-8)") from None
-
-
-def _read_toml(text: str, origin: str) -> dict[str, Any]:
-    try:
-        return tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SceneError(f"{origin}: malformed TOML: {exc}") from None
+    return schema.from_dict(data, cls)
 
 
 # Keys that name files, relative to the scene file that gives them.
@@ -519,7 +387,7 @@ def preset(name: str, cls: type = Scene):
     if name not in PRESETS[cls]:
         raise SceneError(f"unknown preset '{name}': use one of {', '.join(PRESETS[cls])}")
     text = (resources.files("finrft") / "presets" / f"{_PRESET_PREFIX[cls]}-{name}.toml").read_text()
-    return scene_from_dict(_read_toml(text, f"preset {name}"), cls)
+    return scene_from_dict(read_toml(text, f"preset {name}"), cls)
 
 
 def load_scene(path: str | Path | None = None, *, preset_name: str = "paper",
@@ -532,7 +400,7 @@ def load_scene(path: str | Path | None = None, *, preset_name: str = "paper",
         scene = preset(preset_name, cls)
     else:
         path = Path(path)
-        data = _read_toml(read_text(path, "scene file"), str(path))
+        data = read_toml(read_text(path, "scene file"), str(path))
         for section, name in FILE_KEYS:
             given = data.get(section, {}).get(name) if isinstance(data.get(section), dict) else None
             if isinstance(given, str) and given and not Path(given).is_absolute():
@@ -542,30 +410,5 @@ def load_scene(path: str | Path | None = None, *, preset_name: str = "paper",
 
 
 def parse_override(text: str, cls: type = Scene) -> tuple[str, Any]:
-    """``plate.stiffness=0.3`` -> ("plate.stiffness", 0.3); the value is read as TOML, else as a bare string."""
-    key, sep, raw = text.partition("=")
-    key = key.strip()
-    if not sep or not key:
-        raise SceneError(f"--set expects KEY=VALUE, got '{text}'")
-    split_key(cls, key)
-    raw = raw.strip()
-    try:
-        value = tomllib.loads(f"v = {raw}")["v"]
-    except tomllib.TOMLDecodeError:
-        value = raw
-    return key, value
-
-
-def to_toml(scene: Any) -> str:
-    """The full resolved scene as TOML, with units as comments, so a user can copy and edit it."""
-    lines = ["# finrft scene: SI units throughout"]
-    for section, cls in sections(type(scene)).items():
-        lines += ["", f"[{section}]"]
-        values = getattr(scene, section)
-        for f in dataclasses.fields(cls):
-            value = getattr(values, f.name)
-            text = json.dumps(list(value) if isinstance(value, tuple) else value) if isinstance(
-                value, (str, tuple)) else repr(value)
-            unit = f" [{f.metadata['unit']}]" if f.metadata["unit"] else ""
-            lines.append(f"{f.name} = {text}  #{unit} {f.metadata['doc']}")
-    return "\n".join(lines) + "\n"
+    """``plate.stiffness=0.3`` -> ("plate.stiffness", 0.3) for a scene of class ``cls``: `finrft.schema.parse_override`."""
+    return schema.parse_override(text, cls)

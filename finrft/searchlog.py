@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from .files import atomic_path
-from .scene import SceneError
+from .errors import SceneError
 
 OPTIMIZE = "finrft.optimize/2"
 FIT = "finrft.fit/1"

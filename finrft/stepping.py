@@ -9,12 +9,14 @@ from typing import Any, Callable, Sequence
 import mujoco
 import numpy as np
 
-from .convergence import SimulationFailed, SimulationUnstable, check_resolution, check_size, record_every
+from . import methods
+from .convergence import check_resolution, check_size, record_every
 from .drive import Drive
+from .errors import Chatter, NotConverged, SimulationFailed, SimulationUnstable, StepUnderflow
 from .integrate import Stepper
 from .models import ARMATURE_RATIO
 from .native import Code, captured_warnings
-from .scene import ADAPTIVE, ExplicitSim
+from .scene import ExplicitSim
 
 _BAD_STATE = (mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL)
 
@@ -92,7 +94,7 @@ _EXPLICIT_ONLY = "reduce sim.dt or raise the inertias"
 def unstable(scene: Any, t: float, messages: list[str], code: int = 1) -> SimulationUnstable:
     sim = scene.sim
     if code == Code.STEP_TOO_SMALL:
-        return SimulationUnstable(
+        return StepUnderflow(
             f"the adaptive step fell below 1e-9 s at t = {t:.4g} s (tolerance {sim.tolerance:g}): raise "
             f"sim.tolerance or rft.v_reg, or use sim.method = 'newton'")
     if code == Code.ARENA_FULL:
@@ -100,13 +102,13 @@ def unstable(scene: Any, t: float, messages: list[str], code: int = 1) -> Simula
             f"the native step's workspace does not fit in MuJoCo's arena at t = {t:.4g} s: use sim.backend = "
             f"'python'")
     if code == Code.NOT_CONVERGED:
-        return SimulationUnstable(
+        return NotConverged(
             f"Newton's method of the implicit step did not converge at t = {t:.4g} s (dt = {sim.dt:g} s): reduce "
             f"sim.dt or raise rft.v_reg")
     what = messages[0].rstrip(".") if messages else "the velocity became NaN or Inf"
     if isinstance(sim, ExplicitSim):
         advice = _EXPLICIT_ONLY
-    elif sim.method == "explicit":
+    elif not methods.get(sim.method).implicit:
         advice = "reduce sim.dt, raise the inertias or rft.v_reg, or use sim.method = 'newton'"
     else:
         advice = "reduce sim.dt (or sim.max_step), or raise rft.v_reg"
@@ -114,10 +116,10 @@ def unstable(scene: Any, t: float, messages: list[str], code: int = 1) -> Simula
                               f"integrator {sim.integrator}, dt = {sim.dt:g} s: {advice}")
 
 
-def chatter(scene: Any, t: float) -> SimulationUnstable:
+def chatter(scene: Any, t: float) -> Chatter:
     sim = scene.sim
     advice = _EXPLICIT_ONLY if isinstance(sim, ExplicitSim) else "use sim.method = 'newton', or reduce sim.dt"
-    return SimulationUnstable(
+    return Chatter(
         f"the RFT force chatters at t = {t:.4g} s (it reverses every step: the segments overshoot) with method "
         f"{sim.method}, dt = {sim.dt:g} s: {advice}")
 
@@ -139,7 +141,7 @@ def instants(events: np.ndarray, steps: int, starts: np.ndarray, sim: Any, strok
     and the end exactly on the drive's instants, multiples of ``stroke_time``, as its steps can land anywhere:
     a stroke's length rounded to whole steps is felt in eta (~1e-4 for 7 µs on the physical robot)."""
     times = np.asarray(events, dtype=float) * sim.dt
-    if sim.method in ADAPTIVE:
+    if methods.get(sim.method).adaptive:
         stroke = np.searchsorted(starts, events, side="right") - 1
         times = np.where(np.asarray(events) == starts[stroke], stroke * stroke_time, times)
         times = np.where(np.asarray(events) == steps, len(starts) * stroke_time, times)
@@ -167,7 +169,7 @@ def step_through(m: mujoco.MjModel, d: mujoco.MjData, scene: Any, advance: Stepp
     the three steps before every PROBE_EVERY-th sample are taken one by one and checked when the run ends).
     An adaptive method steps to each event's `instants` (the drive's strokes last ``stroke_time``) and restarts its
     step size at each reversal."""
-    adaptive = scene.sim.method in ADAPTIVE
+    adaptive = methods.get(scene.sim.method).adaptive
     probe = len(watch) > 0 and not adaptive
     # velocity[i, j]: the watched velocities 3 - j steps before sample i (j = 3: at the sample)
     velocity = np.full((len(samples), 4, len(watch)), np.nan)

@@ -18,7 +18,8 @@ from typing import Any, Callable
 import mujoco
 import numpy as np
 
-from .convergence import ErrorLimits, SimulationFailed
+from .convergence import ErrorLimits
+from .errors import UndefinedResult
 from .drive import Drive
 from .experiment import Compared, Plot, Quantity, Result, run
 from .models import RobotModel, body_share, build_robot
@@ -79,7 +80,7 @@ class Swim:
             return  # the finite check names it
         for c, row in enumerate(self.cycle_table(run), start=1):
             if not row["D1_mm"] > 0:
-                raise SimulationFailed(f"swim at dt {run.scene.sim.dt:g} s: eta is undefined in cycle {c}: its "
+                raise UndefinedResult(f"swim at dt {run.scene.sim.dt:g} s: eta is undefined in cycle {c}: its "
                                        f"power stroke moved the body {row['D1_mm']:+.3g} mm, not forward")
 
     def attrs(self) -> dict[str, Any]:

@@ -12,9 +12,13 @@ name. Its module provides
 - ``feeds_energy(parameters) -> str``: why the law can push a segment along its own motion (F.v > 0), or "" when
   it dissipates at every velocity and orientation;
 - optionally ``config(parameters) -> dict[str, str]``: its keys of the native plugin's config, when they are not
-  its parameters' numbers written out.
+  its parameters' numbers written out;
+- ``KEYS``: its own keys of a scene's ``[rft]`` section, ``(name, type, finrft.schema.field(default, unit, doc,
+  ...))`` each; the section (`finrft.scene.RFT`) is built from every segment law's (`keys`), so a new law's keys,
+  units and documentation are declared in its module alone.
 
-Modules of another KIND (a surface law, say) live here too and are not segment laws.
+A surface law (``KIND = "surface"``) gives the stress on surface elements of any body (`finrft.attach`); its C twin
+is in plugins/finrft_li2013.c. A surface term (``KIND = "surface-term"``) adds to any surface law.
 
 A law of any kind may also draw its stress map (``finrft law NAME``): ``stress_map(medium) -> dict`` of flat arrays
 of one length, one entry per grid point, for a catalogued medium (`finrft.media.Material`): first two grid axes
@@ -35,6 +39,7 @@ from typing import Any, Callable
 import numpy as np
 
 SEGMENT = "segment"  # the KIND of a segment law
+SURFACE = "surface"  # the KIND of a surface law
 
 Law = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 
@@ -46,8 +51,8 @@ def _modules() -> dict[str, ModuleType]:
 
 
 @functools.cache
-def _registry() -> dict[str, ModuleType]:
-    return {name: module for name, module in _modules().items() if getattr(module, "KIND", "") == SEGMENT}
+def _registry(kind: str = SEGMENT) -> dict[str, ModuleType]:
+    return {name: module for name, module in _modules().items() if getattr(module, "KIND", "") == kind}
 
 
 def mapped() -> dict[str, ModuleType]:
@@ -55,14 +60,19 @@ def mapped() -> dict[str, ModuleType]:
     return {name: module for name, module in sorted(_modules().items()) if hasattr(module, "stress_map")}
 
 
-def names() -> tuple[str, ...]:
-    """The segment laws, by name."""
-    return tuple(sorted(_registry()))
+def names(kind: str = SEGMENT) -> tuple[str, ...]:
+    """The laws of a kind (segment laws by default), by name."""
+    return tuple(sorted(_registry(kind)))
 
 
-def module(name: str) -> ModuleType:
-    """The module of a segment law."""
-    return _registry()[name]
+def module(name: str, kind: str = SEGMENT) -> ModuleType:
+    """The module of a law of a kind (a segment law by default)."""
+    return _registry(kind)[name]
+
+
+def keys(kind: str = SEGMENT) -> tuple[Any, ...]:
+    """Every law's own keys (``KEYS``) of a kind, the laws by name: what a scene's section for them holds."""
+    return tuple(key for name in names(kind) for key in getattr(module(name, kind), "KEYS", ()))
 
 
 def bind(rft: Any) -> Law:

@@ -32,7 +32,7 @@ import math
 
 import numpy as np
 
-from ..scene import SceneError
+from ..errors import SceneError
 
 
 def element_forces(normal: np.ndarray, velocity: np.ndarray, depth: np.ndarray, area: np.ndarray,

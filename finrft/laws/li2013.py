@@ -31,7 +31,7 @@ from dataclasses import astuple, dataclass
 
 import numpy as np
 
-from ..scene import SceneError
+from ..errors import SceneError
 
 N_PER_CM3 = 1e6  # N/m^3 in one N/cm^3
 

@@ -11,9 +11,15 @@ from typing import Any
 
 import numpy as np
 
+from ..schema import field
 from . import components
 
 KIND = "segment"
+# The law's keys of [rft], with their units (`finrft.scene.RFT` is built from every law's).
+KEYS = (("f_perp", float, field(1.2, "N", "normal force coefficient per segment (paper law); < 0 would pull the "
+                                "plate along", minimum=0.0, exclusive=False)),
+        ("f_par", float, field(-0.2, "N", "tangential force coefficient per segment (paper law; < 0 feeds energy "
+                               "in)")))
 
 
 def parameters(rft: Any) -> dict[str, float]:

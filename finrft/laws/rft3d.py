@@ -51,7 +51,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..scene import SceneError
+from ..errors import SceneError
 
 STANDARD_GRAVITY = 9.81  # m/s^2, g of xi_n
 

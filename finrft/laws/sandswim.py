@@ -33,9 +33,19 @@ from typing import Any
 
 import numpy as np
 
+from ..schema import field
 from . import components
 
 KIND = "segment"
+# The law's keys of [rft], with their units (`finrft.scene.RFT` is built from every law's). A chain's scene may
+# leave all three at 0 to take them from its [medium].
+KEYS = (("c_s", float, field(0.0, "N", "sandswim law: C_S per segment (the medium's normal-force scale)",
+                             minimum=0.0, exclusive=False)),
+        ("c_f", float, field(0.0, "N", "sandswim law: C_F per segment (the medium's friction-like drag)",
+                             minimum=0.0, exclusive=False)),
+        ("gamma0", float, field(0.0, "rad", "sandswim law: gamma0, how fast F_perp saturates with the angle of "
+                                "motion", minimum=0.0, exclusive=False, maximum=math.pi / 2,
+                                why_maximum="beyond it the normal force would push a segment along its motion")))
 
 
 def parameters(rft: Any) -> dict[str, float]:

@@ -17,10 +17,15 @@ from typing import Any
 
 import numpy as np
 
-from ..scene import SceneError, read_text
+from ..errors import SceneError
+from ..files import read_text
+from ..schema import field
 from . import components
 
 KIND = "segment"
+# The law's keys of [rft], with their units (`finrft.scene.RFT` is built from every law's).
+KEYS = (("table", str, field("", "", "table law: CSV with columns attack_deg, f_perp_N, f_par_N (relative to the "
+                             "scene file)")),)
 TABLE_COLUMNS = ("attack_deg", "f_perp_N", "f_par_N")
 
 

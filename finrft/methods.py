@@ -1,0 +1,59 @@
+"""The time-stepping methods, ``sim.method``: what each one is and what it can do. Code that depends on the method
+asks its entry here (``methods.get(sim.method).adaptive``) instead of testing its name; `finrft.integrate`
+implements them. Adding a method: its C stepper (plugins/steppers.c), its numpy twin and its stepper in
+`finrft.integrate`, its entry here, and its test.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Method:
+    """One value of ``sim.method``."""
+
+    name: str
+    doc: str
+    implicit: bool  # takes the segment law's force implicitly, differencing it on the scale of rft.v_reg; such a
+                    # method extends MuJoCo's implicitfast integrator and acts on the segment law's forces only
+    newton: bool    # solves the step by Newton's method at the new velocity (else one linearised iteration)
+    adaptive: bool  # sizes its steps by an error estimate (sim.tolerance, sim.max_step); sim.dt is then only the
+                    # grid of reversals and samples
+    stepper: str    # the native stepper, a function of plugins/steppers.c; "": MuJoCo's own mj_step
+
+
+METHODS: dict[str, Method] = {m.name: m for m in (
+    Method("explicit", "MuJoCo's step, the RFT force as it is", implicit=False, newton=False, adaptive=False,
+           stepper=""),
+    Method("implicit", "implicitfast with the RFT force linearised in velocity", implicit=True, newton=False,
+           adaptive=False, stepper="finrft_implicit_step"),
+    Method("newton", "implicitfast with the RFT force at the new velocity, solved by Newton's method (stable and "
+           "accurate at large steps on light segments)", implicit=True, newton=True, adaptive=False,
+           stepper="finrft_implicit_step"),
+    Method("adaptive", "implicit steps sized by an error estimate (dt is then the grid of samples)", implicit=True,
+           newton=False, adaptive=True, stepper="finrft_adaptive_advance"),
+    Method("adaptive-newton", "newton steps sized by the same estimate", implicit=True, newton=True, adaptive=True,
+           stepper="finrft_adaptive_advance"),
+)}
+
+
+def names() -> tuple[str, ...]:
+    """Every method, by name, in the table's order."""
+    return tuple(METHODS)
+
+
+def get(name: str) -> Method:
+    """The entry of a method named in a validated scene."""
+    return METHODS[name]
+
+
+def explicit() -> tuple[str, ...]:
+    """The methods that take no force implicitly: all a model with forces other than the segment law's (the
+    surface elements of `finrft.attach`) can use."""
+    return tuple(name for name, m in METHODS.items() if not m.implicit)
+
+
+def described() -> str:
+    """Every method in one sentence each, as the schema's documentation of ``sim.method``."""
+    return "; ".join(f"{m.name}: {m.doc}" for m in METHODS.values())

@@ -1,0 +1,183 @@
+"""The schema engine: declared keys, validated values, TOML in and out. It knows no section: a scene is any frozen
+dataclass whose fields are sections, each section a frozen dataclass whose fields are declared with `field` (a
+default, a unit, a line of documentation, and the allowed values). `finrft.scene` declares the sections and the
+scenes; each law declares its own keys (``KEYS`` in its module), from which the sections they belong to are built
+(`section`).
+
+Dotted keys name a section's entry: ``"plate.kind"``. Every failure is a SceneError naming the key and what is
+allowed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import json
+import math
+import tomllib
+import typing
+from typing import Any, Callable, Iterable, Mapping
+
+from .errors import SceneError
+
+# One declared key of a section built from several declarations (`section`): its name, type and `field`.
+Key = tuple[str, type, dataclasses.Field]
+
+
+def field(default: Any, unit: str, doc: str, *, choices: tuple[str, ...] | Callable[[], tuple[str, ...]] = (),
+          minimum: float | None = None, exclusive: bool = True, maximum: float | None = None,
+          why_maximum: str = "") -> Any:
+    """A section's entry: its ``default``, its ``unit`` (SI; "" when dimensionless or a name), one line ``doc``, and
+    what values are allowed: ``choices`` (names, matched whatever their case; or a function giving them), a
+    ``minimum`` (``exclusive`` or not) and a ``maximum`` with ``why_maximum``, the reason shown when it is
+    exceeded."""
+    return dataclasses.field(default=default, metadata={"unit": unit, "doc": doc, "choices": choices,
+                                                        "minimum": minimum, "exclusive": exclusive,
+                                                        "maximum": maximum, "why_maximum": why_maximum})
+
+
+def section(name: str, keys: Iterable[Key], module: str, doc: str) -> type:
+    """A frozen section dataclass called ``name`` holding ``keys`` in order, defined in ``module`` (which must bind
+    it to ``name``, for pickling). A key declared twice must be declared the same way (two laws may share a key,
+    never disagree on it)."""
+    seen: dict[str, Key] = {}
+    for key in keys:
+        if key[0] in seen and (seen[key[0]][1], seen[key[0]][2].default, seen[key[0]][2].metadata) != (
+                key[1], key[2].default, key[2].metadata):
+            raise TypeError(f"[{name}] key {key[0]!r} is declared twice, differently")
+        seen.setdefault(key[0], key)
+    cls = dataclasses.make_dataclass(name, list(seen.values()), frozen=True)
+    cls.__module__, cls.__doc__ = module, doc
+    return cls
+
+
+@functools.cache
+def sections(cls: type) -> dict[str, type]:
+    """A scene class's sections and their types, in order."""
+    hints = typing.get_type_hints(cls)
+    return {f.name: hints[f.name] for f in dataclasses.fields(cls)}
+
+
+def split_key(cls: type, key: str) -> tuple[str, str]:
+    """``"plate.kind"`` -> ("plate", "kind"), or SceneError naming what exists."""
+    known = sections(cls)
+    section_name, _, name = key.partition(".")
+    if section_name not in known or not name:
+        raise SceneError(f"unknown scene key '{key}': keys look like SECTION.NAME with SECTION one of "
+                         f"{', '.join(known)}")
+    names = [f.name for f in dataclasses.fields(known[section_name])]
+    if name not in names:
+        raise SceneError(f"unknown scene key '{key}': [{section_name}] has {', '.join(names)}")
+    return section_name, name
+
+
+def field_of(cls: type, key: str) -> dataclasses.Field:
+    """The schema entry of a dotted key (its type, unit, bounds)."""
+    section_name, name = split_key(cls, key)
+    return next(f for f in dataclasses.fields(sections(cls)[section_name]) if f.name == name)
+
+
+def check(section_name: str, f: dataclasses.Field, value: Any) -> Any:
+    """``value`` for the entry ``f`` of a section, converted (an int for a float) and checked against its type,
+    choices (the canonical spelling returned) and bounds; SceneError naming ``section_name.f.name`` otherwise."""
+    key, meta = f"{section_name}.{f.name}", f.metadata
+    if f.type in ("float", float):
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise SceneError(f"{key} must be a number ({meta['unit'] or 'dimensionless'}), got {value!r}")
+        value = float(value)
+        if not math.isfinite(value):
+            raise SceneError(f"{key} must be finite, got {value!r}")
+    elif f.type in ("int", int):
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise SceneError(f"{key} must be a whole number, got {value!r}")
+    elif f.type == "tuple[str, ...]":
+        if isinstance(value, str):
+            value = [value]
+        if not isinstance(value, (list, tuple)) or not all(isinstance(v, str) and v for v in value):
+            raise SceneError(f"{key} must be a list of names, e.g. [\"box\"], got {value!r}")
+        return tuple(value)
+    elif not isinstance(value, str):
+        raise SceneError(f"{key} must be a string, got {value!r}")
+    choices = meta["choices"]() if callable(meta["choices"]) else meta["choices"]
+    if choices:
+        # Names match whatever their case, so MuJoCo's own spellings (Euler, RK4) name the schema's choices.
+        canonical = {choice.lower(): choice for choice in choices}
+        if value.lower() not in canonical:
+            raise SceneError(f"{key} = {value!r} is not allowed: use one of {', '.join(choices)}")
+        value = canonical[value.lower()]
+    low = meta["minimum"]
+    if low is not None and (value <= low if meta["exclusive"] else value < low):
+        relation = ">" if meta["exclusive"] else ">="
+        raise SceneError(f"{key} must be {relation} {low:g} {meta['unit']}".rstrip() + f", got {value!r}")
+    high = meta["maximum"]
+    if high is not None and value > high:
+        raise SceneError(f"{key} must be <= {high:g} {meta['unit']}".rstrip() + f" ({meta['why_maximum']}), got "
+                         f"{value!r}")
+    return value
+
+
+def from_dict(data: Mapping[str, Any], cls: type) -> Any:
+    """Validate a nested mapping (as read from TOML) into a scene of class ``cls``; missing keys take the
+    schema's defaults."""
+    if not isinstance(data, Mapping):
+        raise SceneError("a scene must be a table of sections")
+    known = sections(cls)
+    for section_name in data:
+        if section_name not in known:
+            raise SceneError(f"unknown scene section [{section_name}]: use {', '.join(known)}")
+    defaults = cls()
+    parts = {}
+    for section_name, section_cls in known.items():
+        given = data.get(section_name, {})
+        if not isinstance(given, Mapping):
+            raise SceneError(f"[{section_name}] must be a table")
+        for name in given:
+            split_key(cls, f"{section_name}.{name}")
+        values = {f.name: check(section_name, f, given[f.name])
+                  for f in dataclasses.fields(section_cls) if f.name in given}
+        parts[section_name] = dataclasses.replace(getattr(defaults, section_name), **values)
+    return cls(**parts)
+
+
+def updated(data: dict[str, dict[str, Any]], cls: type, updates: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
+    """``data`` (a scene of class ``cls`` as nested dicts) with the dotted keys of ``updates`` set, in place; the
+    keys are checked, the values are checked when the scene is validated (`from_dict`)."""
+    for key, value in updates.items():
+        section_name, name = split_key(cls, key)
+        data[section_name][name] = value
+    return data
+
+
+def replace(scene: Any, updates: Mapping[str, Any]) -> Any:
+    """A validated copy of ``scene`` with the dotted keys of ``updates`` changed."""
+    return from_dict(updated(dataclasses.asdict(scene), type(scene), updates), type(scene))
+
+
+def parse_override(text: str, cls: type) -> tuple[str, Any]:
+    """``plate.stiffness=0.3`` -> ("plate.stiffness", 0.3); the value is read as TOML, else as a bare string."""
+    key, sep, raw = text.partition("=")
+    key = key.strip()
+    if not sep or not key:
+        raise SceneError(f"--set expects KEY=VALUE, got '{text}'")
+    split_key(cls, key)
+    raw = raw.strip()
+    try:
+        value = tomllib.loads(f"v = {raw}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = raw
+    return key, value
+
+
+def to_toml(scene: Any) -> str:
+    """The full resolved scene as TOML, with units as comments, so a user can copy and edit it."""
+    lines = ["# finrft scene: SI units throughout"]
+    for section_name, cls in sections(type(scene)).items():
+        lines += ["", f"[{section_name}]"]
+        values = getattr(scene, section_name)
+        for f in dataclasses.fields(cls):
+            value = getattr(values, f.name)
+            text = json.dumps(list(value) if isinstance(value, tuple) else value) if isinstance(
+                value, (str, tuple)) else repr(value)
+            unit = f" [{f.metadata['unit']}]" if f.metadata["unit"] else ""
+            lines.append(f"{f.name} = {text}  #{unit} {f.metadata['doc']}")
+    return "\n".join(lines) + "\n"

@@ -11,7 +11,9 @@ the results and their summary::
 The API, by topic:
 
 - scenes: `Scene` (a plate test), `RobotScene` (the robot), `preset`, `load_scene` (TOML file and overrides),
-  `to_toml`, `SceneError`
+  `to_toml`; their keys, units and bounds in one schema (finrft.schema; each law declares its own keys)
+- errors (finrft.errors): `Error`, the root of everything finrft raises on purpose: `SceneError` (bad input, also
+  a ValueError) and `SimulationFailed` (a run that cannot give a trustworthy result)
 - experiments: `run(experiment, scene)` -> `Result` runs any `Experiment` (finrft.experiment): `PlateTest`,
   `Swim`, `UserModel` (a user's MJCF model, `UserScene`), `Intrusion` (a plate pushed into the medium,
   `IntrusionScene`); `SimulationUnstable` when a run blows up or chatters
@@ -39,25 +41,25 @@ from typing import Any
 
 from .attach import attach
 from .batch import PlateRollouts, local_executor, map_jobs, rollout_plates, run_experiments, run_many
-from .convergence import SimulationUnstable
 from .drive import Drive
+from .errors import Error, SceneError, SimulationFailed, SimulationUnstable
 from .experiment import Experiment, Result, run
 from .fit import Fit, fit, read_drag, resolve_params
 from .intrusion import Intrusion
 from .media import medium
 from .optimize import Variable, optimize
-from .scene import IntrusionScene, RobotScene, Scene, SceneError, UserScene, load_scene, preset, to_toml
+from .scene import IntrusionScene, RobotScene, Scene, UserScene, load_scene, preset, to_toml
 from .simulate import PlateTest, simulate
 from .swim import Swim, swim, table_rows, table_scenes
 from .user_model import UserModel
 
 _RECORDING = ("write_h5", "write_rrd")
 
-__all__ = ["Drive", "Experiment", "Fit", "Intrusion", "IntrusionScene", "PlateRollouts", "PlateTest", "Result",
-           "RobotScene", "Scene", "SceneError", "SimulationUnstable", "Swim", "UserModel", "UserScene", "Variable",
-           "attach", "fit", "load_scene", "local_executor", "map_jobs", "medium", "optimize", "preset", "read_drag",
-           "resolve_params", "rollout_plates", "run", "run_experiments", "run_many", "simulate", "swim",
-           "table_rows", "table_scenes", "to_toml", *_RECORDING]
+__all__ = ["Drive", "Error", "Experiment", "Fit", "Intrusion", "IntrusionScene", "PlateRollouts", "PlateTest",
+           "Result", "RobotScene", "Scene", "SceneError", "SimulationFailed", "SimulationUnstable", "Swim",
+           "UserModel", "UserScene", "Variable", "attach", "fit", "load_scene", "local_executor", "map_jobs", "medium",
+           "optimize", "preset", "read_drag", "resolve_params", "rollout_plates", "run", "run_experiments",
+           "run_many", "simulate", "swim", "table_rows", "table_scenes", "to_toml", *_RECORDING]
 
 
 def __getattr__(name: str) -> Any:

@@ -2,9 +2,9 @@
 elements and gives them a granular resistive force law, before the spec is compiled.
 
 Each element below the free surface (z < surface_z, gravity along -z) that leads the motion (outward normal .
-velocity > 0) takes the law's stress times its depth and area (`finrft.laws.li2013.element_forces` or
-`finrft.laws.rft3d.element_forces`), plus, with ``drft_lambda`` > 0, DRFT's rate-dependent term
-(`finrft.laws.drft`). The force
+velocity > 0) takes the law's stress times its depth and area (a surface law of the registry `finrft.laws`, found
+by its name: `finrft.laws.li2013.element_forces` or `finrft.laws.rft3d.element_forces`), plus, with
+``drft_lambda`` > 0, DRFT's rate-dependent term (`finrft.laws.drft`). The force
 appears where MuJoCo's passive forces appear, ``data.qfrc_passive``: from the native plugin ``finrft.surface``
 (plugins/finrft_li2013.c, one instance per body, the elements in its config) or, with the Python backend, from a
 passive-force callback that `Attached.installed` sets for a block and then restores.
@@ -29,10 +29,9 @@ import mujoco
 import numpy as np
 
 from . import coupling, laws, media, native
-from .laws import drft, li2013, rft3d
 from .errors import SceneError
+from .laws import drft, li2013, rft3d
 
-LAWS = ("li2013", "rft3d")
 BACKENDS = ("native", "python")
 PLUGIN = "finrft.surface"
 # More elements than this make the plugin's config and every passive-force evaluation needlessly large.
@@ -53,44 +52,25 @@ class Surface:
     area: np.ndarray
 
 
-@dataclass(frozen=True)
-class Rft3dMedium:
-    """The parameters of the `rft3d` law: critical density rho_c (kg/m^3), internal friction mu_int, and the
-    intruder's surface friction mu_surf."""
-
-    rho_c: float
-    mu_int: float
-    mu_surf: float
-
-    @property
-    def xi(self) -> float:
-        return rft3d.xi(self.rho_c, self.mu_int)
-
-
 @dataclass(frozen=True, eq=False)
 class Attached:
     """What `attach` added to a spec: the law and medium, and each body's surface elements."""
 
     law: str
-    zeta: float
+    parameters: dict[str, float]  # the law's parameters (its PARAMETERS): li2013's zeta, rft3d's rho_c, mu_int, mu_surf
     surface_z: float
     element_size: float
     backend: str               # the backend in use: "native" (plugin instances in the spec) or "python"
     coefficients: li2013.Coefficients | rft3d.Coefficients
     surfaces: tuple[Surface, ...] = field(repr=False)
-    medium: Rft3dMedium | None = None  # rft3d only
     drft_lambda: float = 0.0   # DRFT's lambda; 0: the quasi-static law alone
     bulk_density: float = 0.0  # kg/m^3, DRFT's rho_c (0: none known)
 
     def element_forces(self, normal: np.ndarray, velocity: np.ndarray, depth: np.ndarray, area: np.ndarray
                        ) -> np.ndarray:
         """The law's force on each element (world frame), as the native plugin computes it."""
-        if self.law == "rft3d":
-            m = self.medium
-            force = rft3d.element_forces(normal, velocity, depth, area, m.rho_c, m.mu_int, m.mu_surf,
-                                         self.coefficients)
-        else:
-            force = li2013.element_forces(normal, velocity, depth, area, self.zeta, self.coefficients)
+        force = laws.module(self.law, laws.SURFACE).element_forces(normal, velocity, depth, area,
+                                                                   coefficients=self.coefficients, **self.parameters)
         if self.drft_lambda > 0:
             force = force + drft.element_forces(normal, velocity, depth, area, self.drft_lambda, self.bulk_density)
         return force
@@ -151,36 +131,35 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str, law: str = "li2013"
            drft_lambda: float = 0.0, bulk_density: float | None = None) -> Attached:
     """Add granular RFT to the named bodies of ``spec`` (before it is compiled).
 
-    ``law``: ``li2013`` (`finrft.laws.li2013`) with ``coefficients`` (default: the generic medium) scaled by
-    ``zeta`` (default 1), or instead of both a ``medium`` of the catalogue (`finrft.media`, e.g.
-    ``"poppy_seeds_lp"``); or ``rft3d`` (`finrft.laws.rft3d`) with ``coefficients`` (default:
+    ``law``, a surface law of `finrft.laws`: ``li2013`` (`finrft.laws.li2013`) with ``coefficients`` (default:
+    the generic medium) scaled by ``zeta`` (default 1), or instead of both a ``medium`` of the catalogue
+    (`finrft.media`, e.g. ``"poppy_seeds_lp"``); or ``rft3d`` (`finrft.laws.rft3d`) with ``coefficients`` (default:
     `rft3d.AGARWAL_2023`) and the medium's critical density ``rho_c`` (kg/m^3), internal friction ``mu_int`` and
-    the bodies' surface friction ``mu_surf``, all three required; ``drft_lambda`` (dimensionless, default 0: off):
+    the bodies' surface friction ``mu_surf``, all three required (a catalogued ``medium`` gives rho_c and mu_int
+    when it has them); ``drft_lambda`` (dimensionless, default 0: off):
     DRFT's rate-dependent term on top of either law (`finrft.laws.drft`), with the medium's density: rft3d's
     ``rho_c``, li2013's ``bulk_density`` (kg/m^3; else the catalogued ``medium``'s, if it has one);
     ``surface_z``: height of the free surface, m; ``element_size``: the elements' size, m; ``backend``:
     ``native`` (falls back to ``python``, with a warning, when the plugin cannot be loaded) or ``python`` (then run
     the model inside ``Attached.installed``). Raises `SceneError` on bad input.
     """
-    if medium is not None:
-        if law != "li2013":
-            raise SceneError(f"attach: the media catalogue gives li2013's parameters, not {law}'s")
-        if zeta is not None or coefficients is not None:
-            raise SceneError(f"attach: medium={medium!r} gives zeta and the coefficients: pass one or the other")
-        zeta, coefficients = li2013.medium_parameters(media.medium(medium))
-    zeta = 1.0 if zeta is None else zeta
+    material = media.medium(medium) if medium is not None else None
     names = [bodies] if isinstance(bodies, str) else list(bodies)
-    _check(names, law, zeta, surface_z, element_size, backend)
-    granular = _rft3d_medium(law, rho_c, mu_int, mu_surf)
-    if law == "rft3d" and bulk_density is not None:
-        raise SceneError("attach: law rft3d's bulk density is rho_c: pass rho_c, not bulk_density")
-    catalogued = media.medium(medium).get("bulk_density") if medium is not None else None
-    rho = drft.density(drft_lambda, rho_c if law == "rft3d" else bulk_density,
-                       None if catalogued is None else catalogued.value, "bulk_density", "attach")
-    kind = rft3d.Coefficients if law == "rft3d" else li2013.Coefficients
+    _check(names, law, surface_z, element_size, backend)
+    module = laws.module(law, laws.SURFACE)
+    parameters, catalogued = laws.surface_parameters(
+        law, {"zeta": zeta, "rho_c": rho_c, "mu_int": mu_int, "mu_surf": mu_surf}, material, "attach")
+    if catalogued is not None and coefficients is not None:
+        raise SceneError(f"attach: medium={medium!r} gives the coefficients: pass one or the other")
+    if module.DENSITY and bulk_density is not None:
+        raise SceneError(f"attach: law {law}'s bulk density is {module.DENSITY}: pass {module.DENSITY}, not "
+                         f"bulk_density")
+    known = material.get("bulk_density") if material is not None else None
+    rho = drft.density(drft_lambda, parameters[module.DENSITY] if module.DENSITY else bulk_density,
+                       None if known is None else known.value, "bulk_density", "attach")
     if coefficients is None:
-        coefficients = rft3d.AGARWAL_2023 if law == "rft3d" else li2013.GENERIC
-    elif not isinstance(coefficients, kind):
+        coefficients = module.DEFAULT if catalogued is None else catalogued
+    elif not isinstance(coefficients, module.Coefficients):
         raise SceneError(f"attach: law {law!r} takes finrft.laws.{law}.Coefficients")
     backend = native.resolve_backend(backend)
     model = spec.copy().compile()
@@ -196,59 +175,38 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str, law: str = "li2013"
     if total > MAX_ELEMENTS:
         raise SceneError(f"attach: element_size = {element_size:g} m gives {total} elements, more than "
                          f"{MAX_ELEMENTS}: use a larger element_size")
-    attached = Attached(law, float(zeta), float(surface_z), float(element_size), backend, coefficients,
-                        tuple(surfaces), granular, float(drft_lambda), rho)
+    attached = Attached(law, parameters, float(surface_z), float(element_size), backend, coefficients,
+                        tuple(surfaces), float(drft_lambda), rho)
     if backend == "native":
         spec.activate_plugin(PLUGIN)
         for surface in surfaces:
             _bind(spec, attached, surface)
-    if law == "rft3d":
-        laws.warn_feeds_energy(law, rft3d.FEEDS_ENERGY, "kept as published")
+    laws.warn_feeds_energy(law, module.FEEDS_ENERGY, "kept as published")
     return attached
 
 
-def _check(names: list[str], law: str, zeta: float, surface_z: float, element_size: float, backend: str) -> None:
-    if law not in LAWS:
-        raise SceneError(f"attach: law must be one of {', '.join(LAWS)}, got {law!r}")
+def _check(names: list[str], law: str, surface_z: float, element_size: float, backend: str) -> None:
+    if law not in laws.names(laws.SURFACE):
+        raise SceneError(f"attach: law must be one of {', '.join(laws.names(laws.SURFACE))}, got {law!r}")
     if backend not in BACKENDS:
         raise SceneError(f"attach: backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
     if not names:
         raise SceneError("attach: name at least one body")
     if len(set(names)) != len(names):
         raise SceneError("attach: a body is named twice")
-    if not (math.isfinite(zeta) and zeta > 0):
-        raise SceneError(f"attach: zeta must be > 0, got {zeta!r}")
     if not math.isfinite(surface_z):
         raise SceneError(f"attach: surface_z must be finite, got {surface_z!r}")
     if not (math.isfinite(element_size) and element_size > 0):
         raise SceneError(f"attach: element_size must be > 0 m, got {element_size!r}")
 
 
-def _rft3d_medium(law: str, rho_c: float | None, mu_int: float | None, mu_surf: float | None
-                  ) -> Rft3dMedium | None:
-    given = {"rho_c": rho_c, "mu_int": mu_int, "mu_surf": mu_surf}
-    if law != "rft3d":
-        named = [k for k, v in given.items() if v is not None]
-        if named:
-            raise SceneError(f"attach: {', '.join(named)} belong to law rft3d, not {law}")
-        return None
-    for key, value in given.items():
-        if value is None:
-            raise SceneError(f"attach: law rft3d needs {key}")
-        if not math.isfinite(value) or value < 0 or (value == 0 and key != "mu_surf"):
-            raise SceneError(f"attach: {key} must be {'>= 0' if key == 'mu_surf' else '> 0'}, got {value!r}")
-    return Rft3dMedium(float(rho_c), float(mu_int), float(mu_surf))  # xi_n > 0 for every mu_int > 0
-
-
 def _bind(spec: mujoco.MjSpec, attached: Attached, surface: Surface) -> None:
     elements = np.column_stack([surface.centre, surface.normal, surface.area])
     instance = spec.add_plugin(name=f"finrft_surface_{surface.body}", plugin_name=PLUGIN, active=True)
-    scale = ({"xi": repr(attached.medium.xi), "mu_surf": repr(attached.medium.mu_surf)} if attached.medium
-             else {"zeta": repr(attached.zeta)})
     instance.config = {
         "law": attached.law,
         "coefficients": " ".join(map(repr, attached.coefficients.values())),
-        **scale,
+        **laws.module(attached.law, laws.SURFACE).config(attached.parameters),
         **({"drft_lambda": repr(attached.drft_lambda), "bulk_density": repr(attached.bulk_density)}
            if attached.drft_lambda > 0 else {}),
         "surface_z": repr(attached.surface_z),

@@ -17,6 +17,7 @@ from . import batch, methods, models, native
 from .drive import Drive
 from .convergence import ErrorLimits
 from .errors import Chatter, NotConverged, SimulationFailed, StepUnderflow, UndefinedResult
+from .fit import fit, read_drag, resolve_params, simulated_drag
 from .experiment import Experiment, run as run_experiment
 from .optimize import evaluation_scene, optimize
 from .scene import PRESETS, RobotScene, Scene, preset, resolution
@@ -262,7 +263,6 @@ def fit_speed(paths: list[str] | None = None, *, budget: int = 300, workers: int
     """A 4-parameter fit (k, b, f_perp, f_par) of the paper plate over three drag files with ``budget``
     evaluations: the given files, or the model's own drags at 10, 30 and 50 mm/s over 200 mm. ``progress``
     counts evaluations (at most ``budget``)."""
-    from .fit import fit, read_drag, resolve_params, simulated_drag
     scene = preset("paper")
     data = [read_drag(p) for p in paths] if paths else [
         simulated_drag(scene.replace(**{"plate.damping": 0.8}), v, 0.2) for v in (0.01, 0.03, 0.05)]

@@ -20,7 +20,7 @@ from typing import Any, Mapping
 from . import laws, media, methods, schema
 from .errors import SceneError
 from .files import read_text, read_toml
-from .laws import drft, li2013
+from .laws import drft
 from .schema import field as _f
 # Importable from here as before; their homes are the schema engine, the errors and the file reader.
 from .schema import field_of, sections, split_key, to_toml  # noqa: F401
@@ -83,12 +83,7 @@ class Sim:
     dt: float = _f(1.0e-4, "s", "time step", minimum=0.0)
     backend: str = _f("native", "", "where the RFT force is computed: the C plugin, or a Python callback "
                       "(native falls back to python when the plugin is unavailable)", choices=("native", "python"))
-    method: str = _f("newton", "", "explicit: MuJoCo's step, the RFT force as it is; implicit: implicitfast "
-                     "with the RFT force linearised in velocity; newton: implicitfast with the RFT force at the new "
-                     "velocity, solved by Newton's method (stable and accurate at large steps on light segments); "
-                     "adaptive: implicit steps sized by an error estimate (dt is then the grid of samples); "
-                     "adaptive-newton: newton steps sized by the same estimate",
-                     choices=methods.names())
+    method: str = _f("newton", "", methods.described(), choices=methods.names())
     max_step: float = _f(1e-3, "s", "adaptive methods: largest step", minimum=0.0)
     tolerance: float = _f(1e-4, "", "adaptive methods: error per step, relative (absolute below 1e-3)", minimum=0.0,
                           maximum=0.1, why_maximum="a looser step-doubling test accepts steps of any error")
@@ -155,21 +150,24 @@ class Model:
     bodies: tuple[str, ...] = _f((), "", "the bodies the medium acts on (their geoms are cut into surface elements)")
 
 
-@dataclass(frozen=True)
-class Medium:
-    law: str = _f("li2013", "", "li2013: the granular RFT of Li, Zhang & Goldman 2013 on surface elements",
-                  choices=("li2013",))
-    name: str = _f("", "", "a named medium of the catalogue (finrft medium --list), which gives zeta or its own "
-                   "coefficients; empty: the generic coefficients scaled by zeta")
-    zeta: float = _f(1.0, "", "the medium's scale: alpha_z of a horizontal plate pushed down, in N/cm^3 (the "
-                     "generic coefficients are scaled by it; only without medium.name)", minimum=0.0)
-    surface_z: float = _f(0.0, "m", "height of the free surface (gravity along -z); the medium lies below")
-    element_size: float = _f(0.005, "m", "size of the surface elements", minimum=0.0)
-    drft_lambda: float = _f(0.0, "", "DRFT's rate-dependent term (Agarwal et al. 2021 Sci. Adv.): the leading "
-                            "elements also take a pressure drft_lambda * bulk_density * (v.n)^2; 0: off, the "
-                            "quasi-static law alone; the paper fits O(1) values", minimum=0.0, exclusive=False)
-    bulk_density: float = _f(0.0, "kg/m^3", "the medium's bulk (critical) density, for drft_lambda > 0; 0: the "
-                             "catalogued medium's (medium.name), if it has one", minimum=0.0, exclusive=False)
+Medium = schema.section("Medium", (
+    ("law", str, _f("li2013", "", "the surface law on the surface elements: li2013, the granular RFT of Li, Zhang & "
+                    "Goldman 2013; rft3d, the 3D RFT of Agarwal, Goldman & Kamrin 2023",
+                    choices=lambda: laws.names(laws.SURFACE))),
+    ("name", str, _f("", "", "a named medium of the catalogue (finrft medium --list), which gives li2013's zeta or "
+                     "its own coefficients, rft3d's bulk density and internal friction; empty: li2013's generic "
+                     "coefficients scaled by zeta")),
+    ("surface_z", float, _f(0.0, "m", "height of the free surface (gravity along -z); the medium lies below")),
+    ("element_size", float, _f(0.005, "m", "size of the surface elements", minimum=0.0)),
+    ("drft_lambda", float, _f(0.0, "", "DRFT's rate-dependent term (Agarwal et al. 2021 Sci. Adv.): the leading "
+                              "elements also take a pressure drft_lambda * bulk_density * (v.n)^2; 0: off, the "
+                              "quasi-static law alone; the paper fits O(1) values", minimum=0.0, exclusive=False)),
+    ("bulk_density", float, _f(0.0, "kg/m^3", "the medium's bulk (critical) density, for drft_lambda > 0 and "
+                               "rft3d's rho_c; 0: the catalogued medium's (medium.name), if it has one",
+                               minimum=0.0, exclusive=False)),
+    *laws.keys(laws.SURFACE)), __name__,
+    "The medium of a user's model or an intrusion: its surface law, named medium and free surface, and the keys "
+    "every surface law declares (``KEYS`` in its module, `finrft.laws`).")
 
 
 @dataclass(frozen=True)
@@ -202,15 +200,14 @@ class JointDrive:
     start: float = _f(0.0, "m or rad", "the joint's position at t = 0 (its qpos)")
 
 
-def _check_medium(m: Medium) -> None:
-    catalogued = media.medium(m.name).get("bulk_density") if m.name else None
+def _check_medium(m: Any) -> None:
+    material = media.medium(m.name) if m.name else None
+    catalogued = material.get("bulk_density") if material else None
     drft.density(m.drft_lambda, m.bulk_density or None, None if catalogued is None else catalogued.value,
                  "medium.bulk_density", "medium")
-    if not m.name:
-        return
-    if m.zeta != Medium.zeta:
-        raise SceneError(f"medium.name = {m.name!r} gives the medium's zeta: leave medium.zeta out (got {m.zeta:g})")
-    li2013.medium_parameters(media.medium(m.name))
+    law = laws.module(m.law, laws.SURFACE)
+    laws.surface_parameters(m.law, law.given(m), material, f"medium.law = {m.law!r}",
+                            {key: f"medium.{name}" for key, name in law.SECTION_KEYS.items()})
 
 
 def resolution(sim: Any) -> str:

@@ -18,6 +18,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from . import laws
 from .attach import Attached, SurfaceForces, attach
 from .drive import Drive
 from .experiment import Compared, Plot, Quantity, Result
@@ -89,10 +90,11 @@ def build_attached(spec: mujoco.MjSpec, joint_name: str, bodies: tuple[str, ...]
     mujoco.mj_fullM(plain, d, mass)
     dof = int(plain.jnt_dofadr[plain.joint(joint_name).id])
     joint.armature = ARMATURE_RATIO * mass[dof, dof]
-    attached = attach(spec, list(bodies), law=medium.law, zeta=None if medium.name else medium.zeta,
-                      surface_z=medium.surface_z, element_size=medium.element_size, backend=sim.backend,
-                      medium=medium.name or None, drft_lambda=medium.drft_lambda,
-                      bulk_density=medium.bulk_density or None)
+    law = laws.module(medium.law, laws.SURFACE)
+    attached = attach(spec, list(bodies), law=medium.law, surface_z=medium.surface_z,
+                      element_size=medium.element_size, backend=sim.backend, medium=medium.name or None,
+                      drft_lambda=medium.drft_lambda,
+                      bulk_density=None if law.DENSITY else medium.bulk_density or None, **law.given(medium))
     model = _compile(spec)
     jid = model.joint(joint_name).id
     return AttachedModel(model, attached, int(model.jnt_dofadr[jid]), int(model.jnt_qposadr[jid]),

@@ -10,6 +10,7 @@ import pytest
 
 from finrft.cli import main
 from finrft.convergence import ErrorLimits, InaccurateResult, SimulationFailed, paired
+from finrft.errors import UndefinedResult
 from finrft.drive import Drive
 from finrft.scene import RobotScene, preset
 from finrft.simulate import simulate
@@ -127,5 +128,5 @@ def test_max_error_sets_the_limit(capsys):
 def test_an_undefined_eta_is_not_reported():
     # A gait whose power stroke does not move the body forward has no eta: the run says so, it never reports NaN.
     scene = preset("paper", RobotScene).replace(**{"gait.theta1": math.radians(90), "gait.theta2": math.radians(80)})
-    with pytest.raises(SimulationFailed, match=r"eta is undefined in cycle 1: its power stroke moved the body -109 mm"):
+    with pytest.raises(UndefinedResult, match=r"eta is undefined in cycle 1: its power stroke moved the body -109 mm"):
         swim(scene, 1)

@@ -146,7 +146,7 @@ BOX = """<mujoco><worldbody><body name="plate" pos="0 0 -0.05"><freejoint/>
 
 def test_attach_takes_a_named_medium():
     attached = attach(mujoco.MjSpec.from_string(BOX), "plate", medium="poppy_seeds_lp", backend="python")
-    assert attached.zeta == 1.0
+    assert attached.parameters == {"zeta": 1.0}
     assert attached.coefficients == li2013.medium_parameters(media.medium("poppy_seeds_lp"))[1]
     assert attach(mujoco.MjSpec.from_string(BOX), "plate", backend="python").coefficients == li2013.GENERIC
     with pytest.raises(SceneError, match="one or the other"):

@@ -292,3 +292,27 @@ def test_law_rft3d_plot_and_media_it_cannot_scale(tmp_path, capsys):
     captured = capsys.readouterr()
     assert len(captured.err.strip().splitlines()) == 1 and not captured.out
     assert "bulk_density nor internal_friction_angle" in captured.err and "Traceback" not in captured.err
+
+
+def test_a_scene_file_selects_rft3d(tmp_path):
+    # [medium] law = "rft3d" on the intrusion: a horizontal plate pushed straight down takes xi_n x 0.87504 (the
+    # fit's sum, see test_horizontal_plate_pushed_down) x its area x its depth, upwards, nothing sideways.
+    from finrft.intrusion import intrude
+    from finrft.scene import IntrusionScene, load_scene, scene_from_dict
+
+    path = tmp_path / "intrusion.toml"
+    path.write_text('[medium]\nlaw = "rft3d"\nbulk_density = 1500.0\ninternal_friction = 0.4\n'
+                    'surface_friction = 0.3\n\n[plate]\ndepth = 0.03\n')
+    scene = load_scene(path, cls=IntrusionScene)
+    run = intrude(scene, [0.0])[0]
+    p, deep = scene.plate, run.depth > 0.01
+    up = rft3d.alpha_gen(0.0, np.pi / 2, 0.0)[2]
+    assert up == pytest.approx(0.87504, abs=1e-6)
+    assert run.force_z[deep] == pytest.approx(rft3d.xi(1500.0, 0.4) * up * p.width * p.length * run.depth[deep],
+                                              rel=1e-6)
+    assert np.abs(run.force_x).max() < 1e-9 * np.abs(run.force_z).max()
+    for medium, message in [({"law": "rft3d", "internal_friction": 0.4}, "rft3d needs medium.bulk_density"),
+                            ({"law": "rft3d", "bulk_density": 1500.0}, "rft3d needs medium.internal_friction"),
+                            ({"law": "surface"}, "use one of li2013, rft3d")]:
+        with pytest.raises(SceneError, match=message):
+            scene_from_dict({"medium": medium}, IntrusionScene)

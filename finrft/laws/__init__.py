@@ -17,8 +17,22 @@ name. Its module provides
   ...))`` each; the section (`finrft.scene.RFT`) is built from every segment law's (`keys`), so a new law's keys,
   units and documentation are declared in its module alone.
 
-A surface law (``KIND = "surface"``) gives the stress on surface elements of any body (`finrft.attach`); its C twin
-is in plugins/finrft_li2013.c. A surface term (``KIND = "surface-term"``) adds to any surface law.
+A surface law (``KIND = "surface"``) gives the force on the surface elements of any body (`finrft.attach`); its C
+twin is in plugins/finrft_li2013.c. Its module provides
+
+- ``element_forces(normal, velocity, depth, area, coefficients=..., **parameters) -> (N, 3)``, pure numpy;
+- ``Coefficients`` (its fit's coefficients) and ``DEFAULT``, the set it takes unless given others;
+- ``PARAMETERS``, the names of its parameters of the medium (`finrft.attach` takes them by these names), and
+  ``SECTION_KEYS``, the key of each in a scene's ``[medium]``; ``DENSITY``, the one that is the medium's bulk
+  density ("" for none);
+- ``given(section) -> dict``: its parameters as a scene's ``[medium]`` gives them (None: not given);
+  ``catalogued(material) -> (dict, coefficients or None)``: those a catalogued medium gives; ``checked(parameters,
+  where, shown) -> dict``: them validated, defaults filled in (`surface_parameters` does all three);
+- ``config(parameters) -> dict[str, str]``: its scale keys of the native plugin's config;
+- ``FEEDS_ENERGY``: why it can feed energy in, or "";
+- ``KEYS``: its own keys of a scene's ``[medium]``, as a segment law's of ``[rft]``.
+
+A surface term (``KIND = "surface-term"``, DRFT's) adds to any surface law.
 
 A law of any kind may also draw its stress map (``finrft law NAME``): ``stress_map(medium) -> dict`` of flat arrays
 of one length, one entry per grid point, for a catalogued medium (`finrft.media.Material`): first two grid axes
@@ -37,6 +51,8 @@ from types import ModuleType
 from typing import Any, Callable
 
 import numpy as np
+
+from ..errors import SceneError
 
 SEGMENT = "segment"  # the KIND of a segment law
 SURFACE = "surface"  # the KIND of a surface law
@@ -88,6 +104,27 @@ def plugin_config(rft: Any) -> dict[str, str]:
     params = law.parameters(rft)
     own = law.config(params) if hasattr(law, "config") else {key: repr(float(value)) for key, value in params.items()}
     return {"law": rft.law, "v_reg": repr(rft.v_reg), **own}
+
+
+def surface_parameters(law: str, given: dict[str, float | None], material: Any, where: str,
+                       shown: dict[str, str] | None = None) -> tuple[dict[str, float], Any]:
+    """A surface law's parameters and the coefficients a catalogued medium gives it (None: none): each parameter as
+    ``given`` (None: not given) or else as the catalogued ``material`` gives it (a `finrft.media.Material`, or None),
+    then checked by the law. A value both given and catalogued, or given for another surface law, is refused:
+    SceneError beginning with ``where``, each parameter named as in ``shown`` (default: by its own name)."""
+    surface = _registry(SURFACE)
+    law_module = surface[law]
+    shown = shown or {}
+    foreign = [key for key, value in given.items() if value is not None and key not in law_module.PARAMETERS]
+    if foreign:
+        owner = next(name for name, m in sorted(surface.items()) if foreign[0] in getattr(m, "PARAMETERS", ()))
+        raise SceneError(f"{where}: {', '.join(shown.get(k, k) for k in foreign)} belong to law {owner}, not {law}")
+    found, coefficients = law_module.catalogued(material) if material is not None else ({}, None)
+    both = [shown.get(key, key) for key in found if given.get(key) is not None]
+    if both:
+        raise SceneError(f"{where}: the named medium {material.name!r} gives {', '.join(both)}: leave "
+                         f"{', '.join(both)} out, or name no medium (one or the other)")
+    return law_module.checked({**given, **found}, where, shown), coefficients
 
 
 class FeedsEnergy(RuntimeWarning):

@@ -34,6 +34,8 @@ import numpy as np
 
 from ..errors import SceneError
 
+KIND = "surface-term"  # added on top of any surface law, not a law of its own
+
 
 def element_forces(normal: np.ndarray, velocity: np.ndarray, depth: np.ndarray, area: np.ndarray,
                    drft_lambda: float, rho_c: float) -> np.ndarray:

@@ -27,13 +27,26 @@ alpha_x changes sign. Public codes differ from the paper's fit in two ways this 
 
 from __future__ import annotations
 
+import math
 from dataclasses import astuple, dataclass
+from typing import Any
 
 import numpy as np
 
 from ..errors import SceneError
+from ..schema import field
 
+KIND = "surface"
 N_PER_CM3 = 1e6  # N/m^3 in one N/cm^3
+# The law's parameters of the medium (`finrft.attach` takes them by these names), and the [medium] key of each.
+PARAMETERS = ("zeta",)
+SECTION_KEYS = {"zeta": "zeta"}
+DENSITY = ""  # none of its parameters is the medium's bulk density
+FEEDS_ENERGY = ""  # dissipative over the whole range (the module's docstring)
+# The law's own keys of a scene's [medium] (`finrft.scene.Medium` is built from every surface law's).
+KEYS = (("zeta", float, field(1.0, "", "li2013: the medium's scale: alpha_z of a horizontal plate pushed down, in "
+                              "N/cm^3 (the generic coefficients are scaled by it; only without medium.name)",
+                              minimum=0.0)),)
 
 
 @dataclass(frozen=True)
@@ -62,6 +75,7 @@ class Coefficients:
 # Generic coefficients of Li et al. 2013 (their Table S2), as transcribed identically by independent public codes;
 # scaled by zeta = alpha_z(0, pi/2) of the medium in N/cm^3.
 GENERIC = Coefficients.per_cm3(0.206, 0.169, 0.212, 0.358, 0.055, -0.124, 0.253, 0.007, 0.088)
+DEFAULT = GENERIC  # the coefficients of a medium given by its zeta alone
 # The coefficient sets of named media (poppy seeds loosely and closely packed, ...) are in the media catalogue
 # (finrft/media.toml), with their sources: `medium_parameters`.
 
@@ -134,6 +148,32 @@ def medium_parameters(medium) -> tuple[float, Coefficients]:
     if zeta is not None and not zeta.value > 0:
         raise SceneError(f"medium {medium.name!r}: zeta must be > 0, got {zeta.value!r}")
     return (1.0 if zeta is None else zeta.value), (GENERIC if own is None else Coefficients.per_cm3(*own.value))
+
+
+def given(section: Any) -> dict[str, float | None]:
+    """The law's parameters a scene's ``[medium]`` gives (None: not given, the named medium's): zeta, unless it is
+    left at its default beside a medium.name."""
+    return {"zeta": None if section.name and section.zeta == KEYS[0][2].default else section.zeta}
+
+
+def catalogued(medium) -> tuple[dict[str, float], Coefficients]:
+    """The parameters and coefficients a catalogued medium (`finrft.media.Material`) gives: `medium_parameters`."""
+    zeta, coefficients = medium_parameters(medium)
+    return {"zeta": zeta}, coefficients
+
+
+def checked(parameters: dict[str, float | None], where: str, shown: dict[str, str]) -> dict[str, float]:
+    """The law's parameters, zeta 1 when not given; SceneError beginning with ``where`` for a bad one, named as in
+    ``shown``."""
+    zeta = 1.0 if parameters.get("zeta") is None else parameters["zeta"]
+    if not (math.isfinite(zeta) and zeta > 0):
+        raise SceneError(f"{where}: {shown.get('zeta', 'zeta')} must be > 0, got {zeta!r}")
+    return {"zeta": float(zeta)}
+
+
+def config(parameters: dict[str, float]) -> dict[str, str]:
+    """The native plugin's scale: zeta."""
+    return {"zeta": repr(parameters["zeta"])}
 
 
 # The stress map's grid: Li 2013 Fig. 2's range, both angles in [-90, 90] deg, at 5 deg.

@@ -48,12 +48,27 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from ..errors import SceneError
+from ..schema import field
 
+KIND = "surface"
 STANDARD_GRAVITY = 9.81  # m/s^2, g of xi_n
+# The law's parameters of the medium and the intruder (`finrft.attach` takes them by these names), and the [medium]
+# key of each.
+PARAMETERS = ("rho_c", "mu_int", "mu_surf")
+SECTION_KEYS = {"rho_c": "bulk_density", "mu_int": "internal_friction", "mu_surf": "surface_friction"}
+DENSITY = "rho_c"  # the parameter that is the medium's bulk density (DRFT's too)
+# The law's own keys of a scene's [medium] (`finrft.scene.Medium` is built from every surface law's); rho_c is its
+# medium.bulk_density.
+KEYS = (("internal_friction", float, field(0.0, "", "rft3d: the medium's internal friction coefficient mu_int (tan "
+                                           "of its internal friction angle); 0: the named medium's", minimum=0.0,
+                                           exclusive=False)),
+        ("surface_friction", float, field(0.0, "", "rft3d: friction coefficient mu_surf between the bodies and the "
+                                          "grains (0: frictionless)", minimum=0.0, exclusive=False)))
 
 # Why the published fit can feed energy in (tests/test_rft3d.py measures it): `attach` says so once.
 FEEDS_ENERGY = ("its fitted normal stress pulls outward on about 5 % of grazing leading faces (n.v < 0.2 |v|), "
@@ -89,6 +104,7 @@ AGARWAL_2023 = Coefficients(
     c3=(-0.02634, -0.03436, 0.45256, 0.00835, 0.02553, -1.31290, -0.05532, 0.06790, -0.16404, 0.02287,
         0.02927, 0.95406, -0.00131, -0.11028, 0.01487, -0.02730, 0.10911, -0.04097, 0.07881, -0.27519),
 )
+DEFAULT = AGARWAL_2023  # the coefficients unless others are given
 
 
 def terms(p1, p2, p3) -> np.ndarray:
@@ -159,6 +175,41 @@ def element_forces(normal: np.ndarray, velocity: np.ndarray, depth: np.ndarray, 
     leading = (np.einsum("...i,...i", normal, velocity) > 0) & (np.asarray(depth) > 0)
     scale = np.where(leading, xi(rho_c, mu_int) * np.asarray(area) * np.asarray(depth), 0.0)
     return scale[..., None] * stress
+
+
+def given(section: Any) -> dict[str, float | None]:
+    """The law's parameters a scene's ``[medium]`` gives (None: not given, the named medium's)."""
+    return {"rho_c": section.bulk_density or None, "mu_int": section.internal_friction or None,
+            "mu_surf": section.surface_friction}
+
+
+def catalogued(medium) -> tuple[dict[str, float], None]:
+    """The parameters a catalogued medium (`finrft.media.Material`) gives: rho_c, its bulk density, and mu_int, the
+    tangent of its internal friction angle, those it has (mu_surf is the intruder's); no coefficients."""
+    rho, angle = medium.get("bulk_density"), medium.get("internal_friction_angle")
+    found = {}
+    if rho is not None:
+        found["rho_c"] = rho.value
+    if angle is not None:
+        found["mu_int"] = math.tan(angle.value)
+    return found, None
+
+
+def checked(parameters: dict[str, float | None], where: str, shown: dict[str, str]) -> dict[str, float]:
+    """The law's parameters, all three required; SceneError beginning with ``where`` for a missing or bad one,
+    named as in ``shown``."""
+    for key in PARAMETERS:
+        value, name = parameters.get(key), shown.get(key, key)
+        if value is None:
+            raise SceneError(f"{where}: law rft3d needs {name}")
+        if not math.isfinite(value) or value < 0 or (value == 0 and key != "mu_surf"):
+            raise SceneError(f"{where}: {name} must be {'>= 0' if key == 'mu_surf' else '> 0'}, got {value!r}")
+    return {key: float(parameters[key]) for key in PARAMETERS}  # xi_n > 0 for every mu_int > 0
+
+
+def config(parameters: dict[str, float]) -> dict[str, str]:
+    """The native plugin's scale xi_n and the surface friction."""
+    return {"xi": repr(xi(parameters["rho_c"], parameters["mu_int"])), "mu_surf": repr(parameters["mu_surf"])}
 
 
 # The stress map's grid: the vertical plane (psi = 0), as Li 2013 Fig. 2, both angles in [-90, 90] deg at 5 deg.

@@ -1,0 +1,66 @@
+"""The schema engine knows no section: the sections of the laws' keys are built from what each law declares."""
+
+import dataclasses
+
+import pytest
+
+from finrft import laws, schema
+from finrft.errors import Error, SceneError
+from finrft.laws import table
+from finrft.scene import RFT, IntrusionScene, Medium, RobotScene, Scene, UserScene, field_of, preset, scene_from_dict
+
+
+class Recorder:
+    """A stand-in for a section that records which keys a law reads."""
+
+    def __init__(self, section):
+        self._section, self.read = section, set()
+
+    def __getattr__(self, name):
+        self.read.add(name)
+        return getattr(self._section, name)
+
+
+def test_each_law_declares_its_own_keys_and_reads_only_them(tmp_path):
+    # [rft] is the union of the segment laws' declarations (and the law's name and v_reg, which every law shares);
+    # each law's parameters come from its own keys alone.
+    shared = {"law", "v_reg"}
+    declared = {name: {key for key, _, _ in laws.module(name).KEYS} for name in laws.names()}
+    assert {f.name for f in dataclasses.fields(RFT)} == shared | set().union(*declared.values())
+    table.write_table(tmp_path / "table.csv", table.paper_table(1.2, 0.2))
+    for name in laws.names():
+        rft = Recorder(RFT(law=name, table=str(tmp_path / "table.csv")))
+        laws.module(name).parameters(rft)
+        assert rft.read == declared[name], name
+    assert field_of(Scene, "rft.c_s").metadata["unit"] == "N" and field_of(Scene, "rft.gamma0").metadata["unit"] == "rad"
+    # the surface laws' keys of [medium], likewise
+    for name in laws.names(laws.SURFACE):
+        module = laws.module(name, laws.SURFACE)
+        own = {key for key, _, _ in module.KEYS}
+        assert own <= {f.name for f in dataclasses.fields(Medium)}
+        assert set(module.given(Medium(law=name))) == set(module.PARAMETERS)
+        assert set(module.SECTION_KEYS) == set(module.PARAMETERS)
+        assert set(module.SECTION_KEYS.values()) <= {f.name for f in dataclasses.fields(Medium)}
+    assert laws.names(laws.SURFACE) == ("li2013", "rft3d")
+
+
+def test_a_key_declared_twice_must_agree():
+    key = ("c", float, schema.field(1.0, "N", "a coefficient"))
+    assert [f.name for f in dataclasses.fields(schema.section("S", (key, key), __name__, "doc"))] == ["c"]
+    with pytest.raises(TypeError, match="'c' is declared twice, differently"):
+        schema.section("S", (key, ("c", float, schema.field(2.0, "N", "a coefficient"))), __name__, "doc")
+
+
+def test_every_scene_round_trips_through_its_toml():
+    import tomllib
+    for cls in (Scene, RobotScene, UserScene, IntrusionScene):
+        scene = preset("physical", cls) if cls in (Scene, RobotScene) else cls()
+        assert scene_from_dict(tomllib.loads(schema.to_toml(scene)), cls) == scene
+
+
+def test_bad_input_is_one_error_family():
+    with pytest.raises(SceneError, match="unknown scene key 'rft.nothing': \\[rft\\] has law, v_reg") as caught:
+        preset("paper").replace(**{"rft.nothing": 1.0})
+    assert isinstance(caught.value, Error) and isinstance(caught.value, ValueError)
+    with pytest.raises(SceneError, match="rft.gamma0 must be <= 1.5708 rad"):
+        preset("paper").replace(**{"rft.gamma0": 2.0})

@@ -21,6 +21,7 @@ from typing import Any, Callable
 import mujoco
 import numpy as np
 
+from . import laws
 from .convergence import ErrorLimits
 from .drive import Drive
 from .experiment import Compared, Plot, Quantity, Result, run
@@ -141,9 +142,11 @@ def plot_curves(runs: list[Result], path: str | Path) -> None:
         vertical.plot(1e3 * r.depth, r.force_z, label=label)
         horizontal.plot(1e3 * r.depth, r.force_x, label=label)
     p, medium = runs[0].scene.plate, runs[0].scene.medium
+    given = laws.module(medium.law, laws.SURFACE).given(medium)
+    values = ", ".join(f"{key} {value:g}" for key, value in given.items() if value is not None)
     vertical.set(xlabel="depth of the lowest point (mm)", ylabel="vertical force F_z (N, up)",
-                 title=f"{1e3 * p.width:g} x {1e3 * p.length:g} mm plate pushed down, "
-                 f"{medium.name or f'zeta {medium.zeta:g}'}")
+                 title=f"{1e3 * p.width:g} x {1e3 * p.length:g} mm plate, {medium.law}: "
+                 f"{', '.join(filter(None, (medium.name, values)))}")
     horizontal.set(xlabel="depth of the lowest point (mm)", ylabel="horizontal force F_x (N)",
                    title="Horizontal force")
     for ax in (vertical, horizontal):

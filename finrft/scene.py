@@ -4,8 +4,10 @@ A plate scene is a TOML file with the sections ``[plate]``, ``[rft]``, ``[medium
 has ``[robot]``, ``[body]``, ``[arm]``, ``[fin]``, ``[rft]``, ``[medium]``, ``[gait]`` and ``[sim]`` (their
 ``[medium]`` is `Immersion`); a user's model (`UserScene`) ``[model]``, ``[medium]``, ``[drive]`` and ``[sim]``; a
 plate intrusion (`IntrusionScene`) ``[plate]``, ``[medium]`` and ``[sim]`` (their ``[medium]`` is `Medium`, the
-surface laws'). This module is the one place where keys, types, units, allowed values and defaults are declared;
-everything else reads a validated scene.
+surface laws'). This module declares the sections, their keys, types, units, allowed values and defaults, except
+the keys of the laws: each law declares its own (``KEYS`` in its module, `finrft.laws`), and `RFT` and `Medium` are
+built from them. The schema engine that validates, reads and writes any scene is `finrft.schema`; everything else
+reads a validated scene.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from typing import Any, Mapping
 from . import laws, media, methods, schema
 from .errors import SceneError
 from .files import read_text, read_toml
-from .laws import drft
+from .laws import drft, sandswim
 from .schema import field as _f
 # Importable from here as before; their homes are the schema engine, the errors and the file reader.
 from .schema import field_of, sections, split_key, to_toml  # noqa: F401
@@ -238,7 +240,7 @@ class IntrusionPlate:
 
 
 # The sand-swimming law's keys, which a chain's scene may leave at 0 to take them from its [medium].
-SANDSWIM_KEYS = ("c_s", "c_f", "gamma0")
+SANDSWIM_KEYS = tuple(key for key, _, _ in sandswim.KEYS)
 
 
 class _Sections:

@@ -593,15 +593,15 @@ def _accuracy_chart(rows: list[dict[str, Any]], path: Path) -> None:
     import matplotlib.pyplot as plt
     names = list(dict.fromkeys(r["scene"] for r in rows))
     regs = sorted(dict.fromkeys(r["v_reg"] for r in rows))
-    methods = list(dict.fromkeys(r["method"] for r in rows))
-    colours = {m: f"C{i}" for i, m in enumerate(methods)}
+    labels = list(dict.fromkeys(r["method"] for r in rows))
+    colours = {m: f"C{i}" for i, m in enumerate(labels)}
     fig, axes = plt.subplots(len(regs), len(names), figsize=(5.5 * len(names), 4.5 * len(regs)), squeeze=False)
     for i, reg in enumerate(regs):
         for ax, name in zip(axes[i], names):
             mine = [r for r in rows if r["scene"] == name and r["v_reg"] == reg]
             good = [r["angle_error_deg"] for r in mine if not r["failure"]]
             top = max(good + [1.0]) * 3
-            for method in methods:
+            for method in labels:
                 for backend, style in (("native", "o-"), ("python", "s--")):
                     runs = [r for r in mine if r["method"] == method and r["backend"] == backend]
                     ok = sorted((r for r in runs if not r["failure"]), key=lambda r: r["wall_s"])

@@ -42,14 +42,14 @@ from .batch import PlateRollouts, local_executor, map_jobs, rollout_plates, run_
 from .convergence import SimulationUnstable
 from .drive import Drive
 from .experiment import Experiment, Result, run
-from .fit import Fit, fit, read_drag, resolve_params
-from .intrusion import Intrusion
+from .studies.fit import Fit, fit, read_drag, resolve_params
+from .experiments.intrusion import Intrusion
 from .media import medium
-from .optimize import Variable, optimize
+from .studies.optimize import Variable, optimize
 from .scene import IntrusionScene, RobotScene, Scene, SceneError, UserScene, load_scene, preset, to_toml
-from .simulate import PlateTest, simulate
-from .swim import Swim, swim, table_rows, table_scenes
-from .user_model import UserModel
+from .experiments.plate import PlateTest, simulate
+from .experiments.swim import Swim, swim, table_rows, table_scenes
+from .experiments.user_model import UserModel
 
 _RECORDING = ("write_h5", "write_rrd")
 

@@ -35,8 +35,8 @@ from scipy.optimize import minimize
 import finrft
 from finrft import data as shipped
 from finrft.convergence import SimulationFailed
-from finrft.fit import mse, read_drag
-from finrft.swim import PAPER_TABLE, swim, table_scenes
+from finrft.studies.fit import mse, read_drag
+from finrft.experiments.swim import PAPER_TABLE, swim, table_scenes
 
 NAMES = [row[0] for row in PAPER_TABLE]
 MEASURED = np.array([row[5] / 100 for row in PAPER_TABLE])

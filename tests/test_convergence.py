@@ -12,8 +12,8 @@ from finrft.cli import main
 from finrft.convergence import ErrorLimits, InaccurateResult, SimulationFailed, paired
 from finrft.drive import Drive
 from finrft.scene import RobotScene, preset
-from finrft.simulate import simulate
-from finrft.swim import swim
+from finrft.experiments.plate import simulate
+from finrft.experiments.swim import swim
 
 CYCLE = Drive(speed=0.03, stroke=0.045, cycles=1)
 

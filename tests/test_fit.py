@@ -8,7 +8,7 @@ import tomllib
 import numpy as np
 import pytest
 
-from finrft.fit import fit, read_drag, read_forces, resolve_params, simulated_drag, write_drag
+from finrft.studies.fit import fit, read_drag, read_forces, resolve_params, simulated_drag, write_drag
 from finrft import laws
 from finrft.cli import main
 from finrft.data import plate_drag_dir

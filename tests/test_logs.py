@@ -19,7 +19,7 @@ import pytest
 
 import finrft
 import finrft.scene
-from finrft.fit import read_drag, simulated_drag, write_drag
+from finrft.studies.fit import read_drag, simulated_drag, write_drag
 from finrft.cli import main
 from finrft.scene import preset
 
@@ -155,7 +155,7 @@ def test_ctrl_c_without_a_log(monkeypatch, capsys):
     def interrupt(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(sys.modules["finrft.optimize"], "swim", interrupt)  # finrft.optimize is the function
+    monkeypatch.setattr(sys.modules["finrft.studies.optimize"], "swim", interrupt)  # finrft.optimize is the function
     assert main(["optimize", "--workers", "1"]) == 130
     assert capsys.readouterr().err == ("finrft: interrupted; nothing was logged (--out LOG.h5 makes a run "
                                        "resumable)\n")
@@ -259,7 +259,7 @@ def test_the_package_never_pickles():
 
 def test_the_search_owns_its_random_numbers():
     # pycma's default draws from numpy's global generator; a caller drawing from it too must not change the search.
-    from finrft.optimize import Variable, optimize
+    from finrft.studies.optimize import Variable, optimize
     scene = preset("paper", finrft.scene.RobotScene).replace(**{"gait.omega": 3.0})
     variables = [Variable("gait.theta1", 0.5, 1.5)]
     plain = optimize(scene, variables=variables, budget=12, seed=5, workers=1)

@@ -18,7 +18,7 @@ from finrft.cli import main
 from finrft.drive import Drive
 from finrft.laws.table import ForceTable, write_table
 from finrft.scene import SceneError
-from finrft.simulate import simulate
+from finrft.experiments.plate import simulate
 
 
 def test_plugin_is_built_and_loaded():

@@ -9,9 +9,9 @@ import pytest
 
 from finrft import reference
 from finrft.cli import main
-from finrft.optimize import Variable, optimize, read_log
+from finrft.studies.optimize import Variable, optimize, read_log
 from finrft.scene import RobotScene, SceneError, preset
-from finrft.swim import swim
+from finrft.experiments.swim import swim
 
 
 @pytest.fixture(scope="module")

@@ -18,14 +18,15 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from . import batch, searchlog
-from .convergence import ErrorLimits, SimulationFailed
-from .drive import Drive
+from .. import batch
+from . import searchlog
+from ..convergence import ErrorLimits, SimulationFailed
+from ..drive import Drive
 from .optimize import Search, Variable, cmaes, read_log, si_units
-from .experiment import Result
-from .laws.table import ForceTable
-from .scene import RFT, Scene, SceneError, field_of, read_text, scene_from_dict, split_key, to_toml
-from .simulate import simulate
+from ..experiment import Result
+from ..laws.table import ForceTable
+from ..scene import RFT, Scene, SceneError, field_of, read_text, scene_from_dict, split_key, to_toml
+from ..experiments.plate import simulate
 
 # Short names for the paper's parameters, and default bounds (SI).
 ALIASES = {"b": "plate.damping", "k": "plate.stiffness", "f_perp": "rft.f_perp", "f_par": "rft.f_par"}
@@ -299,7 +300,7 @@ def plate_forces(run: Result) -> dict[str, float]:
 def append_forces(path: str | Path, row: dict[str, float]) -> None:
     """Add a row to a forces CSV, writing its header first when the file is new; SceneError when the file has
     another header. The file is replaced whole, so a failed write leaves it as it was."""
-    from .files import atomic_path
+    from ..files import atomic_path
     check_forces_header(path)
     path = Path(path)
     text = read_text(path, "forces file") if path.exists() else ""

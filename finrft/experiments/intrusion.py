@@ -21,10 +21,10 @@ from typing import Any, Callable
 import mujoco
 import numpy as np
 
-from .convergence import ErrorLimits
-from .drive import Drive
-from .experiment import Compared, Plot, Quantity, Result, run
-from .scene import IntrusionScene
+from ..convergence import ErrorLimits
+from ..drive import Drive
+from ..experiment import Compared, Plot, Quantity, Result, run
+from ..scene import IntrusionScene
 from .user_model import AttachedModel, JointTrial, build_attached
 
 SIGN_CONVENTION = (
@@ -96,7 +96,7 @@ class Intrusion:
                 "final_force_z_N": float(run.force_z[-1]), "final_force_x_N": float(run.force_x[-1])}
 
     def draw(self, rec: Any, run: Result, times: Any, prefix: str) -> list[Any]:
-        from .views import draw_bodies
+        from ..views import draw_bodies
         position = np.zeros((len(run.time), 1, 3))
         position[:, 0, 2] = run.scene.medium.surface_z - run.depth
         force = np.zeros_like(position)

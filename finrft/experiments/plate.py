@@ -17,13 +17,13 @@ from typing import Any, Callable
 import mujoco
 import numpy as np
 
-from .convergence import ErrorLimits
-from .coupling import SegmentForces
-from .drive import Drive
-from .experiment import Compared, Plot, Quantity, Result, run
-from .models import PlateModel, build_plate
-from .scene import Scene
-from .stepping import Prescribed
+from ..convergence import ErrorLimits
+from ..coupling import SegmentForces
+from ..drive import Drive
+from ..experiment import Compared, Plot, Quantity, Result, run
+from ..models import PlateModel, build_plate
+from ..scene import Scene
+from ..stepping import Prescribed
 
 
 SIGN_CONVENTION = (
@@ -99,7 +99,7 @@ class PlateTest:
 
     def independent(self, scene: Scene, times: np.ndarray, *, rtol: float, atol: float) -> np.ndarray:
         """The segment angles (rad) of the independent solution (finrft.reference) at ``times``."""
-        from .reference import solve  # scipy's integrators load only when asked for
+        from ..reference import solve  # scipy's integrators load only when asked for
         return solve(scene, self.drive, times, rtol=rtol, atol=atol).segment_angle
 
     def attrs(self) -> dict[str, Any]:
@@ -138,7 +138,7 @@ class PlateTest:
         return out
 
     def draw(self, rec: Any, run: Result, times: Any, prefix: str) -> list[Any]:
-        from .views import draw_plate
+        from ..views import draw_plate
         return draw_plate(rec, run, times, prefix)
 
 

@@ -18,12 +18,12 @@ from typing import Any, Callable
 import mujoco
 import numpy as np
 
-from .convergence import ErrorLimits, SimulationFailed
-from .drive import Drive
-from .experiment import Compared, Plot, Quantity, Result, run
-from .models import RobotModel, body_share, build_robot
-from .scene import RobotScene
-from .stepping import Prescribed
+from ..convergence import ErrorLimits, SimulationFailed
+from ..drive import Drive
+from ..experiment import Compared, Plot, Quantity, Result, run
+from ..models import RobotModel, body_share, build_robot
+from ..scene import RobotScene
+from ..stepping import Prescribed
 
 
 SIGN_CONVENTION = (
@@ -87,8 +87,8 @@ class Swim:
 
     def independent(self, scene: RobotScene, times: np.ndarray, *, rtol: float, atol: float) -> np.ndarray:
         """The right fin's hinge angles (rad) of the independent solution (finrft.reference) at ``times``."""
-        from . import geometry
-        from .reference import solve_robot  # scipy's integrators load only when asked for
+        from .. import geometry
+        from ..reference import solve_robot  # scipy's integrators load only when asked for
         # the forces a [medium] gives, as numbers: the reference writes out the laws, not their derivation
         given = {"arm": geometry.arm_law(scene), "body_drag": geometry.body_resistance(scene)["total"]} \
             if geometry.properties(scene) else {}
@@ -112,7 +112,7 @@ class Swim:
         return out
 
     def draw(self, rec: Any, run: Result, times: Any, prefix: str) -> list[Any]:
-        from .views import draw_robot
+        from ..views import draw_robot
         return draw_robot(rec, run, times, prefix)
 
 

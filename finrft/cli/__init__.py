@@ -22,12 +22,12 @@ from typing import Any, Callable, Iterator, Sequence
 
 import numpy as np
 
-from . import scene as scenes
-from .convergence import ErrorLimits, SimulationFailed
-from .drive import Drive
-from .files import atomic_path
-from .experiment import Experiment, Result, run as run_experiment
-from .simulate import PlateTest, simulate
+from .. import scene as scenes
+from ..convergence import ErrorLimits, SimulationFailed
+from ..drive import Drive
+from ..files import atomic_path
+from ..experiment import Experiment, Result, run as run_experiment
+from ..experiments.plate import PlateTest, simulate
 
 
 class UsageError(Exception):
@@ -585,7 +585,7 @@ def _run_test(args: argparse.Namespace) -> int:
     drive = _drive(args)
     forces_csv = getattr(args, "forces_csv", None)
     if forces_csv:
-        from .fit import append_forces, check_forces_header, plate_forces
+        from ..studies.fit import append_forces, check_forces_header, plate_forces
         if scene.plate.kind != "rigid":
             raise UsageError("--forces-csv needs a rigid plate (--plate rigid)")
         if drive.cycles is not None:
@@ -625,7 +625,7 @@ def _run(args: argparse.Namespace, experiment: Experiment, scene: Any) -> Result
 def _write(args: argparse.Namespace, result: Result) -> None:
     """The files --out and --rrd ask for, of any experiment's result."""
     if args.out or args.rrd:
-        from . import record  # h5py and rerun load only when a file is asked for
+        from .. import record  # h5py and rerun load only when a file is asked for
         if args.out:
             record.write_h5(result, args.out)
         if args.rrd:
@@ -641,7 +641,7 @@ def _said_written(args: argparse.Namespace, files: Sequence[tuple[str, str | Non
 
 
 def _swim(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
-    from .swim import Swim
+    from ..experiments.swim import Swim
     _check_output(args.out, ".h5", "--out", args.force)
     _check_output(args.rrd, ".rrd", "--rrd", args.force)
     run = _run(args, Swim(args.cycles or scene.gait.cycles), scene)
@@ -668,7 +668,7 @@ def _overrides(args: argparse.Namespace, cls: type) -> dict[str, Any]:
 
 
 def _user_run(args: argparse.Namespace) -> int:
-    from .user_model import UserModel
+    from ..experiments.user_model import UserModel
     _check_output(args.out, ".h5", "--out", args.force)
     _check_output(args.rrd, ".rrd", "--rrd", args.force)
     overrides = _overrides(args, scenes.UserScene)
@@ -703,7 +703,7 @@ def _angles(text: str) -> list[float]:
 
 
 def _intrude(args: argparse.Namespace) -> int:
-    from .intrusion import intrude, plot_curves
+    from ..experiments.intrusion import intrude, plot_curves
     _check_output(args.plot, ".png", "--plot", args.force)
     angles = _angles(args.angles)
     overrides = _overrides(args, scenes.IntrusionScene)
@@ -726,7 +726,7 @@ def _intrude(args: argparse.Namespace) -> int:
 
 
 def _medium(args: argparse.Namespace) -> int:
-    from . import media
+    from .. import media
     if args.name is not None and args.list:
         raise UsageError(f"give a medium's NAME ({args.name}) or --list, not both")
     chosen = (media.medium(args.name),) if args.name is not None else media.media()
@@ -737,7 +737,7 @@ def _medium(args: argparse.Namespace) -> int:
 
 
 def _law(args: argparse.Namespace) -> int:
-    from . import lawmap
+    from .. import lawmap
     _check_output(args.plot, ".png", "--plot", args.force)
     data = lawmap.stress_map(args.name, args.medium)
     if args.plot:
@@ -759,8 +759,8 @@ def _law(args: argparse.Namespace) -> int:
 
 
 def _table(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
-    from .batch import run_experiments
-    from .swim import PHYSICAL_FITTED, Swim, table_markdown, table_rows, table_scenes
+    from ..batch import run_experiments
+    from ..experiments.swim import PHYSICAL_FITTED, Swim, table_markdown, table_rows, table_scenes
     jobs = [(Swim(s.gait.cycles), s) for s in table_scenes(scene)]
     with _progress(args, len(jobs), "Table I", "gaits") as bar:
         runs = run_experiments(jobs, max_error=_limits(args), workers=args.workers,
@@ -794,7 +794,7 @@ def _search_log(args: argparse.Namespace, fixed: dict[str, str]) -> str | None:
 
 def _interrupted(command: str, log: str | None, schema: str) -> "Interrupted":
     """Ctrl-C during a search: how far the log got and how to continue it."""
-    from .optimize import read_log
+    from ..studies.optimize import read_log
     if log is None:
         return Interrupted("interrupted; nothing was logged (--out LOG.h5 makes a run resumable)")
     if not Path(log).is_file():
@@ -805,8 +805,8 @@ def _interrupted(command: str, log: str | None, schema: str) -> "Interrupted":
 
 
 def _fit(args: argparse.Namespace) -> int:
-    from . import searchlog
-    from .fit import ALIASES, drag_for, fit, fit_summary, logged_problem, plot, read_drag, resolve_params
+    from ..studies import searchlog
+    from ..studies.fit import ALIASES, drag_for, fit, fit_summary, logged_problem, plot, read_drag, resolve_params
     for path, suffix, flag in ((args.write_scene, ".toml", "--write-scene"), (args.plot, ".png", "--plot"),
                                (args.rrd, ".rrd", "--rrd")):
         _check_output(path, suffix, flag, args.force)
@@ -839,7 +839,7 @@ def _fit(args: argparse.Namespace) -> int:
         with atomic_path(args.plot) as tmp:
             plot(result.scene, [(d, "fitted") for d in data] + [(d, "validation") for d in validate], tmp)
     if args.rrd:
-        from . import record
+        from .. import record
         record.write_rrd(simulate(result.scene, drag_for(data[0])), args.rrd)
     for key, value in result.search.best.items():
         _say(args, f"{key} = {value:.6g}")
@@ -855,8 +855,8 @@ def _fit(args: argparse.Namespace) -> int:
 
 
 def _fit_rft(args: argparse.Namespace) -> int:
-    from .fit import identify_rft, read_forces, rft_fragment
-    from .laws.table import write_table
+    from ..studies.fit import identify_rft, read_forces, rft_fragment
+    from ..laws.table import write_table
     scene = _resolve_scene(args)
     table_path = args.table or (str(Path(args.out).with_suffix(".csv")) if args.out else None)
     _check_output(args.out, ".toml", "--out", args.force)
@@ -912,8 +912,8 @@ def _parse_bounds(items: list[str], cls: type,
 
 
 def _optimize(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
-    from . import searchlog
-    from .optimize import DEFAULT_VARIABLES, Variable, logged_problem, optimize, read_log
+    from ..studies import searchlog
+    from ..studies.optimize import DEFAULT_VARIABLES, Variable, logged_problem, optimize, read_log
     _check_output(args.rrd, ".rrd", "--rrd", args.force)
     log = _search_log(args, {"bounds": "--bounds", "scene": "--scene", "set": "--set", "fin": "--fin",
                              "model": "--model", "backend": "--backend"})
@@ -945,11 +945,11 @@ def _optimize(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
                               max_error=_limits(args), on_generation=on_generation)
         except KeyboardInterrupt:
             raise _interrupted("optimize", log, searchlog.OPTIMIZE) from None
-    from .swim import swim
+    from ..experiments.swim import swim
     best_scene = scene.replace(**result.best)
     best = swim(best_scene, 1, max_error=_limits(args))
     if args.rrd:
-        from . import record
+        from .. import record
         record.write_optimization_rrd(args.rrd, generations, list(variables), best)
     g = best_scene.gait
     eta = 1 - result.cost
@@ -997,7 +997,7 @@ def _scene(args: argparse.Namespace) -> int:
 
 
 def _report(args: argparse.Namespace) -> int:
-    from .report import write_report
+    from ..studies.report import write_report
     _check_output_dir(args.out, "--out", args.force)
     with _progress(args, 1, "report", "%") as bar:
         path = write_report(args.out, quick=args.quick, workers=args.workers, data_dir=args.data,
@@ -1008,7 +1008,7 @@ def _report(args: argparse.Namespace) -> int:
 
 
 def _bench(args: argparse.Namespace) -> int:
-    from . import bench
+    from ..studies import bench
     log = lambda text: _say(args, text)  # noqa: E731
     if args.bench == "accuracy":
         _check_output_dir(args.out, "--out", args.force)

@@ -25,11 +25,12 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from . import batch, searchlog
-from .convergence import ErrorLimits, SimulationFailed
-from .files import provenance
-from .scene import RobotScene, SceneError, field_of, scene_from_dict, to_toml
-from .swim import swim
+from .. import batch
+from . import searchlog
+from ..convergence import ErrorLimits, SimulationFailed
+from ..files import provenance
+from ..scene import RobotScene, SceneError, field_of, scene_from_dict, to_toml
+from ..experiments.swim import swim
 
 FAILED = 2.0
 # eta = (D1 - D2) / D1 grows without bound as D1 -> 0: a power stroke that moves the body forward by less than

@@ -17,14 +17,14 @@ from typing import Any, Callable, Iterator
 
 import numpy as np
 
-from . import batch, record, views
-from .data import plate_drag_dir
-from .drive import Drive
-from .experiment import Result
+from .. import batch, record, views
+from ..data import plate_drag_dir
+from ..drive import Drive
+from ..experiment import Result
 from .fit import DragData, fit, read_drag, resolve_params, simulated_angles
 from .optimize import optimize
-from .scene import RobotScene, Scene, SceneError, preset, resolution
-from .swim import (PAPER_TABLE, PHYSICAL_FITTED, Swim, steady_cycles, swim, table_markdown, table_rows,
+from ..scene import RobotScene, Scene, SceneError, preset, resolution
+from ..experiments.swim import (PAPER_TABLE, PHYSICAL_FITTED, Swim, steady_cycles, swim, table_markdown, table_rows,
                    table_scenes)
 
 COLORS = {"rigid": "black", "soft": "tab:blue", "origami": "tab:red"}

@@ -18,12 +18,12 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from .attach import Attached, SurfaceForces, attach
-from .drive import Drive
-from .experiment import Compared, Plot, Quantity, Result
-from .models import ARMATURE_RATIO, INTEGRATORS, _compile
-from .scene import ExplicitSim, Medium, SceneError, UserScene
-from .stepping import Prescribed
+from ..attach import Attached, SurfaceForces, attach
+from ..drive import Drive
+from ..experiment import Compared, Plot, Quantity, Result
+from ..models import ARMATURE_RATIO, INTEGRATORS, _compile
+from ..scene import ExplicitSim, Medium, SceneError, UserScene
+from ..stepping import Prescribed
 
 _J = mujoco.mjtJoint
 DRIVEN = {int(_J.mjJNT_SLIDE): "slide", int(_J.mjJNT_HINGE): "hinge"}
@@ -220,5 +220,5 @@ class UserModel:
         }
 
     def draw(self, rec: Any, run: Result, times: Any, prefix: str) -> list[Any]:
-        from .views import draw_bodies
+        from ..views import draw_bodies
         return draw_bodies(rec, run, times, prefix, run.body_position, run.rft_force, "Attached bodies")

@@ -13,14 +13,14 @@ from typing import Any, Callable, Protocol
 import mujoco
 import numpy as np
 
-from . import batch, models, native
-from .drive import Drive
-from .convergence import ErrorLimits, SimulationFailed
-from .experiment import Experiment, run as run_experiment
+from .. import batch, models, native
+from ..drive import Drive
+from ..convergence import ErrorLimits, SimulationFailed
+from ..experiment import Experiment, run as run_experiment
 from .optimize import evaluation_scene, optimize
-from .scene import ADAPTIVE, PRESETS, RobotScene, Scene, preset, resolution
-from .simulate import PlateTest, simulate
-from .swim import Swim, steady_cycles, swim
+from ..scene import ADAPTIVE, PRESETS, RobotScene, Scene, preset, resolution
+from ..experiments.plate import PlateTest, simulate
+from ..experiments.swim import Swim, steady_cycles, swim
 
 
 # progress(cases done, cases): called as each measured case of a benchmark finishes.

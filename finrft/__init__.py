@@ -46,9 +46,10 @@ from .studies.fit import Fit, fit, read_drag, resolve_params
 from .experiments.intrusion import Intrusion
 from .media import medium
 from .studies.optimize import Variable, optimize
+from .studies.table import table_rows, table_scenes
 from .scene import IntrusionScene, RobotScene, Scene, SceneError, UserScene, load_scene, preset, to_toml
 from .experiments.plate import PlateTest, simulate
-from .experiments.swim import Swim, swim, table_rows, table_scenes
+from .experiments.swim import Swim, swim
 from .experiments.user_model import UserModel
 
 _RECORDING = ("write_h5", "write_rrd")

@@ -36,7 +36,8 @@ import finrft
 from finrft import data as shipped
 from finrft.convergence import SimulationFailed
 from finrft.studies.fit import mse, read_drag
-from finrft.experiments.swim import PAPER_TABLE, swim, table_scenes
+from finrft.experiments.swim import swim
+from finrft.studies.table import PAPER_TABLE, table_scenes
 
 NAMES = [row[0] for row in PAPER_TABLE]
 MEASURED = np.array([row[5] / 100 for row in PAPER_TABLE])

@@ -217,7 +217,8 @@ def test_physical_robot_error_estimate_follows_its_error():
     # error that Richardson's estimate would bound), far below the default limit.
     from finrft.studies.optimize import evaluation_scene
     from finrft.scene import RobotScene
-    from finrft.experiments.swim import swim, table_scenes
+    from finrft.experiments.swim import swim
+    from finrft.studies.table import table_scenes
     for scene in map(evaluation_scene, table_scenes(preset("physical", RobotScene))):
         cycles = scene.gait.cycles
         run = swim(scene, cycles)

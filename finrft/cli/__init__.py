@@ -585,7 +585,7 @@ def _run_test(args: argparse.Namespace) -> int:
     drive = _drive(args)
     forces_csv = getattr(args, "forces_csv", None)
     if forces_csv:
-        from ..studies.fit import append_forces, check_forces_header, plate_forces
+        from ..experiments.plate import append_forces, check_forces_header, plate_forces
         if scene.plate.kind != "rigid":
             raise UsageError("--forces-csv needs a rigid plate (--plate rigid)")
         if drive.cycles is not None:
@@ -760,7 +760,8 @@ def _law(args: argparse.Namespace) -> int:
 
 def _table(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
     from ..batch import run_experiments
-    from ..experiments.swim import PHYSICAL_FITTED, Swim, table_markdown, table_rows, table_scenes
+    from ..experiments.swim import Swim
+    from ..studies.table import PHYSICAL_FITTED, table_markdown, table_rows, table_scenes
     jobs = [(Swim(s.gait.cycles), s) for s in table_scenes(scene)]
     with _progress(args, len(jobs), "Table I", "gaits") as bar:
         runs = run_experiments(jobs, max_error=_limits(args), workers=args.workers,

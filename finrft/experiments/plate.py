@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Callable
 
 import mujoco
@@ -21,8 +23,9 @@ from ..convergence import ErrorLimits
 from ..coupling import SegmentForces
 from ..drive import Drive
 from ..experiment import Compared, Plot, Quantity, Result, run
+from ..files import atomic_path
 from ..models import PlateModel, build_plate
-from ..scene import Scene
+from ..scene import Scene, SceneError, read_text
 from ..stepping import Prescribed
 
 
@@ -193,3 +196,42 @@ def simulate(scene: Scene, drive: Drive, *, progress: Callable[[float], None] | 
     than return a diverged run, and InaccurateResult when the estimate exceeds ``max_error`` (None: report it
     only). ``estimate_error=False`` skips the estimate, for studies that measure the error themselves."""
     return run(PlateTest(drive), scene, progress=progress, max_error=max_error, estimate_error=estimate_error)
+
+
+# The steady force of a rigid-plate drag, written by `finrft drag --forces-csv` for `finrft fit-rft`.
+
+FORCE_COLUMNS = ("attack_deg", "force_normal_N", "force_tangential_N")
+
+
+def plate_forces(run: Result) -> dict[str, float]:
+    """The medium's steady force on a rigid plate, decomposed along the plate's normal (the +y side at 90 deg
+    attack) and its axis: the mean over the second half of the run, the first being any start-up."""
+    heading = math.radians(90.0 - run.drive.attack_deg)
+    axis, normal = np.array([math.cos(heading), math.sin(heading), 0.0]), np.array([-math.sin(heading),
+                                                                                    math.cos(heading), 0.0])
+    late = run.time >= 0.5 * run.time[-1]
+    total = run.rft_force[late].sum(axis=1).mean(axis=0)
+    return {"attack_deg": run.drive.attack_deg, "force_normal_N": float(total @ normal),
+            "force_tangential_N": float(total @ axis)}
+
+
+def append_forces(path: str | Path, row: dict[str, float]) -> None:
+    """Add a row to a forces CSV, writing its header first when the file is new; SceneError when the file has
+    another header. The file is replaced whole, so a failed write leaves it as it was."""
+    check_forces_header(path)
+    path = Path(path)
+    text = read_text(path, "forces file") if path.exists() else ""
+    text = (text if text.endswith("\n") else text + "\n") if text.strip() else ",".join(FORCE_COLUMNS) + "\n"
+    with atomic_path(path) as tmp:
+        tmp.write_text(text + ",".join(repr(float(row[k])) for k in FORCE_COLUMNS) + "\n")
+
+
+def check_forces_header(path: str | Path) -> None:
+    """SceneError unless ``path`` is new, empty, or a forces CSV `append_forces` can add to."""
+    path = Path(path)
+    lines = [line for line in (read_text(path, "forces file").splitlines() if path.is_file() else [])
+             if line.strip() and not line.startswith("#")]
+    header = ",".join(FORCE_COLUMNS)
+    if lines and lines[0] != header:
+        raise SceneError(f"{path} has the header '{lines[0]}', not '{header}': append to a forces file written "
+                         f"by finrft drag --forces-csv, or start a new one")

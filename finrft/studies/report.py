@@ -24,8 +24,8 @@ from ..experiment import Result
 from .fit import DragData, fit, read_drag, resolve_params, simulated_angles
 from .optimize import optimize
 from ..scene import RobotScene, Scene, SceneError, preset, resolution
-from ..experiments.swim import (PAPER_TABLE, PHYSICAL_FITTED, Swim, steady_cycles, swim, table_markdown, table_rows,
-                   table_scenes)
+from ..experiments.swim import Swim, steady_cycles, swim
+from .table import PAPER_TABLE, PHYSICAL_FITTED, table_markdown, table_rows, table_scenes
 
 COLORS = {"rigid": "black", "soft": "tab:blue", "origami": "tab:red"}
 KINDS = ("rigid", "soft", "origami")

@@ -34,8 +34,13 @@ full path (``from finrft.fit import simulated_drag``).
 
 from __future__ import annotations
 
-from importlib import import_module
+from importlib import import_module, metadata
 from typing import Any
+
+try:
+    __version__ = metadata.version("finrft")
+except metadata.PackageNotFoundError:  # a source tree on the path, not installed
+    __version__ = "0+unknown"
 
 from .attach import attach
 from .batch import PlateRollouts, local_executor, map_jobs, rollout_plates, run_experiments, run_many
@@ -54,7 +59,7 @@ from .experiments.user_model import UserModel
 
 _RECORDING = ("write_h5", "write_rrd")
 
-__all__ = ["Drive", "Experiment", "Fit", "Intrusion", "IntrusionScene", "PlateRollouts", "PlateTest", "Result",
+__all__ = ["__version__", "Drive", "Experiment", "Fit", "Intrusion", "IntrusionScene", "PlateRollouts", "PlateTest", "Result",
            "RobotScene", "Scene", "SceneError", "SimulationUnstable", "Swim", "UserModel", "UserScene", "Variable",
            "attach", "fit", "load_scene", "local_executor", "map_jobs", "medium", "optimize", "preset", "read_drag",
            "resolve_params", "rollout_plates", "run", "run_experiments", "run_many", "simulate", "swim",

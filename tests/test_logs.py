@@ -159,7 +159,7 @@ def test_ctrl_c_without_a_log(monkeypatch, capsys):
     assert main(["optimize", "--workers", "1"]) == 130
     assert capsys.readouterr().err == ("finrft: interrupted; nothing was logged (--out LOG.h5 makes a run "
                                        "resumable)\n")
-    monkeypatch.setattr("finrft.cli.run_experiment", interrupt)
+    monkeypatch.setattr("finrft.cli.run.run_experiment", interrupt)
     assert main(["drag", "--distance", "5"]) == 130
     assert capsys.readouterr().err == "finrft: interrupted\n"
 

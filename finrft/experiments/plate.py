@@ -9,6 +9,7 @@ would give it (computed with the plate's own mass matrix): `stepping.Prescribed`
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import json
 import math
@@ -25,8 +26,10 @@ from ..drive import Drive
 from ..experiment import Compared, Plot, Quantity, Result, run
 from ..files import atomic_path
 from ..models import PlateModel, build_plate
-from ..scene import Scene, SceneError, read_text
+from ..scene import PRESETS, Scene, SceneError, load_scene, parse_override, read_text
 from ..stepping import Prescribed
+from .command import Command, Output, authors_model_line, error_line, register, steps_line
+from .flags import UsageError, add_max_error, add_result_files, add_scene_flags, number, preset_name
 
 
 SIGN_CONVENTION = (
@@ -226,6 +229,18 @@ def append_forces(path: str | Path, row: dict[str, float]) -> None:
         tmp.write_text(text + ",".join(repr(float(row[k])) for k in FORCE_COLUMNS) + "\n")
 
 
+def check_forces_run(scene: Scene, drive: Drive) -> None:
+    """UsageError unless a run gives the steady force --forces-csv records: a rigid plate, one stroke out, faster
+    than 3 x rft.v_reg, where the rate-independent force is reached."""
+    if scene.plate.kind != "rigid":
+        raise UsageError("--forces-csv needs a rigid plate (--plate rigid)")
+    if drive.cycles is not None:
+        raise UsageError("--forces-csv records the steady force of one stroke out: leave out --cycles")
+    if drive.speed < 3 * scene.rft.v_reg:
+        raise UsageError(f"--forces-csv needs a drag faster than 3 x rft.v_reg ({3e3 * scene.rft.v_reg:g} mm/s), "
+                         f"where the rate-independent force is reached: got {1e3 * drive.speed:g} mm/s")
+
+
 def check_forces_header(path: str | Path) -> None:
     """SceneError unless ``path`` is new, empty, or a forces CSV `append_forces` can add to."""
     path = Path(path)
@@ -235,3 +250,125 @@ def check_forces_header(path: str | Path) -> None:
     if lines and lines[0] != header:
         raise SceneError(f"{path} has the header '{lines[0]}', not '{header}': append to a forces file written "
                          f"by finrft drag --forces-csv, or start a new one")
+
+
+# ---------------------------------------------------------------------------------------------------------
+# The commands: finrft drag and finrft rotate
+
+PRESETS_HELP = ("built-in plate scene when no --scene is given (default: physical): physical = real inertias, "
+                "fitted to the measurements, penalty stop, newton method; paper = the authors' plate with its "
+                "quirks: inertias of 1 kg m^2, a law that feeds energy in, penalty stop, explicit method")
+
+
+def add_plate_scene(p: argparse.ArgumentParser, *, kinds: bool = False, backend: bool = True):
+    """The plate scene's flags (also those of the studies on plates: fit, fit-rft)."""
+    g = add_scene_flags(p, "plate", "plate.segment_inertia=0.001", presets=PRESETS[Scene], presets_help=PRESETS_HELP,
+                        backend=backend and "where the RFT force is computed (overrides sim.backend; default native, "
+                        "the C plugin, falling back to python when it cannot be loaded)")
+    if kinds:
+        g.add_argument("--plate", choices=("origami", "soft", "rigid"),
+                       help="plate kind (overrides plate.kind): origami = one-sided stop, soft = compliant both "
+                            "ways, rigid = does not bend")
+    return g
+
+
+def resolve_plate(args: argparse.Namespace) -> Scene:
+    """The plate scene of --scene or --preset, --set, --plate and --backend."""
+    overrides = dict(parse_override(item) for item in args.set)
+    if getattr(args, "plate", None):
+        overrides["plate.kind"] = args.plate
+    if getattr(args, "backend", None):
+        overrides["sim.backend"] = args.backend
+    return load_scene(args.scene, preset_name=preset_name(args), overrides=overrides)
+
+
+class _PlateCommand(Command):
+    """drag and rotate: the flags of a plate test, its checks, and its summary text."""
+
+    def add_flags(self, p: argparse.ArgumentParser) -> None:
+        add_plate_scene(p, kinds=True).add_argument(
+            "--cycles", type=number("cycles", minimum=1, inclusive=True, integer=True), metavar="N",
+            help="back-and-forth cycles of the triangle wave (the paper used 5; the first is reported separately); "
+                 "without it, a single stroke out")
+        o = p.add_argument_group("output")
+        add_result_files(o)
+        add_max_error(p)
+
+    def scene(self, args: argparse.Namespace) -> Scene:
+        return resolve_plate(args)
+
+    def jobs(self, args: argparse.Namespace, scene: Scene) -> list[tuple[PlateTest, Scene]]:
+        return [(PlateTest(self.drive(args)), scene)]
+
+    def describe(self, args: argparse.Namespace, runs: list[Result]) -> str:
+        run, = runs
+        summary = run.summary()
+        q, u = run.quantity, run.unit
+        sim = run.scene.sim
+        lines = [*authors_model_line(args, run.scene),
+                 f"{run.drive.kind} of the {run.scene.plate.kind} plate, {sim.method} method (dt {sim.dt * 1e3:g} ms, "
+                 f"{sim.integrator}, {run.backend}): {steps_line(summary)} in {run.wall_s:.2f} s",
+                 "final segment angles (deg): " + ", ".join(f"{a:.2f}" for a in summary["final_segment_angle_deg"]),
+                 "final hinge angles (deg):   " + ", ".join(f"{a:.2f}" for a in summary["final_hinge_angle_deg"]),
+                 f"peak drive {q}: {summary[f'peak_drive_{q}_{u}']:.4g} {u.replace('Nm', 'N m')}"]
+        for i, row in enumerate(run.cycle_table(), start=1):
+            lines.append(f"cycle {i}: mean {q} recovery {row[f'mean_recovery_{q}_{u}']:+.4g}, "
+                         f"power {row[f'mean_power_{q}_{u}']:+.4g}; net impulse {row[f'net_impulse_{u}s']:+.4g} {u}s")
+        lines.append(error_line(run))
+        return "\n".join(lines)
+
+
+@register
+class DragCommand(_PlateCommand):
+    name = "drag"
+    help = "drag a plate through the medium along +y (the paper's drag test)"
+    description = ("Drag the plate's base along +y at constant speed: one stroke out from flat (the soft, recovery "
+                   "direction of the origami plate), or --cycles back-and-forth cycles. Reports the drive force (N) "
+                   "that holds the motion.")
+
+    def add_flags(self, p: argparse.ArgumentParser) -> None:
+        p.add_argument("--speed", type=number("mm/s"), default=30.0, metavar="MM_S",
+                       help="drag speed in mm/s (default: %(default)s)")
+        p.add_argument("--distance", type=number("mm"), default=200.0, metavar="MM",
+                       help="stroke length in mm (default: %(default)s)")
+        p.add_argument("--attack", type=number("degrees", inclusive=True), default=90.0, metavar="DEG",
+                       help="angle of attack between the plate and the motion, degrees in 0..180 "
+                            "(default: %(default)s, plate normal to the motion)")
+        super().add_flags(p)
+        p.add_argument("--forces-csv", metavar="FILE.csv", help="append the steady force on the plate (normal and "
+                       "tangential, N) at this angle of attack to a CSV, for finrft fit-rft (rigid plate only)")
+
+    def drive(self, args: argparse.Namespace) -> Drive:
+        if args.attack > 180:
+            raise UsageError(f"argument --attack: must be within 0..180 degrees, got {args.attack:g}")
+        return Drive("drag", args.speed / 1000, args.distance / 1000, args.cycles, args.attack)
+
+    def jobs(self, args: argparse.Namespace, scene: Scene) -> list[tuple[PlateTest, Scene]]:
+        jobs = super().jobs(args, scene)
+        if args.forces_csv:
+            check_forces_run(scene, jobs[0][0].drive)
+            check_forces_header(args.forces_csv)
+        return jobs
+
+    def outputs(self, args: argparse.Namespace) -> list[Output]:
+        return [*super().outputs(args), Output("--forces-csv", args.forces_csv, ".csv", "forces",
+                                               lambda runs, path: append_forces(path, plate_forces(runs[0])),
+                                               append=True)]
+
+
+@register
+class RotateCommand(_PlateCommand):
+    name = "rotate"
+    help = "turn a plate about its base (the paper's rotate test)"
+    description = ("Turn the rod about z through its base at constant angular speed: one stroke counter-clockwise "
+                   "from flat along +x, or --cycles back-and-forth cycles. Reports the drive torque (N m).")
+
+    def add_flags(self, p: argparse.ArgumentParser) -> None:
+        p.add_argument("--amplitude", type=number("degrees"), default=120.0, metavar="DEG",
+                       help="stroke angle in degrees (default: %(default)s)")
+        p.add_argument("--omega", type=number("deg/s"), default=60.0, metavar="DEG_S",
+                       help="angular speed in degrees/s (default: %(default)s)")
+        super().add_flags(p)
+
+    def drive(self, args: argparse.Namespace) -> Drive:
+        return Drive("rotate", math.radians(args.omega), math.radians(args.amplitude), args.cycles)

@@ -12,6 +12,8 @@ per-cycle eta would weigh a short cycle as much as a long one); with N = 1 it is
 
 from __future__ import annotations
 
+import argparse
+import math
 from dataclasses import dataclass
 from typing import Any, Callable
 
@@ -22,8 +24,10 @@ from ..convergence import ErrorLimits, SimulationFailed
 from ..drive import Drive
 from ..experiment import Compared, Plot, Quantity, Result, run
 from ..models import RobotModel, body_share, build_robot
-from ..scene import RobotScene
+from ..scene import PRESETS, RobotScene, load_scene, parse_override, resolution
 from ..stepping import Prescribed
+from .command import Command, authors_model_line, error_line, register, steps_line
+from .flags import add_max_error, add_result_files, add_scene_flags, number, preset_name
 
 
 SIGN_CONVENTION = (
@@ -214,3 +218,86 @@ def swim(scene: RobotScene, cycles: int = 1, *, progress: Callable[[float], None
     that does not move the body forward), and InaccurateResult when the estimate exceeds ``max_error`` (None:
     report it only). ``estimate_error=False`` skips the estimate, for studies that measure the error themselves."""
     return run(Swim(cycles), scene, progress=progress, max_error=max_error, estimate_error=estimate_error)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# The command: finrft swim
+
+PRESETS_HELP = ("built-in robot scene when no --scene is given (default: physical): physical = real inertias, "
+                "penalty stops, velocity body drag (against the body's velocity), adaptive-newton method; paper = "
+                "the authors' model with its quirks: inertias of 1 kg m^2, a law that feeds energy in, penalty "
+                "stops, stroke body drag (a constant force against the fin's sweep), adaptive method")
+
+
+def add_robot(p: argparse.ArgumentParser) -> None:
+    """The robot scene's flags (also those of the studies on the robot: optimize, table)."""
+    g = add_scene_flags(p, "robot", "fin.stiffness=0.4", presets=PRESETS[RobotScene], presets_help=PRESETS_HELP,
+                        title="robot scene", backend="")
+    g.add_argument("--fin", choices=("origami", "soft", "rigid"), help="fin kind (overrides fin.kind)")
+    g.add_argument("--model", choices=("full", "half"), help="full robot, or its right half with half the body's "
+                   "mass and drag (overrides robot.model)")
+    g.add_argument("--backend", choices=("native", "python"), help="where the RFT force is computed")
+
+
+# Flags that set a scene key, with the factor from the CLI's units to SI.
+_GAIT_FLAGS = (("theta1", "gait.theta1", math.pi / 180), ("theta2", "gait.theta2", math.pi / 180),
+               ("arm_length", "arm.length", 1e-3), ("omega", "gait.omega", math.pi / 180))
+
+
+def resolve_robot(args: argparse.Namespace) -> RobotScene:
+    """The robot scene of --scene or --preset, --set, the kind flags and (for swim) the gait flags."""
+    overrides = dict(parse_override(item, RobotScene) for item in args.set)
+    for flag, key in (("fin", "fin.kind"), ("model", "robot.model"), ("backend", "sim.backend")):
+        if getattr(args, flag, None):
+            overrides[key] = getattr(args, flag)
+    for flag, key, scale in _GAIT_FLAGS:
+        if getattr(args, flag, None) is not None:
+            overrides[key] = getattr(args, flag) * scale
+    return load_scene(args.scene, preset_name=preset_name(args), overrides=overrides, cls=RobotScene)
+
+
+@register
+class SwimCommand(Command):
+    name = "swim"
+    help = "the two-fin robot swimming: flap cycles and the swimming efficiency"
+    description = ("Simulate the robot's flap cycles from rest, the arm at theta2: recovery stroke up to theta1, "
+                   "power stroke back. Reports eta = (D1 - D2) / D1 with D1 the distance forward in the power stroke "
+                   "and D2 the distance back in the recovery stroke.")
+
+    def add_flags(self, p: argparse.ArgumentParser) -> None:
+        p.add_argument("--theta1", type=number("degrees", minimum=-math.inf), metavar="DEG",
+                       help="arm angle at the end of the recovery stroke, degrees in -90..90 (0 sideways, 90 "
+                            "forward; default: the scene's, 60 in the presets)")
+        p.add_argument("--theta2", type=number("degrees", minimum=-math.inf), metavar="DEG",
+                       help="arm angle at the end of the power stroke, degrees (default: the scene's, -90 in the "
+                            "presets)")
+        p.add_argument("--arm-length", type=number("mm"), metavar="MM",
+                       help="arm length L_a in mm (default: the scene's, 65 in the presets)")
+        p.add_argument("--omega", type=number("deg/s"), metavar="DEG_S",
+                       help="arm angular speed in degrees/s (default: the scene's, 66 in the presets)")
+        p.add_argument("--cycles", type=number("cycles", minimum=1, inclusive=True, integer=True),
+                       metavar="N", help="flap cycles (default: the scene's gait.cycles: 1 in the paper preset, 2 "
+                       "in the physical one); figures are the last cycle's, and eta over cycles 2..N")
+        add_robot(p)
+        add_max_error(p)
+        add_result_files(p)
+
+    def scene(self, args: argparse.Namespace) -> RobotScene:
+        return resolve_robot(args)
+
+    def jobs(self, args: argparse.Namespace, scene: RobotScene) -> list[tuple[Swim, RobotScene]]:
+        return [(Swim(args.cycles or scene.gait.cycles), scene)]
+
+    def describe(self, args: argparse.Namespace, runs: list[Result]) -> str:
+        run, = runs
+        scene, summary = run.scene, run.summary()
+        lines = [*authors_model_line(args, scene),
+                 f"{scene.robot.model} robot, {scene.fin.kind} fin, theta1 {summary['theta1_deg']:g} deg, theta2 "
+                 f"{summary['theta2_deg']:g} deg, arm {summary['arm_length_mm']:g} mm, omega "
+                 f"{summary['omega_deg_s']:g} deg/s, {resolution(scene.sim)} ({run.backend}): {steps_line(summary)} "
+                 f"in {run.wall_s:.2f} s"]
+        for i, row in enumerate(run.cycle_table(), start=1):
+            lines.append(f"cycle {i}: eta {100 * row['eta']:+.2f} %, forward D1 {row['D1_mm']:.2f} mm, back D2 "
+                         f"{row['D2_mm']:.2f} mm, net {row['net_mm']:+.2f} mm ({row['net_speed_mm_s']:+.3f} mm/s)")
+        lines.append(error_line(run))
+        return "\n".join(lines)

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
+from ..batch import run_experiments
+from ..convergence import ErrorLimits
 from ..experiment import Result
-from ..experiments.swim import steady_cycles
+from ..experiments.swim import Swim, steady_cycles
 from ..scene import RobotScene
 
 
@@ -48,6 +50,15 @@ def table_rows(runs: list[Result], fitted: tuple[str, ...] = ()) -> list[dict[st
                      "paper_eta_exp": eta_exp / 100, "paper_net_speed_exp_mm_s": speed_exp, "fitted": name in fitted,
                      "error_estimate": s.get("error_estimate")})
     return rows
+
+
+def table(scene: RobotScene, *, preset: str | None = None, max_error: ErrorLimits = ErrorLimits(),
+          workers: int | None = None, progress: Callable[[int, int], None] | None = None) -> list[dict[str, Any]]:
+    """Table I's rows for ``scene``'s model, its six gaits run on all cores; ``preset``: the preset the scene came
+    from (None: a scene file), which marks the gaits that preset was fitted on."""
+    jobs = [(Swim(s.gait.cycles), s) for s in table_scenes(scene)]
+    runs = run_experiments(jobs, max_error=max_error, workers=workers, progress=progress)
+    return table_rows(runs, PHYSICAL_FITTED if preset == "physical" else ())
 
 
 def table_markdown(rows: list[dict[str, Any]]) -> str:

@@ -2,17 +2,19 @@
 force theory (RFT).
 
 A scene (a plate test, or the robot) holds every parameter in SI units; a drive moves the plate's base; a run holds
-the results and their summary::
+the results and their summary. The presets are "physical" (real inertias, a dissipative law) and "paper" (the
+authors' model, with its quirks)::
 
     import finrft
-    run = finrft.simulate(finrft.preset("paper"), finrft.Drive(speed=0.03, stroke=0.2, cycles=2))
+    run = finrft.simulate(finrft.preset("physical"), finrft.Drive(speed=0.03, stroke=0.2, cycles=2))
     print(run.summary())
 
 The API, by topic:
 
 - scenes: `Scene` (a plate test), `RobotScene` (the robot), `preset`, `load_scene` (TOML file and overrides),
   `to_toml`, `SceneError`
-- experiments: `run(experiment, scene)` -> `Result` runs any `Experiment` (finrft.experiment): `PlateTest`,
+- experiments: `run(experiment, scene)` -> `Result` runs any `Experiment` (finrft.experiment); the built-in ones,
+  each in its module of finrft.experiments with its command (`finrft.experiments.REGISTRY`): `PlateTest`,
   `Swim`, `UserModel` (a user's MJCF model, `UserScene`), `Intrusion` (a plate pushed into the medium,
   `IntrusionScene`); `SimulationUnstable` when a run blows up or chatters
 - plate tests: `Drive`, `simulate` (`run` of a `PlateTest`)
@@ -27,9 +29,9 @@ The API, by topic:
 - optimising the robot's gait: `optimize`, `Variable`
 - files: `write_h5`, `write_rrd` (any result); they load h5py and rerun on first use, not on ``import finrft``
 
-The functions `attach`, `simulate`, `swim`, `fit` and `optimize` share their names with the modules that define
-them (``finrft.simulate`` ...): here the names are the functions; import other names from those modules by their
-full path (``from finrft.fit import simulated_drag``).
+The studies built on the engine (the CMA-ES search, the fit, Table I, the report, the benchmarks) are in
+finrft.studies: import other names from their modules by their full path (``from finrft.studies.fit import
+simulated_drag``). ``finrft.__version__`` is the installed version.
 """
 
 from __future__ import annotations
@@ -47,19 +49,19 @@ from .batch import PlateRollouts, local_executor, map_jobs, rollout_plates, run_
 from .convergence import SimulationUnstable
 from .drive import Drive
 from .experiment import Experiment, Result, run
-from .studies.fit import Fit, fit, read_drag, resolve_params
 from .experiments.intrusion import Intrusion
-from .media import medium
-from .studies.optimize import Variable, optimize
-from .studies.table import table_rows, table_scenes
-from .scene import IntrusionScene, RobotScene, Scene, SceneError, UserScene, load_scene, preset, to_toml
 from .experiments.plate import PlateTest, simulate
 from .experiments.swim import Swim, swim
 from .experiments.user_model import UserModel
+from .media import medium
+from .scene import IntrusionScene, RobotScene, Scene, SceneError, UserScene, load_scene, preset, to_toml
+from .studies.fit import Fit, fit, read_drag, resolve_params
+from .studies.optimize import Variable, optimize
+from .studies.table import table_rows, table_scenes
 
 _RECORDING = ("write_h5", "write_rrd")
 
-__all__ = ["__version__", "Drive", "Experiment", "Fit", "Intrusion", "IntrusionScene", "PlateRollouts", "PlateTest", "Result",
+__all__ = ["Drive", "Experiment", "Fit", "Intrusion", "IntrusionScene", "PlateRollouts", "PlateTest", "Result",
            "RobotScene", "Scene", "SceneError", "SimulationUnstable", "Swim", "UserModel", "UserScene", "Variable",
            "attach", "fit", "load_scene", "local_executor", "map_jobs", "medium", "optimize", "preset", "read_drag",
            "resolve_params", "rollout_plates", "run", "run_experiments", "run_many", "simulate", "swim",

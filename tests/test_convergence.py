@@ -89,7 +89,7 @@ def _one_line(capsys) -> str:
     (["drag", "--set", "rft.f_perp=-1"], 2, "rft.f_perp"),
     (["drag", "--preset", "physical", "--plate", "soft", "--set", "plate.stiffness=0", "--set", "plate.damping=0",
       "--cycles", "2"], 1, "estimated discretisation error"),
-    (["rotate", "--cycles", "1", "--set", "sim.dt=0.1", "--set", "plate.segment_inertia=1e-3",
+    (["rotate", "--preset", "paper", "--cycles", "1", "--set", "sim.dt=0.1", "--set", "plate.segment_inertia=1e-3",
       "--set", "plate.damping=0.05"], 1, "unstable"),
     (["swim", "--preset", "physical", "--set", "sim.method='newton'", "--set", "sim.dt=0.02"], 1,
      "estimated discretisation error"),

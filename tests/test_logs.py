@@ -25,8 +25,9 @@ from finrft.scene import preset
 
 SEED, BUDGET = "3", "55"  # 7 gaits a generation; CMA-ES stops at 56
 # The paper robot at a faster gait (~8 ms an evaluation).
-OPTIMIZE = ["optimize", "--seed", SEED, "--workers", "1", "--set", "gait.omega=3"]
-FIT = ["fit", "--params", "b", "--seed", "2", "--budget", "40", "--set", "sim.dt=0.002", "--workers", "1"]
+OPTIMIZE = ["optimize", "--preset", "paper", "--seed", SEED, "--workers", "1", "--set", "gait.omega=3"]
+FIT = ["fit", "--preset", "paper", "--params", "b", "--seed", "2", "--budget", "40", "--set", "sim.dt=0.002",
+       "--workers", "1"]
 
 
 def _generations(log: Path) -> int:
@@ -143,7 +144,8 @@ def test_fit_resumes_after_sigkill_bit_for_bit(tmp_path, capsys, drag_data):
 def test_ctrl_c_reaches_no_worker(tmp_path, errors_only):
     # Ctrl-C in a terminal signals the whole process group: the pool's workers stay quiet, the parent reports.
     log = tmp_path / "run.h5"
-    done = _interrupt(["optimize", "--workers", "2", "--out", str(log)], log, signal.SIGINT, workers_too=True)
+    done = _interrupt(["optimize", "--preset", "paper", "--workers", "2", "--out", str(log)], log, signal.SIGINT,
+                      workers_too=True)
     assert done.returncode == 130
     err = errors_only(done.stderr)
     assert err.startswith("finrft: interrupted after ") and len(err.splitlines()) == 1

@@ -107,8 +107,8 @@ def optimize(args: argparse.Namespace) -> int:
     from ..studies.bounds import display_units
     from ..studies.optimize import best_gait, best_gait_text, optimize
     check_output(args.rrd, ".rrd", "--rrd", args.force)
-    log = search_log(args, {"bounds": "--bounds", "scene": "--scene", "set": "--set", "fin": "--fin",
-                            "model": "--model", "backend": "--backend"})
+    log = search_log(args, {"bounds": "--bounds", "scene": "--scene", "preset": "--preset", "set": "--set",
+                            "fin": "--fin", "model": "--model", "backend": "--backend"})
     scene, variables, generations = _variables(args)
     executor = _executor(args)
     with progress(args, args.budget, "optimize", "evaluations") as bar:
@@ -202,7 +202,7 @@ def fit(args: argparse.Namespace) -> int:
                                (args.rrd, ".rrd", "--rrd")):
         check_output(path, suffix, flag, args.force)
     log = search_log(args, {"data": "--data", "params": "--params", "bounds": "--bounds", "scene": "--scene",
-                            "set": "--set", "backend": "--backend"})
+                            "preset": "--preset", "set": "--set", "backend": "--backend"})
     scene, data, variables = _fit_problem(args)
     validate = [read_drag(p) for p in args.validate]
     with progress(args, args.budget, "fit", "evaluations") as bar:

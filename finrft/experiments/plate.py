@@ -25,9 +25,10 @@ from ..coupling import SegmentForces
 from ..drive import Drive
 from ..experiment import Compared, Plot, Quantity, Result, run
 from ..files import atomic_path
-from ..models import PlateModel, build_plate
+from ..models import PlateModel, build_plate, initial_heading
 from ..scene import PRESETS, Scene, SceneError, load_scene, parse_override, read_text
 from ..stepping import Prescribed
+from ..views import centre_line
 from .command import Command, Output, authors_model_line, error_line, register, steps_line
 from .flags import UsageError, add_max_error, add_result_files, add_scene_flags, number, preset_name
 
@@ -144,8 +145,51 @@ class PlateTest:
         return out
 
     def draw(self, rec: Any, run: Result, times: Any, prefix: str) -> list[Any]:
-        from ..views import draw_plate
         return draw_plate(rec, run, times, prefix)
+
+
+def plate_points(run: Result) -> np.ndarray:
+    """The plate's centre line, (T, N + 2, 3) m: base point, rod tip (first hinge), the other hinges, plate tip."""
+    p = run.scene.plate
+    heading = initial_heading(run.drive.kind, run.drive.attack_deg)
+    count = len(run.time)
+    base = np.zeros((count, 3))
+    if run.drive.kind == "drag":
+        base[:, 1] = run.displacement
+        rod_angle = np.full(count, heading)
+    else:
+        rod_angle = heading + run.displacement
+    return centre_line(base, np.column_stack([rod_angle, heading + run.segment_angle]), p.rod_length, p)
+
+
+def draw_plate(rec: Any, run: Result, times: Any, prefix: str) -> list[Any]:
+    """The plate and its RFT forces seen from above."""
+    import rerun as rr  # loads only when a recording is written
+    import rerun.blueprint as rrb
+    p = run.scene.plate
+    n, count = p.segments, len(run.time)
+    points = plate_points(run)
+    midpoints = (points[:, 1:-1] + points[:, 2:]) / 2
+    peak = float(np.max(np.linalg.norm(run.rft_force, axis=-1), initial=0.0))
+    arrow_scale = p.segment_length / peak if peak > 0 else 0.0
+    rec.log(f"{prefix}plate", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+    rec.log(f"{prefix}plate/centerline", rr.LineStrips3D.from_fields(colors=[[60, 60, 70]], radii=[0.0005]),
+            static=True)
+    rec.send_columns(f"{prefix}plate/centerline", indexes=[times], columns=rr.LineStrips3D.columns(strips=points))
+    rec.log(f"{prefix}plate/rft", rr.Arrows3D.from_fields(colors=[[230, 80, 20]], radii=[0.0006]), static=True)
+    rec.log(f"{prefix}plate/rft", rr.AnyValues(arrow_scale_m_per_N=arrow_scale,
+                                               note=f"arrow length = RFT force x {arrow_scale:.4g} m/N"), static=True)
+    rec.send_columns(f"{prefix}plate/rft", indexes=[times], columns=rr.Arrows3D.columns(
+        origins=midpoints.reshape(-1, 3), vectors=arrow_scale * run.rft_force.reshape(-1, 3),
+    ).partition([n] * count))
+    low, high = points.min(axis=(0, 1)), points.max(axis=(0, 1))
+    centre = (low + high) / 2
+    span = float(np.max(high - low)) or p.segment_length
+    # Straight down the -z axis, with +y (the drag direction) up on screen.
+    eye = rrb.EyeControls3D(position=centre + [0.0, 0.0, 2.0 * span], look_target=centre, eye_up=[0.0, 1.0, 0.0])
+    # The default 1 m grid is coarser than the whole plate.
+    return [rrb.Spatial3DView(name="Plate (top view, 1 cm grid)", origin=f"{prefix}plate", eye_controls=eye,
+                              line_grid=rrb.LineGrid3D(spacing=0.01))]
 
 
 class _PlateTrial:

@@ -26,6 +26,7 @@ from ..experiment import Compared, Plot, Quantity, Result, run
 from ..models import RobotModel, body_share, build_robot
 from ..scene import PRESETS, RobotScene, load_scene, parse_override, resolution
 from ..stepping import Prescribed
+from ..views import centre_line
 from .command import Command, authors_model_line, error_line, register, steps_line
 from .flags import add_max_error, add_result_files, add_scene_flags, number, preset_name
 
@@ -116,8 +117,38 @@ class Swim:
         return out
 
     def draw(self, rec: Any, run: Result, times: Any, prefix: str) -> list[Any]:
-        from ..views import draw_robot
         return draw_robot(rec, run, times, prefix)
+
+
+def robot_points(run: Result) -> np.ndarray:
+    """The right arm and fin's centre line, (T, N + 2, 3) m: pivot, arm tip (first hinge), hinges, fin tip."""
+    a, f = run.scene.arm, run.scene.fin
+    count = len(run.time)
+    pivot = np.zeros((count, 3))
+    pivot[:, 0], pivot[:, 1] = a.pivot, run.body_y
+    angles = np.column_stack([run.arm_angle, run.arm_angle[:, None] + np.cumsum(run.hinge_angle, axis=1)])
+    return centre_line(pivot, angles, a.length, f)
+
+
+def draw_robot(rec: Any, run: Result, times: Any, prefix: str) -> list[Any]:
+    """The robot's right half from above: the body as a box outline, arm and fin as a line."""
+    import rerun as rr  # loads only when a recording is written
+    import rerun.blueprint as rrb
+    points = robot_points(run)
+    half_width, half_length = run.scene.arm.pivot, 0.0375
+    corners = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1], [-1, -1]]) * [half_width, half_length]
+    outline = np.zeros((len(run.time), 5, 3))
+    outline[..., :2] = corners
+    outline[..., 1] += run.body_y[:, None]
+    rec.log(f"{prefix}robot", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+    rec.log(f"{prefix}robot/body", rr.LineStrips3D.from_fields(colors=[[90, 110, 160]], radii=[0.0008]),
+            static=True)
+    rec.send_columns(f"{prefix}robot/body", indexes=[times], columns=rr.LineStrips3D.columns(strips=outline))
+    rec.log(f"{prefix}robot/fin", rr.LineStrips3D.from_fields(colors=[[60, 60, 70]], radii=[0.0008]), static=True)
+    rec.send_columns(f"{prefix}robot/fin", indexes=[times], columns=rr.LineStrips3D.columns(strips=points))
+    eye = rrb.EyeControls3D(position=[0.0, 0.0, 0.6], look_target=[0.0, 0.0, 0.0], eye_up=[0.0, 1.0, 0.0])
+    return [rrb.Spatial3DView(name="Robot (top view)", origin=f"{prefix}robot", eye_controls=eye,
+                              line_grid=rrb.LineGrid3D(spacing=0.01))]
 
 
 def _cycle_rows(stroke_y: np.ndarray, cycles: int, cycle_time: float) -> list[dict[str, float]]:

@@ -6,14 +6,17 @@
 - `intrusion`: a plate pushed down into the medium (`Intrusion`, `intrude`)
 
 `REGISTRY` maps each command name to its `Command`; the CLI gives every entry a subcommand and the tests iterate
-it. A new experiment is one module that registers its command (``@register``) and is listed here.
+it. Every module of this package is imported here, and registers its commands as it is (``@register``): a new
+experiment is one module, with nothing to list.
 """
 
-# Importing a module registers its commands, in the order the CLI lists them.
-from . import plate  # noqa: F401,I001
-from . import swim  # noqa: F401
-from . import user_model  # noqa: F401
-from . import intrusion  # noqa: F401
+import importlib
+import pkgutil
+
 from .command import REGISTRY, Command, Output, register
 
-__all__ = ["REGISTRY", "Command", "Output", "intrusion", "plate", "register", "swim", "user_model"]
+# The plate tests first: the CLI lists its commands in the order they were registered.
+for _name in sorted((m.name for m in pkgutil.iter_modules(__path__)), key=lambda n: (n != "plate", n)):
+    importlib.import_module(f"{__name__}.{_name}")
+
+__all__ = ["REGISTRY", "Command", "Output", "register"]

@@ -18,7 +18,7 @@ DISPLAY = {"rad": 180 / math.pi, "rad/s": 180 / math.pi, "m": 1e3}
 def unit_of(cls: type, key: str) -> str | None:
     """A scene key's SI unit; None for a key the schema does not know (the search names it)."""
     try:
-        return field_of(cls, key).metadata["unit"]
+        return field_of(cls, key).metadata.get("unit")
     except SceneError:
         return None
 

@@ -2,10 +2,11 @@
 force theory (RFT).
 
 A scene (a plate test, or the robot) holds every parameter in SI units; a drive moves the plate's base; a run holds
-the results and their summary::
+the results and their summary. The presets are "physical" (real inertias, a dissipative law) and "paper" (the
+authors' model, with its quirks)::
 
     import finrft
-    run = finrft.simulate(finrft.preset("paper"), finrft.Drive(speed=0.03, stroke=0.2, cycles=2))
+    run = finrft.simulate(finrft.preset("physical"), finrft.Drive(speed=0.03, stroke=0.2, cycles=2))
     print(run.summary())
 
 The API, by topic:
@@ -14,7 +15,8 @@ The API, by topic:
   `to_toml`; their keys, units and bounds in one schema (finrft.schema; each law declares its own keys)
 - errors (finrft.errors): `Error`, the root of everything finrft raises on purpose: `SceneError` (bad input, also
   a ValueError) and `SimulationFailed` (a run that cannot give a trustworthy result)
-- experiments: `run(experiment, scene)` -> `Result` runs any `Experiment` (finrft.experiment): `PlateTest`,
+- experiments: `run(experiment, scene)` -> `Result` runs any `Experiment` (finrft.experiment); the built-in ones,
+  each in its module of finrft.experiments with its command (`finrft.experiments.REGISTRY`): `PlateTest`,
   `Swim`, `UserModel` (a user's MJCF model, `UserScene`), `Intrusion` (a plate pushed into the medium,
   `IntrusionScene`); `SimulationUnstable` when a run blows up or chatters
 - plate tests: `Drive`, `simulate` (`run` of a `PlateTest`)
@@ -29,29 +31,35 @@ The API, by topic:
 - optimising the robot's gait: `optimize`, `Variable`
 - files: `write_h5`, `write_rrd` (any result); they load h5py and rerun on first use, not on ``import finrft``
 
-The functions `attach`, `simulate`, `swim`, `fit` and `optimize` share their names with the modules that define
-them (``finrft.simulate`` ...): here the names are the functions; import other names from those modules by their
-full path (``from finrft.fit import simulated_drag``).
+The studies built on the engine (the CMA-ES search, the fit, Table I, the report, the benchmarks) are in
+finrft.studies: import other names from their modules by their full path (``from finrft.studies.fit import
+simulated_drag``). ``finrft.__version__`` is the installed version.
 """
 
 from __future__ import annotations
 
-from importlib import import_module
+from importlib import import_module, metadata
 from typing import Any
+
+try:
+    __version__ = metadata.version("finrft")
+except metadata.PackageNotFoundError:  # a source tree on the path, not installed
+    __version__ = "0+unknown"
 
 from .attach import attach
 from .batch import PlateRollouts, local_executor, map_jobs, rollout_plates, run_experiments, run_many
 from .drive import Drive
 from .errors import Error, SceneError, SimulationFailed, SimulationUnstable
 from .experiment import Experiment, Result, run
-from .fit import Fit, fit, read_drag, resolve_params
-from .intrusion import Intrusion
+from .experiments.intrusion import Intrusion
+from .experiments.plate import PlateTest, simulate
+from .experiments.swim import Swim, swim
+from .experiments.user_model import UserModel
 from .media import medium
-from .optimize import Variable, optimize
 from .scene import IntrusionScene, RobotScene, Scene, UserScene, load_scene, preset, to_toml
-from .simulate import PlateTest, simulate
-from .swim import Swim, swim, table_rows, table_scenes
-from .user_model import UserModel
+from .studies.fit import Fit, fit, read_drag, resolve_params
+from .studies.optimize import Variable, optimize
+from .studies.table import table_rows, table_scenes
 
 _RECORDING = ("write_h5", "write_rrd")
 

@@ -35,7 +35,7 @@ from .convergence import ErrorLimits, SimulationUnstable
 from .drive import Drive
 from .experiment import Experiment, Result, run
 from .scene import Scene
-from .simulate import PlateTest
+from .experiments.plate import PlateTest
 from .stepping import schedule
 
 T = TypeVar("T")

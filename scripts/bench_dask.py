@@ -11,7 +11,7 @@ import math
 import time
 
 from finrft import batch
-from finrft.optimize import evaluate
+from finrft.studies.optimize import evaluate
 from finrft.scene import RobotScene, preset
 
 

@@ -3,7 +3,7 @@
 The fin law's shape is the sand-swimming law's gamma0 and c_f/c_s; its scale is fixed throughout at the physical
 preset's broadside force per segment (c_s cos gamma0 + c_f, from 3D-RFT on the segment), so a shape changes how
 the force turns with the direction of motion, not how large it is. The fin hinges' damping follows their
-stiffness k as k times the preset's time constant b/k. eta is steady (finrft.swim.steady).
+stiffness k as k times the preset's time constant b/k. eta is steady (finrft.experiments.swim.steady).
 
 - preset: the shape 3D-RFT gives (the preset's), k fitted on Optimized (bisection): what the preset holds.
 - plate: the shape fitted to the plate's measured drags (finrft/presets/plate-physical.toml), k refitted on
@@ -35,8 +35,9 @@ from scipy.optimize import minimize
 import finrft
 from finrft import data as shipped
 from finrft.convergence import SimulationFailed
-from finrft.fit import mse, read_drag
-from finrft.swim import PAPER_TABLE, swim, table_scenes
+from finrft.studies.fit import mse, read_drag
+from finrft.experiments.swim import swim
+from finrft.studies.table import PAPER_TABLE, table_scenes
 
 NAMES = [row[0] for row in PAPER_TABLE]
 MEASURED = np.array([row[5] / 100 for row in PAPER_TABLE])

@@ -28,8 +28,8 @@ def test_import_loads_neither_rerun_nor_matplotlib(tmp_path):
 
 
 def test_every_export_is_documented_and_is_the_modules_own():
-    import finrft.fit  # importing a module of the same name must not replace the function
-    from finrft.simulate import simulate
+    import finrft.studies.fit  # importing a module of the same name must not replace the function
+    from finrft.experiments.plate import simulate
     for name in finrft.__all__:
         value = getattr(finrft, name)
         assert value.__doc__ and value.__doc__.strip(), name

@@ -2,7 +2,7 @@
 
 import pytest
 
-from finrft import bench
+from finrft.studies import bench
 from finrft.scene import RobotScene, preset
 
 

@@ -111,8 +111,8 @@ def test_bad_scene_files(tmp_path, capsys, text, named):
 
 def test_unstable_run_exits_1_and_writes_nothing(tmp_path, capsys):
     out = tmp_path / "run.h5"
-    argv = ["drag", "--cycles", "1", "--out", str(out), "--set", "plate.segment_inertia=2.6e-7",
-            "--set", "plate.rod_inertia=4e-8", "--set", "plate.damping=0", "--set", "sim.integrator='euler'",
+    argv = ["drag", "--preset", "paper", "--cycles", "1", "--out", str(out),
+            "--set", "plate.segment_inertia=2.6e-7", "--set", "plate.rod_inertia=4e-8", "--set", "plate.damping=0", "--set", "sim.integrator='euler'",
             "--set", "sim.dt=1e-3"]
     assert main(argv) == 1
     err = capsys.readouterr().err

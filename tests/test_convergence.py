@@ -13,8 +13,8 @@ from finrft.convergence import ErrorLimits, InaccurateResult, SimulationFailed, 
 from finrft.errors import UndefinedResult
 from finrft.drive import Drive
 from finrft.scene import RobotScene, preset
-from finrft.simulate import simulate
-from finrft.swim import swim
+from finrft.experiments.plate import simulate
+from finrft.experiments.swim import swim
 
 CYCLE = Drive(speed=0.03, stroke=0.045, cycles=1)
 
@@ -90,7 +90,7 @@ def _one_line(capsys) -> str:
     (["drag", "--set", "rft.f_perp=-1"], 2, "rft.f_perp"),
     (["drag", "--preset", "physical", "--plate", "soft", "--set", "plate.stiffness=0", "--set", "plate.damping=0",
       "--cycles", "2"], 1, "estimated discretisation error"),
-    (["rotate", "--cycles", "1", "--set", "sim.dt=0.1", "--set", "plate.segment_inertia=1e-3",
+    (["rotate", "--preset", "paper", "--cycles", "1", "--set", "sim.dt=0.1", "--set", "plate.segment_inertia=1e-3",
       "--set", "plate.damping=0.05"], 1, "unstable"),
     (["swim", "--preset", "physical", "--set", "sim.method='newton'", "--set", "sim.dt=0.02"], 1,
      "estimated discretisation error"),

@@ -81,7 +81,7 @@ def test_the_paper_preset_feeds_energy_in_and_says_why_and_the_physical_one_diss
 
 def test_a_run_says_once_that_its_law_feeds_energy_in(tmp_path, capsys, monkeypatch):
     monkeypatch.setattr(laws, "_warned", [])  # as in a fresh process
-    fast = ["--set", "sim.dt=0.001", "--distance", "5"]
+    fast = ["--preset", "paper", "--set", "sim.dt=0.001", "--distance", "5"]
     outs = [tmp_path / "first.h5", tmp_path / "second.h5", tmp_path / "dissipative.h5"]
     assert main(["drag", "--out", str(outs[0]), "--quiet", *fast]) == 0
     assert main(["drag", "--out", str(outs[1]), "--quiet", *fast]) == 0

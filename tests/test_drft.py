@@ -11,7 +11,7 @@ from test_attach import body_xml, passive
 from finrft import native
 from finrft.attach import attach
 from finrft.cli import main
-from finrft.intrusion import intrude
+from finrft.experiments.intrusion import intrude
 from finrft.laws import drft, li2013, rft3d
 from finrft.scene import IntrusionScene, SceneError, scene_from_dict
 

@@ -8,7 +8,7 @@ import tomllib
 import numpy as np
 import pytest
 
-from finrft.fit import fit, read_drag, read_forces, resolve_params, simulated_drag, write_drag
+from finrft.studies.fit import fit, read_drag, read_forces, resolve_params, simulated_drag, write_drag
 from finrft import laws
 from finrft.cli import main
 from finrft.data import plate_drag_dir
@@ -39,8 +39,8 @@ def test_fit_cli_writes_a_scene_drag_accepts(tmp_path, capsys, truth):
         write_drag(path, simulated_drag(truth, speed, 0.06), "simulated")
         paths.append(str(path))
     scene, png, log = tmp_path / "fitted.toml", tmp_path / "fit.png", tmp_path / "fit.h5"
-    assert main(["fit", "--data", paths[0], "--validate", paths[1], "--params", "b", "--budget", "30",
-                 "--write-scene", str(scene), "--plot", str(png), "--out", str(log), "--json"]) == 0
+    assert main(["fit", "--preset", "paper", "--data", paths[0], "--validate", paths[1], "--params", "b",
+                 "--budget", "30", "--write-scene", str(scene), "--plot", str(png), "--out", str(log), "--json"]) == 0
     summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert summary["params"]["plate.damping"] == pytest.approx(0.8, rel=0.05)
     assert set(summary["rmse_deg"]) == {"v0.02"} and set(summary["validate_rmse_deg"]) == {"v0.04"}
@@ -85,8 +85,8 @@ def test_four_parameter_fit_predicts_the_unseen_speed():
 def test_rft_identification_closes_the_loop(tmp_path, capsys):
     forces = tmp_path / "forces.csv"
     for attack in (0, 20, 45, 70, 90):
-        assert main(["drag", "--plate", "rigid", "--attack", str(attack), "--distance", "10", "--quiet",
-                     "--forces-csv", str(forces)]) == 0
+        assert main(["drag", "--preset", "paper", "--plate", "rigid", "--attack", str(attack), "--distance", "10",
+                     "--quiet", "--forces-csv", str(forces)]) == 0
     fragment = tmp_path / "rft.toml"
     assert main(["fit-rft", "--data", str(forces), "--out", str(fragment), "--json"]) == 0
     found = json.loads(capsys.readouterr().out.strip().splitlines()[-1])

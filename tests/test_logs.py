@@ -19,14 +19,15 @@ import pytest
 
 import finrft
 import finrft.scene
-from finrft.fit import read_drag, simulated_drag, write_drag
+from finrft.studies.fit import read_drag, simulated_drag, write_drag
 from finrft.cli import main
 from finrft.scene import preset
 
 SEED, BUDGET = "3", "55"  # 7 gaits a generation; CMA-ES stops at 56
 # The paper robot at a faster gait (~8 ms an evaluation).
-OPTIMIZE = ["optimize", "--seed", SEED, "--workers", "1", "--set", "gait.omega=3"]
-FIT = ["fit", "--params", "b", "--seed", "2", "--budget", "40", "--set", "sim.dt=0.002", "--workers", "1"]
+OPTIMIZE = ["optimize", "--preset", "paper", "--seed", SEED, "--workers", "1", "--set", "gait.omega=3"]
+FIT = ["fit", "--preset", "paper", "--params", "b", "--seed", "2", "--budget", "40", "--set", "sim.dt=0.002",
+       "--workers", "1"]
 
 
 def _generations(log: Path) -> int:
@@ -143,7 +144,8 @@ def test_fit_resumes_after_sigkill_bit_for_bit(tmp_path, capsys, drag_data):
 def test_ctrl_c_reaches_no_worker(tmp_path, errors_only):
     # Ctrl-C in a terminal signals the whole process group: the pool's workers stay quiet, the parent reports.
     log = tmp_path / "run.h5"
-    done = _interrupt(["optimize", "--workers", "2", "--out", str(log)], log, signal.SIGINT, workers_too=True)
+    done = _interrupt(["optimize", "--preset", "paper", "--workers", "2", "--out", str(log)], log, signal.SIGINT,
+                      workers_too=True)
     assert done.returncode == 130
     err = errors_only(done.stderr)
     assert err.startswith("finrft: interrupted after ") and len(err.splitlines()) == 1
@@ -155,11 +157,11 @@ def test_ctrl_c_without_a_log(monkeypatch, capsys):
     def interrupt(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(sys.modules["finrft.optimize"], "swim", interrupt)  # finrft.optimize is the function
+    monkeypatch.setattr(sys.modules["finrft.studies.optimize"], "swim", interrupt)  # finrft.optimize is the function
     assert main(["optimize", "--workers", "1"]) == 130
     assert capsys.readouterr().err == ("finrft: interrupted; nothing was logged (--out LOG.h5 makes a run "
                                        "resumable)\n")
-    monkeypatch.setattr("finrft.cli.run_experiment", interrupt)
+    monkeypatch.setattr("finrft.cli.run.run_experiment", interrupt)
     assert main(["drag", "--distance", "5"]) == 130
     assert capsys.readouterr().err == "finrft: interrupted\n"
 
@@ -259,7 +261,7 @@ def test_the_package_never_pickles():
 
 def test_the_search_owns_its_random_numbers():
     # pycma's default draws from numpy's global generator; a caller drawing from it too must not change the search.
-    from finrft.optimize import Variable, optimize
+    from finrft.studies.optimize import Variable, optimize
     scene = preset("paper", finrft.scene.RobotScene).replace(**{"gait.omega": 3.0})
     variables = [Variable("gait.theta1", 0.5, 1.5)]
     plain = optimize(scene, variables=variables, budget=12, seed=5, workers=1)

@@ -14,7 +14,7 @@ import pytest
 from finrft import laws, media
 from finrft.attach import attach
 from finrft.cli import main
-from finrft.intrusion import intrude
+from finrft.experiments.intrusion import intrude
 from finrft.laws import li2013, sandswim
 from finrft.scene import IntrusionScene, RobotScene, Scene, SceneError, preset, scene_from_dict, to_toml
 

@@ -18,7 +18,7 @@ from finrft.cli import main
 from finrft.drive import Drive
 from finrft.laws.table import ForceTable, write_table
 from finrft.scene import SceneError
-from finrft.simulate import simulate
+from finrft.experiments.plate import simulate
 
 
 def test_plugin_is_built_and_loaded():
@@ -110,7 +110,7 @@ def test_plugin_rejects_bad_config(paper, monkeypatch, capsys, key, value, named
     monkeypatch.setattr(models, "plugin_config", lambda *args: {**good(*args), key: value})
     with pytest.raises(SceneError, match=named):
         models.build_plate(paper)
-    assert main(["drag", "--distance", "5"]) == 2
+    assert main(["drag", "--preset", "paper", "--distance", "5"]) == 2
     err = capsys.readouterr().err
     assert named in err and len(err.strip().splitlines()) == 1
 

@@ -8,7 +8,7 @@ from finrft import models
 from finrft.drive import Drive
 from finrft.convergence import InaccurateResult, SimulationUnstable
 from finrft.scene import preset
-from finrft.simulate import simulate
+from finrft.experiments.plate import simulate
 
 
 @pytest.mark.parametrize("attack_deg", [90.0, 60.0, 30.0, 0.0])

@@ -15,7 +15,7 @@ from finrft.drive import Drive
 from finrft.models import build_plate
 from finrft.scene import preset, to_toml
 from finrft.experiment import Result
-from finrft.simulate import simulate
+from finrft.experiments.plate import simulate
 
 DRIVES = {
     "drag": Drive(stroke=0.02),
@@ -196,7 +196,7 @@ def test_failed_rrd_write_leaves_no_file(runs, tmp_path, monkeypatch):
 
 def test_swim_recording_matches_its_hdf5(tmp_path):
     from finrft.scene import RobotScene
-    from finrft.swim import swim
+    from finrft.experiments.swim import swim
 
     run = swim(preset("physical", RobotScene).replace(**{"sim.dt": 4e-4}), 1)
     h5, rrd = tmp_path / "swim.h5", tmp_path / "swim.rrd"

@@ -10,7 +10,7 @@ import pytest
 from finrft import reference
 from finrft.drive import Drive
 from finrft.scene import preset
-from finrft.simulate import simulate
+from finrft.experiments.plate import simulate
 
 
 def _compare(scene, drive):

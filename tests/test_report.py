@@ -35,7 +35,7 @@ def test_a_report_without_its_measurements_fails_before_running(tmp_path, capsys
 
 
 def test_a_failing_part_leaves_nothing_behind(tmp_path, monkeypatch):
-    from finrft import report
+    from finrft.studies import report
 
     def broken(out, *args):
         (out / "forces.png").write_bytes(b"half a figure")

@@ -297,7 +297,7 @@ def test_law_rft3d_plot_and_media_it_cannot_scale(tmp_path, capsys):
 def test_a_scene_file_selects_rft3d(tmp_path):
     # [medium] law = "rft3d" on the intrusion: a horizontal plate pushed straight down takes xi_n x 0.87504 (the
     # fit's sum, see test_horizontal_plate_pushed_down) x its area x its depth, upwards, nothing sideways.
-    from finrft.intrusion import intrude
+    from finrft.experiments.intrusion import intrude
     from finrft.scene import IntrusionScene, load_scene, scene_from_dict
 
     path = tmp_path / "intrusion.toml"

@@ -9,9 +9,9 @@ import pytest
 
 from finrft import reference
 from finrft.cli import main
-from finrft.optimize import Variable, optimize, read_log
+from finrft.studies.optimize import Variable, optimize, read_log
 from finrft.scene import RobotScene, SceneError, preset
-from finrft.swim import swim
+from finrft.experiments.swim import swim
 
 
 @pytest.fixture(scope="module")
@@ -72,7 +72,7 @@ def test_position_servo_tracks_the_gait():
 
 
 def test_paper_table_pattern(capsys):
-    assert main(["table", "--json"]) == 0
+    assert main(["table", "--preset", "paper", "--json"]) == 0
     rows = {r["gait"]: r for r in json.loads(capsys.readouterr().out.strip().splitlines()[-1])}
     script = {name: r["eta_script"] for name, r in rows.items()}
     # The authors' optimisation measured |net| / D1; on it the paper's pattern holds.

@@ -10,7 +10,7 @@ from finrft import geometry, media
 from finrft.cli import main
 from finrft.models import arm_law, body_drag, body_law
 from finrft.scene import RobotScene, SceneError, preset
-from finrft.swim import steady, swim
+from finrft.experiments.swim import steady, swim
 
 
 @pytest.fixture(scope="module")

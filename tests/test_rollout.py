@@ -10,7 +10,7 @@ from finrft import batch, models, native
 from finrft.convergence import SimulationUnstable
 from finrft.drive import Drive
 from finrft.scene import preset
-from finrft.simulate import simulate
+from finrft.experiments.plate import simulate
 
 
 def _same_as_serial(jobs, states):

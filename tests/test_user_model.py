@@ -13,10 +13,10 @@ import pytest
 
 import finrft
 from finrft.cli import main
-from finrft.intrusion import Intrusion, intrude
+from finrft.experiments.intrusion import Intrusion, intrude
 from finrft.laws import li2013
 from finrft.scene import IntrusionScene, UserScene, load_scene
-from finrft.user_model import UserModel
+from finrft.experiments.user_model import UserModel
 
 # A 4 cm x 6 cm plate (1 mm thick), its top at the surface, on a slide along x: the README's attach example.
 MODEL = """<mujoco><option gravity="0 0 -9.81"/><worldbody><body name="plate">

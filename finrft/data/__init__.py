@@ -1,7 +1,7 @@
 """Measurements shipped with finrft.
 
 ``plate_drag``: the origami plate dragged from flat at 10, 30 and 50 mm/s (see its README.md for provenance,
-columns and sign convention), in the format `finrft.fit.read_drag` reads.
+columns and sign convention), in the format `finrft.studies.fit.read_drag` reads.
 """
 
 from __future__ import annotations

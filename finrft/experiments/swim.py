@@ -12,19 +12,24 @@ per-cycle eta would weigh a short cycle as much as a long one); with N = 1 it is
 
 from __future__ import annotations
 
+import argparse
+import math
 from dataclasses import dataclass
 from typing import Any, Callable
 
 import mujoco
 import numpy as np
 
-from .convergence import ErrorLimits
-from .errors import UndefinedResult
-from .drive import Drive
-from .experiment import Compared, Plot, Quantity, Result, run
-from .models import RobotModel, body_share, build_robot
-from .scene import RobotScene
-from .stepping import Prescribed
+from ..convergence import ErrorLimits
+from ..errors import SimulationFailed, UndefinedResult
+from ..drive import Drive
+from ..experiment import Compared, Plot, Quantity, Result, run
+from ..models import RobotModel, body_share, build_robot
+from ..scene import PRESETS, RobotScene, load_scene, parse_override, resolution
+from ..stepping import Prescribed
+from ..views import centre_line
+from .command import Command, authors_model_line, error_line, register, steps_line
+from .flags import add_max_error, add_result_files, add_scene_flags, number, preset_name
 
 
 SIGN_CONVENTION = (
@@ -88,8 +93,8 @@ class Swim:
 
     def independent(self, scene: RobotScene, times: np.ndarray, *, rtol: float, atol: float) -> np.ndarray:
         """The right fin's hinge angles (rad) of the independent solution (finrft.reference) at ``times``."""
-        from . import geometry
-        from .reference import solve_robot  # scipy's integrators load only when asked for
+        from .. import geometry
+        from ..reference import solve_robot  # scipy's integrators load only when asked for
         # the forces a [medium] gives, as numbers: the reference writes out the laws, not their derivation
         given = {"arm": geometry.arm_law(scene), "body_drag": geometry.body_resistance(scene)["total"]} \
             if geometry.properties(scene) else {}
@@ -113,8 +118,38 @@ class Swim:
         return out
 
     def draw(self, rec: Any, run: Result, times: Any, prefix: str) -> list[Any]:
-        from .views import draw_robot
         return draw_robot(rec, run, times, prefix)
+
+
+def robot_points(run: Result) -> np.ndarray:
+    """The right arm and fin's centre line, (T, N + 2, 3) m: pivot, arm tip (first hinge), hinges, fin tip."""
+    a, f = run.scene.arm, run.scene.fin
+    count = len(run.time)
+    pivot = np.zeros((count, 3))
+    pivot[:, 0], pivot[:, 1] = a.pivot, run.body_y
+    angles = np.column_stack([run.arm_angle, run.arm_angle[:, None] + np.cumsum(run.hinge_angle, axis=1)])
+    return centre_line(pivot, angles, a.length, f)
+
+
+def draw_robot(rec: Any, run: Result, times: Any, prefix: str) -> list[Any]:
+    """The robot's right half from above: the body as a box outline, arm and fin as a line."""
+    import rerun as rr  # loads only when a recording is written
+    import rerun.blueprint as rrb
+    points = robot_points(run)
+    half_width, half_length = run.scene.arm.pivot, 0.0375
+    corners = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1], [-1, -1]]) * [half_width, half_length]
+    outline = np.zeros((len(run.time), 5, 3))
+    outline[..., :2] = corners
+    outline[..., 1] += run.body_y[:, None]
+    rec.log(f"{prefix}robot", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+    rec.log(f"{prefix}robot/body", rr.LineStrips3D.from_fields(colors=[[90, 110, 160]], radii=[0.0008]),
+            static=True)
+    rec.send_columns(f"{prefix}robot/body", indexes=[times], columns=rr.LineStrips3D.columns(strips=outline))
+    rec.log(f"{prefix}robot/fin", rr.LineStrips3D.from_fields(colors=[[60, 60, 70]], radii=[0.0008]), static=True)
+    rec.send_columns(f"{prefix}robot/fin", indexes=[times], columns=rr.LineStrips3D.columns(strips=points))
+    eye = rrb.EyeControls3D(position=[0.0, 0.0, 0.6], look_target=[0.0, 0.0, 0.0], eye_up=[0.0, 1.0, 0.0])
+    return [rrb.Spatial3DView(name="Robot (top view)", origin=f"{prefix}robot", eye_controls=eye,
+                              line_grid=rrb.LineGrid3D(spacing=0.01))]
 
 
 def _cycle_rows(stroke_y: np.ndarray, cycles: int, cycle_time: float) -> list[dict[str, float]]:
@@ -217,57 +252,84 @@ def swim(scene: RobotScene, cycles: int = 1, *, progress: Callable[[float], None
     return run(Swim(cycles), scene, progress=progress, max_error=max_error, estimate_error=estimate_error)
 
 
-# The paper's Table I: (name, theta1 deg, theta2 deg, L_a mm, fin, eta_exp %, eta_sim %, net speed mm/s exp).
-PAPER_TABLE = (
-    ("Optimized", 60, -90, 65, "origami", 8.61, 8.95, 1.69),
-    ("Symmetry 1", 30, -30, 65, "origami", 1.22, 0.06, 0.48),
-    ("Symmetry 2", 30, -30, 75, "origami", 1.08, 0.05, 0.59),
-    ("Asymmetry 1", 90, 0, 65, "origami", 3.12, 3.71, 0.34),
-    ("Asymmetry 2", 90, 0, 75, "origami", 3.57, 3.65, 0.43),
-    ("Rigid fin", 60, -90, 65, "rigid", 0.11, 1.02, 0.02),
-)
+# ---------------------------------------------------------------------------------------------------------
+# The command: finrft swim
+
+PRESETS_HELP = ("built-in robot scene when no --scene is given (default: physical): physical = real inertias, "
+                "penalty stops, velocity body drag (against the body's velocity), adaptive-newton method; paper = "
+                "the authors' model with its quirks: inertias of 1 kg m^2, a law that feeds energy in, penalty "
+                "stops, stroke body drag (a constant force against the fin's sweep), adaptive method")
 
 
-# The gaits the physical preset's fitted parameter (fin.stiffness) was fitted on (scripts/fit_robot.py --shape preset).
-PHYSICAL_FITTED = ("Optimized",)
+def add_robot(p: argparse.ArgumentParser) -> None:
+    """The robot scene's flags (also those of the studies on the robot: optimize, table)."""
+    g = add_scene_flags(p, "robot", "fin.stiffness=0.4", presets=PRESETS[RobotScene], presets_help=PRESETS_HELP,
+                        title="robot scene", backend="")
+    g.add_argument("--fin", choices=("origami", "soft", "rigid"), help="fin kind (overrides fin.kind)")
+    g.add_argument("--model", choices=("full", "half"), help="full robot, or its right half with half the body's "
+                   "mass and drag (overrides robot.model)")
+    g.add_argument("--backend", choices=("native", "python"), help="where the RFT force is computed")
 
 
-def table_scenes(scene: RobotScene) -> list[RobotScene]:
-    """The scene of each gait of the paper's Table I."""
-    return [scene.replace(**{"gait.theta1": np.radians(t1), "gait.theta2": np.radians(t2),
-                             "arm.length": la / 1000, "fin.kind": fin})
-            for _, t1, t2, la, fin, *_ in PAPER_TABLE]
+# Flags that set a scene key, with the factor from the CLI's units to SI.
+_GAIT_FLAGS = (("theta1", "gait.theta1", math.pi / 180), ("theta2", "gait.theta2", math.pi / 180),
+               ("arm_length", "arm.length", 1e-3), ("omega", "gait.omega", math.pi / 180))
 
 
-def table_rows(runs: list[Result], fitted: tuple[str, ...] = ()) -> list[dict[str, Any]]:
-    """Table I rows: finrft's eta (steady, `steady`; the first cycle's when a run has one), the first cycle's, the
-    authors' script measure |net| / D1, the distances and the net speed (steady), beside the paper's figures;
-    ``fitted``: the gaits the scene's parameters were fitted on."""
-    rows = []
-    for (name, t1, t2, la, fin, eta_exp, eta_sim, speed_exp), result in zip(PAPER_TABLE, runs):
-        s = result.summary()
-        rows.append({"gait": name, "theta1_deg": t1, "theta2_deg": t2, "arm_length_mm": la, "fin": fin,
-                     "cycles": s["cycles"], "eta": s["eta_steady"], "eta_first_cycle": s["eta_first_cycle"],
-                     "eta_script": abs(s["D1_mm_steady"] - s["D2_mm_steady"]) / s["D1_mm_steady"],
-                     "D1_mm": s["D1_mm_steady"], "D2_mm": s["D2_mm_steady"],
-                     "net_speed_mm_s": s["net_speed_mm_s_steady"], "paper_eta_sim": eta_sim / 100,
-                     "paper_eta_exp": eta_exp / 100, "paper_net_speed_exp_mm_s": speed_exp, "fitted": name in fitted,
-                     "error_estimate": s.get("error_estimate")})
-    return rows
+def resolve_robot(args: argparse.Namespace) -> RobotScene:
+    """The robot scene of --scene or --preset, --set, the kind flags and (for swim) the gait flags."""
+    overrides = dict(parse_override(item, RobotScene) for item in args.set)
+    for flag, key in (("fin", "fin.kind"), ("model", "robot.model"), ("backend", "sim.backend")):
+        if getattr(args, flag, None):
+            overrides[key] = getattr(args, flag)
+    for flag, key, scale in _GAIT_FLAGS:
+        if getattr(args, flag, None) is not None:
+            overrides[key] = getattr(args, flag) * scale
+    return load_scene(args.scene, preset_name=preset_name(args), overrides=overrides, cls=RobotScene)
 
 
-def table_markdown(rows: list[dict[str, Any]]) -> str:
-    lines = ["| gait | Θ1 ° | Θ2 ° | L_a mm | fin | η % | η cycle 1 % | \\|net\\|/D1 % | paper η_sim % | "
-             "paper η_exp % | D1 mm | D2 mm | net speed mm/s | paper speed mm/s | fit |",
-             "|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
-    for r in rows:
-        lines.append(f"| {r['gait']} | {r['theta1_deg']} | {r['theta2_deg']} | {r['arm_length_mm']} | {r['fin']} | "
-                     f"{100 * r['eta']:.2f} | {100 * r['eta_first_cycle']:.2f} | {100 * r['eta_script']:.2f} | "
-                     f"{100 * r['paper_eta_sim']:.2f} | {100 * r['paper_eta_exp']:.2f} | {r['D1_mm']:.1f} | "
-                     f"{r['D2_mm']:.1f} | {r['net_speed_mm_s']:.2f} | {r['paper_net_speed_exp_mm_s']:.2f} | "
-                     f"{'fitted' if r['fitted'] else ''} |")
-    cycles = rows[0]["cycles"] if rows else 1
-    if cycles > 1:
-        lines.append(f"\nη, D1, D2 and the net speed over the steady {steady_cycles(cycles)}; η cycle 1 from rest.")
-    return "\n".join(lines)
+@register
+class SwimCommand(Command):
+    name = "swim"
+    help = "the two-fin robot swimming: flap cycles and the swimming efficiency"
+    description = ("Simulate the robot's flap cycles from rest, the arm at theta2: recovery stroke up to theta1, "
+                   "power stroke back. Reports eta = (D1 - D2) / D1 with D1 the distance forward in the power stroke "
+                   "and D2 the distance back in the recovery stroke.")
 
+    def add_flags(self, p: argparse.ArgumentParser) -> None:
+        p.add_argument("--theta1", type=number("degrees", minimum=-math.inf), metavar="DEG",
+                       help="arm angle at the end of the recovery stroke, degrees in -90..90 (0 sideways, 90 "
+                            "forward; default: the scene's, 60 in the presets)")
+        p.add_argument("--theta2", type=number("degrees", minimum=-math.inf), metavar="DEG",
+                       help="arm angle at the end of the power stroke, degrees (default: the scene's, -90 in the "
+                            "presets)")
+        p.add_argument("--arm-length", type=number("mm"), metavar="MM",
+                       help="arm length L_a in mm (default: the scene's, 65 in the presets)")
+        p.add_argument("--omega", type=number("deg/s"), metavar="DEG_S",
+                       help="arm angular speed in degrees/s (default: the scene's, 66 in the presets)")
+        p.add_argument("--cycles", type=number("cycles", minimum=1, inclusive=True, integer=True),
+                       metavar="N", help="flap cycles (default: the scene's gait.cycles: 1 in the paper preset, 2 "
+                       "in the physical one); figures are the last cycle's, and eta over cycles 2..N")
+        add_robot(p)
+        add_max_error(p)
+        add_result_files(p)
+
+    def scene(self, args: argparse.Namespace) -> RobotScene:
+        return resolve_robot(args)
+
+    def jobs(self, args: argparse.Namespace, scene: RobotScene) -> list[tuple[Swim, RobotScene]]:
+        return [(Swim(args.cycles or scene.gait.cycles), scene)]
+
+    def describe(self, args: argparse.Namespace, runs: list[Result]) -> str:
+        run, = runs
+        scene, summary = run.scene, run.summary()
+        lines = [*authors_model_line(args, scene),
+                 f"{scene.robot.model} robot, {scene.fin.kind} fin, theta1 {summary['theta1_deg']:g} deg, theta2 "
+                 f"{summary['theta2_deg']:g} deg, arm {summary['arm_length_mm']:g} mm, omega "
+                 f"{summary['omega_deg_s']:g} deg/s, {resolution(scene.sim)} ({run.backend}): {steps_line(summary)} "
+                 f"in {run.wall_s:.2f} s"]
+        for i, row in enumerate(run.cycle_table(), start=1):
+            lines.append(f"cycle {i}: eta {100 * row['eta']:+.2f} %, forward D1 {row['D1_mm']:.2f} mm, back D2 "
+                         f"{row['D2_mm']:.2f} mm, net {row['net_mm']:+.2f} mm ({row['net_speed_mm_s']:+.3f} mm/s)")
+        lines.append(error_line(run))
+        return "\n".join(lines)

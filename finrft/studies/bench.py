@@ -13,17 +13,17 @@ from typing import Any, Callable, Protocol
 import mujoco
 import numpy as np
 
-from . import batch, methods, models, native
-from .drive import Drive
-from .convergence import ErrorLimits
-from .errors import Chatter, NotConverged, SimulationFailed, StepUnderflow, UndefinedResult
+from .. import batch, methods, models, native
+from ..drive import Drive
+from ..convergence import ErrorLimits
+from ..errors import Chatter, NotConverged, SimulationFailed, StepUnderflow, UndefinedResult
 from .fit import fit, read_drag, resolve_params, simulated_drag
-from .experiment import Experiment, run as run_experiment
+from ..experiment import Experiment, run as run_experiment
 from .optimize import evaluation_scene, optimize
-from .scene import PRESETS, RobotScene, Scene, preset, resolution
-from .schema import field_of
-from .simulate import PlateTest, simulate
-from .swim import Swim, steady_cycles, swim
+from ..scene import PRESETS, RobotScene, Scene, preset, resolution
+from ..schema import field_of
+from ..experiments.plate import PlateTest, simulate
+from ..experiments.swim import Swim, steady_cycles, swim
 
 
 # progress(cases done, cases): called as each measured case of a benchmark finishes.

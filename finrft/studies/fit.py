@@ -18,15 +18,16 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from . import batch, searchlog
-from .convergence import ErrorLimits, SimulationFailed
-from .drive import Drive
+from .. import batch
+from . import searchlog
+from ..convergence import ErrorLimits, SimulationFailed
+from ..drive import Drive
 from .optimize import Search, Variable, cmaes, read_log, si_units
-from .experiment import Result
-from .files import atomic_path
-from .laws.table import ForceTable
-from .scene import RFT, Scene, SceneError, field_of, read_text, scene_from_dict, split_key, to_toml
-from .simulate import simulate
+from ..experiment import Result
+from ..files import atomic_path
+from ..laws.table import ForceTable
+from ..scene import RFT, Scene, SceneError, field_of, read_text, scene_from_dict, split_key, to_toml
+from ..experiments.plate import FORCE_COLUMNS, simulate
 
 # Short names for the paper's parameters, and default bounds (SI).
 ALIASES = {"b": "plate.damping", "k": "plate.stiffness", "f_perp": "rft.f_perp", "f_par": "rft.f_par"}
@@ -281,43 +282,6 @@ def plot(fitted: Scene, files: Sequence[tuple[DragData, str]], path: str | Path)
 
 # ---------------------------------------------------------------------------------------------------------
 # RFT identification from rigid-plate drags
-
-FORCE_COLUMNS = ("attack_deg", "force_normal_N", "force_tangential_N")
-
-
-def plate_forces(run: Result) -> dict[str, float]:
-    """The medium's steady force on a rigid plate, decomposed along the plate's normal (the +y side at 90 deg
-    attack) and its axis: the mean over the second half of the run, the first being any start-up."""
-    heading = math.radians(90.0 - run.drive.attack_deg)
-    axis, normal = np.array([math.cos(heading), math.sin(heading), 0.0]), np.array([-math.sin(heading),
-                                                                                    math.cos(heading), 0.0])
-    late = run.time >= 0.5 * run.time[-1]
-    total = run.rft_force[late].sum(axis=1).mean(axis=0)
-    return {"attack_deg": run.drive.attack_deg, "force_normal_N": float(total @ normal),
-            "force_tangential_N": float(total @ axis)}
-
-
-def append_forces(path: str | Path, row: dict[str, float]) -> None:
-    """Add a row to a forces CSV, writing its header first when the file is new; SceneError when the file has
-    another header. The file is replaced whole, so a failed write leaves it as it was."""
-    check_forces_header(path)
-    path = Path(path)
-    text = read_text(path, "forces file") if path.exists() else ""
-    text = (text if text.endswith("\n") else text + "\n") if text.strip() else ",".join(FORCE_COLUMNS) + "\n"
-    with atomic_path(path) as tmp:
-        tmp.write_text(text + ",".join(repr(float(row[k])) for k in FORCE_COLUMNS) + "\n")
-
-
-def check_forces_header(path: str | Path) -> None:
-    """SceneError unless ``path`` is new, empty, or a forces CSV `append_forces` can add to."""
-    path = Path(path)
-    lines = [line for line in (read_text(path, "forces file").splitlines() if path.is_file() else [])
-             if line.strip() and not line.startswith("#")]
-    header = ",".join(FORCE_COLUMNS)
-    if lines and lines[0] != header:
-        raise SceneError(f"{path} has the header '{lines[0]}', not '{header}': append to a forces file written "
-                         f"by finrft drag --forces-csv, or start a new one")
-
 
 def read_forces(path: str | Path) -> np.ndarray:
     """(rows, 3): attack (deg), normal and tangential force (N), one row per angle (repeated identical rows are

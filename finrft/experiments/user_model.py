@@ -11,6 +11,7 @@ forces of the segment law's force groups, and the surface elements of `attach` a
 
 from __future__ import annotations
 
+import argparse
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -18,13 +19,15 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from . import laws
-from .attach import Attached, SurfaceForces, attach
-from .drive import Drive
-from .experiment import Compared, Plot, Quantity, Result
-from .models import ARMATURE_RATIO, INTEGRATORS, _compile
-from .scene import ExplicitSim, Medium, SceneError, UserScene
-from .stepping import Prescribed
+from .. import laws
+from ..attach import Attached, SurfaceForces, attach
+from ..drive import Drive
+from ..experiment import Compared, Plot, Quantity, Result
+from ..models import ARMATURE_RATIO, INTEGRATORS, _compile
+from ..scene import ExplicitSim, Medium, SceneError, UserScene, load_scene, parse_override
+from ..stepping import Prescribed
+from .command import Command, error_line, register, steps_line
+from .flags import add_max_error, add_result_files, add_scene_flags
 
 _J = mujoco.mjtJoint
 DRIVEN = {int(_J.mjJNT_SLIDE): "slide", int(_J.mjJNT_HINGE): "hinge"}
@@ -222,5 +225,53 @@ class UserModel:
         }
 
     def draw(self, rec: Any, run: Result, times: Any, prefix: str) -> list[Any]:
-        from .views import draw_bodies
+        from ..views import draw_bodies
         return draw_bodies(rec, run, times, prefix, run.body_position, run.rft_force, "Attached bodies")
+
+
+# ---------------------------------------------------------------------------------------------------------
+# The command: finrft run
+
+@register
+class RunCommand(Command):
+    name = "run"
+    help = "RFT on your own MuJoCo model: a joint driven through the medium"
+    description = ("Attach the granular RFT of Li, Zhang & Goldman 2013 to bodies of an MJCF model and move one "
+                   "slide or hinge joint at constant speed (one stroke, or --set drive.cycles=N back-and-forth "
+                   "cycles), exactly: the joint carries a very large armature and the force (torque) it needs is "
+                   "recorded, with each attached body's position and the medium's force on it. The scene (SI units) "
+                   "has [model] (path, bodies), [medium] (law, name or zeta, surface_z, element_size), [drive] "
+                   "(joint, speed, stroke, cycles, start) and [sim] (dt, integrator, backend, record_dt; MuJoCo's "
+                   "explicit step only).")
+
+    def add_flags(self, p: argparse.ArgumentParser) -> None:
+        p.add_argument("model", nargs="?", metavar="MODEL.xml", help="the MJCF file (overrides model.path)")
+        add_scene_flags(p, "user-model", "drive.speed=0.05", required=True, backend="where the RFT force is "
+                        "computed (overrides sim.backend)")
+        add_max_error(p)
+        add_result_files(p)
+
+    def scene(self, args: argparse.Namespace) -> UserScene:
+        overrides = dict(parse_override(item, UserScene) for item in args.set)
+        if args.backend:
+            overrides["sim.backend"] = args.backend
+        if args.model:
+            overrides["model.path"] = args.model
+        return load_scene(args.scene, overrides=overrides, cls=UserScene)
+
+    def jobs(self, args: argparse.Namespace, scene: UserScene) -> list[tuple[UserModel, UserScene]]:
+        return [(UserModel.of(scene), scene)]
+
+    def describe(self, args: argparse.Namespace, runs: list[Result]) -> str:
+        run, = runs
+        scene, summary = run.scene, run.summary()
+        q, u = run.quantity, run.unit.replace("Nm", "N m")
+        lines = [f"{scene.model.path}: joint {scene.drive.joint} driven, RFT on {', '.join(scene.model.bodies)} "
+                 f"({run.backend}; dt {scene.sim.dt:g} s, {scene.sim.integrator}): {steps_line(summary)} in "
+                 f"{run.wall_s:.2f} s",
+                 f"mean drive {q} per stroke: " + ", ".join(
+                     f"{value:+.4g} {u}" for value in summary[f"mean_drive_{q}_{run.unit}_per_stroke"])]
+        for body, position in summary["final_body_position_mm"].items():
+            lines.append(f"{body}: final position (mm) " + ", ".join(f"{x:.2f}" for x in position))
+        lines.append(error_line(run))
+        return "\n".join(lines)

@@ -17,15 +17,16 @@ from typing import Any, Callable, Iterator
 
 import numpy as np
 
-from . import batch, record, views
-from .data import plate_drag_dir
-from .drive import Drive
-from .experiment import Result
+from .. import batch, record
+from ..data import plate_drag_dir
+from ..drive import Drive
+from ..experiment import Result
+from ..experiments.plate import plate_points
 from .fit import DragData, fit, read_drag, resolve_params, simulated_angles
 from .optimize import optimize
-from .scene import RobotScene, Scene, SceneError, preset, resolution
-from .swim import (PAPER_TABLE, PHYSICAL_FITTED, Swim, steady_cycles, swim, table_markdown, table_rows,
-                   table_scenes)
+from ..scene import RobotScene, Scene, SceneError, preset, resolution
+from ..experiments.swim import Swim, steady_cycles, swim
+from .table import PAPER_TABLE, PHYSICAL_FITTED, table_markdown, table_rows, table_scenes
 
 COLORS = {"rigid": "black", "soft": "tab:blue", "origami": "tab:red"}
 KINDS = ("rigid", "soft", "origami")
@@ -118,7 +119,7 @@ def flapping(out: Path, quick: bool, workers: int | None) -> str:
     grid = fig.add_gridspec(2, 4)
     for i, ((kind, amplitude), run) in enumerate(zip(shapes, runs)):
         ax = fig.add_subplot(grid[0, i])
-        points = views.plate_points(run)
+        points = plate_points(run)
         second = np.flatnonzero((run.time >= 2 * run.drive.stroke_time - 1e-9))
         index = second[np.linspace(0, len(second) - 1, 16).astype(int)]
         colors = plt.cm.viridis(np.linspace(0, 1, len(index)))

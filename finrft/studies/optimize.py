@@ -25,11 +25,12 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from . import batch, searchlog
-from .convergence import ErrorLimits, SimulationFailed
-from .files import provenance
-from .scene import RobotScene, SceneError, field_of, scene_from_dict, to_toml
-from .swim import swim
+from .. import batch
+from . import searchlog
+from ..convergence import ErrorLimits, SimulationFailed
+from ..files import provenance
+from ..scene import RobotScene, SceneError, field_of, scene_from_dict, to_toml
+from ..experiments.swim import swim
 
 FAILED = 2.0
 # eta = (D1 - D2) / D1 grows without bound as D1 -> 0: a power stroke that moves the body forward by less than
@@ -365,3 +366,22 @@ def optimize(scene: RobotScene, *, variables: Sequence[Variable] = DEFAULT_VARIA
                                f"exceeded the error limit, or moved the body forward by less than "
                                f"{MIN_FORWARD_MM} mm): check the scene and the bounds")
     return search
+
+
+def best_gait(scene: RobotScene, result: Search, max_error: ErrorLimits = ErrorLimits()) -> tuple[Any, dict[str, Any]]:
+    """The search's best gait run again (one cycle, with its error estimate) and the search's summary: the best
+    gait in degrees and mm, its eta, the estimate, and the search's figures."""
+    best_scene = scene.replace(**result.best)
+    best = swim(best_scene, 1, max_error=max_error)
+    g = best_scene.gait
+    return best, {"theta1_deg": math.degrees(g.theta1), "theta2_deg": math.degrees(g.theta2),
+                  "arm_length_mm": 1e3 * best_scene.arm.length, "eta": 1 - result.cost, "best": result.best,
+                  "error_estimate": best.error_estimate, "error_companion": best.error_companion,
+                  "evaluations": result.evaluations, "generations": result.generations, "wall_s": result.wall_s,
+                  "seed": result.seed, "budget": result.budget, "stop": {k: str(v) for k, v in result.stop.items()}}
+
+
+def best_gait_text(summary: dict[str, Any]) -> str:
+    return (f"best eta {100 * summary['eta']:.2f} % at theta1 {summary['theta1_deg']:.1f} deg, theta2 "
+            f"{summary['theta2_deg']:.1f} deg, arm {summary['arm_length_mm']:.1f} mm after {summary['evaluations']} "
+            f"evaluations in {summary['wall_s']:.1f} s")

@@ -13,6 +13,7 @@ side, alpha_z(pi/2, pi/2) = 0.128 zeta N/cm^3 on one face plus the edge (tested)
 
 from __future__ import annotations
 
+import argparse
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,11 +22,13 @@ from typing import Any, Callable
 import mujoco
 import numpy as np
 
-from . import laws
-from .convergence import ErrorLimits
-from .drive import Drive
-from .experiment import Compared, Plot, Quantity, Result, run
-from .scene import IntrusionScene
+from .. import laws
+from ..convergence import ErrorLimits
+from ..drive import Drive
+from ..experiment import Compared, Plot, Quantity, Result, run
+from ..scene import IntrusionScene, load_scene, parse_override, scene_from_dict
+from .command import Command, Output, register
+from .flags import UsageError, add_force, add_json, add_quiet, add_scene_flags
 from .user_model import AttachedModel, JointTrial, build_attached
 
 SIGN_CONVENTION = (
@@ -97,7 +100,7 @@ class Intrusion:
                 "final_force_z_N": float(run.force_z[-1]), "final_force_x_N": float(run.force_x[-1])}
 
     def draw(self, rec: Any, run: Result, times: Any, prefix: str) -> list[Any]:
-        from .views import draw_bodies
+        from ..views import draw_bodies
         position = np.zeros((len(run.time), 1, 3))
         position[:, 0, 2] = run.scene.medium.surface_z - run.depth
         force = np.zeros_like(position)
@@ -155,3 +158,60 @@ def plot_curves(runs: list[Result], path: str | Path) -> None:
     fig.tight_layout()
     fig.savefig(path, format="png", dpi=120)
     plt.close(fig)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# The command: finrft intrude
+
+def _angles(text: str) -> list[float]:
+    try:
+        angles = [float(a) for a in text.split(",") if a.strip()]
+    except ValueError:
+        raise UsageError(f"--angles expects comma-separated degrees, e.g. 0,30,60,90, got '{text}'") from None
+    if not angles or not all(-90 <= a <= 90 for a in angles):
+        raise UsageError(f"--angles: each angle must be within -90..90 degrees, got '{text}'")
+    return angles
+
+
+@register
+class IntrudeCommand(Command):
+    name = "intrude"
+    help = ("a plate pushed vertically into the medium at several angles: the force-depth curves of Li, Zhang & "
+            "Goldman 2013")
+    description = ("Push a thin plate (plate.width x plate.length) at each angle beta (0 horizontal, 90 vertical, "
+                   "cutting in edge first) straight down into the medium at constant speed, from plate.clearance "
+                   "above the surface to plate.depth below it, and record the medium's vertical and horizontal force "
+                   "against the depth of the plate's lowest point.")
+
+    def add_flags(self, p: argparse.ArgumentParser) -> None:
+        p.add_argument("--angles", default="0,30,60,90", metavar="DEGS",
+                       help="comma-separated plate angles in degrees, each in -90..90 (default: %(default)s)")
+        add_scene_flags(p, "intrusion", "medium.zeta=0.5", scene_help="intrusion scene file in SI units ([plate], "
+                        "[medium], [sim]; default: the schema's defaults, a 25 x 38 mm plate to 50 mm in the generic "
+                        "medium)")
+        p.add_argument("--plot", metavar="FILE.png", help="write the force-depth curves as a figure")
+        add_force(p)
+        add_json(p, "each angle's summary and curve")
+        add_quiet(p)
+
+    def scene(self, args: argparse.Namespace) -> IntrusionScene:
+        overrides = dict(parse_override(item, IntrusionScene) for item in args.set)
+        if args.backend:
+            overrides["sim.backend"] = args.backend
+        return (load_scene(args.scene, overrides=overrides, cls=IntrusionScene) if args.scene else
+                scene_from_dict({}, IntrusionScene).replace(**overrides))
+
+    def jobs(self, args: argparse.Namespace, scene: IntrusionScene) -> list[tuple[Intrusion, IntrusionScene]]:
+        return [(Intrusion(), scene.replace(**{"plate.angle": math.radians(a)})) for a in _angles(args.angles)]
+
+    def outputs(self, args: argparse.Namespace) -> list[Output]:
+        return [Output("--plot", args.plot, ".png", "figure", lambda runs, path: plot_curves(runs, path))]
+
+    def describe(self, args: argparse.Namespace, runs: list[Result]) -> str:
+        return "\n".join(f"beta {s['angle_deg']:g} deg: at {s['final_depth_mm']:.1f} mm, vertical force "
+                         f"{s['final_force_z_N']:.4g} N, horizontal {s['final_force_x_N']:+.4g} N"
+                         for s in (r.summary() for r in runs))
+
+    def to_json(self, runs: list[Result]) -> list[dict[str, Any]]:
+        return [{**r.summary(), "depth_mm": 1e3 * r.depth, "force_z_N": r.force_z, "force_x_N": r.force_x}
+                for r in runs]

@@ -13,8 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from .files import atomic_path
-from .errors import SceneError
+from ..files import atomic_path
+from ..errors import SceneError
 
 OPTIMIZE = "finrft.optimize/2"
 FIT = "finrft.fit/1"

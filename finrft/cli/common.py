@@ -1,0 +1,130 @@
+"""What every command shares: the parser that reports in one line, output checks, the progress bar, summary text,
+'wrote' lines and JSON."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import os
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any, Callable, Iterator, Sequence
+
+import numpy as np
+
+from ..convergence import SimulationFailed
+from ..experiments.flags import UsageError
+from ..files import atomic_path
+
+
+class Interrupted(Exception):
+    """Ctrl-C: reported in one line (how to continue, when there is a log) with exit status 130."""
+
+
+class Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> None:  # one line, not argparse's usage block
+        raise UsageError(f"{message} (see '{self.prog} --help')")
+
+
+def check_output(path: str | None, suffix: str, flag: str, force: bool, *, append: bool = False) -> None:
+    """Refuse, before anything runs, an output file that cannot be written: the wrong suffix, a missing or
+    read-only folder, a directory, or (unless ``force``, or ``append`` for files added to) an existing file."""
+    if path is None:
+        return
+    target = Path(path)
+    if target.suffix != suffix:
+        raise UsageError(f"{flag} {path}: the file name must end in {suffix}")
+    _check_writable(target.parent, flag, path)
+    if target.is_dir():
+        raise UsageError(f"{flag} {path} is a directory: give a file name")
+    if target.exists() and not (force or append):
+        raise UsageError(f"{flag} {path} exists: choose a new file, or pass --force to replace it")
+
+
+def check_output_dir(path: str, flag: str, force: bool) -> None:
+    """The same for an output folder: it may exist, empty, or with ``force``."""
+    target = Path(path)
+    _check_writable(target.parent, flag, path)
+    if target.exists() and not target.is_dir():
+        raise UsageError(f"{flag} {path} is a file: give a folder")
+    if target.is_dir() and any(target.iterdir()) and not force:
+        raise UsageError(f"{flag} {path} exists and is not empty: choose a new folder, or pass --force to write "
+                         f"into it")
+    if target.is_dir():
+        _check_writable(target, flag, path)
+
+
+def _check_writable(folder: Path, flag: str, path: str) -> None:
+    if not folder.is_dir():
+        raise UsageError(f"{flag} {path}: {folder} is not a directory" if folder.exists() else
+                         f"{flag} {path}: directory {folder} does not exist")
+    try:  # a file made and removed, not os.access: that says yes to root, and to read-only file systems
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as exc:
+        raise UsageError(f"{flag} {path}: cannot write in {folder}: {exc.strerror}") from None
+
+
+def write_text(path: str, text: str) -> None:
+    with atomic_path(path) as tmp:
+        tmp.write_text(text)
+
+
+@contextlib.contextmanager
+def progress(args: argparse.Namespace, total: float, what: str,
+             unit: str = "") -> Iterator[Callable[..., None] | None]:
+    """A progress bar on stderr: yields ``update(done, note="")``, ``done`` counted towards ``total`` and never
+    shown past it (``unit`` "%": ``done`` is a fraction of 1); None when stderr is not a terminal or with --quiet,
+    so that the work skips its callbacks."""
+    if args.quiet or not sys.stderr.isatty():
+        yield None
+        return
+    from tqdm import tqdm
+    scale = 100 if unit == "%" else 1
+    form = "{desc}: {percentage:3.0f}% |{bar}| {elapsed}<{remaining}{postfix}" if unit == "%" else None
+    try:  # a terminal that reports no size (0 x 0) would hide the bar
+        size = os.get_terminal_size(sys.stderr.fileno())
+    except (OSError, ValueError):
+        size = os.terminal_size((0, 0))
+    with tqdm(total=scale * total, desc=what, unit=unit or "it", file=sys.stderr, leave=False,
+              ncols=size.columns or 80, nrows=size.lines or 24, bar_format=form) as bar:
+        def update(done: float, note: str = "") -> None:
+            if note:
+                bar.set_postfix_str(note, refresh=False)
+            bar.update(min(round(scale * done), bar.total) - bar.n)
+        yield update
+
+
+def say(args: argparse.Namespace, text: str) -> None:
+    """Human text on stdout, unless --quiet (or empty); it keeps a progress bar intact."""
+    if text and not args.quiet:
+        from tqdm import tqdm
+        tqdm.write(text, file=sys.stdout)
+
+
+def said_written(args: argparse.Namespace, files: Sequence[tuple[str, str | None]]) -> None:
+    """One line for each file written, (what, path) with path None for one not asked for."""
+    for what, path in files:
+        if path:
+            say(args, f"wrote {what}: {path}")
+
+
+def to_json(value: Any) -> str:
+    """One line of strict JSON; a NaN or infinity anywhere is a failed result (exit 1), never invalid JSON."""
+    try:
+        return json.dumps(value, allow_nan=False,
+                          default=lambda x: x.tolist() if isinstance(x, np.ndarray) else float(x))
+    except ValueError:
+        raise SimulationFailed("the result holds a NaN or infinite value: nothing is reported") from None
+
+
+def print_json(args: argparse.Namespace, value: Any) -> None:
+    """The --json line, when asked for."""
+    if args.json:
+        print(to_json(value))
+
+
+def one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    print(f"finrft: warning: {message}", file=sys.stderr)

@@ -1,0 +1,288 @@
+"""The searches: optimize (the robot's gait), fit (plate parameters to measured drags), fit-rft (RFT coefficients
+from rigid-plate forces), and their logs (--out, --resume, Ctrl-C)."""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .. import scene as scenes
+from ..experiments.flags import (UsageError, add_force, add_json, add_max_error, add_quiet, add_workers, limits,
+                                 number)
+from ..experiments.plate import add_plate_scene, resolve_plate
+from ..experiments.swim import add_robot, resolve_robot
+from ..files import atomic_path
+from .common import Interrupted, check_output, print_json, progress, said_written, say, write_text
+
+
+def _add_search(p: argparse.ArgumentParser, command: str) -> None:
+    p.add_argument("--budget", type=number("evaluations", minimum=1, inclusive=True, integer=True),
+                   metavar="EVALS", help="evaluations in all (default: 300, or the log's with --resume; CMA-ES "
+                   "finishes the generation it is in)")
+    p.add_argument("--seed", type=number("", minimum=1, inclusive=True, integer=True), metavar="S",
+                   help="random seed, >= 1; the same seed gives the same result (default: 1, or the log's with "
+                   "--resume)")
+    p.add_argument("--out", metavar="LOG.h5", help="new HDF5 log of every evaluation and of the optimiser's state, "
+                   "rewritten after each generation (an existing file only with --force)")
+    p.add_argument("--resume", metavar="LOG.h5", help=f"continue the run logged in LOG.h5 (a finrft {command} log) "
+                   "exactly as if it had not stopped, and go on logging to it")
+
+
+def search_log(args: argparse.Namespace, fixed: dict[str, str]) -> str | None:
+    """The log of an optimise or fit command, after checking --out and --resume; ``fixed``: the options (attribute
+    -> flag) that a resumed run takes from its log, so that they may not be given with --resume."""
+    if args.out and args.resume:
+        raise UsageError("give either --out (a new log) or --resume (an existing one), not both")
+    check_output(args.out, ".h5", "--out", True)
+    if args.out and Path(args.out).exists() and not args.force:
+        raise UsageError(f"--out {args.out} exists: continue it with --resume {args.out}, choose a new file, or "
+                         f"pass --force to replace it")
+    if args.resume:
+        if not Path(args.resume).is_file():
+            raise UsageError(f"--resume {args.resume}: no such file")
+        for name, flag in fixed.items():
+            if getattr(args, name, None):
+                raise UsageError(f"{flag} cannot be given with --resume: the log fixes it")
+    return args.resume or args.out
+
+
+def interrupted(command: str, log: str | None, schema: str) -> Interrupted:
+    """Ctrl-C during a search: how far the log got and how to continue it."""
+    from ..studies.optimize import read_log
+    if log is None:
+        return Interrupted("interrupted; nothing was logged (--out LOG.h5 makes a run resumable)")
+    if not Path(log).is_file():
+        return Interrupted("interrupted before the first generation ended; nothing was logged")
+    done = len(read_log(log, schema)["state/sigma"])
+    return Interrupted(f"interrupted after {done} generation{'s' * (done != 1)}; continue with: finrft {command} "
+                       f"--resume {shlex.quote(log)}")
+
+
+def add_optimize(sub: Any) -> None:
+    p = sub.add_parser("optimize", help="optimise the gait with CMA-ES",
+                       description="Maximise the swimming efficiency eta over one flap cycle with CMA-ES (pycma): by "
+                       "default over theta1 in [0, 90] deg, theta2 in [-90, 0] deg and the arm length in [60, 85] "
+                       "mm. Every evaluation is logged to HDF5 after each generation.")
+    _add_search(p, "optimize")
+    p.add_argument("--bounds", action="append", default=[], metavar="KEY=LOW:HIGH",
+                   help="search a scene key between bounds, in SI or with a unit suffix deg or mm, e.g. "
+                        "gait.theta1=10:80deg, gait.omega=0.5:2, fin.stiffness=0.1:2 (repeatable; replaces the "
+                        "default bounds of that key)")
+    add_workers(p)
+    p.add_argument("--executor", choices=("local", "dask"), default="local",
+                   help="where evaluations run: local processes, or a Dask cluster (needs finrft[cluster])")
+    p.add_argument("--address", metavar="tcp://HOST:PORT", help="Dask scheduler address (--executor dask)")
+    p.add_argument("--rrd", metavar="FILE.rrd", help="rerun recording: best eta per generation, the population, "
+                   "and the best gait's motion")
+    add_force(p)
+    add_json(p, "the result")
+    add_quiet(p)
+    add_robot(p)
+    add_max_error(p)
+    p.set_defaults(handler=optimize)
+
+
+def _variables(args: argparse.Namespace) -> tuple[scenes.RobotScene, dict[str, Any], list]:
+    """The scene, the searched variables (key -> Variable) and the generations logged so far (for --rrd)."""
+    from ..studies.bounds import display_units, parse_bounds
+    from ..studies.optimize import DEFAULT_VARIABLES, Variable, logged_problem, read_log
+    scene, variables, generations = resolve_robot(args), {v.key: v for v in DEFAULT_VARIABLES}, []
+    if args.resume:
+        scene, logged = logged_problem(args.resume)
+        variables = {v.key: v for v in logged}
+        past = read_log(args.resume)
+        generations = [(display_units(scenes.RobotScene, list(variables), past["x"][past["generation"] == g]),
+                        past["eta"][past["generation"] == g]) for g in range(len(past["state/sigma"]))]
+    for key, (low, high) in parse_bounds(args.bounds, scenes.RobotScene).items():
+        variables[key] = Variable(key, low, high)
+    return scene, variables, generations
+
+
+def optimize(args: argparse.Namespace) -> int:
+    from ..studies import searchlog
+    from ..studies.bounds import display_units
+    from ..studies.optimize import best_gait, best_gait_text, optimize
+    check_output(args.rrd, ".rrd", "--rrd", args.force)
+    log = search_log(args, {"bounds": "--bounds", "scene": "--scene", "preset": "--preset", "set": "--set",
+                            "fin": "--fin", "model": "--model", "backend": "--backend"})
+    scene, variables, generations = _variables(args)
+    executor = _executor(args)
+    with progress(args, args.budget, "optimize", "evaluations") as bar:
+        def on_generation(g: int, values: np.ndarray, extras: dict[str, np.ndarray], es: Any) -> None:
+            generations.append((display_units(scenes.RobotScene, list(variables), values), extras["eta"]))
+            if bar:
+                best = np.nanmax([1 - c for c in es.fit.fit]) if len(es.fit.fit) else float("nan")
+                bar(es.countevals, f"generation {g + 1}, best eta {100 * best:.2f} %")
+
+        try:
+            result = optimize(scene, variables=list(variables.values()), budget=args.budget, seed=args.seed,
+                              log=log, resume=bool(args.resume), executor=executor, workers=args.workers,
+                              max_error=limits(args), on_generation=on_generation)
+        except KeyboardInterrupt:
+            raise interrupted("optimize", log, searchlog.OPTIMIZE) from None
+    best, summary = best_gait(scene, result, limits(args))
+    if args.rrd:
+        from .. import record
+        record.write_optimization_rrd(args.rrd, generations, list(variables), best)
+    say(args, best_gait_text(summary))
+    said_written(args, (("search log", log), ("rerun recording", args.rrd)))
+    print_json(args, summary)
+    return 0
+
+
+def _executor(args: argparse.Namespace):
+    """The Dask cluster's executor with --executor dask; None for local processes."""
+    if args.executor != "dask":
+        if args.address:
+            raise UsageError("--address goes with --executor dask")
+        return None
+    if not args.address:
+        raise UsageError("--executor dask needs --address tcp://HOST:PORT")
+    try:
+        from dask.distributed import Client
+    except ImportError:
+        raise UsageError("--executor dask needs Dask: pip install 'finrft[cluster]'") from None
+    try:
+        return Client(args.address, timeout="3s").get_executor()
+    except (OSError, TimeoutError) as exc:
+        raise UsageError(f"cannot reach the Dask scheduler at {args.address}: {exc}") from None
+
+
+def add_fit(sub: Any) -> None:
+    p = sub.add_parser("fit", help="fit plate-scene parameters to measured segment angles (CMA-ES)",
+                       description="Fit plate-scene parameters so that simulated segment angles match measured ones: "
+                       "each data file is a drag from flat at constant speed, 1 to 1000 mm/s (columns time_s, "
+                       "displacement_mm, segment1_deg ...); the objective is the mean over files of the mean squared "
+                       "error (deg^2), as the paper's E(b). The measurements shipped with finrft are in the folder "
+                       "python -c 'import finrft.data as d; print(d.plate_drag_dir())' prints.")
+    p.add_argument("--data", nargs="+", metavar="FILE.csv", help="drag data to fit (required unless --resume)")
+    p.add_argument("--validate", nargs="+", default=[], metavar="FILE.csv",
+                   help="drag data to check the fit on, not fitted")
+    p.add_argument("--params", metavar="NAMES",
+                   help="comma-separated parameters: b (plate.damping), k (plate.stiffness), f_perp (rft.f_perp), "
+                        "f_par (rft.f_par), or any numeric plate-scene key (default: b, the paper's procedure)")
+    p.add_argument("--bounds", action="append", default=[], metavar="KEY=LOW:HIGH",
+                   help="bounds of a fitted parameter in SI, by name or key, e.g. b=0.0001:100 (defaults: b "
+                        "0.01:100, k 0.01:100, f_perp 0.1:100, f_par -2:2); positive bounds over more than a decade "
+                        "are searched in log space")
+    _add_search(p, "fit")
+    add_workers(p)
+    add_max_error(p)
+    p.add_argument("--write-scene", metavar="OUT.toml", help="write the fitted scene (finrft drag --scene OUT.toml)")
+    p.add_argument("--plot", metavar="OUT.png", help="simulated against measured angles for every file")
+    p.add_argument("--rrd", metavar="FILE.rrd", help="rerun recording of the fitted drag of the first file")
+    add_force(p)
+    add_json(p, "the result")
+    add_quiet(p)
+    add_plate_scene(p)
+    p.set_defaults(handler=fit)
+
+
+def _fit_problem(args: argparse.Namespace) -> tuple[scenes.Scene, list, list]:
+    """The plate scene, the data and the fitted variables: from the log with --resume, else from the flags."""
+    from ..studies.bounds import parse_bounds
+    from ..studies.fit import ALIASES, logged_problem, read_drag, resolve_params
+    if args.resume:
+        return logged_problem(args.resume)
+    if not args.data:
+        raise UsageError("--data is required (or --resume LOG.h5)")
+    names = [n.strip() for n in (args.params or "b").split(",") if n.strip()]
+    return (resolve_plate(args), [read_drag(p) for p in args.data],
+            resolve_params(names, parse_bounds(args.bounds, scenes.Scene, ALIASES)))
+
+
+def fit(args: argparse.Namespace) -> int:
+    from ..studies import searchlog
+    from ..studies.fit import fit, fit_summary, read_drag
+    for path, suffix, flag in ((args.write_scene, ".toml", "--write-scene"), (args.plot, ".png", "--plot"),
+                               (args.rrd, ".rrd", "--rrd")):
+        check_output(path, suffix, flag, args.force)
+    log = search_log(args, {"data": "--data", "params": "--params", "bounds": "--bounds", "scene": "--scene",
+                            "preset": "--preset", "set": "--set", "backend": "--backend"})
+    scene, data, variables = _fit_problem(args)
+    validate = [read_drag(p) for p in args.validate]
+    with progress(args, args.budget, "fit", "evaluations") as bar:
+        def on_generation(g: int, values: np.ndarray, extras: dict[str, np.ndarray], es: Any) -> None:
+            if bar:
+                bar(es.countevals, f"best RMSE {np.sqrt(es.best.f):.2f} deg")
+
+        try:
+            result = fit(scene, data, variables, budget=args.budget, seed=args.seed, validate=validate, log=log,
+                         resume=bool(args.resume), workers=args.workers, max_error=limits(args),
+                         on_generation=on_generation)
+        except KeyboardInterrupt:
+            raise interrupted("fit", log, searchlog.FIT) from None
+    _fit_files(args, result, data, validate)
+    for key, value in result.search.best.items():
+        say(args, f"{key} = {value:.6g}")
+    for label, table in (("fitted", result.rmse_deg), ("validation", result.validate_rmse_deg)):
+        for name, rmse in table.items():
+            say(args, f"RMSE {name} ({label}): {rmse:.2f} deg")
+    say(args, f"{result.search.evaluations} evaluations in {result.search.wall_s:.1f} s")
+    said_written(args, (("search log", log), ("scene", args.write_scene), ("figure", args.plot),
+                        ("rerun recording", args.rrd)))
+    print_json(args, fit_summary(result))
+    return 0
+
+
+def _fit_files(args: argparse.Namespace, result: Any, data: list, validate: list) -> None:
+    """The fitted scene, the figure and the recording the flags ask for."""
+    from ..experiments.plate import simulate
+    from ..studies.fit import drag_for, plot
+    if args.write_scene:
+        write_text(args.write_scene, scenes.to_toml(result.scene))
+    if args.plot:
+        with atomic_path(args.plot) as tmp:
+            plot(result.scene, [(d, "fitted") for d in data] + [(d, "validation") for d in validate], tmp)
+    if args.rrd:
+        from .. import record
+        record.write_rrd(simulate(result.scene, drag_for(data[0])), args.rrd)
+
+
+def add_fit_rft(sub: Any) -> None:
+    p = sub.add_parser("fit-rft", help="identify RFT coefficients from rigid-plate forces",
+                       description="Identify the paper law's f_perp and f_par (least squares) and the table law's "
+                       "F_perp(theta), F_par(theta) from the steady forces on a rigid plate dragged at several angles "
+                       "of attack (columns attack_deg, force_normal_N, force_tangential_N, as written by finrft drag "
+                       "--plate rigid --forces-csv; one row per angle, with an angle above 0 and one below 90 deg). "
+                       "Writes a scene fragment and the table CSV.")
+    p.add_argument("--data", required=True, metavar="FORCES.csv", help="forces per angle of attack")
+    p.add_argument("--speed", type=number("mm/s"), default=30.0, metavar="MM_S",
+                   help="drag speed of the measurements in mm/s (default: %(default)s)")
+    p.add_argument("--out", metavar="FRAGMENT.toml", help="write the [rft] scene fragment here (default: print it)")
+    p.add_argument("--table", metavar="TABLE.csv", help="write the table law here (default: beside --out)")
+    add_force(p)
+    add_json(p, "the coefficients")
+    add_quiet(p)
+    add_plate_scene(p, backend=False)
+    p.set_defaults(handler=fit_rft)
+
+
+def fit_rft(args: argparse.Namespace) -> int:
+    from ..laws.table import write_table
+    from ..studies.fit import identify_rft, read_forces, rft_fragment
+    scene = resolve_plate(args)
+    table_path = args.table or (str(Path(args.out).with_suffix(".csv")) if args.out else None)
+    check_output(args.out, ".toml", "--out", args.force)
+    check_output(table_path, ".csv", "--table", args.force)
+    forces = read_forces(args.data)
+    law, table = identify_rft(forces, scene.plate.segments, scene.rft.v_reg, args.speed / 1000)
+    fragment = rft_fragment(law, Path(table_path).name if table_path else "TABLE.csv")
+    if table_path:
+        with atomic_path(table_path) as tmp:
+            write_table(tmp, table)
+    if args.out:
+        write_text(args.out, fragment)
+        said_written(args, (("law", args.out), ("table", table_path)))
+    else:
+        print(fragment, end="")
+    print_json(args, {"f_perp": law.f_perp, "f_par": law.f_par, "v_reg": law.v_reg,
+                      "table": {"attack_deg": table.attack_deg, "f_perp_N": table.f_perp, "f_par_N": table.f_par}})
+    return 0
+
+
+SUBCOMMANDS = (add_optimize, add_fit, add_fit_rft)

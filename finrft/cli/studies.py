@@ -1,0 +1,185 @@
+"""The paper's results and the benchmarks: table (Table I), report, bench."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from .. import scene as scenes
+from ..experiments.flags import (add_force, add_json, add_max_error, add_quiet, add_workers, limits, number,
+                                 preset_name)
+from ..experiments.swim import add_robot, resolve_robot
+from .common import check_output, check_output_dir, print_json, progress, said_written, say
+
+
+def add_table(sub: Any) -> None:
+    p = sub.add_parser("table", help="the paper's Table I: six gaits, eta next to the paper's",
+                       description="Evaluate the six gaits of the paper's Table I (the preset's gait.cycles flap "
+                       "cycles each, eta over the steady ones) and print eta, the authors' script measure |net|/D1, "
+                       "D1, D2 and the net speed next to the paper's eta_sim and eta_exp, as a Markdown table.")
+    add_workers(p)
+    add_json(p, "the rows")
+    add_quiet(p)
+    add_robot(p)
+    add_max_error(p)
+    p.set_defaults(handler=table)
+
+
+def table(args: argparse.Namespace) -> int:
+    from ..studies.table import PAPER_TABLE, table, table_markdown
+    scene = resolve_robot(args)
+    with progress(args, len(PAPER_TABLE), "Table I", "gaits") as bar:
+        rows = table(scene, preset=None if args.scene else preset_name(args), max_error=limits(args),
+                     workers=args.workers, progress=bar and (lambda done, total: bar(done)))
+    if args.json:
+        say(args, table_markdown(rows))
+        print_json(args, rows)
+    else:  # the table is what was asked for: --quiet leaves it
+        print(table_markdown(rows))
+    return 0
+
+
+def add_report(sub: Any) -> None:
+    p = sub.add_parser("report", help="regenerate the paper's figures and table (Markdown, PNG, rerun)",
+                       description="Write DIR/report.md with the paper's results regenerated: drag and rotate "
+                       "forces, effective flapping, model against the plate-drag measurements, the robot's Table I, "
+                       "optimisation and trajectories, and how long each part took; plus rerun recordings. The files "
+                       "appear in DIR only when every part has succeeded.")
+    p.add_argument("--out", default="report", metavar="DIR", help="output folder (default: %(default)s)")
+    p.add_argument("--quick", action="store_true", help="a smaller version: fewer cycles and evaluations")
+    p.add_argument("--preset", default="physical", choices=scenes.PRESETS[scenes.Scene],
+                   help="plate preset fitted to the measurements (default: %(default)s)")
+    p.add_argument("--data", metavar="DIR", help="folder of plate-drag measurements (default: those shipped "
+                   "with finrft)")
+    add_workers(p)
+    add_force(p)
+    add_quiet(p)
+    p.set_defaults(handler=report)
+
+
+def report(args: argparse.Namespace) -> int:
+    from ..studies.report import write_report
+    check_output_dir(args.out, "--out", args.force)
+    with progress(args, 1, "report", "%") as bar:
+        path = write_report(args.out, quick=args.quick, workers=args.workers, data_dir=args.data,
+                            plate=scenes.preset(args.preset),
+                            progress=bar and (lambda done, total, part: bar(done / total, part)))
+    said_written(args, (("report", path),))
+    return 0
+
+
+def add_bench(sub: Any) -> None:
+    bench = sub.add_parser("bench", help="benchmarks, measured as ratios in one run on this machine")
+    kinds = bench.add_subparsers(dest="bench", required=True, parser_class=type(bench))
+    for add in (_add_backends, _add_robot, _add_accuracy, _add_modelling, _add_fit):
+        kind = add(kinds)
+        add_quiet(kind)
+        if add is not _add_accuracy:
+            add_json(kind, "the figures")
+    bench.set_defaults(handler=run_bench)
+
+
+def _budget(p: argparse.ArgumentParser, help: str) -> None:
+    p.add_argument("--budget", type=number("evaluations", minimum=1, inclusive=True, integer=True), default=300,
+                   metavar="EVALS", help=f"{help} (default: %(default)s)")
+
+
+def _add_backends(kinds: Any) -> argparse.ArgumentParser:
+    p = kinds.add_parser("backends", help="Python callback vs native plugin vs bare MuJoCo, and batch",
+                         description="Time the paper plate drag (200 mm at 30 mm/s) with each backend against bare "
+                         "mj_step of the same model, and the throughput of a batch of drags on all cores against "
+                         "one core.")
+    p.add_argument("--batch", type=number("simulations", minimum=1, inclusive=True, integer=True), default=64,
+                   metavar="N", help="simulations in the batch (default: %(default)s)")
+    p.add_argument("--scaling", metavar="FILE.png", help="also chart the batch throughput against the number of "
+                   "workers (1, 2, ... up to the cores): process pool and threaded batch")
+    add_workers(p)
+    add_force(p)
+    return p
+
+
+def _add_robot(kinds: Any) -> argparse.ArgumentParser:
+    p = kinds.add_parser("robot", help="one gait evaluation and a full optimisation",
+                         description="Time one gait evaluation as the optimiser runs it (the preset's gait.cycles "
+                         "flap cycles, eta over the steady ones), measure its eta against a converged run of the "
+                         "same gait, and time a CMA-ES optimisation of --budget evaluations on all cores, for a "
+                         "robot preset.")
+    p.add_argument("--preset", default="physical", choices=scenes.PRESETS[scenes.RobotScene],
+                   help="robot preset (default: %(default)s)")
+    _budget(p, "optimisation budget")
+    add_workers(p)
+    return p
+
+
+def _add_accuracy(kinds: Any) -> argparse.ArgumentParser:
+    p = kinds.add_parser("accuracy", help="speed against accuracy of every time-stepping method and step",
+                         description="Run the origami drag (45 mm out and back) and one flap cycle of the robot, "
+                         "each with the paper's and with physical inertias, for every method (explicit with each "
+                         "MuJoCo integrator, implicit, newton: steps of 10 µs to 10 ms; adaptive and adaptive-newton: "
+                         "tolerances 0.1 to 1e-5), v_reg (0.1, 1, 10 mm/s) and backend (python at steps of 1 ms and "
+                         "more); write DIR/accuracy.csv, a chart of error against wall time (accuracy.png) and a "
+                         "summary of the fastest setting within 0.1° and 1° (accuracy.md). Takes about 4 minutes on "
+                         "two cores.")
+    p.add_argument("--out", default="accuracy", metavar="DIR", help="output folder (default: %(default)s)")
+    p.add_argument("--quick", action="store_true",
+                   help="steps of 0.1 and 1 ms, one tolerance and v_reg, and a coarser reference (about 25 s)")
+    add_workers(p)
+    add_force(p)
+    return p
+
+
+def _add_modelling(kinds: Any) -> argparse.ArgumentParser:
+    return kinds.add_parser("modelling", help="what each modelling choice costs and changes",
+                            description="Measure planar against 3D chains, rigid plates as one body against welded "
+                            "segments, MuJoCo limit against penalty stops, and the half against the full robot: the "
+                            "largest change in segment angle (deg), drive force (% of its peak) or efficiency "
+                            "(points), and the wall-time ratio. About 10 s.")
+
+
+def _add_fit(kinds: Any) -> argparse.ArgumentParser:
+    p = kinds.add_parser("fit", help="a 4-parameter plate fit over three drag files",
+                         description="Time a fit of k, b, f_perp and f_par of the paper plate over three drag files "
+                         "with --budget evaluations on all cores.")
+    p.add_argument("--data", nargs="+", metavar="FILE.csv", help="drag data (default: the model's own drags at 10, "
+                   "30 and 50 mm/s)")
+    _budget(p, "evaluations")
+    add_workers(p)
+    return p
+
+
+def _bench_figures(args: argparse.Namespace, log: Any, tick: Any) -> dict[str, Any]:
+    from ..studies import bench
+    if args.bench == "fit":
+        return bench.fit_speed(args.data, budget=args.budget, workers=args.workers, log=log, progress=tick)
+    if args.bench == "robot":
+        return bench.robot(scenes.preset(args.preset, scenes.RobotScene), budget=args.budget, workers=args.workers,
+                           log=log, progress=tick)
+    if args.bench == "backends":
+        return bench.backends(batch_size=args.batch, workers=args.workers, log=log, progress=tick)
+    return bench.modelling(log=log, progress=tick)
+
+
+def run_bench(args: argparse.Namespace) -> int:
+    from ..studies import bench
+    log = lambda text: say(args, text)  # noqa: E731
+    if args.bench == "accuracy":
+        check_output_dir(args.out, "--out", args.force)
+        with progress(args, 1, "bench accuracy", "%") as bar:
+            bench.accuracy(args.out, quick=args.quick, workers=args.workers, log=log,
+                           progress=bar and (lambda done, total: bar(done / total)))
+        return 0
+    if args.bench == "backends":
+        check_output(args.scaling, ".png", "--scaling", args.force)
+    unit, total = ("evaluations", args.budget) if args.bench == "fit" else ("%", 1)
+    with progress(args, total, f"bench {args.bench}", unit) as bar:
+        tick = bar and ((lambda done, total: bar(done)) if unit == "evaluations" else
+                        (lambda done, total: bar(done / total)))
+        figures = _bench_figures(args, log, tick)
+    if args.bench == "backends" and args.scaling:
+        figures["scaling"] = bench.scaling(args.scaling, batch_size=args.batch, measured=figures, log=log)["rows"]
+        said_written(args, (("figure", args.scaling),))
+    print_json(args, figures)
+    return 0
+
+
+SUBCOMMANDS = (add_table, add_report, add_bench)

@@ -1,0 +1,94 @@
+"""The command-line flags experiments and studies share: number types in the CLI's units, the output flags, the
+error limit, and the error every bad flag raises. argparse only: no engine here."""
+
+from __future__ import annotations
+
+import argparse
+import math
+from typing import Callable
+
+from ..convergence import ErrorLimits
+
+
+class UsageError(Exception):
+    """Bad input from the command line; reported in one line with exit status 2."""
+
+
+def number(unit: str, *, minimum: float = 0.0, inclusive: bool = False, integer: bool = False) -> Callable:
+    """An argparse type: a finite number in ``unit``, above ``minimum`` (or at it, ``inclusive``)."""
+    def parse(text: str):
+        try:
+            value = int(text) if integer else float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a {'whole ' if integer else ''}number ({unit}), got "
+                                             f"'{text}'") from None
+        if not math.isfinite(value) or (value < minimum if inclusive else value <= minimum):
+            raise argparse.ArgumentTypeError(f"must be {'>=' if inclusive else '>'} {minimum:g}{' ' if unit else ''}"
+                                             f"{unit}, got {text}")
+        return value
+    return parse
+
+
+def add_quiet(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--quiet", action="store_true", help="no progress bar and no summary text (what was asked "
+                   "for, files or JSON, is still written)")
+
+
+def add_json(p: argparse.ArgumentParser, what: str) -> None:
+    p.add_argument("--json", action="store_true", help=f"print {what} as JSON on the last line of stdout (each key "
+                   "names its unit: SI, or _deg, _mm where the key says so)")
+
+
+def add_force(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--force", action="store_true", help="replace output files that exist (default: refuse)")
+
+
+def add_result_files(p: argparse.ArgumentParser) -> None:
+    """The outputs of a run: HDF5, rerun, --force, --json, --quiet."""
+    p.add_argument("--out", metavar="FILE.h5", help="write the time series and the resolved scene to HDF5 (SI units)")
+    p.add_argument("--rrd", metavar="FILE.rrd", help="write a rerun recording; open it with 'rerun FILE.rrd'")
+    add_force(p)
+    add_json(p, "a summary")
+    add_quiet(p)
+
+
+def add_max_error(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--max-error", type=number("degrees or points"), default=ErrorLimits().angle_deg,
+                   metavar="X", help="largest estimated discretisation error accepted, in degrees for angles, "
+                   "percentage points for eta and mm for positions (default: %(default)s); every run estimates its "
+                   "own from a companion run at another step, and a larger one stops with exit status 1, nothing "
+                   "written")
+
+
+def limits(args: argparse.Namespace) -> ErrorLimits:
+    """The error limits --max-error sets; the defaults for a command without the flag."""
+    max_error = getattr(args, "max_error", None)
+    return ErrorLimits() if max_error is None else ErrorLimits.uniform(max_error)
+
+
+def add_workers(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--workers", type=number("processes", minimum=1, inclusive=True, integer=True), metavar="N",
+                   help="worker processes (default: all cores)")
+
+
+def add_scene_flags(p: argparse.ArgumentParser, what: str, example: str, *, presets: tuple[str, ...] = (),
+                    presets_help: str = "", backend: str = "where the RFT force is computed", scene_help: str = "",
+                    required: bool = False, title: str = "scene"):
+    """The scene group: --scene, --preset (when the scene has presets), --set and --backend (when ``backend``)."""
+    g = p.add_argument_group(title)
+    g.add_argument("--scene", metavar="FILE.toml", required=required, help=scene_help or f"{what} scene file in SI "
+                   f"units{' (instead of --preset)' if presets else ''}")
+    if presets:
+        g.add_argument("--preset", choices=presets, help=presets_help)
+    g.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help=f"override a scene key in SI units, e.g. --set {example} (repeatable)")
+    if backend:
+        g.add_argument("--backend", choices=("native", "python"), help=backend)
+    return g
+
+
+def preset_name(args: argparse.Namespace) -> str:
+    """The preset a command runs: --preset, else the physical one; refused beside --scene."""
+    if args.scene and args.preset:
+        raise UsageError(f"give --scene {args.scene} or --preset {args.preset}, not both")
+    return args.preset or "physical"

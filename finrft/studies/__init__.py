@@ -1,0 +1,3 @@
+"""The studies built on the engine and its experiments: the CMA-ES search and its logs (`optimize`, `searchlog`),
+the plate fit (`fit`), the paper's report and Table I (`report`, `table`), and the benchmarks (`bench`). The engine
+and the experiments never import them."""

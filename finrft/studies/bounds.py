@@ -1,0 +1,54 @@
+"""The searched keys' units: --bounds KEY=LOW:HIGH read in SI or with the unit suffix a key's schema unit allows,
+and searched values shown in the CLI's units. Units come from the scene schema, never from a key's name."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..scene import SceneError, field_of
+
+# The unit suffixes --bounds takes, each for the keys of one SI unit.
+SUFFIXES = {"deg": ("rad", math.pi / 180), "mm": ("m", 1e-3)}
+# SI units shown in the CLI's: radians (and per second) in degrees, metres in mm.
+DISPLAY = {"rad": 180 / math.pi, "rad/s": 180 / math.pi, "m": 1e3}
+
+
+def unit_of(cls: type, key: str) -> str | None:
+    """A scene key's SI unit; None for a key the schema does not know (the search names it)."""
+    try:
+        return field_of(cls, key).metadata.get("unit")
+    except SceneError:
+        return None
+
+
+def parse_bounds(items: list[str], cls: type,
+                 aliases: dict[str, str] | None = None) -> dict[str, tuple[float, float]]:
+    """--bounds KEY=LOW:HIGH items of ``cls``'s scene keys (or their ``aliases``) in SI, or in deg or mm where the
+    key's unit is rad or m; SceneError for an item that is not so."""
+    bounds = {}
+    for item in items:
+        key, sep, span = item.partition("=")
+        low, sep2, high = span.partition(":")
+        if not sep or not sep2:
+            raise SceneError(f"--bounds expects KEY=LOW:HIGH, got '{item}'")
+        scale = 1.0
+        for suffix, (si, factor) in SUFFIXES.items():
+            if high.strip().endswith(suffix):
+                unit = unit_of(cls, (aliases or {}).get(key.strip(), key.strip()))
+                if unit is not None and unit != si:
+                    other = next((f" or {s}" for s, (u, _) in SUFFIXES.items() if u == unit), "")
+                    raise SceneError(f"--bounds {item}: {suffix} is no unit of {key.strip()}, whose unit is "
+                                     f"{unit or 'none'}: give its bounds in {unit or 'plain numbers'}{other}")
+                scale, low, high = factor, low.strip().removesuffix(suffix), high.strip().removesuffix(suffix)
+        try:
+            bounds[key.strip()] = (float(low) * scale, float(high) * scale)
+        except ValueError:
+            raise SceneError(f"--bounds {item}: bounds must be numbers") from None
+    return bounds
+
+
+def display_units(cls: type, keys: list[str], values: np.ndarray) -> np.ndarray:
+    """Searched values in the CLI's units: angles in degrees, lengths in mm, the rest in SI."""
+    return values * np.array([DISPLAY.get(unit_of(cls, k) or "", 1.0) for k in keys])

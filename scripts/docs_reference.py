@@ -113,7 +113,7 @@ def _flags(action: argparse.Action) -> str:
     names = ", ".join(f"`{o}`" for o in action.option_strings) or f"`{action.metavar or action.dest}`"
     if action.nargs != 0 and action.option_strings:
         if action.choices:
-            names += " " + "\\|".join(map(str, action.choices))
+            names += " " + "|".join(map(str, action.choices))
         else:
             names += f" {action.metavar or action.dest.upper()}"
     return names

@@ -150,10 +150,8 @@ def _command(name: str, parser: argparse.ArgumentParser, summary: str, lines: li
 def cli_reference() -> str:
     parser = cli_parser()
     lines = ["# Command reference", "",
-             "Generated from the command's own parser (`finrft --help`) when the documentation is built. Flags "
-             "speak the paper's units (mm, mm/s, degrees); scene files and result files are SI. Exit status: 0 "
-             "done, 1 a run went unstable or its estimated error is above `--max-error`, 2 bad input (one line on "
-             "stderr, nothing written), 130 interrupted.", ""]
+             "Generated from the command's own parser when the documentation is built: the same text as "
+             "`finrft COMMAND --help`.", ""]
     _command("finrft", parser, "", lines)
     return "\n".join(lines)
 

@@ -172,9 +172,9 @@ def test_intrusion_is_an_experiment_of_the_engine():
     assert run.error_estimate["force_N"] < 1e-6
 
 
-def test_the_readme_scene_runs_the_readme_plate(tmp_path, capsys):
-    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
-    (block,) = [b for b in re.findall(r"^```toml\n(.*?)^```", readme, flags=re.S | re.M) if "[model]" in b]
+def test_the_guide_scene_runs_the_guide_plate(tmp_path, capsys):
+    guide = (Path(__file__).resolve().parents[1] / "docs" / "guide" / "own-model.md").read_text()
+    (block,) = [b for b in re.findall(r"^```toml\n(.*?)^```", guide, flags=re.S | re.M) if "[model]" in b]
     (tmp_path / "plate.xml").write_text(MODEL)
     (tmp_path / "scene.toml").write_text(block)
     assert main(["run", "--scene", str(tmp_path / "scene.toml"), "--json", "--quiet"]) == 0

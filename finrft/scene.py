@@ -52,7 +52,7 @@ class Chain:
                                 minimum=0.0)
     stiffness: float = _f(0.209, "N m/rad", "hinge spring stiffness k", minimum=0.0, exclusive=False)
     springref: float = _f(0.0, "rad", "hinge rest angle; the origami stop sits here")
-    damping: float = _f(1.43, "N m s/rad", "hinge damping b", minimum=0.0, exclusive=False)
+    damping: float = _f(0.04555, "N m s/rad", "hinge damping b", minimum=0.0, exclusive=False)
     stop: str = _f("penalty", "", "origami stop: the penalty spring (taken implicitly by the newton method), or a "
                    "MuJoCo joint limit",
                    choices=("limit", "penalty"))
@@ -76,15 +76,19 @@ class Plate(Chain):
 class RFT:
     law: str = _f("paper", "", "paper: direction-cosine law; table: F_perp(theta), F_par(theta) from a CSV; "
                   "sandswim: the sand-swimming law of Maladen et al. 2009", choices=laws.names)
-    f_perp: float = _f(1.2, "N", "normal force coefficient per segment (paper law); < 0 would pull the plate along",
+    # The defaults: the authors' 1.2 N and -0.2 N per 33 mm segment, over its face 33 x 55 mm at 37.5 mm mean depth.
+    f_perp: float = _f(17630.85399449036, "N/m^3", "normal force coefficient per unit area and depth (paper law): a "
+                       "segment's is this x its face's area x mean depth; < 0 would pull the plate along",
                        minimum=0.0, exclusive=False)
-    f_par: float = _f(-0.2, "N", "tangential force coefficient per segment (paper law; < 0 feeds energy in)")
+    f_par: float = _f(-2938.4756657483936, "N/m^3", "tangential force coefficient per unit area and depth (paper "
+                      "law; < 0 feeds energy in)")
     v_reg: float = _f(0.001, "m/s", "speed below which the rate-independent force fades out (tanh)", minimum=0.0)
-    table: str = _f("", "", "table law: CSV with columns attack_deg, f_perp_N, f_par_N (relative to the scene file)")
-    c_s: float = _f(0.0, "N", "sandswim law: C_S per segment (the medium's normal-force scale)", minimum=0.0,
-                    exclusive=False)
-    c_f: float = _f(0.0, "N", "sandswim law: C_F per segment (the medium's friction-like drag)", minimum=0.0,
-                    exclusive=False)
+    table: str = _f("", "", "table law: CSV with columns attack_deg, f_perp_N, f_par_N, the forces per unit area and "
+                     "depth (N/m^3) (relative to the scene file)")
+    c_s: float = _f(0.0, "N/m^3", "sandswim law: C_S per unit area and depth (the medium's normal-force scale); all "
+                    "of c_s, c_f, gamma0 at 0: from [medium]", minimum=0.0, exclusive=False)
+    c_f: float = _f(0.0, "N/m^3", "sandswim law: C_F per unit area and depth (the medium's friction-like drag)",
+                    minimum=0.0, exclusive=False)
     gamma0: float = _f(0.0, "rad", "sandswim law: gamma0, how fast F_perp saturates with the angle of motion",
                        minimum=0.0, exclusive=False, maximum=math.pi / 2,
                        why_maximum="beyond it the normal force would push a segment along its motion")
@@ -194,9 +198,10 @@ class Immersion:
     here, and the chain's depth and height do."""
 
     name: str = _f("", "", "a medium of the catalogue (finrft medium --list); empty: unnamed")
-    depth: float = _f(0.0, "m", "depth of the chain's top edge below the free surface", minimum=0.0, exclusive=False)
-    height: float = _f(0.0, "m", "the chain's vertical extent (the plate's height); 0: not given", minimum=0.0,
-                       exclusive=False)
+    depth: float = _f(0.010, "m", "depth of the chain's top edge below the free surface", minimum=0.0,
+                      exclusive=False)
+    height: float = _f(0.055, "m", "the chain's vertical extent (the plate's or fin's height): a segment's face is "
+                       "segment_length x height, at mean depth depth + height / 2", minimum=0.0)
     bulk_density: float = _f(0.0, "kg/m^3", "the medium's critical (bulk) density, 3D-RFT's rho_c; 0: the named "
                              "medium's, if catalogued", minimum=0.0, exclusive=False)
     internal_friction: float = _f(0.0, "", "the medium's internal friction coefficient, 3D-RFT's mu_int (tan of the "
@@ -269,12 +274,8 @@ class _Sections:
         return dataclasses.asdict(self)
 
     def replace(self, **updates: Any):
-        """A copy with dotted keys changed, e.g. ``scene.replace(**{"plate.kind": "soft"})``; validated. Law
-        coefficients the scene took from its medium are taken anew (from the changed medium or chain), unless
-        the updates set them."""
+        """A copy with dotted keys changed, e.g. ``scene.replace(**{"plate.kind": "soft"})``; validated."""
         data = self.to_dict()
-        if getattr(self, "_rft_from_medium", False) and not any(f"rft.{k}" in updates for k in SANDSWIM_KEYS):
-            data["rft"].update(dict.fromkeys(SANDSWIM_KEYS, 0.0))
         for key, value in updates.items():
             section, name = split_key(type(self), key)
             data[section][name] = value
@@ -303,7 +304,7 @@ class Scene(_Sections):
     sim: Sim = field(default_factory=Sim)
 
     def __post_init__(self) -> None:
-        _law_from_medium(self, self.plate.segment_length)
+        _check_chain_law(self)
         _check_sim(self.sim)
 
 
@@ -317,13 +318,14 @@ class RobotScene(_Sections):
     fin: Chain = field(default_factory=lambda: Chain(segments=3, segment_length=0.02, segment_mass=0.00795,
                                                      segment_inertia=2.65e-7, stiffness=0.5879, damping=0.4399,
                                                      stop_stiffness=100.0))
-    rft: RFT = field(default_factory=lambda: RFT(f_perp=6.779, f_par=-1.0))
+    # the authors' 6.779 N and -1 N per 20 mm fin segment, over its face 20 x 55 mm at 37.5 mm mean depth
+    rft: RFT = field(default_factory=lambda: RFT(f_perp=164339.39393939395, f_par=-24242.424242424244))
     medium: Immersion = field(default_factory=Immersion)
     gait: Gait = field(default_factory=Gait)
     sim: Sim = field(default_factory=Sim)
 
     def __post_init__(self) -> None:
-        _law_from_medium(self, self.fin.segment_length)
+        _check_chain_law(self)
         _check_sim(self.sim)
         g = self.gait
         for key in ("theta1", "theta2"):
@@ -374,31 +376,21 @@ class IntrusionScene(_Sections):
         _check_medium(self.medium)
 
 
-def _check_law(r: RFT) -> None:
+def _check_chain_law(scene: Any) -> None:
+    """Check a chain scene's medium and law: a sandswim law with c_s, c_f and gamma0 all 0 takes them from the
+    medium (`finrft.geometry.resolve`, at model build), which must then give what they follow from."""
+    from . import media  # the catalogue's module imports this one
+
+    r = scene.rft
+    properties = media.immersion_properties(scene.medium)
+    if r.law == "sandswim" and not any(getattr(r, k) for k in SANDSWIM_KEYS) and properties is not None:
+        return
     if r.law == "table" and not r.table:
         raise SceneError("rft.law = 'table' needs rft.table, the path of a CSV with attack_deg, f_perp_N, f_par_N")
     if r.law == "sandswim" and not (r.c_s > 0 and r.c_f > 0 and r.gamma0 > 0):
-        raise SceneError("rft.law = 'sandswim' needs rft.c_s > 0, rft.c_f > 0 (N per segment) and "
-                         "0 < rft.gamma0 <= pi/2 (rad), the medium's fitted values: none are built in (or leave "
-                         "all three at 0 and give [medium] height, bulk_density, internal_friction and "
-                         "surface_friction to derive them)")
-
-
-def _law_from_medium(scene: Any, segment_length: float) -> None:
-    """Check a chain scene's medium and law; a sandswim law with c_s, c_f and gamma0 all 0 takes them from the
-    medium when it gives what they follow from (the scene then holds them, and remembers where they came from).
-    A derived C_S or C_F may be 0 (3D-RFT gives a thin plate no drag along itself without surface friction)."""
-    from . import media  # the catalogue's module imports this one
-
-    rft = scene.rft
-    properties = media.immersion_properties(scene.medium)
-    if rft.law == "sandswim" and not any(getattr(rft, k) for k in SANDSWIM_KEYS) and properties is not None:
-        found = media.sandswim_coefficients(segment_length, scene.medium.depth, scene.medium.height, *properties)
-        object.__setattr__(scene, "rft", dataclasses.replace(rft, c_s=found.c_s, c_f=found.c_f,
-                                                             gamma0=found.gamma0))
-        object.__setattr__(scene, "_rft_from_medium", True)
-    else:
-        _check_law(rft)
+        raise SceneError("rft.law = 'sandswim' needs rft.c_s > 0, rft.c_f > 0 (N/m^3) and 0 < rft.gamma0 <= pi/2 "
+                         "(rad), the medium's fitted values: none are built in (or leave all three at 0 and give "
+                         "[medium] bulk_density, internal_friction and surface_friction to derive them)")
 
 
 PRESETS: dict[type, tuple[str, ...]] = {Scene: ("paper", "physical"), RobotScene: ("paper", "physical")}

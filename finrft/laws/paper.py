@@ -2,6 +2,9 @@
 
     F = -tanh(|v| / v_reg) * ( f_perp (v^.y^) y^ + f_par (v^.x^) x^ ),   v^ = v / |v|
 
+A scene gives ``rft.f_perp`` and ``rft.f_par`` per unit area and depth (N/m^3, like RFT's zeta); a segment's
+``f_perp`` and ``f_par`` (N) are those times its face's area and mean depth (`finrft.laws.segment_scale`).
+
 The C twin is plugins/laws/paper.c.
 """
 
@@ -14,6 +17,7 @@ import numpy as np
 from . import components
 
 KIND = "segment"
+INTENSIVE = ("f_perp", "f_par")
 
 
 def parameters(rft: Any) -> dict[str, float]:
@@ -28,7 +32,8 @@ def force(v: np.ndarray, x_axis: np.ndarray, y_axis: np.ndarray, v_reg: float, f
 
 
 def feeds_energy(params: dict[str, float]) -> str:
-    """Why the law can push a segment along its own motion (F.v > 0), or "" when it dissipates at every velocity:
+    """Why the law can push a segment along its own motion (F.v > 0), or "" when it dissipates at every velocity
+    (``params``: one segment's, N):
     per unit speed its power is -(f_perp (v^.y^)^2 + f_par (v^.x^)^2), so either coefficient < 0 feeds energy in."""
     if params["f_par"] < 0:
         return f"f_par = {params['f_par']:g} N < 0 pushes a segment along its axial motion"

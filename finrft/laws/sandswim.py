@@ -16,9 +16,10 @@ which is odd in v and smooth in its direction. Its power is F.v = -tanh(|v|/v_re
 (`feeds_energy`).
 
 Coefficients. C_S and C_F are forces (N) on the whole drag rod of the papers, at their depth; the forces scale in
-proportion to the length of the body and, in the frictional regime, to its depth, so a scene gives them per
-segment: ``rft.c_s`` and ``rft.c_f`` = the published value x (segment length / rod length) x (segment depth / rod
-depth). ``rft.gamma0`` (rad) is the same for any length or depth.
+proportion to the area of the body and, in the frictional regime, to its depth, so a scene gives them per unit area
+and depth: ``rft.c_s`` and ``rft.c_f`` (N/m^3) = the published value / (rod area x rod mean depth), and a segment's
+C_S and C_F (N) are those times its face's area and mean depth (`finrft.laws.segment_scale`). ``rft.gamma0`` (rad)
+is the same for any size or depth.
 
 The published fits (0.3 mm and 3 mm glass beads, loose and close packing: Maladen 2009, supplement; the 3 mm
 particles in Ding 2012, Table 2, from a DEM drag of a 40 mm rod of 16 mm x 16 mm section at 7.6 cm depth) could
@@ -36,6 +37,7 @@ import numpy as np
 from . import components
 
 KIND = "segment"
+INTENSIVE = ("c_s", "c_f")
 
 
 def parameters(rft: Any) -> dict[str, float]:

@@ -233,9 +233,9 @@ def build_parser() -> argparse.ArgumentParser:
                               "length in [60, 85] mm. Every evaluation is logged to HDF5 after each generation.")
     _add_search(optimize, "optimize")
     optimize.add_argument("--bounds", action="append", default=[], metavar="KEY=LOW:HIGH",
-                          help="search a scene key between bounds, in SI or with a unit suffix deg or mm, e.g. "
-                               "gait.theta1=10:80deg, gait.omega=0.5:2, fin.stiffness=0.1:2 (repeatable; "
-                               "replaces the default bounds of that key)")
+                          help="search a scene key between bounds, in mm for a length, deg for an angle, else SI "
+                               "(the schema's unit), e.g. gait.theta1=10:80, fin.segment_length=10:40, "
+                               "fin.stiffness=0.1:2 (repeatable; replaces the default bounds of that key)")
     _add_workers(optimize)
     optimize.add_argument("--executor", choices=("local", "dask"), default="local",
                           help="where evaluations run: local processes, or a Dask cluster (needs finrft[cluster])")
@@ -339,9 +339,10 @@ def build_parser() -> argparse.ArgumentParser:
                            "(rft.f_perp), f_par (rft.f_par), or any numeric plate-scene key (default: b, the "
                            "paper's procedure)")
     fitp.add_argument("--bounds", action="append", default=[], metavar="KEY=LOW:HIGH",
-                      help="bounds of a fitted parameter in SI, by name or key, e.g. b=0.0001:100 (defaults: b "
-                           "0.01:100, k 0.01:100, f_perp 0.1:100, f_par -2:2); positive bounds over more than a "
-                           "decade are searched in log space")
+                      help="bounds of a fitted parameter, by name or key, in mm for a length, deg for an angle, "
+                           "else SI, e.g. b=0.0001:100, plate.segment_length=20:50 (defaults: b 0.01:100, k "
+                           "0.01:100, f_perp and f_par 0.1:100 N and -2:2 N per segment of the paper plate, in "
+                           "N/m^3); positive bounds over more than a decade are searched in log space")
     _add_search(fitp, "fit")
     _add_workers(fitp)
     _add_max_error(fitp)
@@ -807,6 +808,7 @@ def _interrupted(command: str, log: str | None, schema: str) -> "Interrupted":
 def _fit(args: argparse.Namespace) -> int:
     from . import searchlog
     from .fit import ALIASES, drag_for, fit, fit_summary, logged_problem, plot, read_drag, resolve_params
+    from .optimize import parse_bounds
     for path, suffix, flag in ((args.write_scene, ".toml", "--write-scene"), (args.plot, ".png", "--plot"),
                                (args.rrd, ".rrd", "--rrd")):
         _check_output(path, suffix, flag, args.force)
@@ -820,7 +822,7 @@ def _fit(args: argparse.Namespace) -> int:
         scene = _resolve_scene(args)
         data = [read_drag(p) for p in args.data]
         names = [n.strip() for n in (args.params or "b").split(",") if n.strip()]
-        variables = resolve_params(names, _parse_bounds(args.bounds, scenes.Scene, ALIASES))
+        variables = resolve_params(names, parse_bounds(args.bounds, scenes.Scene, ALIASES))
     validate = [read_drag(p) for p in args.validate]
     with _progress(args, args.budget, "fit", "evaluations") as bar:
         def on_generation(g: int, values: np.ndarray, extras: dict[str, np.ndarray], es: Any) -> None:
@@ -855,6 +857,7 @@ def _fit(args: argparse.Namespace) -> int:
 
 
 def _fit_rft(args: argparse.Namespace) -> int:
+    from . import geometry
     from .fit import identify_rft, read_forces, rft_fragment
     from .laws.table import write_table
     scene = _resolve_scene(args)
@@ -862,7 +865,8 @@ def _fit_rft(args: argparse.Namespace) -> int:
     _check_output(args.out, ".toml", "--out", args.force)
     _check_output(table_path, ".csv", "--table", args.force)
     forces = read_forces(args.data)
-    law, table = identify_rft(forces, scene.plate.segments, scene.rft.v_reg, args.speed / 1000)
+    law, table = identify_rft(forces, scene.plate.segments, scene.rft.v_reg, args.speed / 1000,
+                              geometry.segment_scale(scene))
     fragment = rft_fragment(law, Path(table_path).name if table_path else "TABLE.csv")
     if table_path:
         with atomic_path(table_path) as tmp:
@@ -874,46 +878,13 @@ def _fit_rft(args: argparse.Namespace) -> int:
         print(fragment, end="")
     if args.json:
         print(_json({"f_perp": law.f_perp, "f_par": law.f_par, "v_reg": law.v_reg,
-                     "table": {"attack_deg": table.attack_deg, "f_perp_N": table.f_perp, "f_par_N": table.f_par}}))
+                     "table": {"attack_deg": table.attack_deg, "f_perp": table.f_perp, "f_par": table.f_par}}))
     return 0
-
-
-# The unit suffixes --bounds takes, each for the keys of one SI unit.
-_BOUND_UNITS = {"deg": ("rad", math.pi / 180), "mm": ("m", 1e-3)}
-
-
-def _parse_bounds(items: list[str], cls: type,
-                  aliases: dict[str, str] | None = None) -> dict[str, tuple[float, float]]:
-    """--bounds KEY=LOW:HIGH items of ``cls``'s scene keys (or their ``aliases``) in SI, or in deg or mm where the
-    key's unit is rad or m."""
-    bounds = {}
-    for item in items:
-        key, sep, span = item.partition("=")
-        low, sep2, high = span.partition(":")
-        if not sep or not sep2:
-            raise UsageError(f"--bounds expects KEY=LOW:HIGH, got '{item}'")
-        scale = 1.0
-        for suffix, (si, factor) in _BOUND_UNITS.items():
-            if high.strip().endswith(suffix):
-                try:
-                    unit = scenes.field_of(cls, (aliases or {}).get(key.strip(), key.strip())).metadata["unit"]
-                except scenes.SceneError:
-                    unit = si  # an unknown key: the search names it
-                if unit != si:
-                    other = next((f" or {s}" for s, (u, _) in _BOUND_UNITS.items() if u == unit), "")
-                    raise UsageError(f"--bounds {item}: {suffix} is no unit of {key.strip()}, whose unit is "
-                                     f"{unit or 'none'}: give its bounds in {unit or 'plain numbers'}{other}")
-                scale, low, high = factor, low.strip().removesuffix(suffix), high.strip().removesuffix(suffix)
-        try:
-            bounds[key.strip()] = (float(low) * scale, float(high) * scale)
-        except ValueError:
-            raise UsageError(f"--bounds {item}: bounds must be numbers") from None
-    return bounds
 
 
 def _optimize(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
     from . import searchlog
-    from .optimize import DEFAULT_VARIABLES, Variable, logged_problem, optimize, read_log
+    from .optimize import DEFAULT_VARIABLES, Variable, cli_values, logged_problem, optimize, parse_bounds, read_log
     _check_output(args.rrd, ".rrd", "--rrd", args.force)
     log = _search_log(args, {"bounds": "--bounds", "scene": "--scene", "set": "--set", "fin": "--fin",
                              "model": "--model", "backend": "--backend"})
@@ -923,9 +894,9 @@ def _optimize(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
         scene, logged = logged_problem(args.resume)
         variables = {v.key: v for v in logged}
         past = read_log(args.resume)
-        generations = [(_display_units(list(variables), past["x"][past["generation"] == g]),
+        generations = [(cli_values(scenes.RobotScene, list(variables), past["x"][past["generation"] == g]),
                         past["eta"][past["generation"] == g]) for g in range(len(past["state/sigma"]))]
-    for key, (low, high) in _parse_bounds(args.bounds, scenes.RobotScene).items():
+    for key, (low, high) in parse_bounds(args.bounds, scenes.RobotScene).items():
         variables[key] = Variable(key, low, high)
     executor = None
     if args.executor == "dask":
@@ -934,7 +905,7 @@ def _optimize(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
         raise UsageError("--address goes with --executor dask")
     with _progress(args, args.budget, "optimize", "evaluations") as bar:
         def on_generation(g: int, values: np.ndarray, extras: dict[str, np.ndarray], es: Any) -> None:
-            generations.append((_display_units(list(variables), values), extras["eta"]))
+            generations.append((cli_values(scenes.RobotScene, list(variables), values), extras["eta"]))
             if bar:
                 best = np.nanmax([1 - c for c in es.fit.fit]) if len(es.fit.fit) else float("nan")
                 bar(es.countevals, f"generation {g + 1}, best eta {100 * best:.2f} %")
@@ -965,12 +936,6 @@ def _optimize(args: argparse.Namespace, scene: scenes.RobotScene) -> int:
     if args.json:
         print(_json(summary))
     return 0
-
-
-def _display_units(keys: list[str], values: np.ndarray) -> np.ndarray:
-    """Searched values in the CLI's units: angles in degrees, lengths in mm."""
-    scale = [180 / math.pi if "theta" in k or "omega" in k else 1e3 if k.endswith("length") else 1.0 for k in keys]
-    return values * np.array(scale)
 
 
 def _dask_executor(address: str | None):

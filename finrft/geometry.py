@@ -79,10 +79,15 @@ def from_medium(scene: Any) -> bool:
     return scene.rft.law == "sandswim" and not any(getattr(scene.rft, k) for k in SANDSWIM_KEYS)
 
 
+def segment_scale(scene: Any) -> float:
+    """A chain segment's face area x mean depth (m^3), which its law's intensive coefficients are multiplied by."""
+    return laws.segment_scale(chain_of(scene).segment_length, scene.medium.height, scene.medium.depth)
+
+
 def chain_law(scene: Any) -> tuple[SegmentLaw, float]:
     """The law of one segment of the scene's chain (N) and the segment's scale (m^3)."""
     m, length = scene.medium, chain_of(scene).segment_length
-    scale = laws.segment_scale(length, m.height, m.depth)
+    scale = segment_scale(scene)
     if from_medium(scene):
         fit = media.sandswim_coefficients(length, m.depth, m.height, *properties(scene))
         return SegmentLaw("sandswim", scene.rft.v_reg, {"c_s": fit.c_s, "c_f": fit.c_f, "gamma0": fit.gamma0}), scale

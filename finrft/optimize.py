@@ -175,6 +175,48 @@ def _state(es: Any, rng: np.random.RandomState) -> dict[str, np.ndarray]:
             "rng_cached_gaussian": np.float64(cached)}
 
 
+# The command line's unit of each SI unit it does not speak as is, and that unit's value in SI: it speaks mm and
+# degrees (GUIDE: units).
+CLI_UNITS = {"m": ("mm", 1e-3), "m/s": ("mm/s", 1e-3), "rad": ("deg", math.pi / 180),
+             "rad/s": ("deg/s", math.pi / 180)}
+
+
+def cli_unit(cls: type, key: str) -> tuple[str, float]:
+    """The command line's unit of a scene key, from the schema's unit of the key, and its value in SI."""
+    unit = field_of(cls, key).metadata["unit"]
+    return CLI_UNITS.get(unit, (unit, 1.0))
+
+
+def parse_bounds(items: Sequence[str], cls: type,
+                 aliases: dict[str, str] | None = None) -> dict[str, tuple[float, float]]:
+    """``KEY=LOW:HIGH`` items (``--bounds``) of ``cls``'s scene keys, or their ``aliases``, in the command line's unit
+    of each key (`cli_unit`: mm for a length, degrees for an angle; a suffix naming it, e.g. ``10:80deg``, is
+    allowed), as SI bounds by key; SceneError naming an item that is not one."""
+    bounds = {}
+    for item in items:
+        key, sep, span = item.partition("=")
+        key = key.strip()
+        low, sep2, high = span.partition(":")
+        if not sep or not sep2:
+            raise SceneError(f"--bounds expects KEY=LOW:HIGH, got '{item}'")
+        unit, scale = cli_unit(cls, (aliases or {}).get(key, key))
+        low, high = low.strip(), high.strip()
+        suffix = high.lstrip("+-.0123456789eE").strip()
+        if suffix and suffix != unit:
+            raise SceneError(f"--bounds {item}: {suffix} is no unit of {key}, whose unit is {unit or 'none'}: give "
+                             f"its bounds in {unit or 'plain numbers'}")
+        try:
+            bounds[key] = (float(low.removesuffix(suffix)) * scale, float(high.removesuffix(suffix)) * scale)
+        except ValueError:
+            raise SceneError(f"--bounds {item}: bounds must be numbers{f' (in {unit})' if unit else ''}") from None
+    return bounds
+
+
+def cli_values(cls: type, keys: Sequence[str], values: np.ndarray) -> np.ndarray:
+    """SI values of scene keys (the last axis, one per key) in the command line's units (`cli_unit`)."""
+    return np.asarray(values) / np.array([cli_unit(cls, key)[1] for key in keys])
+
+
 def si_units(cls: type, variables: Sequence[Variable]) -> list[str]:
     """The SI unit of each variable's scene key ("1" when dimensionless)."""
     return [field_of(cls, v.key).metadata["unit"] or "1" for v in variables]

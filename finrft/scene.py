@@ -48,9 +48,9 @@ class Chain:
                        "mass matrix")
     segment_length: float = _f(0.033, "m", "length of one segment", minimum=0.0)
     segment_mass: float = _f(0.00289, "kg", "mass of one segment, at its midpoint", minimum=0.0)
-    segment_inertia: float = _f(2.6e-7, "kg m^2", "rotational inertia of a segment about z through its centre",
+    segment_inertia: float = _f(2.623e-7, "kg m^2", "rotational inertia of a segment about z through its centre",
                                 minimum=0.0)
-    stiffness: float = _f(0.209, "N m/rad", "hinge spring stiffness k", minimum=0.0, exclusive=False)
+    stiffness: float = _f(0.04863, "N m/rad", "hinge spring stiffness k", minimum=0.0, exclusive=False)
     springref: float = _f(0.0, "rad", "hinge rest angle; the origami stop sits here")
     damping: float = _f(0.04555, "N m s/rad", "hinge damping b", minimum=0.0, exclusive=False)
     stop: str = _f("penalty", "", "origami stop: the penalty spring (taken implicitly by the newton method), or a "
@@ -64,7 +64,7 @@ class Chain:
 class Plate(Chain):
     rod_length: float = _f(0.007, "m", "extension rod from the driven base point to the first hinge", minimum=0.0)
     rod_mass: float = _f(0.010, "kg", "mass of the extension rod, at its midpoint", minimum=0.0)
-    rod_inertia: float = _f(4.1e-8, "kg m^2", "rotational inertia of the rod about z through its centre",
+    rod_inertia: float = _f(4.08e-8, "kg m^2", "rotational inertia of the rod about z through its centre",
                             minimum=0.0)
     chain: str = _f("planar", "", "planar: hinges about z only; spatial: each segment also turns freely about "
                     "its own x and y axes (a 3D chain)", choices=("planar", "spatial"))

@@ -33,7 +33,8 @@ ALIASES = {"b": "plate.damping", "k": "plate.stiffness", "f_perp": "rft.f_perp",
 # tall at 37.5 mm mean depth), per unit area and depth.
 PAPER_FACE = 0.033 * 0.055 * (0.010 + 0.055 / 2)
 DEFAULT_BOUNDS = {"plate.damping": (0.01, 100.0), "plate.stiffness": (0.01, 100.0),
-                  "rft.f_perp": (0.1 / PAPER_FACE, 100.0 / PAPER_FACE), "rft.f_par": (-2.0 / PAPER_FACE, 2.0 / PAPER_FACE)}
+                  "rft.f_perp": (0.1 / PAPER_FACE, 100.0 / PAPER_FACE),
+                  "rft.f_par": (-2.0 / PAPER_FACE, 2.0 / PAPER_FACE)}
 FAILED = 1e6  # deg^2: worse than any plate that moved at all
 # Drag speeds the model is meant for (m/s); a file outside them most likely has its columns in other units.
 SPEEDS = (1e-3, 1.0)

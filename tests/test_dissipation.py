@@ -88,7 +88,7 @@ def test_a_run_says_once_that_its_law_feeds_energy_in(tmp_path, capsys, monkeypa
     assert main(["drag", "--out", str(outs[2]), "--quiet", "--set", "rft.f_par=0.2", *fast]) == 0
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("finrft: warning: ") and "f_par = -0.2 N < 0" in err[0], err
-    reason = laws.feeds_energy(preset("paper"))
+    reason = laws.feeds_energy(geometry.segment_law(preset("paper")))
     for out, expected in zip(outs, (reason, reason, "")):
         with h5py.File(out) as f:
             assert f.attrs["law_feeds_energy"] == expected

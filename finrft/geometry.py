@@ -91,7 +91,7 @@ def chain_law(scene: Any) -> tuple[SegmentLaw, float]:
     if from_medium(scene):
         fit = media.sandswim_coefficients(length, m.depth, m.height, *properties(scene))
         return SegmentLaw("sandswim", scene.rft.v_reg, {"c_s": fit.c_s, "c_f": fit.c_f, "gamma0": fit.gamma0}), scale
-    return laws.per_segment(scene.rft, scale), scale
+    return laws.per_segment(scene.rft, length, m.height, m.depth), scale
 
 
 def segment_law(scene: Any) -> SegmentLaw | None:

@@ -80,7 +80,7 @@ class RFT:
     f_perp: float = _f(17630.85399449036, "N/m^3", "normal force coefficient per unit area and depth (paper law): a "
                        "segment's is this x its face's area x mean depth; < 0 would pull the plate along",
                        minimum=0.0, exclusive=False)
-    f_par: float = _f(-2938.4756657483936, "N/m^3", "tangential force coefficient per unit area and depth (paper "
+    f_par: float = _f(-2938.475665748393, "N/m^3", "tangential force coefficient per unit area and depth (paper "
                       "law; < 0 feeds energy in)")
     v_reg: float = _f(0.001, "m/s", "speed below which the rate-independent force fades out (tanh)", minimum=0.0)
     table: str = _f("", "", "table law: CSV with columns attack_deg, f_perp_N, f_par_N, the forces per unit area and "

@@ -102,5 +102,5 @@ def test_a_table_law_scales_with_the_face_and_reads_its_file_once_per_version(tm
     assert _broadside(long) / _broadside(short) == pytest.approx(2.0, rel=1e-9)
     assert _broadside(short) == pytest.approx(3 * 20000 * face(short) * math.tanh(30.0), rel=1e-9)
     assert len(reads) == 1  # every model build, companion run and check of both scenes
-    law = laws.per_segment(short.rft, 2.0)
+    law = laws.per_segment(short.rft, 1.0, 2.0, 0.0)  # a face 1 x 2 m at 1 m mean depth
     np.testing.assert_allclose(law.parameters["table"].f_perp, 40000 * np.sin(np.radians(attack)), rtol=1e-12)

@@ -86,12 +86,15 @@ class SegmentLaw:
     parameters: Mapping[str, Any] = field(hash=False)
 
 
-def per_segment(rft: Any, scale: float) -> SegmentLaw:
-    """The law of a scene's ``[rft]`` section on a segment of ``scale`` = `segment_scale` (m^3): its INTENSIVE
-    coefficients (N/m^3) times the scale."""
+def per_segment(rft: Any, length: float, height: float, depth: float) -> SegmentLaw:
+    """The law of a scene's ``[rft]`` section on a segment whose face is ``length`` x ``height`` (m), its top edge
+    ``depth`` below the surface: its INTENSIVE coefficients (N/m^3) times `segment_scale`, multiplied in the order
+    length, height, mean depth, in which a per-segment value converted to N/m^3 with 17 digits (the paper presets')
+    comes back exactly."""
     law = module(rft.law)
     intensive = getattr(law, "INTENSIVE", ())
-    params = {key: value * scale if key in intensive else value for key, value in law.parameters(rft).items()}
+    params = {key: ((value * length) * height) * (depth + height / 2) if key in intensive else value
+              for key, value in law.parameters(rft).items()}
     return SegmentLaw(rft.law, rft.v_reg, params)
 
 

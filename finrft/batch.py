@@ -30,7 +30,7 @@ from typing import Any, Callable, Iterator, Sequence, TypeVar
 import mujoco
 import numpy as np
 
-from . import laws, methods, models, native
+from . import geometry, laws, methods, models, native
 from .convergence import ErrorLimits, SimulationUnstable
 from .drive import Drive
 from .experiment import Experiment, Result, run
@@ -100,7 +100,7 @@ def map_jobs(fn: Callable[[T], R], jobs: Sequence[T], *, workers: int | None = N
         if pool is not None:
             for job in jobs:
                 for part in job if isinstance(job, tuple) else (job,):
-                    laws.warn_if_feeds_energy(part)
+                    laws.warn_if_feeds_energy(geometry.segment_law(part))
         pending = [pool.submit(fn, job) for job in jobs] if pool is not None else jobs
         try:
             for item in pending:

@@ -27,7 +27,7 @@ class SegmentForces:
     """The RFT force on each segment of a force group (N, 3), world frame, for MuJoCo's current kinematics."""
 
     def __init__(self, group: ForceGroup) -> None:
-        self.law = laws.bind(group.rft)
+        self.law = laws.bind(group.law)
         self.sites = group.sites
         self.bodies = group.bodies
         self.roots = None  # the bodies' root bodies, known once a model is seen

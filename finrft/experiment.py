@@ -17,7 +17,7 @@ from typing import Any, Callable, Protocol
 import mujoco
 import numpy as np
 
-from . import laws, native
+from . import geometry, laws, native
 from .convergence import ErrorLimits, Estimated, checked, max_difference, paired, require_finite
 from .coupling import PythonCoupling, installed
 from .drive import Drive
@@ -185,7 +185,7 @@ def run(experiment: Experiment, scene: Any, *, progress: Callable[[float], None]
     and InaccurateResult when the estimate exceeds ``max_error`` (None: report it only). ``estimate_error=False``
     skips the estimate, for studies that measure the error themselves. A scene whose law can feed energy in (the
     paper's model) runs, with a warning once per process (`laws.FeedsEnergy`)."""
-    laws.warn_if_feeds_energy(scene)
+    laws.warn_if_feeds_energy(geometry.segment_law(scene))
     # A companion on the run's model (the adaptive methods') steps the run's MjData again, reset: a new one costs
     # a tenth of a physical gait's companion (the bindings' wrappers).
     datas: dict[int, mujoco.MjData] = {}

@@ -216,7 +216,7 @@ class PythonImplicit:
 
     def __init__(self, m: mujoco.MjModel, groups: Sequence[ForceGroup]) -> None:
         self.m = m
-        self.laws = [(laws.bind(g.rft), g) for g in groups if len(g.sites)]
+        self.laws = [(laws.bind(g.law), g) for g in groups if len(g.sites)]
         self.damping = np.diag(m.dof_damping)
         servo = [a for a in range(m.nu) if m.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT
                  and m.actuator_biastype[a] == mujoco.mjtBias.mjBIAS_AFFINE]
@@ -236,7 +236,7 @@ class PythonImplicit:
             for row, site in zip(jacp, group.sites):
                 mujoco.mj_jacSite(self.m, d, row, None, site)
             frames = d.site_xmat[group.sites].reshape(-1, 3, 3)
-            segments.append((law, group.rft.v_reg, jacp, frames[:, :, 0], frames[:, :, 1]))
+            segments.append((law, group.law.v_reg, jacp, frames[:, :, 0], frames[:, :, 1]))
             if group.stop_stiffness > 0:
                 deflection = d.qpos[group.hinge_qpos] - self.m.qpos_spring[group.hinge_qpos]
                 stops.append((group.stop_stiffness, group.hinge_dof, deflection))

@@ -16,8 +16,10 @@ from importlib import resources
 import mujoco
 import numpy as np
 
-from . import geometry, laws, native
-from .scene import RFT, Chain, RobotScene, Scene, SceneError, Sim
+from . import laws, native
+from .geometry import Resolved, resolve
+from .laws import SegmentLaw
+from .scene import Chain, RobotScene, Scene, SceneError, Sim
 
 INTEGRATORS = {
     "euler": mujoco.mjtIntegrator.mjINT_EULER,
@@ -41,7 +43,7 @@ class ForceGroup:
     bodies that carry the penalty stop (when stop_stiffness > 0)."""
 
     name: str
-    rft: RFT
+    law: SegmentLaw            # one segment's law, forces in N
     sites: np.ndarray          # (N,) midpoint site of each segment
     bodies: np.ndarray         # (N,) body that carries each segment
     stop_stiffness: float
@@ -62,6 +64,7 @@ class PlateModel:
     hinge_qpos: np.ndarray     # (H,) qpos address of each hinge: H = segments, or 0 for a rigid plate
     hinge_dof: np.ndarray      # (H,)
     groups: tuple[ForceGroup, ...]  # the segments' RFT (one group)
+    resolved: Resolved         # the forces the scene's medium and geometry give (finrft.geometry.resolve)
 
 
 def mjcf_path(name: str = "plate.xml"):
@@ -88,7 +91,7 @@ def initial_heading(drive: str, attack_deg: float) -> float:
     return float(np.radians(90.0 - attack_deg)) if drive == "drag" else 0.0
 
 
-def plugin_config(law: RFT, stop_stiffness: float) -> dict[str, str]:
+def plugin_config(law: SegmentLaw, stop_stiffness: float) -> dict[str, str]:
     """The native plugin's config for one force group: the same law and penalty stop as the Python coupling."""
     return {**laws.plugin_config(law), "stop_stiffness": repr(stop_stiffness)}
 
@@ -162,7 +165,7 @@ def _attach_chain(spec: mujoco.MjSpec, mount: mujoco.MjsFrame, chain: Chain, dt:
     return attached
 
 
-def _bind(spec: mujoco.MjSpec, name: str, law: RFT, stop_stiffness: float, bodies: list[mujoco.MjsBody]) -> None:
+def _bind(spec: mujoco.MjSpec, name: str, law: SegmentLaw, stop_stiffness: float, bodies: list[mujoco.MjsBody]) -> None:
     """Bind a native plugin instance carrying one force group's law to its bodies."""
     spec.activate_plugin(native.PLUGIN)
     instance = spec.add_plugin(name=name, plugin_name=native.PLUGIN, active=True)
@@ -195,7 +198,7 @@ def _compile(spec: mujoco.MjSpec) -> mujoco.MjModel:
         raise SceneError(f"MuJoCo rejected the model: {reason}") from None
 
 
-def _group(model: mujoco.MjModel, name: str, law: RFT, stop_stiffness: float,
+def _group(model: mujoco.MjModel, name: str, law: SegmentLaw, stop_stiffness: float,
            bodies: list[mujoco.MjsBody]) -> ForceGroup:
     """A force group of a compiled model: every site on the given (compiled) bodies, and their hinges."""
     ids = [b.id for b in bodies]
@@ -220,7 +223,7 @@ class _Plate:
     chain: AttachedChain
 
 
-def _plate(scene: Scene, drive: str, attack_deg: float, backend: str) -> _Plate:
+def _plate(scene: Scene, drive: str, attack_deg: float, backend: str, resolved: Resolved) -> _Plate:
     if drive not in DRIVES:
         raise ValueError(f"drive must be one of {DRIVES}, got {drive!r}")
     p = scene.plate
@@ -243,7 +246,7 @@ def _plate(scene: Scene, drive: str, attack_deg: float, backend: str) -> _Plate:
     chain = _attach_chain(spec, mount, p, scene.sim.dt, "plate_", spatial=p.chain == "spatial",
                           welded=p.rigid_as == "welds")
     if backend == "native":
-        _bind(spec, "sand", scene.rft, penalty_stiffness(p), chain.bodies)
+        _bind(spec, "sand", resolved.chain, penalty_stiffness(p), chain.bodies)
 
     # Everything the drive moves, seen from the drive: total mass (slide) or inertia about the base (hinge).
     lumps = [(p.rod_mass, p.rod_inertia, p.rod_length / 2)] + [
@@ -259,15 +262,16 @@ def plate_spec(scene: Scene, drive: str = "drag", attack_deg: float = 90.0,
     """The plate's MjSpec for a scene: drive ``drag`` (base slides along +y, the plate at angle of attack
     ``attack_deg`` to the motion) or ``rotate`` (the rod turns about z through its base); with backend
     ``native`` the RFT plugin is bound to the segments."""
-    return _plate(scene, drive, attack_deg, backend).spec
+    return _plate(scene, drive, attack_deg, backend, resolve(scene)).spec
 
 
 def build_plate(scene: Scene, drive: str = "drag", attack_deg: float = 90.0) -> PlateModel:
     """Compile the plate model for a scene and collect its indices."""
     backend = native.resolve_backend(scene.sim.backend)
-    plate = _plate(scene, drive, attack_deg, backend)
+    resolved = resolve(scene)
+    plate = _plate(scene, drive, attack_deg, backend, resolved)
     model = _compile(plate.spec)
-    group = _group(model, "sand", scene.rft, penalty_stiffness(scene.plate), plate.chain.bodies)
+    group = _group(model, "sand", resolved.chain, penalty_stiffness(scene.plate), plate.chain.bodies)
     (drive_qpos,), (drive_dof,) = _addresses(model, [plate.drive])
     hinge_qpos, hinge_dof = _addresses(model, plate.chain.hinges)
     return PlateModel(
@@ -280,6 +284,7 @@ def build_plate(scene: Scene, drive: str = "drag", attack_deg: float = 90.0) -> 
         hinge_qpos=hinge_qpos,
         hinge_dof=hinge_dof,
         groups=(group,),
+        resolved=resolved,
     )
 
 
@@ -320,16 +325,7 @@ class RobotModel:
     fin_hinge_dof: np.ndarray   # (S, H)
     fin_sites: np.ndarray      # (S, N) fin segment midpoints per side
     groups: tuple[ForceGroup, ...]
-
-
-def arm_law(scene: RobotScene) -> RFT:
-    """The arm's RFT law: from the medium (finrft.geometry), or the paper law with a normal coefficient that grows
-    with the arm's length."""
-    if geometry.properties(scene) is not None:
-        return geometry.arm_law(scene)
-    a = scene.arm
-    return RFT(law="paper", f_perp=a.f_perp_base + a.f_perp_per_length * a.length, f_par=a.f_par,
-               v_reg=scene.rft.v_reg)
+    resolved: Resolved         # the forces the scene's medium and geometry give (finrft.geometry.resolve)
 
 
 def body_share(scene: RobotScene) -> float:
@@ -337,16 +333,11 @@ def body_share(scene: RobotScene) -> float:
     return 0.5 if scene.robot.model == "half" else 1.0
 
 
-def body_drag(scene: RobotScene) -> float:
-    """The whole robot's body drag (N): body.drag, or from the medium the body's faces and the cart
-    (finrft.geometry)."""
-    return scene.body.drag if geometry.properties(scene) is None else geometry.body_resistance(scene)["total"]
-
-
-def body_law(scene: RobotScene) -> RFT:
-    """The velocity body drag as an isotropic RFT law: F = -tanh(|v|/v_reg) drag v/|v|."""
-    drag = body_share(scene) * body_drag(scene)
-    return RFT(law="paper", f_perp=drag, f_par=drag, v_reg=scene.body.v_reg)
+def body_law(scene: RobotScene, resolved: Resolved) -> SegmentLaw:
+    """The velocity body drag as an isotropic law: F = -tanh(|v|/v_reg) drag v/|v|, the model's share of the whole
+    robot's resolved body drag."""
+    drag = body_share(scene) * resolved.body_drag
+    return SegmentLaw("paper", scene.body.v_reg, {"f_perp": drag, "f_par": drag})
 
 
 @dataclass(frozen=True)
@@ -360,7 +351,7 @@ class _Robot:
     fins: list[AttachedChain]
 
 
-def _robot(scene: RobotScene, backend: str) -> _Robot:
+def _robot(scene: RobotScene, backend: str, resolved: Resolved) -> _Robot:
     spec = _new_spec("robot.xml", scene.sim)
     r, a, fin = scene.robot, scene.arm, scene.fin
     sides = ("r",) if r.model == "half" else ("r", "l")
@@ -395,10 +386,10 @@ def _robot(scene: RobotScene, backend: str) -> _Robot:
             actuator.actrange = [scene.gait.theta2, scene.gait.theta1]
             robot.actuators.append(actuator)
     if backend == "native":
-        _bind(spec, "fin_sand", scene.rft, penalty_stiffness(fin), _fin_bodies(robot))
-        _bind(spec, "arm_sand", arm_law(scene), 0.0, robot.arms)
+        _bind(spec, "fin_sand", resolved.chain, penalty_stiffness(fin), _fin_bodies(robot))
+        _bind(spec, "arm_sand", resolved.arm, 0.0, robot.arms)
         if scene.body.drag_law == "velocity":
-            _bind(spec, "body_sand", body_law(scene), 0.0, [body])
+            _bind(spec, "body_sand", body_law(scene, resolved), 0.0, [body])
     spec.modelname = f"finrft robot ({r.model}, {fin.kind} fins)"
     return robot
 
@@ -409,20 +400,21 @@ def _fin_bodies(robot: _Robot) -> list[mujoco.MjsBody]:
 
 def robot_spec(scene: RobotScene, backend: str = "python") -> mujoco.MjSpec:
     """The robot's MjSpec for a scene (see mjcf/robot.xml)."""
-    return _robot(scene, backend).spec
+    return _robot(scene, backend, resolve(scene)).spec
 
 
 def build_robot(scene: RobotScene) -> RobotModel:
     """Compile the robot model for a scene and collect its indices."""
     backend = native.resolve_backend(scene.sim.backend)
-    robot = _robot(scene, backend)
+    resolved = resolve(scene)
+    robot = _robot(scene, backend, resolved)
     model = _compile(robot.spec)
     fin = scene.fin
     sides = ("r",) if scene.robot.model == "half" else ("r", "l")
-    groups = [_group(model, "fin_sand", scene.rft, penalty_stiffness(fin), _fin_bodies(robot)),
-              _group(model, "arm_sand", arm_law(scene), 0.0, robot.arms)]
+    groups = [_group(model, "fin_sand", resolved.chain, penalty_stiffness(fin), _fin_bodies(robot)),
+              _group(model, "arm_sand", resolved.arm, 0.0, robot.arms)]
     if scene.body.drag_law == "velocity":
-        groups.append(_group(model, "body_sand", body_law(scene), 0.0, [robot.body]))
+        groups.append(_group(model, "body_sand", body_law(scene, resolved), 0.0, [robot.body]))
     (travel_qpos,), (travel_dof,) = _addresses(model, [robot.travel])
     servo_qpos, servo_dof = _addresses(model, robot.servos)
     hinges = [_addresses(model, chain.hinges) for chain in robot.fins]
@@ -442,4 +434,5 @@ def build_robot(scene: RobotScene) -> RobotModel:
         fin_hinge_dof=np.array([d for _, d in hinges], dtype=int).reshape(len(sides), -1),
         fin_sites=np.array([[b.sites[0].id for b in chain.bodies] for chain in robot.fins]),
         groups=tuple(groups),
+        resolved=resolved,
     )

@@ -17,7 +17,7 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from . import laws
+from . import geometry, laws
 from .experiment import DISPLAY, Result
 from .files import atomic_path, provenance
 from .scene import to_toml
@@ -60,9 +60,9 @@ def write_h5(run: Result, path: str | Path, *, extra_attrs: dict[str, Any] | Non
             if quantity.per == "sample":
                 ds.dims[0].label = "time"
                 ds.dims[0].attach_scale(t)
+        feeds = laws.feeds_energy(geometry.segment_law(run.scene))
         f.attrs.update({"schema": experiment.schema, **_provenance(run.scene, run.summary()), **experiment.attrs(),
-                        "sign_convention": experiment.sign_convention, "law_feeds_energy": laws.feeds_energy(run.scene),
-                        **extra})
+                        "sign_convention": experiment.sign_convention, "law_feeds_energy": feeds, **extra})
 
 
 def _stream(path: Path) -> rr.RecordingStream:

@@ -21,7 +21,7 @@ out on its own the law, the penalty stop and the robot's parts (its arm's and bo
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 from scipy.integrate import solve_ivp
@@ -62,12 +62,28 @@ def _sandswim_law(c_s: float, c_f: float, gamma0: float, v_reg: float) -> Callab
     return law
 
 
-def _scene_law(rft: RFT):
+def _scene_law(rft: RFT, length: float, medium: Any, given: Any = None):
+    """A segment's law: the scene's coefficients, per unit area and depth, times the segment's face area (length x
+    medium.height) and its mean depth (medium.depth + height / 2); or a law ``given`` per segment (N), as a
+    [medium] gives it (`finrft.laws.SegmentLaw`: its law's name, v_reg and parameters)."""
+    if given is not None:
+        return _given_law(given)
+    size = length * medium.height * (medium.depth + medium.height / 2)
     if rft.law == "paper":
-        return _paper_law(rft.f_perp, rft.f_par, rft.v_reg)
-    if rft.law == "sandswim":
-        return _sandswim_law(rft.c_s, rft.c_f, rft.gamma0, rft.v_reg)
-    raise ValueError(f"the reference solves the paper and sandswim laws, not rft.law = {rft.law!r}")
+        return _paper_law(size * rft.f_perp, size * rft.f_par, rft.v_reg)
+    if rft.law == "sandswim" and rft.c_s:
+        return _sandswim_law(size * rft.c_s, size * rft.c_f, rft.gamma0, rft.v_reg)
+    raise ValueError(f"the reference solves the paper and sandswim laws with given coefficients, not "
+                     f"rft.law = {rft.law!r} (a law from [medium] must be given)")
+
+
+def _given_law(law: Any):
+    p = law.parameters
+    if law.law == "paper":
+        return _paper_law(p["f_perp"], p["f_par"], law.v_reg)
+    if law.law == "sandswim":
+        return _sandswim_law(p["c_s"], p["c_f"], p["gamma0"], law.v_reg)
+    raise ValueError(f"the reference solves the paper and sandswim laws, not {law.law!r}")
 
 
 def _stop(deflection, stiffness: float):
@@ -92,7 +108,7 @@ def _e_perp(phi):
 
 
 class _Chain:
-    def __init__(self, scene: Scene, drive: Drive) -> None:
+    def __init__(self, scene: Scene, drive: Drive, law: Any = None) -> None:
         p = scene.plate
         if p.kind == "rigid":
             raise ValueError("the reference solves hinged plates; a rigid plate has no dynamics of its own")
@@ -105,7 +121,7 @@ class _Chain:
         self.inertia = np.full(n, p.segment_inertia)
         self.mcc = np.einsum("i,ik,ij->kj", self.m, self.c, self.c)  # sum_i m_i c_ik c_ij
         self.mc = self.m[:, None] * self.c                            # m_i c_ik
-        self.law = _scene_law(scene.rft)
+        self.law = _scene_law(scene.rft, p.segment_length, scene.medium, law)
         self.penalty = p.kind == "origami"
         # a drag at angle of attack theta to +y starts with the plate at 90 deg - theta
         self.heading = np.radians(90.0 - drive.attack_deg) if drive.kind == "drag" else 0.0
@@ -161,9 +177,11 @@ class _Chain:
         return np.linalg.solve(a, rhs)
 
 
-def solve(scene: Scene, drive: Drive, times: np.ndarray, *, rtol: float = 1e-10, atol: float = 1e-12) -> Solution:
-    """Integrate the plate test stroke by stroke (Radau) and sample it at ``times`` (s, increasing)."""
-    chain = _Chain(scene, drive)
+def solve(scene: Scene, drive: Drive, times: np.ndarray, *, rtol: float = 1e-10, atol: float = 1e-12,
+          law: Any = None) -> Solution:
+    """Integrate the plate test stroke by stroke (Radau) and sample it at ``times`` (s, increasing); ``law``: a
+    segment's law (N) when the scene's [medium] gives it."""
+    chain = _Chain(scene, drive, law)
     n, ts = chain.n, drive.stroke_time
     phi = np.full(n, chain.heading)
     # At t = 0 the plate moves rigidly with the drive: hinge rates are zero.
@@ -215,7 +233,7 @@ class _HalfRobot:
     is prescribed. Point masses j (body, arm centre, segment midpoints) at r_j(q, psi), with J_j = dr_j/dq and
     w_j = dr_j/dpsi:  M q'' = Q - sum_j m_j J_j^T (J_j' q' + w_j' psi'),  M = sum_j m_j J_j^T J_j + diag(I)."""
 
-    def __init__(self, scene: RobotScene, drive: Drive, arm: RFT | None, body_drag: float | None) -> None:
+    def __init__(self, scene: RobotScene, drive: Drive, arm: Any, body_drag: float | None, fin: Any) -> None:
         f, a = scene.fin, scene.arm
         if scene.robot.model != "half" or scene.robot.servo != "prescribed":
             raise ValueError("the reference solves the half robot with a prescribed servo")
@@ -233,10 +251,10 @@ class _HalfRobot:
         self.m_arm = a.mass_base + a.linear_density * a.length
         self.m_seg = f.segment_mass
         self.inertia = np.full(self.n, f.segment_inertia)
-        self.fin_law = _scene_law(scene.rft)
+        self.fin_law = _scene_law(scene.rft, f.segment_length, m, fin)
         # the arm: the given law, or the paper law with a normal coefficient growing with the arm's length; the
         # body: isotropic drag, the given one or the scene's
-        self.arm_law = _scene_law(arm) if arm else _paper_law(a.f_perp_base + a.f_perp_per_length * a.length,
+        self.arm_law = _given_law(arm) if arm else _paper_law(a.f_perp_base + a.f_perp_per_length * a.length,
                                                              a.f_par, scene.rft.v_reg)
         drag = share * (scene.body.drag if body_drag is None else body_drag)
         self.body_law = _paper_law(drag, drag, scene.body.v_reg)
@@ -294,13 +312,13 @@ class _HalfRobot:
 
 
 def solve_robot(scene: RobotScene, cycles: int, times: np.ndarray, *, rtol: float = 1e-9, atol: float = 1e-12,
-                arm: RFT | None = None, body_drag: float | None = None) -> RobotSolution:
+                arm: Any = None, body_drag: float | None = None, fin: Any = None) -> RobotSolution:
     """Integrate the half robot's flap cycles with Radau; the same start and reversals as finrft.swim. A scene
     whose [medium] gives the arm's law and the body's drag (N, the whole robot's) needs them given, as numbers:
-    ``arm`` and ``body_drag``."""
+    ``arm`` and ``body_drag`` (and ``fin``, a fin segment's law, when the medium gives it)."""
     g = scene.gait  # the arm swings from theta2 up to theta1 and back at omega
     drive = Drive(kind="rotate", speed=g.omega, stroke=g.theta1 - g.theta2, cycles=cycles, start=g.theta2)
-    robot = _HalfRobot(scene, drive, arm, body_drag)
+    robot = _HalfRobot(scene, drive, arm, body_drag, fin)
     n, ts = robot.n, drive.stroke_time
     if robot.rigid:
         raise ValueError("the reference solves hinged fins")

@@ -44,11 +44,11 @@ class Chain:
                        "mass matrix")
     segment_length: float = _f(0.033, "m", "length of one segment", minimum=0.0)
     segment_mass: float = _f(0.00289, "kg", "mass of one segment, at its midpoint", minimum=0.0)
-    segment_inertia: float = _f(2.6e-7, "kg m^2", "rotational inertia of a segment about z through its centre",
+    segment_inertia: float = _f(2.623e-7, "kg m^2", "rotational inertia of a segment about z through its centre",
                                 minimum=0.0)
-    stiffness: float = _f(0.209, "N m/rad", "hinge spring stiffness k", minimum=0.0, exclusive=False)
+    stiffness: float = _f(0.04863, "N m/rad", "hinge spring stiffness k", minimum=0.0, exclusive=False)
     springref: float = _f(0.0, "rad", "hinge rest angle; the origami stop sits here")
-    damping: float = _f(1.43, "N m s/rad", "hinge damping b", minimum=0.0, exclusive=False)
+    damping: float = _f(0.04555, "N m s/rad", "hinge damping b", minimum=0.0, exclusive=False)
     stop: str = _f("penalty", "", "origami stop: the penalty spring (taken implicitly by the newton method), or a "
                    "MuJoCo joint limit",
                    choices=("limit", "penalty"))
@@ -60,7 +60,7 @@ class Chain:
 class Plate(Chain):
     rod_length: float = _f(0.007, "m", "extension rod from the driven base point to the first hinge", minimum=0.0)
     rod_mass: float = _f(0.010, "kg", "mass of the extension rod, at its midpoint", minimum=0.0)
-    rod_inertia: float = _f(4.1e-8, "kg m^2", "rotational inertia of the rod about z through its centre",
+    rod_inertia: float = _f(4.08e-8, "kg m^2", "rotational inertia of the rod about z through its centre",
                             minimum=0.0)
     chain: str = _f("planar", "", "planar: hinges about z only; spatial: each segment also turns freely about "
                     "its own x and y axes (a 3D chain)", choices=("planar", "spatial"))
@@ -180,9 +180,10 @@ class Immersion:
     here, and the chain's depth and height do."""
 
     name: str = _f("", "", "a medium of the catalogue (finrft medium --list); empty: unnamed")
-    depth: float = _f(0.0, "m", "depth of the chain's top edge below the free surface", minimum=0.0, exclusive=False)
-    height: float = _f(0.0, "m", "the chain's vertical extent (the plate's height); 0: not given", minimum=0.0,
-                       exclusive=False)
+    depth: float = _f(0.010, "m", "depth of the chain's top edge below the free surface", minimum=0.0,
+                      exclusive=False)
+    height: float = _f(0.055, "m", "the chain's vertical extent (the plate's or fin's height): a segment's face is "
+                       "segment_length x height, at mean depth depth + height / 2", minimum=0.0)
     bulk_density: float = _f(0.0, "kg/m^3", "the medium's critical (bulk) density, 3D-RFT's rho_c; 0: the named "
                              "medium's, if catalogued", minimum=0.0, exclusive=False)
     internal_friction: float = _f(0.0, "", "the medium's internal friction coefficient, 3D-RFT's mu_int (tan of the "
@@ -248,12 +249,8 @@ class _Sections:
         return dataclasses.asdict(self)
 
     def replace(self, **updates: Any):
-        """A copy with dotted keys changed, e.g. ``scene.replace(**{"plate.kind": "soft"})``; validated. Law
-        coefficients the scene took from its medium are taken anew (from the changed medium or chain), unless
-        the updates set them."""
+        """A copy with dotted keys changed, e.g. ``scene.replace(**{"plate.kind": "soft"})``; validated."""
         data = self.to_dict()
-        if getattr(self, "_rft_from_medium", False) and not any(f"rft.{k}" in updates for k in SANDSWIM_KEYS):
-            data["rft"].update(dict.fromkeys(SANDSWIM_KEYS, 0.0))
         return scene_from_dict(schema.updated(data, type(self), updates), type(self))
 
 
@@ -273,7 +270,7 @@ class Scene(_Sections):
     sim: Sim = field(default_factory=Sim)
 
     def __post_init__(self) -> None:
-        _law_from_medium(self, self.plate.segment_length)
+        _check_chain_law(self)
         _check_sim(self.sim)
 
 
@@ -287,13 +284,14 @@ class RobotScene(_Sections):
     fin: Chain = field(default_factory=lambda: Chain(segments=3, segment_length=0.02, segment_mass=0.00795,
                                                      segment_inertia=2.65e-7, stiffness=0.5879, damping=0.4399,
                                                      stop_stiffness=100.0))
-    rft: RFT = field(default_factory=lambda: RFT(f_perp=6.779, f_par=-1.0))
+    # the authors' 6.779 N and -1 N per 20 mm fin segment, over its face 20 x 55 mm at 37.5 mm mean depth
+    rft: RFT = field(default_factory=lambda: RFT(f_perp=164339.39393939395, f_par=-24242.424242424244))
     medium: Immersion = field(default_factory=Immersion)
     gait: Gait = field(default_factory=Gait)
     sim: Sim = field(default_factory=Sim)
 
     def __post_init__(self) -> None:
-        _law_from_medium(self, self.fin.segment_length)
+        _check_chain_law(self)
         _check_sim(self.sim)
         g = self.gait
         for key in ("theta1", "theta2"):
@@ -342,29 +340,19 @@ class IntrusionScene(_Sections):
         _check_medium(self.medium)
 
 
-def _check_law(r: RFT) -> None:
+def _check_chain_law(scene: Any) -> None:
+    """Check a chain scene's medium and law: a sandswim law with c_s, c_f and gamma0 all 0 takes them from the
+    medium (`finrft.geometry.resolve`, at model build), which must then give what they follow from."""
+    r = scene.rft
+    properties = media.immersion_properties(scene.medium)
+    if r.law == "sandswim" and not any(getattr(r, k) for k in SANDSWIM_KEYS) and properties is not None:
+        return
     if r.law == "table" and not r.table:
         raise SceneError("rft.law = 'table' needs rft.table, the path of a CSV with attack_deg, f_perp_N, f_par_N")
     if r.law == "sandswim" and not (r.c_s > 0 and r.c_f > 0 and r.gamma0 > 0):
-        raise SceneError("rft.law = 'sandswim' needs rft.c_s > 0, rft.c_f > 0 (N per segment) and "
-                         "0 < rft.gamma0 <= pi/2 (rad), the medium's fitted values: none are built in (or leave "
-                         "all three at 0 and give [medium] height, bulk_density, internal_friction and "
-                         "surface_friction to derive them)")
-
-
-def _law_from_medium(scene: Any, segment_length: float) -> None:
-    """Check a chain scene's medium and law; a sandswim law with c_s, c_f and gamma0 all 0 takes them from the
-    medium when it gives what they follow from (the scene then holds them, and remembers where they came from).
-    A derived C_S or C_F may be 0 (3D-RFT gives a thin plate no drag along itself without surface friction)."""
-    rft = scene.rft
-    properties = media.immersion_properties(scene.medium)
-    if rft.law == "sandswim" and not any(getattr(rft, k) for k in SANDSWIM_KEYS) and properties is not None:
-        found = media.sandswim_coefficients(segment_length, scene.medium.depth, scene.medium.height, *properties)
-        object.__setattr__(scene, "rft", dataclasses.replace(rft, c_s=found.c_s, c_f=found.c_f,
-                                                             gamma0=found.gamma0))
-        object.__setattr__(scene, "_rft_from_medium", True)
-    else:
-        _check_law(rft)
+        raise SceneError("rft.law = 'sandswim' needs rft.c_s > 0, rft.c_f > 0 (N/m^3) and 0 < rft.gamma0 <= pi/2 "
+                         "(rad), the medium's fitted values: none are built in (or leave all three at 0 and give "
+                         "[medium] bulk_density, internal_friction and surface_friction to derive them)")
 
 
 PRESETS: dict[type, tuple[str, ...]] = {Scene: ("paper", "physical"), RobotScene: ("paper", "physical")}

@@ -34,6 +34,7 @@ from scipy.optimize import minimize
 
 import finrft
 from finrft import data as shipped
+from finrft import geometry
 from finrft.convergence import SimulationFailed
 from finrft.studies.fit import mse, read_drag
 from finrft.experiments.swim import swim
@@ -48,14 +49,21 @@ STIFFNESS = np.geomspace(0.08, 3.0, 16)  # N m/rad
 K_RANGE = (0.05, 20.0)  # N m/rad: the bisection's bracket
 
 
-def broadside(rft: finrft.scene.RFT) -> float:
+def fin_law(scene: finrft.RobotScene) -> dict[str, float]:
+    """A fin segment's sand-swimming law, resolved (N): the preset's from its medium, or the scene's coefficients
+    times the segment's face."""
+    return dict(geometry.resolve(scene).chain.parameters)
+
+
+def broadside(law: dict[str, float]) -> float:
     """The sand-swimming law's force (N) on a segment moving along its normal."""
-    return rft.c_s * math.cos(rft.gamma0) + rft.c_f
+    return law["c_s"] * math.cos(law["gamma0"]) + law["c_f"]
 
 
 def shaped(scene: finrft.RobotScene, gamma0: float, ratio: float) -> finrft.RobotScene:
-    """The scene with the fin law's gamma0 and c_f/c_s set, its broadside force kept."""
-    c_s = broadside(scene.rft) / (math.cos(gamma0) + ratio)
+    """The scene with the fin law's gamma0 and c_f/c_s set, its broadside force kept (the scene's coefficients per
+    unit area and depth)."""
+    c_s = broadside(fin_law(scene)) / (math.cos(gamma0) + ratio) / geometry.segment_scale(scene)
     return scene.replace(**{"rft.c_s": c_s, "rft.c_f": ratio * c_s, "rft.gamma0": gamma0})
 
 
@@ -78,9 +86,9 @@ class Robot:
         except SimulationFailed:
             out = {"eta": float("nan"), "D1_mm": float("nan"), "D2_mm": float("nan"),
                    "net_speed_mm_s": float("nan"), "eta_first_cycle": float("nan")}
-        r = self.scene.rft
+        r = fin_law(self.scene)
         if self.log:
-            self.log.writerow([self.label, f"{r.gamma0:.5f}", f"{r.c_f / r.c_s:.5f}", f"{k:.6g}", NAMES[row],
+            self.log.writerow([self.label, f"{r['gamma0']:.5f}", f"{r['c_f'] / r['c_s']:.5f}", f"{k:.6g}", NAMES[row],
                                f"{out['eta']:.6f}", f"{out['net_speed_mm_s']:.4f}"])
         return out
 
@@ -106,9 +114,9 @@ class Robot:
 
 
 def show(title: str, robot: Robot, k: float, rows: list[dict[str, float]]) -> None:
-    r = robot.scene.rft
-    print(f"\n### {title}: gamma0 {r.gamma0:.4f} rad, c_f/c_s {r.c_f / r.c_s:.3f}, c_s {r.c_s:.3f} N, "
-          f"c_f {r.c_f:.3f} N (broadside {broadside(r):.3f} N per segment), k {k:.4g} N m/rad\n")
+    r = fin_law(robot.scene)
+    print(f"\n### {title}: gamma0 {r['gamma0']:.4f} rad, c_f/c_s {r['c_f'] / r['c_s']:.3f}, c_s {r['c_s']:.3f} N, "
+          f"c_f {r['c_f']:.3f} N per segment (broadside {broadside(r):.3f} N), k {k:.4g} N m/rad\n")
     print("| gait | η % | η cycle 1 % | η_exp % | net speed mm/s | paper speed mm/s | speed ratio | fit |")
     print("|---|---:|---:|---:|---:|---:|---:|---|")
     for i, row in enumerate(rows):
@@ -164,7 +172,7 @@ def main() -> None:
     args = parser.parse_args()
     warnings.simplefilter("ignore", finrft.laws.FeedsEnergy)
     scene = finrft.preset("physical", finrft.RobotScene)
-    ratio = scene.rft.c_f / scene.rft.c_s
+    ratio = fin_law(scene)["c_f"] / fin_law(scene)["c_s"]
     optimized, asymmetry = NAMES.index("Optimized"), NAMES.index("Asymmetry 1")
     f = open(args.out, "w", newline="") if args.out else None
     log = csv.writer(f) if f else None

@@ -5,6 +5,15 @@ import pytest
 from finrft.scene import Scene, preset
 
 
+def face(scene) -> float:
+    """A chain segment's face area x mean depth (m^3), written out: the segment's length x the chain's height
+    (medium.height), at the depth of its middle (medium.depth + height / 2). A segment's law coefficients (N) are
+    the scene's (N/m^3) times it."""
+    chain = getattr(scene, "plate", None) or scene.fin
+    m = scene.medium
+    return chain.segment_length * m.height * (m.depth + m.height / 2)
+
+
 @pytest.fixture(scope="session")
 def paper() -> Scene:
     return preset("paper")

@@ -162,7 +162,8 @@ def test_a_wrong_integrator_lists_the_choices(capsys):
 
 def test_table_law_from_a_scene_file_matches_the_paper_law(tmp_path, capsys):
     # The paper law written as a fine table must give the same drag: two laws, one result.
-    write_table(tmp_path / "forces.csv", paper_table(1.2, -0.2, samples=1801))
+    paper_law = preset("paper").rft  # per unit area and depth, as the table is
+    write_table(tmp_path / "forces.csv", paper_table(paper_law.f_perp, paper_law.f_par, samples=1801))
     text = to_toml(preset("paper")).replace('law = "paper"', 'law = "table"')
     scene = tmp_path / "table.toml"
     scene.write_text(text.replace('table = ""', 'table = "forces.csv"'))  # relative to the scene file

@@ -8,7 +8,7 @@ import h5py
 import numpy as np
 import pytest
 
-from finrft import laws
+from finrft import geometry, laws
 from finrft.cli import main
 from finrft.laws import table
 from finrft.scene import preset
@@ -74,9 +74,9 @@ def test_feeding_parameters_are_detected_and_do_feed_energy_in(name, params):
 
 
 def test_the_paper_preset_feeds_energy_in_and_says_why_and_the_physical_one_dissipates():
-    assert "f_par" in laws.feeds_energy(preset("paper"))
-    assert laws.feeds_energy(preset("paper").replace(**{"rft.f_par": 0.2})) == ""
-    assert laws.feeds_energy(preset("physical")) == ""
+    assert "f_par = -0.2 N < 0" in laws.feeds_energy(geometry.segment_law(preset("paper")))  # per segment
+    assert laws.feeds_energy(geometry.segment_law(preset("paper").replace(**{"rft.f_par": 2938.0}))) == ""
+    assert laws.feeds_energy(geometry.segment_law(preset("physical"))) == ""
 
 
 def test_a_run_says_once_that_its_law_feeds_energy_in(tmp_path, capsys, monkeypatch):
@@ -88,7 +88,7 @@ def test_a_run_says_once_that_its_law_feeds_energy_in(tmp_path, capsys, monkeypa
     assert main(["drag", "--out", str(outs[2]), "--quiet", "--set", "rft.f_par=0.2", *fast]) == 0
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("finrft: warning: ") and "f_par = -0.2 N < 0" in err[0], err
-    reason = laws.feeds_energy(preset("paper"))
+    reason = laws.feeds_energy(geometry.segment_law(preset("paper")))
     for out, expected in zip(outs, (reason, reason, "")):
         with h5py.File(out) as f:
             assert f.attrs["law_feeds_energy"] == expected

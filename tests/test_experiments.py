@@ -9,6 +9,7 @@ import pytest
 import finrft
 import finrft.laws
 from finrft.cli import build_parser, main
+from finrft.geometry import segment_law
 from finrft.experiments import REGISTRY, Command, register
 from finrft.experiments.plate import PlateTest, add_plate_scene, resolve_plate
 
@@ -80,14 +81,14 @@ def test_fresh_swim_is_the_physical_robot_swimming_forward_without_warning(capsy
     summary = json.loads(captured.out.splitlines()[-1])
     assert summary["eta_steady"] > 0  # the physical robot swims forward; the paper preset's eta is -7 %
     assert "authors' model" not in captured.out
-    assert finrft.laws.feeds_energy(finrft.preset("physical", finrft.RobotScene)) == ""  # warned or not before
+    assert finrft.laws.feeds_energy(segment_law(finrft.preset("physical", finrft.RobotScene))) == ""  # warned or not before
 
 
 def test_fresh_drag_warns_of_nothing_and_the_paper_preset_says_what_it_is(capsys):
     assert main(["drag", "--distance", "5"]) == 0
     captured = capsys.readouterr()
     assert captured.err == "" and "authors' model" not in captured.out
-    assert finrft.laws.feeds_energy(finrft.preset("physical")) == ""
+    assert finrft.laws.feeds_energy(segment_law(finrft.preset("physical"))) == ""
     assert main(["drag", "--distance", "5", "--preset", "paper"]) == 0
     captured = capsys.readouterr()
     assert "preset paper: the authors' model" in captured.out and "feeds energy in" in captured.out

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from finrft.studies.fit import fit, read_drag, read_forces, resolve_params, simulated_drag, write_drag
-from finrft import laws
+from conftest import face
+from finrft import geometry, laws
 from finrft.cli import main
 from finrft.data import plate_drag_dir
 from finrft.laws.table import read_table
@@ -67,15 +68,17 @@ def test_four_parameter_fit_predicts_the_unseen_speed():
     # with physical inertias on 10 and 50 mm/s, predict the 30 mm/s measurement to within 3 deg RMS (README:
     # 2.86 deg), better than the paper's damping-only fit does on the data it fits.
     data = {v: read_drag(f"{DATA}/origami_v{v}.csv") for v in (10, 30, 50)}
+    # bounds and start per segment (N) of the preset's face, per unit area and depth (N/m^3)
+    size = face(preset("physical"))
     variables = resolve_params(["b", "rft.c_s", "rft.c_f", "rft.gamma0"],
-                               {"b": (1e-4, 100.0), "rft.c_s": (0.01, 100.0), "rft.c_f": (1e-4, 2.0),
-                                "rft.gamma0": (0.01, math.pi / 2)})
-    start = preset("physical").replace(**{"plate.damping": 0.09012, "rft.c_s": 0.6, "rft.c_f": 0.05,
+                               {"b": (1e-4, 100.0), "rft.c_s": (0.01 / size, 100.0 / size),
+                                "rft.c_f": (1e-4 / size, 2.0 / size), "rft.gamma0": (0.01, math.pi / 2)})
+    start = preset("physical").replace(**{"plate.damping": 0.09012, "rft.c_s": 0.6 / size, "rft.c_f": 0.05 / size,
                                           "rft.gamma0": 0.5})
     result = fit(start, [data[10], data[50]], variables, validate=[data[30]], budget=300, seed=1, workers=2)
     assert result.validate_rmse_deg["origami_v30"] < 3.0
     assert max(result.rmse_deg.values()) < 3.5
-    assert laws.feeds_energy(result.scene) == ""
+    assert laws.feeds_energy(geometry.segment_law(result.scene)) == ""
     physical = preset("physical")  # what this fit gave, rounded to four digits
     for key in ("c_s", "c_f", "gamma0"):
         assert getattr(result.scene.rft, key) == pytest.approx(getattr(physical.rft, key), rel=1e-3)
@@ -90,12 +93,14 @@ def test_rft_identification_closes_the_loop(tmp_path, capsys):
     fragment = tmp_path / "rft.toml"
     assert main(["fit-rft", "--data", str(forces), "--out", str(fragment), "--json"]) == 0
     found = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
-    assert found["f_perp"] == pytest.approx(1.2, rel=1e-9) and found["f_par"] == pytest.approx(-0.2, rel=1e-9)
+    # the paper preset's law, per unit area and depth: the authors' 1.2 N and -0.2 N per segment over its face
+    f_perp, f_par = 1.2 / face(preset("paper")), -0.2 / face(preset("paper"))
+    assert found["f_perp"] == pytest.approx(f_perp, rel=1e-9) and found["f_par"] == pytest.approx(f_par, rel=1e-9)
     table = read_table(tmp_path / "rft.csv")
     attack = np.radians(table.attack_deg)
-    np.testing.assert_allclose(table.f_perp, 1.2 * np.sin(attack), atol=1e-9)
-    np.testing.assert_allclose(table.f_par, -0.2 * np.cos(attack), atol=1e-9)
-    assert tomllib.loads(fragment.read_text())["rft"]["f_perp"] == pytest.approx(1.2, rel=1e-9)
+    np.testing.assert_allclose(table.f_perp, f_perp * np.sin(attack), rtol=1e-9, atol=1e-9 * f_perp)
+    np.testing.assert_allclose(table.f_par, f_par * np.cos(attack), rtol=1e-9, atol=1e-9 * f_perp)
+    assert tomllib.loads(fragment.read_text())["rft"]["f_perp"] == pytest.approx(f_perp, rel=1e-9)
 
 
 BAD_FILES = {

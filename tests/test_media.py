@@ -11,12 +11,13 @@ import mujoco
 import numpy as np
 import pytest
 
-from finrft import laws, media
+from finrft import geometry, laws, media
 from finrft.attach import attach
 from finrft.cli import main
 from finrft.experiments.intrusion import intrude
 from finrft.laws import li2013, sandswim
-from finrft.scene import IntrusionScene, RobotScene, Scene, SceneError, preset, scene_from_dict, to_toml
+from finrft.scene import (IntrusionScene, RobotScene, Scene, SceneError, load_scene, preset, scene_from_dict,
+                          to_toml)
 
 CM3 = li2013.N_PER_CM3
 # alpha_z(0, 90 deg) of the poppy-seed sets: the sum of their A and B coefficients (Li 2013's zeta of a medium)
@@ -217,34 +218,53 @@ MEDIUM_SET = {"medium.height": 0.03, "medium.depth": 0.02, "medium.bulk_density"
 def test_the_physical_preset_names_its_medium_and_dissipates():
     scene = preset("physical")
     assert scene.medium.name == "glass_beads_4mm" and scene.rft.law == "sandswim"
-    assert laws.feeds_energy(scene) == "" and laws.feeds_energy(preset("paper"))
+    assert laws.feeds_energy(geometry.segment_law(scene)) == ""
+    assert laws.feeds_energy(geometry.segment_law(preset("paper")))
 
 
-@pytest.mark.parametrize("cls, length_key", [(Scene, "plate.segment_length"), (RobotScene, "fin.segment_length")])
-def test_a_sandswim_law_left_at_zero_takes_its_coefficients_from_the_medium(cls, length_key):
+@pytest.mark.parametrize("cls, chain", [(Scene, "plate"), (RobotScene, "fin")])
+def test_a_sandswim_law_left_at_zero_takes_its_coefficients_from_the_medium(cls, chain):
     scene = preset("physical", cls).replace(**{"rft.law": "sandswim", "rft.c_s": 0.0, "rft.c_f": 0.0,
                                                "rft.gamma0": 0.0, **MEDIUM_SET})
-    same = scene.replace()
-    found = media.sandswim_coefficients(
-        getattr(getattr(scene, length_key.split(".")[0]), "segment_length"), 0.02, 0.03, 1500.0, 0.4, 0.4)
-    assert (scene.rft.c_s, scene.rft.c_f, scene.rft.gamma0) == (found.c_s, found.c_f, found.gamma0)
-    assert same.rft == scene.rft
+    found = media.sandswim_coefficients(getattr(scene, chain).segment_length, 0.02, 0.03, 1500.0, 0.4, 0.4)
+    law = geometry.resolve(scene).chain
+    assert (law.law, law.parameters) == ("sandswim", {"c_s": found.c_s, "c_f": found.c_f, "gamma0": found.gamma0})
+    # the scene says what its user gave: the coefficients stay left to the medium
+    assert (scene.rft.c_s, scene.rft.c_f, scene.rft.gamma0) == (0.0, 0.0, 0.0)
     # deeper: 3D-RFT's stress grows with depth, so C_S and C_F with the plate's mean depth, and gamma0 stays
-    deeper = scene.replace(**{"medium.depth": 0.05})
+    deeper = geometry.resolve(scene.replace(**{"medium.depth": 0.05})).chain.parameters
     ratio = (0.05 + 0.015) / (0.02 + 0.015)
-    assert deeper.rft.c_s == pytest.approx(ratio * scene.rft.c_s, rel=1e-5)
-    assert deeper.rft.c_f == pytest.approx(ratio * scene.rft.c_f, rel=1e-5)
-    assert deeper.rft.gamma0 == pytest.approx(scene.rft.gamma0, rel=1e-5)
-    # the resolved scene holds the values: its TOML gives the same law
-    assert scene_from_dict(tomllib.loads(to_toml(scene)), cls).rft == scene.rft
-    # coefficients set explicitly are kept
-    assert scene.replace(**{"rft.c_s": 1.0}).rft.c_s == 1.0
+    assert deeper["c_s"] == pytest.approx(ratio * found.c_s, rel=1e-5)
+    assert deeper["c_f"] == pytest.approx(ratio * found.c_f, rel=1e-5)
+    assert deeper["gamma0"] == pytest.approx(found.gamma0, rel=1e-5)
+    # coefficients set explicitly are kept, per unit area and depth
+    explicit = scene.replace(**{"rft.c_s": 1000.0, "rft.c_f": 500.0, "rft.gamma0": 0.3})
+    size = getattr(scene, chain).segment_length * 0.03 * (0.02 + 0.015)
+    assert geometry.resolve(explicit).chain.parameters["c_s"] == pytest.approx(1000.0 * size, rel=1e-12)
+
+
+@pytest.mark.parametrize("cls", [Scene, RobotScene])
+def test_a_scene_whose_law_comes_from_its_medium_reads_back_the_same(cls, tmp_path):
+    """Saved and read back (TOML: --write-scene, scene --dump; JSON: result files), a scene whose sandswim law comes
+    from its [medium] is the same scene, and a changed medium changes both alike."""
+    scene = preset("physical", cls).replace(**{"rft.law": "sandswim", "rft.c_s": 0.0, "rft.c_f": 0.0,
+                                               "rft.gamma0": 0.0, **MEDIUM_SET})
+    path = tmp_path / "scene.toml"
+    path.write_text(to_toml(scene))
+    for back in (load_scene(path, cls=cls), scene_from_dict(json.loads(json.dumps(scene.to_dict())), cls)):
+        assert back == scene
+        for changed in ({"medium.depth": 0.04}, {"medium.height": 0.05}, {"medium.bulk_density": 1600.0}):
+            ours, theirs = scene.replace(**changed), back.replace(**changed)
+            assert ours == theirs
+            assert geometry.resolve(ours) == geometry.resolve(theirs)
+            assert geometry.resolve(ours).chain != geometry.resolve(scene).chain  # the change did reach the law
 
 
 def test_a_sandswim_law_without_coefficients_or_medium_values_is_refused():
     scene = preset("physical")
-    with pytest.raises(SceneError, match=r"sandswim' needs rft.c_s > 0.*\[medium\] height, bulk_density"):
-        scene.replace(**{"rft.c_s": 0.0, "rft.c_f": 0.0, "rft.gamma0": 0.0, **MEDIUM_SET, "medium.height": 0.0})
+    with pytest.raises(SceneError, match=r"sandswim' needs rft.c_s > 0.*\[medium\] bulk_density"):
+        scene.replace(**{"rft.c_s": 0.0, "rft.c_f": 0.0, "rft.gamma0": 0.0, **MEDIUM_SET,
+                         "medium.name": "", "medium.bulk_density": 0.0})
     with pytest.raises(SceneError, match="unknown medium 'sand'"):
         scene.replace(**{"medium.name": "sand"})
 

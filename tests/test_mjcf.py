@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from finrft import models
-from finrft.scene import RobotScene, preset
+from finrft.scene import RobotScene, Scene, preset
 
 FILES = sorted(f.name for f in resources.files("finrft.mjcf").iterdir() if f.name.endswith(".xml"))
 
@@ -72,3 +72,45 @@ def test_robot_fins_hang_from_the_arm_tips():
     x = a.pivot + a.length + (np.arange(f.segments) + 0.5) * f.segment_length
     np.testing.assert_allclose(d.site_xpos[robot.fin_sites][..., 0], [x, -x], atol=1e-12)
     assert robot.fin_hinge_qpos.shape == (2, f.segments)
+
+
+def _xml(name):
+    return mujoco.MjModel.from_xml_path(str(models.mjcf_path(name)))
+
+
+def _carried(name):
+    """The values a model file carries, by the physical preset's scene key, read from the compiled file."""
+    m = _xml(name)
+    if name == "segment.xml":
+        joint, body = m.joint("hinge").id, m.body("segment").id
+        return {"plate.stiffness": m.jnt_stiffness[joint], "plate.damping": m.dof_damping[m.jnt_dofadr[joint]],
+                "plate.springref": m.qpos_spring[m.jnt_qposadr[joint]], "plate.segment_mass": m.body_mass[body],
+                "plate.segment_inertia": m.body_inertia[body][2], "plate.segment_length": 2 * m.site_pos[0][0]}
+    if name == "plate.xml":
+        rod = m.body("rod").id
+        return {"plate.rod_mass": m.body_mass[rod], "plate.rod_inertia": m.body_inertia[rod][2],
+                "plate.rod_length": 2 * m.body_ipos[rod][0]}
+    if name == "robot.xml":
+        body, arm = m.body("body").id, m.body("r_arm").id
+        return {"body.mass": m.body_mass[body], "arm.inertia": m.body_inertia[arm][2], "arm.pivot": m.body_pos[arm][0],
+                "arm.length": 2 * m.body_ipos[arm][0], "arm.mass": m.body_mass[arm]}
+    return {}
+
+
+@pytest.mark.parametrize("name", [n for n in FILES if not n.endswith("_scene.xml")])
+def test_every_model_carries_the_values_its_preset_uses(name):
+    """One home per value: a model file opened alone has the physical preset's values (the scene files include
+    the models), and the schema's defaults of the plate's segments and rod are the same."""
+    carried = _carried(name)
+    assert carried, f"{name}: say here which preset values it carries"
+    plate, robot, defaults = preset("physical"), preset("physical", RobotScene), Scene()
+    for key, value in carried.items():
+        section, field = key.split(".")
+        if section == "plate":
+            assert value == pytest.approx(getattr(plate.plate, field), rel=1e-9, abs=1e-15), key
+            assert value == pytest.approx(getattr(defaults.plate, field), rel=1e-9, abs=1e-15), f"default {key}"
+        elif key == "arm.mass":
+            a = robot.arm
+            assert value == pytest.approx(a.mass_base + a.linear_density * a.length, rel=1e-9), key
+        else:
+            assert value == pytest.approx(getattr(getattr(robot, section), field), rel=1e-9), key

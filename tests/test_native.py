@@ -13,11 +13,12 @@ import numpy as np
 import pytest
 from mujoco import rollout
 
+from conftest import face
 from finrft import batch, models, native
 from finrft.cli import main
 from finrft.drive import Drive
 from finrft.laws.table import ForceTable, write_table
-from finrft.scene import SceneError
+from finrft.scene import SceneError, preset
 from finrft.experiments.plate import simulate
 
 
@@ -58,10 +59,12 @@ def test_mujoco_version_mismatch_falls_back_with_one_line(monkeypatch, capsys):
 
 @pytest.fixture(scope="module")
 def table_csv(tmp_path_factory):
-    # A table that is not the paper law (a flattened sine), so the table path is exercised on its own.
+    # A table that is not the paper law (a flattened sine), so the table path is exercised on its own; per unit
+    # area and depth, of the paper plate's per-segment 1.2 N and -0.3 N.
     path = tmp_path_factory.mktemp("rft") / "forces.csv"
-    attack = np.linspace(0.0, 90.0, 7)
-    write_table(path, ForceTable(attack, 1.2 * np.sin(np.radians(attack)) ** 0.5, -0.3 * np.cos(np.radians(attack))))
+    attack, size = np.linspace(0.0, 90.0, 7), face(preset("paper"))
+    write_table(path, ForceTable(attack, 1.2 / size * np.sin(np.radians(attack)) ** 0.5,
+                                 -0.3 / size * np.cos(np.radians(attack))))
     return str(path)
 
 

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
+from conftest import face
 from finrft import models
 from finrft.drive import Drive
 from finrft.convergence import InaccurateResult, SimulationUnstable
@@ -18,8 +19,8 @@ def test_rigid_drag_is_the_sum_of_the_segment_law(paper, attack_deg):
     scene = paper.replace(**{"plate.kind": "rigid"})
     drive = Drive(speed=0.03, stroke=0.03, attack_deg=attack_deg)
     run = simulate(scene, drive)
-    theta, r = np.radians(attack_deg), scene.rft
-    expected = scene.plate.segments * (r.f_perp * np.sin(theta) ** 2 + r.f_par * np.cos(theta) ** 2) \
+    theta, r, size = np.radians(attack_deg), scene.rft, face(scene)
+    expected = scene.plate.segments * size * (r.f_perp * np.sin(theta) ** 2 + r.f_par * np.cos(theta) ** 2) \
         * np.tanh(drive.speed / r.v_reg)
     np.testing.assert_allclose(run.drive_force, expected, rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(run.rft_force.sum(axis=1)[:, 1], -expected, rtol=1e-9, atol=1e-12)
@@ -33,7 +34,7 @@ def test_rigid_rotation_torque_closed_form(paper):
     run = simulate(scene, drive)
     p, r = scene.plate, scene.rft
     radius = p.rod_length + (np.arange(p.segments) + 0.5) * p.segment_length
-    expected = np.sum(r.f_perp * np.tanh(drive.speed * radius / r.v_reg) * radius)
+    expected = np.sum(face(scene) * r.f_perp * np.tanh(drive.speed * radius / r.v_reg) * radius)
     np.testing.assert_allclose(run.drive_force, expected, rtol=1e-9)
     np.testing.assert_allclose(run.segment_angle[:, 0], run.displacement, atol=1e-12)
 
@@ -53,7 +54,8 @@ def test_single_hinge_settles_where_spring_balances_rft(paper):
                              "plate.damping": 0.01, "plate.segment_inertia": 1e-3, "sim.dt": 2.5e-4})
     run = simulate(scene, Drive(stroke=0.15))
     p, r = scene.plate, scene.rft
-    q_eq = brentq(lambda q: p.stiffness * q + 0.5 * p.segment_length * r.f_perp * np.cos(q), -np.pi / 2, 0.0)
+    f_perp = face(scene) * r.f_perp  # N, on the one segment
+    q_eq = brentq(lambda q: p.stiffness * q + 0.5 * p.segment_length * f_perp * np.cos(q), -np.pi / 2, 0.0)
     assert np.degrees(run.hinge_angle[-1, 0]) == pytest.approx(np.degrees(q_eq), abs=1e-3)
     assert -40.0 < np.degrees(q_eq) < -10.0  # a real bend, not a trivial case
 
@@ -108,7 +110,7 @@ def test_penalty_stop_settles_at_its_static_balance(responsive):
     run = simulate(scene, Drive(stroke=0.2, cycles=1))
     p, r = scene.plate, scene.rft
     n = p.segments
-    tau = [r.f_perp * p.segment_length * sum(i - j + 0.5 for i in range(j, n)) for j in range(n)]
+    tau = [face(scene) * r.f_perp * p.segment_length * sum(i - j + 0.5 for i in range(j, n)) for j in range(n)]
     static = [brentq(lambda q, t=t: p.stiffness * q + 2 * p.stop_stiffness * q * q - t, 0.0, 1.0) for t in tau]
     np.testing.assert_allclose(run.hinge_angle[-1], static, rtol=0.01)
     assert np.all(run.hinge_angle.max(axis=0) < 3 * np.array(static))  # the impact overshoots, boundedly
@@ -148,9 +150,10 @@ def test_spatial_chain_stays_in_the_plane(paper):
 @pytest.mark.parametrize("name,f_perp", [("paper", None), ("physical", None), ("physical", 0.6)])
 def test_welded_segments_behave_as_one_rigid_body(name, f_perp):
     # The drive's load of a welded plate is -armature qacc through the constraint solver, which once accepted its
-    # warm start (qacc = 0, a load of 0) on the physical plate with the paper law at f_perp = 0.6 N.
-    rigid = preset(name).replace(**{"plate.kind": "rigid", **({"rft.law": "paper", "rft.f_perp": f_perp,
-                                                              "rft.f_par": 0.1} if f_perp else {})})
+    # warm start (qacc = 0, a load of 0) on the physical plate with the paper law at f_perp = 0.6 N per segment.
+    scene = preset(name)
+    rigid = scene.replace(**{"plate.kind": "rigid", **({"rft.law": "paper", "rft.f_perp": f_perp / face(scene),
+                                                        "rft.f_par": 0.1 / face(scene)} if f_perp else {})})
     body, welded = simulate(rigid, Drive()), simulate(rigid.replace(**{"plate.rigid_as": "welds"}), Drive())
     assert np.degrees(np.abs(welded.hinge_angle)).max() < 1e-3  # the welds hold
     assert body.peak_drive_force > 0.5

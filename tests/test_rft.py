@@ -104,8 +104,9 @@ def test_registry_finds_the_laws_by_name_and_skips_other_modules(extra_laws):
     assert laws.names() == ("paper", "sandswim", "table", "viscous")
     scene = preset("paper").replace(**{"rft.law": "viscous", "rft.f_perp": 2.0})  # the scene's choices follow
     v = np.array([[0.0, 1e-3, 0.0]])
-    np.testing.assert_allclose(laws.bind(scene.rft)(v, *frames(np.zeros(1))), -2.0 * v / scene.rft.v_reg)
-    assert laws.plugin_config(scene.rft) == {"law": "viscous", "v_reg": repr(scene.rft.v_reg), "f_perp": "2.0"}
+    law = laws.per_segment(scene.rft, 1.0, 1.0, 0.5)  # a law without INTENSIVE keys takes them as given
+    np.testing.assert_allclose(laws.bind(law)(v, *frames(np.zeros(1))), -2.0 * v / scene.rft.v_reg)
+    assert laws.plugin_config(law) == {"law": "viscous", "v_reg": repr(scene.rft.v_reg), "f_perp": "2.0"}
     with pytest.raises(SceneError, match="use one of paper, sandswim, table, viscous"):
         preset("paper").replace(**{"rft.law": "surface"})
 

@@ -161,3 +161,33 @@ def test_optimize_never_overwrites_and_rejects_foreign_logs(tmp_path, capsys):
     assert "exists" in err and "not a finrft optimisation log" in err
     with pytest.raises(SceneError):
         read_log(log)
+
+
+def test_optimize_searches_fin_design_keys(capsys):
+    # Segment length, fin height, stiffness, rest angle and arm length, bounded in mm and degrees as the command
+    # line speaks (a suffix the schema's unit allows): the best scene lies within them, in SI.
+    bounds = {"fin.segment_length": "15:30mm", "medium.height": "40:70mm", "fin.stiffness": "0.5:3",
+              "fin.springref": "-10:10deg", "arm.length": "60:85mm"}
+    argv = ["optimize", "--preset", "physical", "--budget", "4", "--workers", "1", "--json", "--quiet"]
+    for key, span in bounds.items():
+        argv += ["--bounds", f"{key}={span}"]
+    assert main(argv) == 0
+    best = json.loads(capsys.readouterr().out.strip().splitlines()[-1])["best"]
+    si = {"fin.segment_length": (0.015, 0.03), "medium.height": (0.04, 0.07), "fin.stiffness": (0.5, 3.0),
+          "fin.springref": (-np.radians(10), np.radians(10)), "arm.length": (0.06, 0.085)}
+    for key, (low, high) in si.items():
+        assert low <= best[key] <= high, key
+
+
+def test_bounds_take_each_keys_unit_from_the_schema():
+    from finrft.studies.fit import ALIASES, resolve_params
+    from finrft.studies.bounds import parse_bounds
+    from finrft.scene import Scene
+    found = parse_bounds(["plate.segment_length=20:50mm", "b=0.001:1", "plate.springref=-5:5deg",
+                          "rft.gamma0=10:80deg"], Scene, ALIASES)
+    assert found == {"plate.segment_length": pytest.approx((0.02, 0.05)), "b": (0.001, 1.0),
+                     "plate.springref": pytest.approx((-np.radians(5), np.radians(5))),
+                     "rft.gamma0": pytest.approx((np.radians(10), np.radians(80)))}
+    variables = resolve_params(["b", "plate.segment_length"], {k: found[k] for k in ("b", "plate.segment_length")})
+    assert [(v.key, v.low, v.high) for v in variables] == [("plate.damping", 0.001, 1.0),
+                                                           ("plate.segment_length", 0.02, 0.05)]

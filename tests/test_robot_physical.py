@@ -8,7 +8,7 @@ import pytest
 
 from finrft import geometry, media
 from finrft.cli import main
-from finrft.models import arm_law, body_drag, body_law
+from finrft.models import body_law
 from finrft.scene import RobotScene, SceneError, preset
 from finrft.experiments.swim import steady, swim
 
@@ -18,10 +18,11 @@ def physical():
     return preset("physical", RobotScene)
 
 
-def _broadside(rft):
+def _broadside(law):
     """The sand-swimming law's force on a segment moving along its normal: C_S sin(beta0) + C_F at psi = 90 deg,
     tan beta0 = cot gamma0."""
-    return rft.c_s * math.cos(rft.gamma0) + rft.c_f
+    p = law.parameters
+    return p["c_s"] * math.cos(p["gamma0"]) + p["c_f"]
 
 
 def test_faces_take_3d_rft_forces_from_the_medium(physical):
@@ -32,24 +33,31 @@ def test_faces_take_3d_rft_forces_from_the_medium(physical):
     # the body: only its front face (W x H, broadside) resists in 3D-RFT; the sides slide along themselves
     front, _ = media.plate_forces(broadside, s.body.width, m.depth, s.body.height, *props)
     assert geometry.body_resistance(s)["faces"] == pytest.approx(front[0], rel=1e-9)
-    assert body_drag(s) == pytest.approx(front[0] + s.body.cart, rel=1e-9)
-    assert body_law(s).f_perp == pytest.approx(0.5 * body_drag(s))  # the half robot carries half
+    resolved = geometry.resolve(s)
+    assert resolved.body_drag == pytest.approx(front[0] + s.body.cart, rel=1e-9)
+    # the half robot carries half
+    assert body_law(s, resolved).parameters["f_perp"] == pytest.approx(0.5 * resolved.body_drag)
     # fins and arms: the sand-swimming law fitted to 3D-RFT on their faces, as close as the fit is
-    for law, length, height in ((s.rft, s.fin.segment_length, m.height), (arm_law(s), s.arm.length, s.arm.height)):
+    for law, length, height in ((resolved.chain, s.fin.segment_length, m.height),
+                                (resolved.arm, s.arm.length, s.arm.height)):
         fit = media.sandswim_coefficients(length, m.depth, height, *props)
-        assert (law.law, law.c_s, law.c_f, law.gamma0) == ("sandswim", fit.c_s, fit.c_f, fit.gamma0)
+        p = law.parameters
+        assert (law.law, p["c_s"], p["c_f"], p["gamma0"]) == ("sandswim", fit.c_s, fit.c_f, fit.gamma0)
         perp, _ = media.plate_forces(broadside, length, m.depth, height, *props)
         assert abs(_broadside(law) - perp[0]) <= fit.max_error
     # the magnitudes are those of a small robot: a few newtons per segment
-    assert 1.0 < _broadside(s.rft) < 20.0
+    assert 1.0 < _broadside(resolved.chain) < 20.0
+    # the scene keeps what its user gave: the law's coefficients are left to the medium
+    assert (s.rft.c_s, s.rft.c_f, s.rft.gamma0) == (0.0, 0.0, 0.0)
 
 
 def test_without_a_medium_the_coefficients_are_as_given():
     paper = preset("paper", RobotScene)
     assert geometry.properties(paper) is None
     a = paper.arm
-    assert arm_law(paper).f_perp == pytest.approx(a.f_perp_base + a.f_perp_per_length * a.length)
-    assert body_drag(paper) == paper.body.drag
+    resolved = geometry.resolve(paper)
+    assert resolved.arm.parameters["f_perp"] == pytest.approx(a.f_perp_base + a.f_perp_per_length * a.length)
+    assert resolved.body_drag == paper.body.drag
 
 
 def test_a_robot_in_a_medium_needs_a_velocity_drag(physical):
@@ -98,8 +106,9 @@ def test_the_robot_in_its_medium_matches_the_independent_solution(physical):
     from finrft.reference import solve_robot
     scene = physical.replace(**{"sim.tolerance": 1e-5})
     run = swim(scene, 1, estimate_error=False)
-    ref = solve_robot(scene, 1, run.time, rtol=1e-8, atol=1e-11, arm=geometry.arm_law(scene),
-                      body_drag=geometry.body_resistance(scene)["total"])
+    resolved = geometry.resolve(scene)
+    ref = solve_robot(scene, 1, run.time, rtol=1e-8, atol=1e-11, arm=resolved.arm, body_drag=resolved.body_drag,
+                      fin=resolved.chain)
     assert np.degrees(np.abs(run.series["hinge_angle"] - ref.hinge_angle).max()) < 0.005
     assert 1e3 * np.abs(run.body_y - ref.body_y).max() < 0.05                  # of ~180 mm strokes
     eta_ref = (np.diff(ref.stroke_y)[1] + np.diff(ref.stroke_y)[0]) / np.diff(ref.stroke_y)[1]

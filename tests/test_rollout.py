@@ -113,7 +113,7 @@ def test_rollout_jobs_with_other_laws_step_with_their_own():
     # again for each job's model: each steps with its own law.
     drive = Drive(speed=0.03, stroke=0.045, cycles=1)
     jobs = [(preset("paper").replace(**changes), drive) for changes in (
-        {}, {"rft.f_perp": 2.4}, {"rft.law": "sandswim", "rft.c_s": 1.0, "rft.c_f": 0.3, "rft.gamma0": 0.4},
+        {}, {"rft.f_perp": 35000.0}, {"rft.law": "sandswim", "rft.c_s": 15000.0, "rft.c_f": 4400.0, "rft.gamma0": 0.4},
         {"plate.segments": 4, "plate.segment_length": 0.025})]
     for (scene, _), states in zip(jobs, batch.rollout_plates(jobs, workers=2)):
         run = simulate(scene, drive, estimate_error=False)

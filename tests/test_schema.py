@@ -32,7 +32,7 @@ def test_each_law_declares_its_own_keys_and_reads_only_them(tmp_path):
         rft = Recorder(RFT(law=name, table=str(tmp_path / "table.csv")))
         laws.module(name).parameters(rft)
         assert rft.read == declared[name], name
-    assert field_of(Scene, "rft.c_s").metadata["unit"] == "N" and field_of(Scene, "rft.gamma0").metadata["unit"] == "rad"
+    assert field_of(Scene, "rft.c_s").metadata["unit"] == "N/m^3" and field_of(Scene, "rft.gamma0").metadata["unit"] == "rad"
     # the surface laws' keys of [medium], likewise
     for name in laws.names(laws.SURFACE):
         module = laws.module(name, laws.SURFACE)

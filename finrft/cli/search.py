@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import geometry
 from .. import scene as scenes
 from ..experiments.flags import (UsageError, add_force, add_json, add_max_error, add_quiet, add_workers, limits,
                                  number)
@@ -166,9 +167,10 @@ def add_fit(sub: Any) -> None:
                    help="comma-separated parameters: b (plate.damping), k (plate.stiffness), f_perp (rft.f_perp), "
                         "f_par (rft.f_par), or any numeric plate-scene key (default: b, the paper's procedure)")
     p.add_argument("--bounds", action="append", default=[], metavar="KEY=LOW:HIGH",
-                   help="bounds of a fitted parameter in SI, by name or key, e.g. b=0.0001:100 (defaults: b "
-                        "0.01:100, k 0.01:100, f_perp 0.1:100, f_par -2:2); positive bounds over more than a decade "
-                        "are searched in log space")
+                   help="bounds of a fitted parameter, by name or key, in SI or with a unit suffix deg or mm, e.g. "
+                        "b=0.0001:100, plate.segment_length=20:50mm (defaults: b 0.01:100, k 0.01:100, f_perp and "
+                        "f_par 0.1:100 N and -2:2 N per segment of the paper plate, in N/m^3); positive bounds over "
+                        "more than a decade are searched in log space")
     _add_search(p, "fit")
     add_workers(p)
     add_max_error(p)
@@ -270,7 +272,8 @@ def fit_rft(args: argparse.Namespace) -> int:
     check_output(args.out, ".toml", "--out", args.force)
     check_output(table_path, ".csv", "--table", args.force)
     forces = read_forces(args.data)
-    law, table = identify_rft(forces, scene.plate.segments, scene.rft.v_reg, args.speed / 1000)
+    law, table = identify_rft(forces, scene.plate.segments, scene.rft.v_reg, args.speed / 1000,
+                              geometry.segment_scale(scene))
     fragment = rft_fragment(law, Path(table_path).name if table_path else "TABLE.csv")
     if table_path:
         with atomic_path(table_path) as tmp:
@@ -281,7 +284,7 @@ def fit_rft(args: argparse.Namespace) -> int:
     else:
         print(fragment, end="")
     print_json(args, {"f_perp": law.f_perp, "f_par": law.f_par, "v_reg": law.v_reg,
-                      "table": {"attack_deg": table.attack_deg, "f_perp_N": table.f_perp, "f_par_N": table.f_par}})
+                      "table": {"attack_deg": table.attack_deg, "f_perp": table.f_perp, "f_par": table.f_par}})
     return 0
 
 

@@ -11,6 +11,7 @@ import argparse
 from dataclasses import dataclass
 from typing import Any, Callable
 
+from .. import geometry
 from ..experiment import Experiment, Result
 from ..laws import feeds_energy
 
@@ -100,7 +101,7 @@ def authors_model_line(args: argparse.Namespace, scene: Any) -> list[str]:
     """What the paper preset is, when it was asked for: the authors' model, and why its law can feed energy in."""
     if getattr(args, "preset", None) != "paper":
         return []
-    reason = feeds_energy(scene)
+    reason = feeds_energy(geometry.segment_law(scene))
     return ["preset paper: the authors' model, quirks kept to reproduce their runs"
             + (f"; its law feeds energy in ({reason})" if reason else "")
             + "; --preset physical is the physical model"]

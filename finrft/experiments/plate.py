@@ -20,6 +20,7 @@ from typing import Any, Callable
 import mujoco
 import numpy as np
 
+from .. import geometry
 from ..convergence import ErrorLimits
 from ..coupling import SegmentForces
 from ..drive import Drive
@@ -107,7 +108,9 @@ class PlateTest:
     def independent(self, scene: Scene, times: np.ndarray, *, rtol: float, atol: float) -> np.ndarray:
         """The segment angles (rad) of the independent solution (finrft.reference) at ``times``."""
         from ..reference import solve  # scipy's integrators load only when asked for
-        return solve(scene, self.drive, times, rtol=rtol, atol=atol).segment_angle
+        # a law the [medium] gives, as numbers: the reference writes out the laws, not their derivation
+        given = geometry.chain_law(scene)[0] if geometry.from_medium(scene) else None
+        return solve(scene, self.drive, times, rtol=rtol, atol=atol, law=given).segment_angle
 
     def attrs(self) -> dict[str, Any]:
         return {"drive_json": json.dumps(dataclasses.asdict(self.drive))}
@@ -133,6 +136,7 @@ class PlateTest:
             "final_segment_angle_deg": np.degrees(run.segment_angle[-1]).tolist(),
             "final_hinge_angle_deg": np.degrees(run.hinge_angle[-1]).tolist(),
             f"peak_drive_{q}_{u}": float(run.peak_drive_force),
+            **geometry.resolve(run.scene).figures(),
         }
         cycles = self.cycle_table(run)
         if cycles:

@@ -20,6 +20,7 @@ from typing import Any, Callable
 import mujoco
 import numpy as np
 
+from .. import geometry
 from ..convergence import ErrorLimits
 from ..errors import SimulationFailed, UndefinedResult
 from ..drive import Drive
@@ -93,11 +94,12 @@ class Swim:
 
     def independent(self, scene: RobotScene, times: np.ndarray, *, rtol: float, atol: float) -> np.ndarray:
         """The right fin's hinge angles (rad) of the independent solution (finrft.reference) at ``times``."""
-        from .. import geometry
         from ..reference import solve_robot  # scipy's integrators load only when asked for
         # the forces a [medium] gives, as numbers: the reference writes out the laws, not their derivation
-        given = {"arm": geometry.arm_law(scene), "body_drag": geometry.body_resistance(scene)["total"]} \
-            if geometry.properties(scene) else {}
+        resolved = geometry.resolve(scene)
+        given = {"arm": resolved.arm, "body_drag": resolved.body_drag} if geometry.properties(scene) else {}
+        if geometry.from_medium(scene):
+            given["fin"] = resolved.chain
         return solve_robot(scene, self.cycles, times, rtol=rtol, atol=atol, **given).hinge_angle
 
     def cycle_table(self, run: Result) -> list[dict[str, float]]:
@@ -115,6 +117,7 @@ class Swim:
         out.update(theta1_deg=float(np.degrees(g.theta1)), theta2_deg=float(np.degrees(g.theta2)),
                    arm_length_mm=1e3 * scene.arm.length, omega_deg_s=float(np.degrees(g.omega)),
                    fin=scene.fin.kind, model=scene.robot.model, cycles=int(self.cycles))
+        out.update(geometry.resolve(scene).figures())
         return out
 
     def draw(self, rec: Any, run: Result, times: Any, prefix: str) -> list[Any]:

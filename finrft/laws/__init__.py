@@ -4,8 +4,10 @@ A segment law (module-level ``KIND = "segment"``) gives the granular resistive f
 source of truth of its formula; its C twin is ``plugins/laws/NAME.c``, which the native plugin finds by the same
 name. Its module provides
 
-- ``parameters(rft) -> dict``: the keyword arguments of ``force`` from a scene's ``[rft]`` section (read once: the
-  table law reads its CSV here);
+- ``parameters(rft) -> dict``: its coefficients from a scene's ``[rft]`` section, intensive (per unit area and
+  depth, N/m^3) where they are forces (the table law reads its CSV here);
+- ``INTENSIVE``: the names among them that scale with a segment's size, times `segment_scale` (m^3) the keyword
+  arguments of ``force`` for one segment (N), `per_segment`;
 - ``force(v, x_axis, y_axis, v_reg, **parameters) -> (N, 3)``, pure numpy: the force (N, world frame) on N segments
   from their midpoint velocities ``v`` (N, 3), their unit axes ``x_axis`` (N, 3) and in-plane normals ``y_axis``
   (N, 3); every law fades out below the speed ``v_reg`` (the implicit methods difference it on that scale);
@@ -47,8 +49,9 @@ import functools
 import importlib
 import pkgutil
 import warnings
+from dataclasses import dataclass, field
 from types import ModuleType
-from typing import Any, Callable
+from typing import Any, Callable, Mapping
 
 import numpy as np
 
@@ -91,19 +94,48 @@ def keys(kind: str = SEGMENT) -> tuple[Any, ...]:
     return tuple(key for name in names(kind) for key in getattr(module(name, kind), "KEYS", ()))
 
 
-def bind(rft: Any) -> Law:
-    """The law a scene's ``[rft]`` section selects, with its parameters, as ``f(v, x_axis, y_axis) -> (N, 3)``."""
-    law = module(rft.law)
-    params, v_reg = law.parameters(rft), rft.v_reg
-    return lambda v, x, y: law.force(v, x, y, v_reg, **params)
+def segment_scale(length: float, height: float, depth: float) -> float:
+    """What a segment law's intensive coefficients (N/m^3) are multiplied by to give one segment's forces (N): the
+    area of a vertical face ``length`` x ``height`` (m) times its mean depth, its top edge ``depth`` below the free
+    surface. Granular stress grows in proportion to depth (RFT's zeta, N/m^3), so a face's force is stress x area
+    at its mean depth."""
+    return length * height * (depth + height / 2)
 
 
-def plugin_config(rft: Any) -> dict[str, str]:
-    """The native plugin's config keys of a scene's law: its name, v_reg and its own parameters."""
+@dataclass(frozen=True)
+class SegmentLaw:
+    """A segment law bound to one segment: its name, v_reg (m/s) and the keyword arguments of its ``force`` for that
+    segment, forces in N (`per_segment`)."""
+
+    law: str
+    v_reg: float
+    parameters: Mapping[str, Any] = field(hash=False)
+
+
+def per_segment(rft: Any, length: float, height: float, depth: float) -> SegmentLaw:
+    """The law of a scene's ``[rft]`` section on a segment whose face is ``length`` x ``height`` (m), its top edge
+    ``depth`` below the surface: its INTENSIVE coefficients (N/m^3) times `segment_scale`, multiplied in the order
+    length, height, mean depth, in which a per-segment value converted to N/m^3 with 17 digits (the paper presets')
+    comes back exactly."""
     law = module(rft.law)
-    params = law.parameters(rft)
-    own = law.config(params) if hasattr(law, "config") else {key: repr(float(value)) for key, value in params.items()}
-    return {"law": rft.law, "v_reg": repr(rft.v_reg), **own}
+    intensive = getattr(law, "INTENSIVE", ())
+    params = {key: ((value * length) * height) * (depth + height / 2) if key in intensive else value
+              for key, value in law.parameters(rft).items()}
+    return SegmentLaw(rft.law, rft.v_reg, params)
+
+
+def bind(law: SegmentLaw) -> Law:
+    """A segment's law as ``f(v, x_axis, y_axis) -> (N, 3)``."""
+    force, params, v_reg = module(law.law).force, dict(law.parameters), law.v_reg
+    return lambda v, x, y: force(v, x, y, v_reg, **params)
+
+
+def plugin_config(law: SegmentLaw) -> dict[str, str]:
+    """The native plugin's config keys of a segment's law: its name, v_reg and its own parameters."""
+    own_law, params = module(law.law), dict(law.parameters)
+    own = own_law.config(params) if hasattr(own_law, "config") else {key: repr(float(value))
+                                                                       for key, value in params.items()}
+    return {"law": law.law, "v_reg": repr(law.v_reg), **own}
 
 
 def surface_parameters(law: str, given: dict[str, float | None], material: Any, where: str,
@@ -131,14 +163,10 @@ class FeedsEnergy(RuntimeWarning):
     """A scene's law can feed energy in (the paper's model, say): allowed, to reproduce published runs."""
 
 
-def feeds_energy(scene: Any) -> str:
-    """Why a scene's segment law can push a segment along its own motion, or "" when it dissipates; "" too for a
-    scene without an ``[rft]`` section (a surface law's, whose dissipation its tests show)."""
-    rft = getattr(scene, "rft", None)
-    if rft is None:
-        return ""
-    law = module(rft.law)
-    return law.feeds_energy(law.parameters(rft))
+def feeds_energy(law: SegmentLaw | None) -> str:
+    """Why a segment's law can push it along its own motion, or "" when it dissipates; "" too for None (a scene
+    without a segment law: a surface law's, whose dissipation its tests show)."""
+    return "" if law is None else module(law.law).feeds_energy(dict(law.parameters))
 
 
 _warned: list[str] = []  # the reason this process has warned of: once is enough
@@ -151,11 +179,10 @@ def warn_feeds_energy(law: str, reason: str, kept: str) -> None:
         warnings.warn(f"RFT law '{law}' feeds energy in: {reason} ({kept})", FeedsEnergy, stacklevel=3)
 
 
-def warn_if_feeds_energy(scene: Any) -> None:
-    """Warn (FeedsEnergy) when a scene's segment law can feed energy in, once per process; anything that is not
-    such a scene passes."""
-    if not _warned and getattr(scene, "rft", None) is not None:
-        warn_feeds_energy(scene.rft.law, feeds_energy(scene),
+def warn_if_feeds_energy(law: SegmentLaw | None) -> None:
+    """Warn (FeedsEnergy) when a segment's law can feed energy in, once per process; None passes."""
+    if not _warned and law is not None:
+        warn_feeds_energy(law.law, feeds_energy(law),
                           "kept to reproduce published runs; result files record it as law_feeds_energy")
 
 

@@ -16,9 +16,10 @@ which is odd in v and smooth in its direction. Its power is F.v = -tanh(|v|/v_re
 (`feeds_energy`).
 
 Coefficients. C_S and C_F are forces (N) on the whole drag rod of the papers, at their depth; the forces scale in
-proportion to the length of the body and, in the frictional regime, to its depth, so a scene gives them per
-segment: ``rft.c_s`` and ``rft.c_f`` = the published value x (segment length / rod length) x (segment depth / rod
-depth). ``rft.gamma0`` (rad) is the same for any length or depth.
+proportion to the area of the body and, in the frictional regime, to its depth, so a scene gives them per unit area
+and depth: ``rft.c_s`` and ``rft.c_f`` (N/m^3) = the published value / (rod area x rod mean depth), and a segment's
+C_S and C_F (N) are those times its face's area and mean depth (`finrft.laws.segment_scale`). ``rft.gamma0`` (rad)
+is the same for any size or depth.
 
 The published fits (0.3 mm and 3 mm glass beads, loose and close packing: Maladen 2009, supplement; the 3 mm
 particles in Ding 2012, Table 2, from a DEM drag of a 40 mm rod of 16 mm x 16 mm section at 7.6 cm depth) could
@@ -39,13 +40,14 @@ from . import components
 KIND = "segment"
 # The law's keys of [rft], with their units (`finrft.scene.RFT` is built from every law's). A chain's scene may
 # leave all three at 0 to take them from its [medium].
-KEYS = (("c_s", float, field(0.0, "N", "sandswim law: C_S per segment (the medium's normal-force scale)",
-                             minimum=0.0, exclusive=False)),
-        ("c_f", float, field(0.0, "N", "sandswim law: C_F per segment (the medium's friction-like drag)",
-                             minimum=0.0, exclusive=False)),
+KEYS = (("c_s", float, field(0.0, "N/m^3", "sandswim law: C_S per unit area and depth (the medium's normal-force "
+                             "scale); all of c_s, c_f, gamma0 at 0: from [medium]", minimum=0.0, exclusive=False)),
+        ("c_f", float, field(0.0, "N/m^3", "sandswim law: C_F per unit area and depth (the medium's friction-like "
+                             "drag)", minimum=0.0, exclusive=False)),
         ("gamma0", float, field(0.0, "rad", "sandswim law: gamma0, how fast F_perp saturates with the angle of "
                                 "motion", minimum=0.0, exclusive=False, maximum=math.pi / 2,
                                 why_maximum="beyond it the normal force would push a segment along its motion")))
+INTENSIVE = ("c_s", "c_f")
 
 
 def parameters(rft: Any) -> dict[str, float]:

@@ -4,13 +4,17 @@ motion, 0..90 degrees), interpolated linearly::
     F = -tanh(|v| / v_reg) * ( F_perp(theta) sgn(v^.y^) y^ + F_par(theta) sgn(v^.x^) x^ )
 
 which is how RFT is identified from rigid-plate drags; the paper law is the table F_perp = f_perp sin(theta),
-F_par = f_par cos(theta). The table is a CSV with columns attack_deg, f_perp_N, f_par_N. The C twin is
-plugins/laws/table.c.
+F_par = f_par cos(theta). The table is a CSV with columns attack_deg, f_perp_N, f_par_N: the forces on a segment of
+unit scale, i.e. per unit area and depth (N/m^3, as the other laws' coefficients) despite the columns' names, which
+files already written keep; a segment's forces are the table times its face's area and mean depth
+(`finrft.laws.segment_scale`). The CSV is read once per file version (its path, size and modification time). The C
+twin is plugins/laws/table.c.
 """
 
 from __future__ import annotations
 
 import csv
+import functools
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -24,8 +28,9 @@ from . import components
 
 KIND = "segment"
 # The law's keys of [rft], with their units (`finrft.scene.RFT` is built from every law's).
-KEYS = (("table", str, field("", "", "table law: CSV with columns attack_deg, f_perp_N, f_par_N (relative to the "
-                             "scene file)")),)
+KEYS = (("table", str, field("", "", "table law: CSV with columns attack_deg, f_perp_N, f_par_N, the forces per unit "
+                             "area and depth (N/m^3) (relative to the scene file)")),)
+INTENSIVE = ("table",)
 TABLE_COLUMNS = ("attack_deg", "f_perp_N", "f_par_N")
 
 
@@ -37,9 +42,24 @@ class ForceTable:
     f_perp: np.ndarray
     f_par: np.ndarray
 
+    def __mul__(self, scale: float) -> ForceTable:
+        """The table's forces times ``scale``: a segment's, from the table per unit area and depth."""
+        return ForceTable(self.attack_deg, self.f_perp * scale, self.f_par * scale)
+
 
 def parameters(rft: Any) -> dict[str, ForceTable]:
-    return {"table": read_table(rft.table)}
+    path = Path(rft.table)
+    try:
+        stat = path.stat()
+    except OSError:
+        return {"table": read_table(path)}  # which names the problem
+    return {"table": _read_cached(str(path.resolve()), stat.st_size, stat.st_mtime_ns)}
+
+
+@functools.lru_cache(maxsize=32)
+def _read_cached(path: str, size: int, mtime_ns: int) -> ForceTable:
+    """`read_table`, once per version of a file: every model build and companion run asks for it."""
+    return read_table(path)
 
 
 def config(params: dict[str, ForceTable]) -> dict[str, str]:

@@ -31,8 +31,12 @@ from ..experiments.plate import FORCE_COLUMNS, simulate
 
 # Short names for the paper's parameters, and default bounds (SI).
 ALIASES = {"b": "plate.damping", "k": "plate.stiffness", "f_perp": "rft.f_perp", "f_par": "rft.f_par"}
-DEFAULT_BOUNDS = {"plate.damping": (0.01, 100.0), "plate.stiffness": (0.01, 100.0), "rft.f_perp": (0.1, 100.0),
-                  "rft.f_par": (-2.0, 2.0)}
+# The paper law's bounds are 0.1..100 N and -2..2 N per segment of the paper plate (33 mm, on the presets' face 55 mm
+# tall at 37.5 mm mean depth), per unit area and depth.
+PAPER_FACE = 0.033 * 0.055 * (0.010 + 0.055 / 2)
+DEFAULT_BOUNDS = {"plate.damping": (0.01, 100.0), "plate.stiffness": (0.01, 100.0),
+                  "rft.f_perp": (0.1 / PAPER_FACE, 100.0 / PAPER_FACE),
+                  "rft.f_par": (-2.0 / PAPER_FACE, 2.0 / PAPER_FACE)}
 FAILED = 1e6  # deg^2: worse than any plate that moved at all
 # Drag speeds the model is meant for (m/s); a file outside them most likely has its columns in other units.
 SPEEDS = (1e-3, 1.0)
@@ -313,19 +317,21 @@ def read_forces(path: str | Path) -> np.ndarray:
     return np.array([values for _, values in rows.values()])
 
 
-def identify_rft(forces: np.ndarray, segments: int, v_reg: float, speed: float) -> tuple[RFT, ForceTable]:
-    """RFT from a rigid plate of N segments dragged at attack theta, where each law gives the totals
-    normal = -N ramp F_perp(theta) and tangential = -N ramp F_par(theta), ramp = tanh(speed / v_reg):
-    the paper law's f_perp, f_par by least squares (F_perp = f_perp sin theta, F_par = f_par cos theta), and the
-    table law at the measured angles, held at its end values out to 0 and 90 degrees."""
-    scale = segments * math.tanh(speed / v_reg)
+def identify_rft(forces: np.ndarray, segments: int, v_reg: float, speed: float,
+                 face: float) -> tuple[RFT, ForceTable]:
+    """RFT from a rigid plate of N segments dragged at attack theta, each segment's face ``face`` m^3 (area x mean
+    depth, `finrft.geometry.segment_scale`), where each law gives the totals normal = -N face ramp F_perp(theta)
+    and tangential = -N face ramp F_par(theta), ramp = tanh(speed / v_reg): the paper law's f_perp, f_par (N/m^3)
+    by least squares (F_perp = f_perp sin theta, F_par = f_par cos theta), and the table law (N/m^3) at the
+    measured angles, held at its end values out to 0 and 90 degrees."""
+    scale = segments * face * math.tanh(speed / v_reg)
     order = np.argsort(forces[:, 0])
     deg, perp, par = forces[order, 0], -forces[order, 1] / scale, -forces[order, 2] / scale
     sin, cos = np.sin(np.radians(deg)), np.cos(np.radians(deg))
     f_perp = float(perp @ sin / (sin @ sin)) if sin @ sin > 0 else 0.0
     f_par = float(par @ cos / (cos @ cos)) if cos @ cos > 0 else 0.0
     if f_perp < 0:
-        raise SceneError(f"the normal forces push the plate along its motion (f_perp = {f_perp:.3g} N < 0): forces "
+        raise SceneError(f"the normal forces push the plate along its motion (f_perp = {f_perp:.3g} N/m^3 < 0): forces "
                          f"from finrft drag --forces-csv are those of a stroke out along +y; check their sign")
     if deg[0] > 0:
         deg, perp, par = np.r_[0.0, deg], np.r_[perp[0], perp], np.r_[par[0], par]
@@ -337,7 +343,7 @@ def identify_rft(forces: np.ndarray, segments: int, v_reg: float, speed: float) 
 def rft_fragment(law: RFT, table_csv: str) -> str:
     """A scene fragment with the identified paper-law coefficients (and the table, as a commented option)."""
     return (f"# RFT identified from rigid-plate drags (finrft fit-rft)\n[rft]\nlaw = \"paper\"\n"
-            f"f_perp = {law.f_perp!r}  # [N] per segment\nf_par = {law.f_par!r}  # [N] per segment\n"
+            f"f_perp = {law.f_perp!r}  # [N/m^3] per unit area and depth\nf_par = {law.f_par!r}  # [N/m^3]\n"
             f"v_reg = {law.v_reg!r}  # [m/s]\n# or the tabulated law:\n# law = \"table\"\n"
             f"# table = \"{table_csv}\"\n")
 

@@ -251,7 +251,7 @@ def robot(out: Path, quick: bool, workers: int | None) -> str:
             f"CMA-ES: {search.evaluations} evaluations in {search.wall_s:.1f} s; its optimum, eta "
             f"{100 * (1 - search.cost):.2f} %, carries an estimated discretisation error of {error:.2g} points (every "
             f"evaluation is checked; those above 0.5 points score as failed). Recordings: "
-            f"`robot_optimum.rrd`, `optimization.rrd`. See the README's robot section for why eta is negative on "
+            f"`robot_optimum.rrd`, `optimization.rrd`. See the documentation (docs/guide/robot.md) for why eta is negative on "
             f"the paper's definition and for the optimiser's sensitivity to dt.")
 
 
@@ -297,7 +297,7 @@ def robot_physical(out: Path, quick: bool, workers: int | None) -> str:
     return (f"Physical preset (forces from 3D-RFT in its [medium], {resolution(scene.sim)}), eta over the steady "
             f"{steady_cycles(gaits[0].gait.cycles)}; mean |eta - eta_exp| {100 * mean:.2f} points:\n\n"
             f"{table_markdown(rows)}\n\n![model against experiment, trajectories](robot_physical.png)\n\n"
-            f"See the README's robot section for the model, what was fitted and where it fails.")
+            f"See the documentation (docs/guide/robot.md) for the model, what was fitted and where it fails.")
 
 
 def write_report(out: str | Path = "report", *, quick: bool = False, workers: int | None = None,

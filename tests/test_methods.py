@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from finrft import integrate, methods, models, native, reference
-from finrft.studies import bench
+from finrft.studies import accuracy
 from finrft.drive import Drive
 from finrft.errors import Chatter, StepUnderflow
 from finrft.scene import Scene, SceneError, field_of, preset
@@ -174,7 +174,7 @@ def test_chatter_stops_the_run_loudly():
     with pytest.raises(Chatter, match=r"chatters at t = .* dt = 0.0001 s: use sim.method = 'newton'"):
         simulate(scene, LIGHT_DRIVE)
     # the speed study names a failure by its kind, not by its wording
-    trial = bench._trial((PlateTest(LIGHT_DRIVE), scene, False))
+    trial = accuracy._trial((PlateTest(LIGHT_DRIVE), scene, False))
     assert trial["failure"] == "chatter" and "chatters" in trial["detail"]
 
 

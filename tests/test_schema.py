@@ -1,11 +1,13 @@
 """The schema engine knows no section: the sections of the laws' keys are built from what each law declares."""
 
+import argparse
 import dataclasses
 
 import pytest
 
 from finrft import laws, schema
-from finrft.errors import Error, SceneError
+from finrft.errors import Error, SceneError, UsageError
+from finrft.experiments.flags import preset_name
 from finrft.laws import table
 from finrft.scene import RFT, IntrusionScene, Medium, RobotScene, Scene, UserScene, field_of, preset, scene_from_dict
 
@@ -64,3 +66,7 @@ def test_bad_input_is_one_error_family():
     assert isinstance(caught.value, Error) and isinstance(caught.value, ValueError)
     with pytest.raises(SceneError, match="rft.gamma0 must be <= 1.5708 rad"):
         preset("paper").replace(**{"rft.gamma0": 2.0})
+    # a command line's own bad flags are of the same family: one line, exit status 2
+    with pytest.raises(UsageError, match="give --scene s.toml or --preset paper, not both") as caught:
+        preset_name(argparse.Namespace(scene="s.toml", preset="paper"))
+    assert isinstance(caught.value, SceneError)

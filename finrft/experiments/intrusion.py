@@ -25,10 +25,11 @@ import numpy as np
 from .. import laws
 from ..convergence import ErrorLimits
 from ..drive import Drive
+from ..errors import UsageError
 from ..experiment import Compared, Plot, Quantity, Result, run
 from ..scene import IntrusionScene, load_scene, parse_override, scene_from_dict
 from .command import Command, Output, register
-from .flags import UsageError, add_force, add_json, add_quiet, add_scene_flags
+from .flags import add_force, add_json, add_quiet, add_scene_flags
 from .user_model import AttachedModel, JointTrial, build_attached
 
 SIGN_CONVENTION = (

@@ -24,6 +24,7 @@ from .. import geometry
 from ..convergence import ErrorLimits
 from ..coupling import SegmentForces
 from ..drive import Drive
+from ..errors import UsageError
 from ..experiment import Compared, Plot, Quantity, Result, run
 from ..files import atomic_path
 from ..models import PlateModel, build_plate, initial_heading
@@ -31,7 +32,7 @@ from ..scene import PRESETS, Scene, SceneError, load_scene, parse_override, read
 from ..stepping import Prescribed
 from ..views import centre_line
 from .command import Command, Output, authors_model_line, error_line, register, steps_line
-from .flags import UsageError, add_max_error, add_result_files, add_scene_flags, number, preset_name
+from .flags import add_max_error, add_result_files, add_scene_flags, number, preset_name
 
 
 SIGN_CONVENTION = (

@@ -377,14 +377,15 @@ def preset(name: str, cls: type = Scene):
     return scene_from_dict(read_toml(text, f"preset {name}"), cls)
 
 
-def load_scene(path: str | Path | None = None, *, preset_name: str = "paper",
+def load_scene(path: str | Path | None = None, *, preset_name: str = "physical",
                overrides: Mapping[str, Any] | None = None, cls: type = Scene):
-    """A scene from a TOML file (or the named preset when no file is given), with dotted-key overrides applied.
+    """A scene from a TOML file (or, when no file is given, the named preset, physical as every command; a scene
+    class without presets takes its schema's defaults), with dotted-key overrides applied.
 
     A relative path in a file (``rft.table``, ``model.path``) is taken relative to that file.
     """
     if path is None:
-        scene = preset(preset_name, cls)
+        scene = preset(preset_name, cls) if cls in PRESETS else scene_from_dict({}, cls)
     else:
         path = Path(path)
         data = read_toml(read_text(path, "scene file"), str(path))

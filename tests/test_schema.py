@@ -34,6 +34,15 @@ def test_each_law_declares_its_own_keys_and_reads_only_them(tmp_path):
         rft = Recorder(RFT(law=name, table=str(tmp_path / "table.csv")))
         laws.module(name).parameters(rft)
         assert rft.read == declared[name], name
+    # a law's own check of its section (through the registry, as every scene calls it) reads its own keys alone
+    for name in laws.names():
+        for medium in (None, (1500.0, 0.6, 0.3)):
+            rft = Recorder(RFT(law=name))
+            try:
+                laws.check(rft, medium)
+            except SceneError as error:
+                assert f"rft.law = '{name}' needs" in str(error)
+            assert rft.read <= declared[name] | shared, name
     assert field_of(Scene, "rft.c_s").metadata["unit"] == "N/m^3" and field_of(Scene, "rft.gamma0").metadata["unit"] == "rad"
     # the surface laws' keys of [medium], likewise
     for name in laws.names(laws.SURFACE):

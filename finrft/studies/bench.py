@@ -12,9 +12,9 @@ from typing import Any, Callable
 import mujoco
 import numpy as np
 
-from .. import batch, methods, models, native
+from .. import batch, methods, native
 from ..drive import Drive
-from ..experiments.plate import simulate
+from ..experiments.plate import build_plate, simulate
 from ..experiments.swim import steady_cycles, swim
 from ..scene import PRESETS, RobotScene, Scene, preset, resolution
 from .accuracy import PLATE_DRIVE
@@ -110,7 +110,7 @@ def backends(scene: Scene | None = None, *, batch_size: int = 64, workers: int |
 def _stepping(scene: Scene, drive: Drive, steps: int, timed: bool = False) -> Callable[[], None]:
     """``steps`` of mj_step, in C, of the plate's model with the drive at its speed: without MuJoCo's profiling
     timer, as finrft steps, unless ``timed``."""
-    plate = models.build_plate(scene)
+    plate = build_plate(scene)
 
     def run() -> None:
         d = mujoco.MjData(plate.model)

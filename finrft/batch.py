@@ -30,12 +30,12 @@ from typing import Any, Callable, Iterator, Sequence, TypeVar
 import mujoco
 import numpy as np
 
-from . import geometry, laws, methods, models, native
+from . import geometry, laws, methods, native
 from .convergence import ErrorLimits, SimulationUnstable
 from .drive import Drive
 from .experiment import Experiment, Result, run
 from .scene import Scene
-from .experiments.plate import PlateTest
+from .experiments.plate import PlateModel, PlateTest, retune, retune_key
 from .stepping import schedule
 
 T = TypeVar("T")
@@ -172,8 +172,8 @@ class PlateRollouts:
     Every job of a batch must share its drive, ``sim.dt`` and ``sim.record_dt``, and step explicitly with the native
     backend (a Python force callback would hold the GIL); ValueError otherwise. Jobs may differ in anything else:
     a thread steps jobs of any law on one MjData per size, as the plugin takes each job's law from its model. A job
-    that differs from one of the last batch's only in the hinges' stiffness and damping (`models.RETUNABLE`) reuses
-    its compiled model. A run that goes unstable raises SimulationUnstable.
+    that differs from one of the last batch's only in the hinges' stiffness and damping (`RETUNABLE` of
+    finrft.experiments.plate) reuses its compiled model. A run that goes unstable raises SimulationUnstable.
 
     ``with PlateRollouts(workers) as rollouts: states = rollouts(jobs)``, or `close` when done.
     """
@@ -181,7 +181,7 @@ class PlateRollouts:
     def __init__(self, workers: int | None = None) -> None:
         self.threads = workers or default_workers()
         self._pool = ThreadPoolExecutor(self.threads)
-        self._plates: dict[tuple, list[models.PlateModel]] = {}  # the last batch's models, by retune key
+        self._plates: dict[tuple, list[PlateModel]] = {}  # the last batch's models, by retune key
         self._datas: dict[tuple, list[mujoco.MjData]] = {}       # by sizes: the drive's, then one per thread
         self._record = native.function("finrft_explicit_record", ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p,
                                        ctypes.c_int, ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p)
@@ -223,13 +223,13 @@ class PlateRollouts:
                 out[j] = state
         return out
 
-    def _models(self, test: PlateTest, scenes: list[Scene]) -> list[models.PlateModel]:
+    def _models(self, test: PlateTest, scenes: list[Scene]) -> list[PlateModel]:
         """A compiled plate for every scene: the last batch's of its retune key, retuned, while there are enough;
         then copies of one, or a compile."""
         kept, self._plates = self._plates, {}
         out = []
         for scene in scenes:
-            key = (models.retune_key(scene), test.drive.kind, test.drive.attack_deg)
+            key = (retune_key(scene), test.drive.kind, test.drive.attack_deg)
             mine = self._plates.setdefault(key, [])
             spare = kept.get(key, [])
             if len(spare) > len(mine):
@@ -239,12 +239,12 @@ class PlateRollouts:
                 plate = dataclasses.replace(source, model=copy.copy(source.model))
             else:
                 plate = test.build(scene)
-            models.retune(plate, scene.plate)
+            retune(plate, scene.plate)
             mine.append(plate)
             out.append(plate)
         return out
 
-    def _roll(self, test: PlateTest, jobs: list[int], scenes: list[Scene], plates: list[models.PlateModel],
+    def _roll(self, test: PlateTest, jobs: list[int], scenes: list[Scene], plates: list[PlateModel],
               sizes: tuple, steps: int, starts: np.ndarray, samples: np.ndarray) -> list[np.ndarray]:
         """The recorded states of jobs (their indices in the batch, their scenes and models) of one size."""
         # A job's state between strokes: the physics and the solver's warm start, as one MjData would carry them.

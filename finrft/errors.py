@@ -2,6 +2,7 @@
 
 - `SceneError` (also a ValueError): bad input, a scene file, preset, override or argument that cannot be used; the
   message names the key or file and what is allowed. The command line prints it on one line and exits with 2.
+  `UsageError`, its kind for the command line's own flags (two that conflict, an output file that exists).
 - `SimulationFailed` (also a RuntimeError): a run that cannot give a trustworthy result; the message says what
   happened and what to change. The command line exits with 1. Its kinds:
 
@@ -23,6 +24,11 @@ class Error(Exception):
 
 class SceneError(Error, ValueError):
     """A scene file, preset or override that cannot be used; the message names the key and what is allowed."""
+
+
+class UsageError(SceneError):
+    """Bad input from the command line (flags that conflict or do not fit the scene, an output file that exists);
+    reported in one line with exit status 2."""
 
 
 class SimulationFailed(Error, RuntimeError):

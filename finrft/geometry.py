@@ -34,8 +34,8 @@ from typing import Any
 import numpy as np
 
 from . import laws, media
-from .laws import SegmentLaw
-from .scene import SANDSWIM_KEYS, RobotScene
+from .laws import SegmentLaw, sandswim
+from .scene import RobotScene
 
 
 @dataclass(frozen=True)
@@ -76,7 +76,7 @@ def chain_of(scene: Any) -> Any:
 
 def from_medium(scene: Any) -> bool:
     """Whether the scene's sandswim law takes c_s, c_f and gamma0 from its [medium] (all three left at 0)."""
-    return scene.rft.law == "sandswim" and not any(getattr(scene.rft, k) for k in SANDSWIM_KEYS)
+    return scene.rft.law == "sandswim" and sandswim.from_medium(scene.rft)
 
 
 def segment_scale(scene: Any) -> float:

@@ -1,4 +1,5 @@
-"""MuJoCo models built from the MJCF files in ``mjcf/`` and a scene.
+"""MuJoCo models built from the MJCF files in ``mjcf/`` and a scene: the chain builder every model stands on, and
+the robot's model (the plate's is its experiment's, finrft.experiments.plate).
 
 ``plate.xml`` and ``robot.xml`` hold the plate's rod and the robot's body and arms; ``segment.xml`` holds one
 segment on its hinge, attached N times in series (MjSpec attach) to make the plate's chain and each fin. The specs
@@ -8,7 +9,6 @@ hinge spring/damper/stop, and the drive. Indices come from the objects attach re
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 from dataclasses import dataclass
 from importlib import resources
@@ -19,7 +19,7 @@ import numpy as np
 from . import laws, native
 from .geometry import Resolved, resolve
 from .laws import SegmentLaw
-from .scene import Chain, RobotScene, Scene, SceneError, Sim
+from .scene import Chain, RobotScene, SceneError, Sim
 
 INTEGRATORS = {
     "euler": mujoco.mjtIntegrator.mjINT_EULER,
@@ -27,7 +27,6 @@ INTEGRATORS = {
     "implicit": mujoco.mjtIntegrator.mjINT_IMPLICIT,
     "rk4": mujoco.mjtIntegrator.mjINT_RK4,
 }
-DRIVES = ("drag", "rotate")
 # The drive's armature, relative to what it drives: large enough that the RFT load changes the prescribed
 # speed by ~1e-10 per step, small enough that the mass matrix keeps full precision in double.
 ARMATURE_RATIO = 1e10
@@ -51,22 +50,6 @@ class ForceGroup:
     hinge_dof: np.ndarray
 
 
-@dataclass(frozen=True)
-class PlateModel:
-    """A compiled plate model and the indices the simulation needs."""
-
-    model: mujoco.MjModel
-    backend: str               # "native" (the RFT plugin is bound to the segments) or "python"
-    drive: str                 # "drag" or "rotate"
-    drive_dof: int
-    drive_qpos: int
-    armature: float            # the drive's armature (kg or kg m^2)
-    hinge_qpos: np.ndarray     # (H,) qpos address of each hinge: H = segments, or 0 for a rigid plate
-    hinge_dof: np.ndarray      # (H,)
-    groups: tuple[ForceGroup, ...]  # the segments' RFT (one group)
-    resolved: Resolved         # the forces the scene's medium and geometry give (finrft.geometry.resolve)
-
-
 def mjcf_path(name: str = "plate.xml"):
     """The path of a packaged MJCF file."""
     return resources.files("finrft.mjcf") / name
@@ -80,15 +63,6 @@ def _parsed(name: str) -> mujoco.MjSpec:
 def _spec(name: str) -> mujoco.MjSpec:
     """A fresh MjSpec of a packaged MJCF file: parsed once per process (a batch builds many models), copied."""
     return _parsed(name).copy()
-
-
-def _quat_z(angle: float) -> list[float]:
-    return [np.cos(angle / 2), 0.0, 0.0, np.sin(angle / 2)]
-
-
-def initial_heading(drive: str, attack_deg: float) -> float:
-    """The plate's orientation about z at t = 0: a drag along +y at angle of attack theta starts at 90 deg - theta."""
-    return float(np.radians(90.0 - attack_deg)) if drive == "drag" else 0.0
 
 
 def plugin_config(law: SegmentLaw, stop_stiffness: float) -> dict[str, str]:
@@ -139,8 +113,8 @@ def _segment_spec(chain: Chain, dt: float, spatial: bool, hinged: bool) -> mujoc
     return spec
 
 
-def _attach_chain(spec: mujoco.MjSpec, mount: mujoco.MjsFrame, chain: Chain, dt: float, prefix: str,
-                  spatial: bool = False, welded: bool = False) -> AttachedChain:
+def attach_chain(spec: mujoco.MjSpec, mount: mujoco.MjsFrame, chain: Chain, dt: float, prefix: str,
+                 spatial: bool = False, welded: bool = False) -> AttachedChain:
     """Attach ``chain.segments`` copies of the segment in series, the first at ``mount``, each next one at the
     tip of the one before; copy i is named with ``prefix`` (not empty: MuJoCo warns that the model could not be
     saved) and the suffix i (``{prefix}segment{i}``, ``{prefix}hinge{i}``, ``{prefix}midpoint{i}``). A rigid
@@ -165,7 +139,8 @@ def _attach_chain(spec: mujoco.MjSpec, mount: mujoco.MjsFrame, chain: Chain, dt:
     return attached
 
 
-def _bind(spec: mujoco.MjSpec, name: str, law: SegmentLaw, stop_stiffness: float, bodies: list[mujoco.MjsBody]) -> None:
+def bind_plugin(spec: mujoco.MjSpec, name: str, law: SegmentLaw, stop_stiffness: float,
+                bodies: list[mujoco.MjsBody]) -> None:
     """Bind a native plugin instance carrying one force group's law to its bodies."""
     spec.activate_plugin(native.PLUGIN)
     instance = spec.add_plugin(name=name, plugin_name=native.PLUGIN, active=True)
@@ -176,7 +151,8 @@ def _bind(spec: mujoco.MjSpec, name: str, law: SegmentLaw, stop_stiffness: float
         body.plugin.active = True
 
 
-def _new_spec(file: str, sim: Sim) -> mujoco.MjSpec:
+def new_spec(file: str, sim: Sim) -> mujoco.MjSpec:
+    """A fresh spec of a packaged MJCF file with the scene's time step and integrator."""
     spec = _spec(file)
     spec.option.timestep = sim.dt
     spec.option.integrator = INTEGRATORS[sim.integrator]
@@ -188,7 +164,8 @@ def _new_spec(file: str, sim: Sim) -> mujoco.MjSpec:
     return spec
 
 
-def _compile(spec: mujoco.MjSpec) -> mujoco.MjModel:
+def compile_spec(spec: mujoco.MjSpec) -> mujoco.MjModel:
+    """The compiled model; SceneError quoting MuJoCo's reason when it refuses the spec."""
     try:
         with native.captured_warnings([]):
             return spec.compile()
@@ -198,8 +175,8 @@ def _compile(spec: mujoco.MjSpec) -> mujoco.MjModel:
         raise SceneError(f"MuJoCo rejected the model: {reason}") from None
 
 
-def _group(model: mujoco.MjModel, name: str, law: SegmentLaw, stop_stiffness: float,
-           bodies: list[mujoco.MjsBody]) -> ForceGroup:
+def force_group(model: mujoco.MjModel, name: str, law: SegmentLaw, stop_stiffness: float,
+                bodies: list[mujoco.MjsBody]) -> ForceGroup:
     """A force group of a compiled model: every site on the given (compiled) bodies, and their hinges."""
     ids = [b.id for b in bodies]
     sites = np.array([s for s in range(model.nsite) if model.site_bodyid[s] in ids], dtype=int)
@@ -210,101 +187,10 @@ def _group(model: mujoco.MjModel, name: str, law: SegmentLaw, stop_stiffness: fl
                       np.array([model.jnt_dofadr[j] for j in hinges], dtype=int))
 
 
-def _addresses(model: mujoco.MjModel, joints: list[mujoco.MjsJoint]) -> tuple[np.ndarray, np.ndarray]:
+def addresses(model: mujoco.MjModel, joints: list[mujoco.MjsJoint]) -> tuple[np.ndarray, np.ndarray]:
     """The qpos and dof addresses of compiled joints."""
     ids = [j.id for j in joints]
     return model.jnt_qposadr[ids].astype(int), model.jnt_dofadr[ids].astype(int)
-
-
-@dataclass(frozen=True)
-class _Plate:
-    spec: mujoco.MjSpec
-    drive: mujoco.MjsJoint
-    chain: AttachedChain
-
-
-def _plate(scene: Scene, drive: str, attack_deg: float, backend: str, resolved: Resolved) -> _Plate:
-    if drive not in DRIVES:
-        raise ValueError(f"drive must be one of {DRIVES}, got {drive!r}")
-    p = scene.plate
-    spec = _new_spec("plate.xml", scene.sim)
-    rod = spec.body("rod")
-    rod.mass, rod.ipos = p.rod_mass, [p.rod_length / 2, 0, 0]
-    rod.inertia = [p.rod_inertia] * 3
-    spec.geom("rod").fromto = [0, 0, 0, p.rod_length, 0, 0]
-    mount = spec.frame("chain")
-    mount.pos = [p.rod_length, 0, 0]
-
-    joint = spec.joint("drive")
-    heading = initial_heading(drive, attack_deg)
-    rod.quat = _quat_z(heading)
-    if drive == "drag":
-        joint.axis = [np.sin(heading), np.cos(heading), 0.0]  # world +y in the rotated rod frame
-    else:
-        joint.type = mujoco.mjtJoint.mjJNT_HINGE
-        joint.axis = [0, 0, 1]
-    chain = _attach_chain(spec, mount, p, scene.sim.dt, "plate_", spatial=p.chain == "spatial",
-                          welded=p.rigid_as == "welds")
-    if backend == "native":
-        _bind(spec, "sand", resolved.chain, penalty_stiffness(p), chain.bodies)
-
-    # Everything the drive moves, seen from the drive: total mass (slide) or inertia about the base (hinge).
-    lumps = [(p.rod_mass, p.rod_inertia, p.rod_length / 2)] + [
-        (p.segment_mass, p.segment_inertia, p.rod_length + (i + 0.5) * p.segment_length) for i in range(p.segments)]
-    moved = sum(m for m, _, _ in lumps) if drive == "drag" else sum(i + m * r * r for m, i, r in lumps)
-    joint.armature = ARMATURE_RATIO * moved
-    spec.modelname = f"finrft {p.kind} plate ({drive})"
-    return _Plate(spec, joint, chain)
-
-
-def plate_spec(scene: Scene, drive: str = "drag", attack_deg: float = 90.0,
-               backend: str = "python") -> mujoco.MjSpec:
-    """The plate's MjSpec for a scene: drive ``drag`` (base slides along +y, the plate at angle of attack
-    ``attack_deg`` to the motion) or ``rotate`` (the rod turns about z through its base); with backend
-    ``native`` the RFT plugin is bound to the segments."""
-    return _plate(scene, drive, attack_deg, backend, resolve(scene)).spec
-
-
-def build_plate(scene: Scene, drive: str = "drag", attack_deg: float = 90.0) -> PlateModel:
-    """Compile the plate model for a scene and collect its indices."""
-    backend = native.resolve_backend(scene.sim.backend)
-    resolved = resolve(scene)
-    plate = _plate(scene, drive, attack_deg, backend, resolved)
-    model = _compile(plate.spec)
-    group = _group(model, "sand", resolved.chain, penalty_stiffness(scene.plate), plate.chain.bodies)
-    (drive_qpos,), (drive_dof,) = _addresses(model, [plate.drive])
-    hinge_qpos, hinge_dof = _addresses(model, plate.chain.hinges)
-    return PlateModel(
-        model=model,
-        backend=backend,
-        drive=drive,
-        drive_dof=int(drive_dof),
-        drive_qpos=int(drive_qpos),
-        armature=float(model.dof_armature[drive_dof]),
-        hinge_qpos=hinge_qpos,
-        hinge_dof=hinge_dof,
-        groups=(group,),
-        resolved=resolved,
-    )
-
-
-# The chain's keys that reach a compiled plate as numbers of its hinges and nowhere else (the plugin reads neither):
-# a plate that differs from a compiled one only in these is that model with them set (`retune`), which costs
-# microseconds where a compile costs a millisecond. Tested field by field against fresh compiles.
-RETUNABLE = ("stiffness", "damping")
-
-
-def retune(plate: PlateModel, chain: Chain) -> None:
-    """Give a compiled plate's hinges the chain's RETUNABLE values, in place."""
-    m = plate.model
-    m.jnt_stiffness[m.dof_jntid[plate.hinge_dof]] = chain.stiffness
-    m.dof_damping[plate.hinge_dof] = chain.damping
-
-
-def retune_key(scene: Scene) -> tuple:
-    """What a plate's compiled model depends on besides its RETUNABLE keys: plates of equal keys differ only in
-    those."""
-    return (dataclasses.replace(scene.plate, **dict.fromkeys(RETUNABLE, 0.0)), scene.rft, scene.medium, scene.sim)
 
 
 @dataclass(frozen=True)
@@ -352,7 +238,7 @@ class _Robot:
 
 
 def _robot(scene: RobotScene, backend: str, resolved: Resolved) -> _Robot:
-    spec = _new_spec("robot.xml", scene.sim)
+    spec = new_spec("robot.xml", scene.sim)
     r, a, fin = scene.robot, scene.arm, scene.fin
     sides = ("r",) if r.model == "half" else ("r", "l")
     if r.model == "half":
@@ -373,7 +259,7 @@ def _robot(scene: RobotScene, backend: str, resolved: Resolved) -> _Robot:
         spec.site(f"{side}_arm").pos = [a.length / 2, 0, 0]
         mount = spec.frame(f"{side}_fin")
         mount.pos = [a.length, 0, 0]
-        robot.fins.append(_attach_chain(spec, mount, fin, scene.sim.dt, f"{side}_"))
+        robot.fins.append(attach_chain(spec, mount, fin, scene.sim.dt, f"{side}_"))
         robot.arms.append(arm)
         servo = spec.joint(f"{side}_servo")
         robot.servos.append(servo)
@@ -386,10 +272,10 @@ def _robot(scene: RobotScene, backend: str, resolved: Resolved) -> _Robot:
             actuator.actrange = [scene.gait.theta2, scene.gait.theta1]
             robot.actuators.append(actuator)
     if backend == "native":
-        _bind(spec, "fin_sand", resolved.chain, penalty_stiffness(fin), _fin_bodies(robot))
-        _bind(spec, "arm_sand", resolved.arm, 0.0, robot.arms)
+        bind_plugin(spec, "fin_sand", resolved.chain, penalty_stiffness(fin), _fin_bodies(robot))
+        bind_plugin(spec, "arm_sand", resolved.arm, 0.0, robot.arms)
         if scene.body.drag_law == "velocity":
-            _bind(spec, "body_sand", body_law(scene, resolved), 0.0, [body])
+            bind_plugin(spec, "body_sand", body_law(scene, resolved), 0.0, [body])
     spec.modelname = f"finrft robot ({r.model}, {fin.kind} fins)"
     return robot
 
@@ -408,16 +294,16 @@ def build_robot(scene: RobotScene) -> RobotModel:
     backend = native.resolve_backend(scene.sim.backend)
     resolved = resolve(scene)
     robot = _robot(scene, backend, resolved)
-    model = _compile(robot.spec)
+    model = compile_spec(robot.spec)
     fin = scene.fin
     sides = ("r",) if scene.robot.model == "half" else ("r", "l")
-    groups = [_group(model, "fin_sand", resolved.chain, penalty_stiffness(fin), _fin_bodies(robot)),
-              _group(model, "arm_sand", resolved.arm, 0.0, robot.arms)]
+    groups = [force_group(model, "fin_sand", resolved.chain, penalty_stiffness(fin), _fin_bodies(robot)),
+              force_group(model, "arm_sand", resolved.arm, 0.0, robot.arms)]
     if scene.body.drag_law == "velocity":
-        groups.append(_group(model, "body_sand", body_law(scene, resolved), 0.0, [robot.body]))
-    (travel_qpos,), (travel_dof,) = _addresses(model, [robot.travel])
-    servo_qpos, servo_dof = _addresses(model, robot.servos)
-    hinges = [_addresses(model, chain.hinges) for chain in robot.fins]
+        groups.append(force_group(model, "body_sand", body_law(scene, resolved), 0.0, [robot.body]))
+    (travel_qpos,), (travel_dof,) = addresses(model, [robot.travel])
+    servo_qpos, servo_dof = addresses(model, robot.servos)
+    hinges = [addresses(model, chain.hinges) for chain in robot.fins]
     prescribed = scene.robot.servo == "prescribed"
     return RobotModel(
         model=model,

@@ -22,7 +22,7 @@ from typing import Any, Mapping
 from . import laws, media, methods, schema
 from .errors import SceneError
 from .files import read_text, read_toml
-from .laws import drft, sandswim
+from .laws import drft
 from .schema import field as _f
 # Importable from here as before; their homes are the schema engine, the errors and the file reader.
 from .schema import field_of, sections, split_key, to_toml  # noqa: F401
@@ -240,10 +240,6 @@ class IntrusionPlate:
     depth: float = _f(0.05, "m", "depth of the plate's lowest point at the end", minimum=0.0)
 
 
-# The sand-swimming law's keys, which a chain's scene may leave at 0 to take them from its [medium].
-SANDSWIM_KEYS = tuple(key for key, _, _ in sandswim.KEYS)
-
-
 class _Sections:
     def to_dict(self) -> dict[str, dict[str, Any]]:
         return dataclasses.asdict(self)
@@ -341,18 +337,9 @@ class IntrusionScene(_Sections):
 
 
 def _check_chain_law(scene: Any) -> None:
-    """Check a chain scene's medium and law: a sandswim law with c_s, c_f and gamma0 all 0 takes them from the
-    medium (`finrft.geometry.resolve`, at model build), which must then give what they follow from."""
-    r = scene.rft
-    properties = media.immersion_properties(scene.medium)
-    if r.law == "sandswim" and not any(getattr(r, k) for k in SANDSWIM_KEYS) and properties is not None:
-        return
-    if r.law == "table" and not r.table:
-        raise SceneError("rft.law = 'table' needs rft.table, the path of a CSV with attack_deg, f_perp_N, f_par_N")
-    if r.law == "sandswim" and not (r.c_s > 0 and r.c_f > 0 and r.gamma0 > 0):
-        raise SceneError("rft.law = 'sandswim' needs rft.c_s > 0, rft.c_f > 0 (N/m^3) and 0 < rft.gamma0 <= pi/2 "
-                         "(rad), the medium's fitted values: none are built in (or leave all three at 0 and give "
-                         "[medium] bulk_density, internal_friction and surface_friction to derive them)")
+    """Check a chain scene's medium and, with what the medium gives (a law may derive its coefficients from it at
+    model build, `finrft.geometry.resolve`), its segment law's own keys (`finrft.laws.check`)."""
+    laws.check(scene.rft, media.immersion_properties(scene.medium))
 
 
 PRESETS: dict[type, tuple[str, ...]] = {Scene: ("paper", "physical"), RobotScene: ("paper", "physical")}
@@ -377,14 +364,15 @@ def preset(name: str, cls: type = Scene):
     return scene_from_dict(read_toml(text, f"preset {name}"), cls)
 
 
-def load_scene(path: str | Path | None = None, *, preset_name: str = "paper",
+def load_scene(path: str | Path | None = None, *, preset_name: str = "physical",
                overrides: Mapping[str, Any] | None = None, cls: type = Scene):
-    """A scene from a TOML file (or the named preset when no file is given), with dotted-key overrides applied.
+    """A scene from a TOML file (or, when no file is given, the named preset, physical as every command; a scene
+    class without presets takes its schema's defaults), with dotted-key overrides applied.
 
     A relative path in a file (``rft.table``, ``model.path``) is taken relative to that file.
     """
     if path is None:
-        scene = preset(preset_name, cls)
+        scene = preset(preset_name, cls) if cls in PRESETS else scene_from_dict({}, cls)
     else:
         path = Path(path)
         data = read_toml(read_text(path, "scene file"), str(path))

@@ -1,4 +1,4 @@
-"""Speed-against-accuracy study: the same as `finrft bench accuracy`."""
+"""Speed-against-accuracy study (finrft.studies.accuracy): the same as `finrft bench accuracy`."""
 
 import sys
 

@@ -75,3 +75,15 @@ def test_run_many_from_a_script_without_the_main_guard_says_what_to_do(tmp_path)
     done = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True, text=True, timeout=120)
     assert done.returncode == 1
     assert 'call it under `if __name__ == "__main__":` (each worker imports the script again).' in done.stderr
+
+
+def test_load_scene_defaults_to_what_every_command_runs():
+    # The API and the command line start from the same scene: the physical presets (the paper's one flag away).
+    import argparse
+    from finrft.experiments.flags import preset_name
+    command = preset_name(argparse.Namespace(scene=None, preset=None))
+    for cls in (finrft.Scene, finrft.RobotScene):
+        assert finrft.load_scene(cls=cls) == finrft.preset(command, cls) == finrft.preset("physical", cls)
+        assert finrft.load_scene(cls=cls) != finrft.load_scene(preset_name="paper", cls=cls)
+    # a scene without presets takes its schema's defaults, as `finrft intrude` without --scene does
+    assert finrft.load_scene(cls=finrft.IntrusionScene) == finrft.scene.scene_from_dict({}, finrft.IntrusionScene)

@@ -143,7 +143,7 @@ def test_scene_dump_round_trips(tmp_path, capsys):
     ("RK4", None, "rk4"), ("Euler", None, "euler"), ("rk4", "sim.integrator=implicitFAST", "implicitfast"),
     ("implicit", "sim.integrator=Euler", "euler")])
 def test_mujoco_spellings_of_the_integrator_are_accepted(tmp_path, capsys, file_value, override, expected):
-    from finrft.models import build_plate
+    from finrft.experiments.plate import build_plate
     from finrft.scene import load_scene
     path = tmp_path / "mine.toml"
     path.write_text(f'[sim]\nmethod = "explicit"\nintegrator = "{file_value}"\n')

@@ -5,12 +5,12 @@ import mujoco
 import numpy as np
 import pytest
 
-from finrft import integrate, methods, models, native, reference
-from finrft.studies import bench
+from finrft import integrate, methods, native, reference
+from finrft.studies import accuracy
 from finrft.drive import Drive
 from finrft.errors import Chatter, StepUnderflow
 from finrft.scene import Scene, SceneError, field_of, preset
-from finrft.experiments.plate import PlateTest, simulate
+from finrft.experiments.plate import PlateTest, build_plate, plate_spec, simulate
 
 
 def test_the_methods_table_says_what_each_method_does():
@@ -44,7 +44,7 @@ def test_implicit_step_without_rft_is_implicitfast(backend):
     # A model with no RFT (python-backend model, no callback installed): only MuJoCo's own forces.
     scene = preset("paper").replace(**{"sim.backend": "python", "plate.stop": "limit", "plate.segment_inertia": 1e-3,
                                        "sim.dt": 5e-4, "sim.method": "implicit"})
-    plate = models.build_plate(scene)
+    plate = build_plate(scene)
     m = plate.model
     ours, theirs = mujoco.MjData(m), mujoco.MjData(m)
     for d in (ours, theirs):
@@ -132,7 +132,7 @@ def _flips(scene, method: str, dt: float) -> float:
     """The share of steps, over 200 steps half a second into a 45 mm recovery stroke, in which some hinge's
     acceleration changes sign: near 1 when the segments chatter (the RFT force reverses every step)."""
     scene = scene.replace(**{"sim.method": method, "sim.dt": dt})
-    plate = models.build_plate(scene)
+    plate = build_plate(scene)
     m, d = plate.model, mujoco.MjData(plate.model)
     d.qvel[plate.drive_dof] = LIGHT_DRIVE.speed
     advance = integrate.stepper(m, scene.sim, "native", plate.groups)
@@ -174,7 +174,7 @@ def test_chatter_stops_the_run_loudly():
     with pytest.raises(Chatter, match=r"chatters at t = .* dt = 0.0001 s: use sim.method = 'newton'"):
         simulate(scene, LIGHT_DRIVE)
     # the speed study names a failure by its kind, not by its wording
-    trial = bench._trial((PlateTest(LIGHT_DRIVE), scene, False))
+    trial = accuracy._trial((PlateTest(LIGHT_DRIVE), scene, False))
     assert trial["failure"] == "chatter" and "chatters" in trial["detail"]
 
 
@@ -185,7 +185,7 @@ def test_native_step_too_big_for_the_arena_says_so_and_leaves_the_state(method):
     scene = preset("physical").replace(**{"plate.segments": 60, "sim.method": method})
     native.load()
     for memory, code in ((150_000, native.Code.ARENA_FULL), (400_000, 0)):
-        spec = models.plate_spec(scene, backend="native")
+        spec = plate_spec(scene, backend="native")
         spec.memory = memory
         m = spec.compile()
         d = mujoco.MjData(m)

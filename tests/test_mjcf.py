@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from finrft import models
+from finrft.experiments.plate import build_plate
 from finrft.scene import RobotScene, Scene, preset
 
 FILES = sorted(f.name for f in resources.files("finrft.mjcf").iterdir() if f.name.endswith(".xml"))
@@ -50,7 +51,7 @@ def test_attached_chain_lies_along_the_rod(paper, overrides):
     # heads along +x at 90 deg of attack; hinges follow in chain order, one per segment unless the plate is rigid.
     scene = paper.replace(**overrides)
     p = scene.plate
-    plate = models.build_plate(scene)
+    plate = build_plate(scene)
     d = mujoco.MjData(plate.model)
     mujoco.mj_kinematics(plate.model, d)
     sites = plate.groups[0].sites

@@ -19,7 +19,7 @@ from finrft.cli import main
 from finrft.drive import Drive
 from finrft.laws.table import ForceTable, write_table
 from finrft.scene import SceneError, preset
-from finrft.experiments.plate import simulate
+from finrft.experiments.plate import build_plate, simulate
 
 
 def test_plugin_is_built_and_loaded():
@@ -84,7 +84,7 @@ def test_backends_give_the_same_trajectories(paper, table_csv, kind, law):
 
 def test_plugin_is_thread_safe_in_rollout(paper):
     # Two threads stepping copies of the plate at once must reproduce a plain sequential run exactly.
-    plate = models.build_plate(paper)
+    plate = build_plate(paper)
     m = plate.model
     d = mujoco.MjData(m)
     d.qvel[plate.drive_dof] = 0.03
@@ -112,7 +112,7 @@ def test_plugin_rejects_bad_config(paper, monkeypatch, capsys, key, value, named
     good = models.plugin_config
     monkeypatch.setattr(models, "plugin_config", lambda *args: {**good(*args), key: value})
     with pytest.raises(SceneError, match=named):
-        models.build_plate(paper)
+        build_plate(paper)
     assert main(["drag", "--preset", "paper", "--distance", "5"]) == 2
     err = capsys.readouterr().err
     assert named in err and len(err.strip().splitlines()) == 1

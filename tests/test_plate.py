@@ -5,11 +5,10 @@ import pytest
 from scipy.optimize import brentq
 
 from conftest import face
-from finrft import models
 from finrft.drive import Drive
 from finrft.convergence import InaccurateResult, SimulationUnstable
 from finrft.scene import preset
-from finrft.experiments.plate import simulate
+from finrft.experiments.plate import build_plate, simulate
 
 
 @pytest.mark.parametrize("attack_deg", [90.0, 60.0, 30.0, 0.0])
@@ -95,7 +94,7 @@ def test_soft_loop_is_symmetric_origami_is_not(loops):
 def test_limit_stop_holds(responsive):
     # The stated penetration of the limit stop: below 0.02 deg while the power stroke presses the plate into it.
     # At this step its slams are resolved too (estimated error 0.016 deg, 0.005 deg against dt 10 us), now that
-    # the constraint solver iterates to convergence (see finrft.models._new_spec).
+    # the constraint solver iterates to convergence (see finrft.models.new_spec).
     scene = responsive.replace(**{"plate.stop": "limit"})
     origami = simulate(scene, Drive(speed=0.03, stroke=0.2, cycles=2))
     assert origami.error_estimate["angle_deg"] < 0.05
@@ -141,7 +140,7 @@ def test_spatial_chain_stays_in_the_plane(paper):
     # A chain free to turn about each segment's own x and y axes too: the in-plane loads leave those six extra
     # degrees of freedom at rest, so the motion is the planar chain's.
     spatial = paper.replace(**{"plate.chain": "spatial"})
-    assert models.build_plate(spatial).model.nv == models.build_plate(paper).model.nv + 2 * paper.plate.segments
+    assert build_plate(spatial).model.nv == build_plate(paper).model.nv + 2 * paper.plate.segments
     planar, free = simulate(paper, Drive()), simulate(spatial, Drive())
     np.testing.assert_allclose(free.segment_angle, planar.segment_angle, atol=1e-12)
     np.testing.assert_allclose(free.drive_force, planar.drive_force, atol=1e-9)

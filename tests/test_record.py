@@ -12,10 +12,9 @@ from rerun.chunk import RrdReader
 
 from finrft import record
 from finrft.drive import Drive
-from finrft.models import build_plate
 from finrft.scene import preset, to_toml
 from finrft.experiment import Result
-from finrft.experiments.plate import simulate
+from finrft.experiments.plate import build_plate, simulate
 
 DRIVES = {
     "drag": Drive(stroke=0.02),

@@ -8,8 +8,9 @@ import mujoco
 import numpy as np
 import pytest
 
-from finrft import laws, models
+from finrft import laws
 from finrft.coupling import PythonCoupling, installed
+from finrft.experiments.plate import build_plate
 from finrft.laws import paper, sandswim, table
 from finrft.scene import SceneError, preset
 
@@ -190,8 +191,8 @@ def test_every_law_has_a_c_twin_giving_the_same_forces(tmp_path):
     rng = np.random.default_rng(5)
     for name, values in examples.items():
         scene = preset("physical").replace(**{"rft.law": name, "plate.segments": 6, **values})
-        native = models.build_plate(scene.replace(**{"sim.backend": "native"}))
-        python = models.build_plate(scene.replace(**{"sim.backend": "python"}))
+        native = build_plate(scene.replace(**{"sim.backend": "native"}))
+        python = build_plate(scene.replace(**{"sim.backend": "python"}))
         assert native.backend == "native"
         m_native, m_python = native.model, python.model
         d_native, d_python = mujoco.MjData(m_native), mujoco.MjData(m_python)

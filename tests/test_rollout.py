@@ -6,17 +6,17 @@ import mujoco
 import numpy as np
 import pytest
 
-from finrft import batch, models, native
+from finrft import batch, native
 from finrft.convergence import SimulationUnstable
 from finrft.drive import Drive
 from finrft.scene import preset
-from finrft.experiments.plate import simulate
+from finrft.experiments.plate import RETUNABLE, build_plate, retune, retune_key, simulate
 
 
 def _same_as_serial(jobs, states):
     for (scene, drive), state in zip(jobs, states):
         run = simulate(scene, drive, estimate_error=False)
-        plate = models.build_plate(scene)
+        plate = build_plate(scene)
         assert np.allclose(state[:, 0], run.time, rtol=0, atol=1e-9)  # MuJoCo sums dt, the result multiplies
         assert np.array_equal(state[:, 1 + plate.drive_qpos], run.displacement)
         hinges = 1 + np.asarray(plate.hinge_qpos)
@@ -56,14 +56,14 @@ def test_later_batches_reuse_models_and_match_serial_runs():
 def test_retuned_model_equals_a_fresh_compile(changes):
     # Every field of the model, not only those retune sets: nothing else may depend on the retuned keys.
     scene = preset("physical")
-    source = models.build_plate(scene.replace(**{k: v for k, v in changes.items() if k.split(".")[1]
-                                                 not in models.RETUNABLE}))
+    source = build_plate(scene.replace(**{k: v for k, v in changes.items() if k.split(".")[1]
+                                                 not in RETUNABLE}))
     plate = dataclasses.replace(source, model=mujoco.MjModel.__copy__(source.model))
     target = scene.replace(**changes)
-    models.retune(plate, target.plate)
-    fresh = models.build_plate(target).model
-    assert models.retune_key(target) == models.retune_key(scene.replace(
-        **{k: v for k, v in changes.items() if k.split(".")[1] not in models.RETUNABLE}))
+    retune(plate, target.plate)
+    fresh = build_plate(target).model
+    assert retune_key(target) == retune_key(scene.replace(
+        **{k: v for k, v in changes.items() if k.split(".")[1] not in RETUNABLE}))
     compared = 0
     for name in dir(fresh):
         value = getattr(fresh, name)
@@ -117,6 +117,6 @@ def test_rollout_jobs_with_other_laws_step_with_their_own():
         {"plate.segments": 4, "plate.segment_length": 0.025})]
     for (scene, _), states in zip(jobs, batch.rollout_plates(jobs, workers=2)):
         run = simulate(scene, drive, estimate_error=False)
-        plate = models.build_plate(scene)
+        plate = build_plate(scene)
         hinges = 1 + np.asarray(plate.hinge_qpos)
         assert np.array_equal(states[:, hinges], run.hinge_angle[:, :len(hinges)])

@@ -1,11 +1,13 @@
 """The schema engine knows no section: the sections of the laws' keys are built from what each law declares."""
 
+import argparse
 import dataclasses
 
 import pytest
 
 from finrft import laws, schema
-from finrft.errors import Error, SceneError
+from finrft.errors import Error, SceneError, UsageError
+from finrft.experiments.flags import preset_name
 from finrft.laws import table
 from finrft.scene import RFT, IntrusionScene, Medium, RobotScene, Scene, UserScene, field_of, preset, scene_from_dict
 
@@ -32,6 +34,15 @@ def test_each_law_declares_its_own_keys_and_reads_only_them(tmp_path):
         rft = Recorder(RFT(law=name, table=str(tmp_path / "table.csv")))
         laws.module(name).parameters(rft)
         assert rft.read == declared[name], name
+    # a law's own check of its section (through the registry, as every scene calls it) reads its own keys alone
+    for name in laws.names():
+        for medium in (None, (1500.0, 0.6, 0.3)):
+            rft = Recorder(RFT(law=name))
+            try:
+                laws.check(rft, medium)
+            except SceneError as error:
+                assert f"rft.law = '{name}' needs" in str(error)
+            assert rft.read <= declared[name] | shared, name
     assert field_of(Scene, "rft.c_s").metadata["unit"] == "N/m^3" and field_of(Scene, "rft.gamma0").metadata["unit"] == "rad"
     # the surface laws' keys of [medium], likewise
     for name in laws.names(laws.SURFACE):
@@ -64,3 +75,7 @@ def test_bad_input_is_one_error_family():
     assert isinstance(caught.value, Error) and isinstance(caught.value, ValueError)
     with pytest.raises(SceneError, match="rft.gamma0 must be <= 1.5708 rad"):
         preset("paper").replace(**{"rft.gamma0": 2.0})
+    # a command line's own bad flags are of the same family: one line, exit status 2
+    with pytest.raises(UsageError, match="give --scene s.toml or --preset paper, not both") as caught:
+        preset_name(argparse.Namespace(scene="s.toml", preset="paper"))
+    assert isinstance(caught.value, SceneError)

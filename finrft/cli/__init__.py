@@ -17,15 +17,14 @@ import sys
 import warnings
 from typing import Sequence
 
-from .. import __version__, scene as scenes
-from ..convergence import SimulationFailed
+from .. import __version__
+from ..errors import SceneError, SimulationFailed
 from ..experiments import REGISTRY
-from ..experiments.flags import UsageError
 from . import info, search, studies
 from .common import Interrupted, Parser, one_line_warning
 from .run import add_experiment
 
-__all__ = ["UsageError", "build_parser", "main"]
+__all__ = ["build_parser", "main"]
 
 DESCRIPTION = ("Compliant fins in granular media: resistive force theory (RFT) on MuJoCo. Command-line flags use the "
                "paper's units (mm, mm/s, degrees); scene and HDF5 files use SI units, JSON keys name theirs. Every "
@@ -69,7 +68,7 @@ def _dispatch(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> in
     try:
         args = parser.parse_args(argv)
         return args.handler(args)
-    except (UsageError, scenes.SceneError) as exc:
+    except SceneError as exc:  # a UsageError too
         print(f"finrft: error: {exc}", file=sys.stderr)
         return 2
     except SimulationFailed as exc:

@@ -14,8 +14,7 @@ from typing import Any, Callable, Iterator, Sequence
 
 import numpy as np
 
-from ..convergence import SimulationFailed
-from ..experiments.flags import UsageError
+from ..errors import SimulationFailed, UsageError
 from ..files import atomic_path
 
 

@@ -6,7 +6,8 @@ import argparse
 from typing import Any
 
 from .. import scene as scenes
-from ..experiments.flags import UsageError, add_force, add_json, add_quiet
+from ..errors import UsageError
+from ..experiments.flags import add_force, add_json, add_quiet
 from ..files import atomic_path
 from .common import check_output, print_json, said_written, say
 

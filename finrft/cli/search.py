@@ -12,8 +12,8 @@ import numpy as np
 
 from .. import geometry
 from .. import scene as scenes
-from ..experiments.flags import (UsageError, add_force, add_json, add_max_error, add_quiet, add_workers, limits,
-                                 number)
+from ..errors import UsageError
+from ..experiments.flags import add_force, add_json, add_max_error, add_quiet, add_workers, limits, number
 from ..experiments.plate import add_plate_scene, resolve_plate
 from ..experiments.swim import add_robot, resolve_robot
 from ..files import atomic_path

@@ -160,12 +160,12 @@ def _bench_figures(args: argparse.Namespace, log: Any, tick: Any) -> dict[str, A
 
 
 def run_bench(args: argparse.Namespace) -> int:
-    from ..studies import bench
+    from ..studies import accuracy, bench
     log = lambda text: say(args, text)  # noqa: E731
     if args.bench == "accuracy":
         check_output_dir(args.out, "--out", args.force)
         with progress(args, 1, "bench accuracy", "%") as bar:
-            bench.accuracy(args.out, quick=args.quick, workers=args.workers, log=log,
+            accuracy.study(args.out, quick=args.quick, workers=args.workers, log=log,
                            progress=bar and (lambda done, total: bar(done / total)))
         return 0
     if args.bench == "backends":

@@ -1,5 +1,5 @@
-"""The command-line flags experiments and studies share: number types in the CLI's units, the output flags, the
-error limit, and the error every bad flag raises. argparse only: no engine here."""
+"""The command-line flags experiments and studies share: number types in the CLI's units, the output flags and the
+error limit (a bad flag raises finrft.errors.UsageError). argparse only: no engine here."""
 
 from __future__ import annotations
 
@@ -8,10 +8,7 @@ import math
 from typing import Callable
 
 from ..convergence import ErrorLimits
-
-
-class UsageError(Exception):
-    """Bad input from the command line; reported in one line with exit status 2."""
+from ..errors import UsageError
 
 
 def number(unit: str, *, minimum: float = 0.0, inclusive: bool = False, integer: bool = False) -> Callable:

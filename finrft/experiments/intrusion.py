@@ -25,10 +25,11 @@ import numpy as np
 from .. import laws
 from ..convergence import ErrorLimits
 from ..drive import Drive
+from ..errors import UsageError
 from ..experiment import Compared, Plot, Quantity, Result, run
-from ..scene import IntrusionScene, load_scene, parse_override, scene_from_dict
+from ..scene import IntrusionScene, load_scene, parse_override
 from .command import Command, Output, register
-from .flags import UsageError, add_force, add_json, add_quiet, add_scene_flags
+from .flags import add_force, add_json, add_quiet, add_scene_flags
 from .user_model import AttachedModel, JointTrial, build_attached
 
 SIGN_CONVENTION = (
@@ -198,8 +199,7 @@ class IntrudeCommand(Command):
         overrides = dict(parse_override(item, IntrusionScene) for item in args.set)
         if args.backend:
             overrides["sim.backend"] = args.backend
-        return (load_scene(args.scene, overrides=overrides, cls=IntrusionScene) if args.scene else
-                scene_from_dict({}, IntrusionScene).replace(**overrides))
+        return load_scene(args.scene, overrides=overrides, cls=IntrusionScene)
 
     def jobs(self, args: argparse.Namespace, scene: IntrusionScene) -> list[tuple[Intrusion, IntrusionScene]]:
         return [(Intrusion(), scene.replace(**{"plate.angle": math.radians(a)})) for a in _angles(args.angles)]

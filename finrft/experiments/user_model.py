@@ -23,7 +23,7 @@ from .. import laws
 from ..attach import Attached, SurfaceForces, attach
 from ..drive import Drive
 from ..experiment import Compared, Plot, Quantity, Result
-from ..models import ARMATURE_RATIO, INTEGRATORS, _compile
+from ..models import ARMATURE_RATIO, INTEGRATORS, compile_spec
 from ..scene import ExplicitSim, Medium, SceneError, UserScene, load_scene, parse_override
 from ..stepping import Prescribed
 from .command import Command, error_line, register, steps_line
@@ -86,7 +86,7 @@ def build_attached(spec: mujoco.MjSpec, joint_name: str, bodies: tuple[str, ...]
     spec.option.timestep = sim.dt
     spec.option.integrator = INTEGRATORS[sim.integrator]
     # The armature is relative to what the joint moves (its diagonal of the mass matrix at qpos0), as the plate's.
-    plain = _compile(spec)
+    plain = compile_spec(spec)
     d = mujoco.MjData(plain)
     mujoco.mj_forward(plain, d)
     mass = np.zeros((plain.nv, plain.nv))
@@ -98,7 +98,7 @@ def build_attached(spec: mujoco.MjSpec, joint_name: str, bodies: tuple[str, ...]
                       element_size=medium.element_size, backend=sim.backend, medium=medium.name or None,
                       drft_lambda=medium.drft_lambda,
                       bulk_density=None if law.DENSITY else medium.bulk_density or None, **law.given(medium))
-    model = _compile(spec)
+    model = compile_spec(spec)
     jid = model.joint(joint_name).id
     return AttachedModel(model, attached, int(model.jnt_dofadr[jid]), int(model.jnt_qposadr[jid]),
                          float(model.dof_armature[model.jnt_dofadr[jid]]),

@@ -15,6 +15,9 @@ name. Its module provides
   it dissipates at every velocity and orientation;
 - optionally ``config(parameters) -> dict[str, str]``: its keys of the native plugin's config, when they are not
   its parameters' numbers written out;
+- optionally ``check(rft, medium)``: SceneError for a ``[rft]`` section it cannot run (a key it needs left out),
+  ``medium`` what the chain's ``[medium]`` gives to derive coefficients from (`finrft.media.immersion_properties`:
+  bulk density, internal and surface friction) or None; called on every chain scene (`check`);
 - ``KEYS``: its own keys of a scene's ``[rft]`` section, ``(name, type, finrft.schema.field(default, unit, doc,
   ...))`` each; the section (`finrft.scene.RFT`) is built from every segment law's (`keys`), so a new law's keys,
   units and documentation are declared in its module alone.
@@ -92,6 +95,14 @@ def module(name: str, kind: str = SEGMENT) -> ModuleType:
 def keys(kind: str = SEGMENT) -> tuple[Any, ...]:
     """Every law's own keys (``KEYS``) of a kind, the laws by name: what a scene's section for them holds."""
     return tuple(key for name in names(kind) for key in getattr(module(name, kind), "KEYS", ()))
+
+
+def check(rft: Any, medium: tuple[float, float, float] | None) -> None:
+    """Check a scene's ``[rft]`` section with its segment law's own ``check``, when the law has one: SceneError
+    naming what it needs. ``medium``: what the chain's ``[medium]`` gives to derive coefficients from, or None."""
+    own = getattr(module(rft.law), "check", None)
+    if own is not None:
+        own(rft, medium)
 
 
 def segment_scale(length: float, height: float, depth: float) -> float:

@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import SceneError
 from ..schema import field
 from . import components
 
@@ -48,6 +49,23 @@ KEYS = (("c_s", float, field(0.0, "N/m^3", "sandswim law: C_S per unit area and 
                                 "motion", minimum=0.0, exclusive=False, maximum=math.pi / 2,
                                 why_maximum="beyond it the normal force would push a segment along its motion")))
 INTENSIVE = ("c_s", "c_f")
+
+
+def from_medium(rft: Any) -> bool:
+    """Whether a scene's [rft] leaves c_s, c_f and gamma0 all at 0, to take them from its chain's [medium]
+    (`finrft.geometry.resolve`, at model build)."""
+    return not any(getattr(rft, key) for key, _, _ in KEYS)
+
+
+def check(rft: Any, medium: tuple[float, float, float] | None) -> None:
+    """SceneError unless the section gives c_s, c_f and gamma0 > 0, or leaves all three at 0 in a ``medium`` that
+    gives what they are derived from."""
+    if from_medium(rft) and medium is not None:
+        return
+    if not (rft.c_s > 0 and rft.c_f > 0 and rft.gamma0 > 0):
+        raise SceneError("rft.law = 'sandswim' needs rft.c_s > 0, rft.c_f > 0 (N/m^3) and 0 < rft.gamma0 <= pi/2 "
+                         "(rad), the medium's fitted values: none are built in (or leave all three at 0 and give "
+                         "[medium] bulk_density, internal_friction and surface_friction to derive them)")
 
 
 def parameters(rft: Any) -> dict[str, float]:

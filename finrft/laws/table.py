@@ -47,6 +47,12 @@ class ForceTable:
         return ForceTable(self.attack_deg, self.f_perp * scale, self.f_par * scale)
 
 
+def check(rft: Any, medium: Any) -> None:
+    """SceneError unless the section names its CSV (the medium gives the table nothing)."""
+    if not rft.table:
+        raise SceneError("rft.law = 'table' needs rft.table, the path of a CSV with attack_deg, f_perp_N, f_par_N")
+
+
 def parameters(rft: Any) -> dict[str, ForceTable]:
     path = Path(rft.table)
     try:

@@ -69,8 +69,7 @@ class Plate(Chain):
 
 
 RFT = schema.section("RFT", (
-    ("law", str, _f("paper", "", "paper: direction-cosine law; table: F_perp(theta), F_par(theta) from a CSV; "
-                    "sandswim: the sand-swimming law of Maladen et al. 2009", choices=laws.names)),
+    ("law", str, _f("paper", "", laws.described(), choices=laws.names)),
     ("v_reg", float, _f(0.001, "m/s", "speed below which the rate-independent force fades out (tanh)",
                         minimum=0.0)),
     *laws.keys()), __name__,

@@ -166,7 +166,11 @@ def on_files(files: Any, config: Any) -> Any:
 
 
 def main(argv: list[str]) -> int:
-    out = Path(argv[0] if argv else "reference")
+    parser = argparse.ArgumentParser(description="Write the documentation's generated reference pages (the scene "
+                                     "keys, the commands) to a folder, without building the site.")
+    parser.add_argument("out", nargs="?", default="reference", metavar="DIR",
+                        help="the folder to write scene.md and cli.md to (default: %(default)s)")
+    out = Path(parser.parse_args(argv).out)
     for uri, builder in PAGES.items():
         path = out / Path(uri).name
         path.parent.mkdir(parents=True, exist_ok=True)

@@ -40,3 +40,16 @@ def _energy_warning_given():
 def errors_only():
     """A subprocess's stderr without that once-per-process warning, for tests of other messages."""
     return lambda err: "".join(line for line in err.splitlines(keepends=True) if "feeds energy in" not in line)
+
+
+def law_cases(name: str):
+    """The cases of a segment law for the tests every law goes through: its test module tests/test_law_NAME.py
+    defines ``twin(tmp_path)`` (scene overrides), ``DISSIPATIVE`` and ``FEEDING`` (parameters of its force)."""
+    import importlib
+
+    try:
+        return importlib.import_module(f"test_law_{name}")
+    except ModuleNotFoundError:
+        raise AssertionError(f"segment law {name!r} has no tests/test_law_{name}.py defining twin, DISSIPATIVE "
+                             f"and FEEDING") from None
+

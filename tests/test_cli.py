@@ -1,5 +1,6 @@
 """The command line: outputs, units, and how bad input and failures are reported."""
 
+import argparse
 import json
 import re
 import signal
@@ -15,7 +16,7 @@ import numpy as np
 import pytest
 
 from finrft.laws.table import paper_table, write_table
-from finrft.cli import main
+from finrft.cli import build_parser, main
 from finrft.scene import RobotScene, preset, to_toml
 
 # Subprocesses run outside the repository: from its root `python -m finrft` would import the source tree, which
@@ -337,9 +338,22 @@ def test_swim_help_defaults_are_the_presets():
         assert 1e3 * scene.arm.length == pytest.approx(stated["length"])
 
 
-COMMANDS = [["drag"], ["rotate"], ["scene"], ["swim"], ["optimize"], ["table"], ["fit"], ["fit-rft"], ["report"],
-            ["run"], ["intrude"], ["medium"], ["law"],
-            *[["bench", kind] for kind in ("backends", "robot", "accuracy", "modelling", "fit")]]
+def _commands(parser=None, prefix=()):
+    """Every command of the parser, sub-commands (bench's) included: what a new experiment's command joins."""
+    parser = parser or build_parser()
+    found = []
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                found += _commands(sub, (*prefix, name)) or [[*prefix, name]]
+    return found
+
+
+COMMANDS = _commands()
+
+
+def test_the_commands_are_found():
+    assert ["drag"] in COMMANDS and ["bench", "accuracy"] in COMMANDS and ["law"] in COMMANDS
 
 
 @pytest.mark.parametrize("argv", COMMANDS, ids=" ".join)

@@ -10,8 +10,9 @@ import pytest
 
 from finrft import geometry, laws
 from finrft.cli import main
-from finrft.laws import table
 from finrft.scene import preset
+
+from conftest import law_cases
 
 V_REG = 1e-3
 SAMPLES = 20000
@@ -35,28 +36,10 @@ def _max_power(name, params, seed=3):
     return np.einsum("ij,ij->i", force, v).max(), (np.linalg.norm(force, axis=1) * np.linalg.norm(v, axis=1)).max()
 
 
-def _table(perp, par, attack_deg=(0.0, 45.0, 90.0)):
-    return {"table": table.ForceTable(np.array(attack_deg), np.array(perp, float), np.array(par, float))}
-
-
-# Parameters that dissipate, per registered law; and parameters that can feed energy in.
-DISSIPATIVE = {
-    "paper": [{"f_perp": 1.2, "f_par": 0.2}, {"f_perp": 1.2, "f_par": 0.0}, {"f_perp": 0.0, "f_par": 0.7}],
-    "table": [_table([0.0, 1.0, 1.2], [0.3, 0.2, 0.0]), {"table": table.paper_table(1.2, 0.2, samples=19)},
-              # negative F_par near 90 deg, outweighed there by F_perp sin(theta)
-              _table([0.0, 1.0, 1.0], [0.2, 0.0, -0.1])],
-    "sandswim": [{"c_s": 1.7, "c_f": 0.6, "gamma0": 0.35}, {"c_s": 0.9, "c_f": 1.2, "gamma0": np.pi / 2},
-                 {"c_s": 2.0, "c_f": 0.0, "gamma0": 0.1}],
-}
-FEEDING = {
-    "paper": [{"f_perp": 1.2, "f_par": -0.2}, {"f_perp": -0.5, "f_par": 0.3}],
-    "table": [{"table": table.paper_table(1.2, -0.2, samples=19)}, _table([0.0, -0.3, 1.0], [0.3, 0.2, 0.0])],
-    "sandswim": [{"c_s": 1.0, "c_f": -0.1, "gamma0": 0.3}, {"c_s": -1.0, "c_f": 0.5, "gamma0": 0.3}],
-}
-
-
-def test_every_law_has_examples_here():
-    assert set(DISSIPATIVE) == set(FEEDING) == set(laws.names()), "every registered law needs its cases here"
+# Parameters that dissipate, per registered law, and parameters that can feed energy in: each law's own test
+# module holds them (conftest.law_cases).
+DISSIPATIVE = {name: law_cases(name).DISSIPATIVE for name in laws.names()}
+FEEDING = {name: law_cases(name).FEEDING for name in laws.names()}
 
 
 @pytest.mark.parametrize("name,params", [(n, p) for n, cases in DISSIPATIVE.items() for p in cases])

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from .. import laws
 from .. import scene as scenes
 from ..errors import UsageError
 from ..experiments.flags import add_force, add_json, add_quiet
@@ -66,7 +67,7 @@ def add_law(sub: Any) -> None:
                        "vertical plane (psi = 0) for the medium's xi_n (from its bulk density and internal friction; "
                        "generic: 1 N/cm^3); for sandswim, F_perp and F_par per unit C_S and C_F over the angle psi "
                        "between velocity and body axis (0..90 deg at 1 deg) and gamma0.")
-    p.add_argument("name", metavar="NAME", help="the law: li2013, rft3d or sandswim")
+    p.add_argument("name", metavar="NAME", help=f"the law: {', '.join(laws.mapped())}")
     p.add_argument("--medium", default="generic", metavar="M",
                    help="a medium of the catalogue (finrft medium --list; default: %(default)s)")
     p.add_argument("--plot", metavar="FILE.png", help="write the map as a figure, one colour map per field")

@@ -92,6 +92,11 @@ def module(name: str, kind: str = SEGMENT) -> ModuleType:
     return _registry(kind)[name]
 
 
+def described(kind: str = SEGMENT) -> str:
+    """Every law of a kind in a few words each (its module's ``SUMMARY``), as the schema documents the choice."""
+    return "; ".join(f"{name}: {getattr(module(name, kind), 'SUMMARY', '')}" for name in names(kind))
+
+
 def keys(kind: str = SEGMENT) -> tuple[Any, ...]:
     """Every law's own keys (``KEYS``) of a kind, the laws by name: what a scene's section for them holds."""
     return tuple(key for name in names(kind) for key in getattr(module(name, kind), "KEYS", ()))

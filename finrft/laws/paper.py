@@ -18,6 +18,7 @@ from ..schema import field
 from . import components
 
 KIND = "segment"
+SUMMARY = "direction-cosine law (the paper's model)"  # what the scene's rft.law documents
 # The law's keys of [rft], with their units (`finrft.scene.RFT` is built from every law's). The defaults: the
 # authors' 1.2 N and -0.2 N per 33 mm segment, over its face 33 x 55 mm at 37.5 mm mean depth.
 KEYS = (("f_perp", float, field(17630.85399449036, "N/m^3", "normal force coefficient per unit area and depth "

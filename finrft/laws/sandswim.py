@@ -39,6 +39,7 @@ from ..schema import field
 from . import components
 
 KIND = "segment"
+SUMMARY = "the sand-swimming law of Maladen et al. 2009"  # what the scene's rft.law documents
 # The law's keys of [rft], with their units (`finrft.scene.RFT` is built from every law's). A chain's scene may
 # leave all three at 0 to take them from its [medium].
 KEYS = (("c_s", float, field(0.0, "N/m^3", "sandswim law: C_S per unit area and depth (the medium's normal-force "

@@ -4,11 +4,11 @@ motion, 0..90 degrees), interpolated linearly::
     F = -tanh(|v| / v_reg) * ( F_perp(theta) sgn(v^.y^) y^ + F_par(theta) sgn(v^.x^) x^ )
 
 which is how RFT is identified from rigid-plate drags; the paper law is the table F_perp = f_perp sin(theta),
-F_par = f_par cos(theta). The table is a CSV with columns attack_deg, f_perp_N, f_par_N: the forces on a segment of
-unit scale, i.e. per unit area and depth (N/m^3, as the other laws' coefficients) despite the columns' names, which
-files already written keep; a segment's forces are the table times its face's area and mean depth
-(`finrft.laws.segment_scale`). The CSV is read once per file version (its path, size and modification time). The C
-twin is plugins/laws/table.c.
+F_par = f_par cos(theta). The table is a CSV with columns attack_deg, f_perp_N_m3, f_par_N_m3: the forces on a
+segment of unit scale, i.e. per unit area and depth (N/m^3, as the other laws' coefficients); a table of forces per
+segment (columns f_perp_N, f_par_N) is refused, not read as N/m^3. A segment's forces are the table times its
+face's area and mean depth (`finrft.laws.segment_scale`). The CSV is read once per file version (its path, size and
+modification time). The C twin is plugins/laws/table.c.
 """
 
 from __future__ import annotations
@@ -27,11 +27,14 @@ from ..schema import field
 from . import components
 
 KIND = "segment"
+SUMMARY = "F_perp(theta), F_par(theta) from a CSV"  # what the scene's rft.law documents
 # The law's keys of [rft], with their units (`finrft.scene.RFT` is built from every law's).
-KEYS = (("table", str, field("", "", "table law: CSV with columns attack_deg, f_perp_N, f_par_N, the forces per unit "
+KEYS = (("table", str, field("", "", "table law: CSV with columns attack_deg, f_perp_N_m3, f_par_N_m3, the forces per unit "
                              "area and depth (N/m^3) (relative to the scene file)")),)
 INTENSIVE = ("table",)
-TABLE_COLUMNS = ("attack_deg", "f_perp_N", "f_par_N")
+TABLE_COLUMNS = ("attack_deg", "f_perp_N_m3", "f_par_N_m3")
+# The columns of a table of forces per segment, before the coefficients were per unit area and depth.
+PER_SEGMENT_COLUMNS = ("f_perp_N", "f_par_N")
 
 
 @dataclass(frozen=True)
@@ -50,7 +53,8 @@ class ForceTable:
 def check(rft: Any, medium: Any) -> None:
     """SceneError unless the section names its CSV (the medium gives the table nothing)."""
     if not rft.table:
-        raise SceneError("rft.law = 'table' needs rft.table, the path of a CSV with attack_deg, f_perp_N, f_par_N")
+        raise SceneError("rft.law = 'table' needs rft.table, the path of a CSV with attack_deg, f_perp_N_m3, "
+                         "f_par_N_m3")
 
 
 def parameters(rft: Any) -> dict[str, ForceTable]:
@@ -69,7 +73,7 @@ def _read_cached(path: str, size: int, mtime_ns: int) -> ForceTable:
 
 
 def config(params: dict[str, ForceTable]) -> dict[str, str]:
-    """The plugin's ``table``: attack_deg f_perp_N f_par_N triples."""
+    """The plugin's ``table``: attack_deg f_perp f_par triples (N/m^3)."""
     table = params["table"]
     return {"table": " ".join(repr(float(x)) for row in zip(table.attack_deg, table.f_perp, table.f_par)
                               for x in row)}
@@ -105,10 +109,14 @@ def feeds_energy(params: dict[str, ForceTable]) -> str:
 
 
 def read_table(path: str | Path) -> ForceTable:
-    """Read a force table CSV (columns attack_deg, f_perp_N, f_par_N; angles increasing over 0..90 degrees)."""
+    """Read a force table CSV (columns attack_deg, f_perp_N_m3, f_par_N_m3; angles increasing over 0..90 degrees)."""
     path = Path(path)
     lines = read_text(path, "RFT table").splitlines()
     rows = list(csv.DictReader(line for line in lines if not line.startswith("#")))
+    if rows and all(c in rows[0] for c in PER_SEGMENT_COLUMNS):
+        raise SceneError(f"RFT table {path} holds forces per segment (columns f_perp_N, f_par_N): give them per unit "
+                         f"area and depth, divided by the segment's length x medium.height x (medium.depth + "
+                         f"medium.height / 2), in columns f_perp_N_m3, f_par_N_m3")
     if not rows or any(c not in rows[0] for c in TABLE_COLUMNS):
         raise SceneError(f"RFT table {path} needs the columns {', '.join(TABLE_COLUMNS)}")
     try:

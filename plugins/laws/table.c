@@ -1,7 +1,7 @@
 // Law "table": F = -tanh(|v|/v_reg) (F_perp(theta) sgn(v^.y^) y^ + F_par(theta) sgn(v^.x^) x^), the magnitudes
 // interpolated linearly in the angle of attack theta. The twin of finrft/laws/table.py.
 //
-// Config `table`: "attack_deg f_perp_N f_par_N ..." triples, attack increasing over 0..90 degrees.
+// Config `table`: "attack_deg f_perp f_par ..." triples, attack increasing over 0..90 degrees.
 
 #include <math.h>
 #include <stdlib.h>
@@ -29,7 +29,7 @@ static void destroy(void* params) {
 static void* create(const mjModel* m, int instance) {
   const char* text = mj_getPluginConfig(m, instance, "table");
   if (!text || !text[0]) {
-    mju_warning("finrft.rft: law 'table' needs config 'table' (attack_deg f_perp_N f_par_N triples)");
+    mju_warning("finrft.rft: law 'table' needs config 'table' (attack_deg f_perp f_par triples)");
     return NULL;
   }
   int capacity = 16, count = 0;
@@ -76,7 +76,7 @@ static void* create(const mjModel* m, int instance) {
   }
   free(values);
   if (bad) {
-    mju_warning("finrft.rft: config 'table' must hold numeric triples 'attack_deg f_perp_N f_par_N' with the "
+    mju_warning("finrft.rft: config 'table' must hold numeric triples 'attack_deg f_perp f_par' with the "
                 "angle increasing over 0..90 degrees");
   }
   return t;

@@ -341,8 +341,45 @@ def _check_chain_law(scene: Any) -> None:
     laws.check(scene.rft, media.immersion_properties(scene.medium))
 
 
-PRESETS: dict[type, tuple[str, ...]] = {Scene: ("paper", "physical"), RobotScene: ("paper", "physical")}
-_PRESET_PREFIX = {Scene: "plate", RobotScene: "robot"}
+@dataclass(frozen=True)
+class SceneKind:
+    """A registered scene class: its built-in presets (``presets/PREFIX-NAME.toml``) and a line saying what it is
+    and which commands read it (the scene reference's heading)."""
+
+    cls: type
+    presets: tuple[str, ...] = ()
+    prefix: str = ""
+    title: str = ""
+
+
+_KINDS: dict[type, SceneKind] = {}
+# Each registered scene class's presets (see `register_scene`), filled as the kinds register.
+PRESETS: dict[type, tuple[str, ...]] = {}
+
+
+def register_scene(cls: type, *, presets: tuple[str, ...] = (), prefix: str = "", title: str = "") -> type:
+    """Register a scene class: its presets are read from ``finrft/presets/PREFIX-NAME.toml`` (`preset`), and the
+    scene reference lists its sections under ``title``. The experiments register their own scene kinds when
+    `finrft.experiments` is imported (``import finrft`` does it). Returns the class."""
+    if presets and not prefix:
+        raise ValueError(f"{cls.__name__}: a scene kind with presets needs the prefix of their files")
+    _KINDS[cls] = SceneKind(cls, tuple(presets), prefix, title or cls.__name__)
+    if presets:
+        PRESETS[cls] = tuple(presets)
+    return cls
+
+
+def scene_kinds() -> tuple[SceneKind, ...]:
+    """The registered scene kinds, in the order they registered."""
+    return tuple(_KINDS.values())
+
+
+register_scene(Scene, presets=("paper", "physical"), prefix="plate",
+               title="Plate tests: `finrft drag`, `rotate`, `fit`, `report`; `finrft.Scene`")
+register_scene(RobotScene, presets=("paper", "physical"), prefix="robot",
+               title="The two-fin robot: `finrft swim`, `table`, `optimize`; `finrft.RobotScene`")
+register_scene(UserScene, title="Your own model: `finrft run`; `finrft.UserScene`")
+register_scene(IntrusionScene, title="Plate intrusion: `finrft intrude`; `finrft.IntrusionScene`")
 
 
 def scene_from_dict(data: Mapping[str, Any], cls: type = Scene):
@@ -356,10 +393,13 @@ FILE_KEYS = (("rft", "table"), ("model", "path"))
 
 
 def preset(name: str, cls: type = Scene):
-    """A built-in scene by name (see PRESETS)."""
-    if name not in PRESETS[cls]:
-        raise SceneError(f"unknown preset '{name}': use one of {', '.join(PRESETS[cls])}")
-    text = (resources.files("finrft") / "presets" / f"{_PRESET_PREFIX[cls]}-{name}.toml").read_text()
+    """A built-in scene of a registered kind by name (see `register_scene`)."""
+    kind = _KINDS.get(cls)
+    if kind is None:
+        raise SceneError(f"{getattr(cls, '__name__', cls)!s} is not a registered scene kind (import finrft)")
+    if name not in kind.presets:
+        raise SceneError(f"unknown preset '{name}': use one of {', '.join(kind.presets) or '(none)'}")
+    text = (resources.files("finrft") / "presets" / f"{kind.prefix}-{name}.toml").read_text()
     return scene_from_dict(read_toml(text, f"preset {name}"), cls)
 
 
@@ -371,7 +411,7 @@ def load_scene(path: str | Path | None = None, *, preset_name: str = "physical",
     A relative path in a file (``rft.table``, ``model.path``) is taken relative to that file.
     """
     if path is None:
-        scene = preset(preset_name, cls) if cls in PRESETS else scene_from_dict({}, cls)
+        scene = preset(preset_name, cls) if PRESETS.get(cls) else scene_from_dict({}, cls)
     else:
         path = Path(path)
         data = read_toml(read_text(path, "scene file"), str(path))

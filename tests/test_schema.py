@@ -9,8 +9,9 @@ from finrft import laws, schema
 from finrft.errors import Error, SceneError, UsageError
 from finrft.experiments.flags import preset_name
 from finrft.laws import table
-from finrft.scene import (PRESETS, RFT, IntrusionScene, Medium, RobotScene, Scene, UserScene, field_of, preset,
-                          scene_from_dict, scene_kinds)
+from finrft.experiments.intrusion import IntrusionScene
+from finrft.experiments.swim import RobotScene
+from finrft.scene import PRESETS, RFT, Medium, Scene, UserScene, field_of, preset, scene_from_dict, scene_kinds
 
 
 class Recorder:

@@ -51,12 +51,12 @@ from .batch import PlateRollouts, local_executor, map_jobs, rollout_plates, run_
 from .drive import Drive
 from .errors import Error, SceneError, SimulationFailed, SimulationUnstable
 from .experiment import Experiment, Result, run
-from .experiments.intrusion import Intrusion
+from .experiments.intrusion import Intrusion, IntrusionScene
 from .experiments.plate import PlateTest, simulate
-from .experiments.swim import Swim, swim
+from .experiments.swim import RobotScene, Swim, swim
 from .experiments.user_model import UserModel
 from .media import medium
-from .scene import IntrusionScene, RobotScene, Scene, UserScene, load_scene, preset, to_toml
+from .scene import Scene, UserScene, load_scene, preset, to_toml
 from .studies.fit import Fit, fit, read_drag, resolve_params
 from .studies.optimize import Variable, optimize
 from .studies.table import table_rows, table_scenes

@@ -35,7 +35,6 @@ import numpy as np
 
 from . import laws, media
 from .laws import SegmentLaw, sandswim
-from .scene import RobotScene
 
 
 @dataclass(frozen=True)
@@ -71,7 +70,7 @@ def properties(scene: Any) -> tuple[float, float, float] | None:
 
 def chain_of(scene: Any) -> Any:
     """The scene's chain of segments: the plate, or the robot's fin."""
-    return scene.fin if isinstance(scene, RobotScene) else scene.plate
+    return scene.fin if hasattr(scene, "fin") else scene.plate
 
 
 def from_medium(scene: Any) -> bool:
@@ -99,7 +98,7 @@ def segment_law(scene: Any) -> SegmentLaw | None:
     return chain_law(scene)[0] if getattr(scene, "rft", None) is not None else None
 
 
-def arm_law(scene: RobotScene) -> SegmentLaw:
+def arm_law(scene: Any) -> SegmentLaw:
     """The law of one arm: the sand-swimming law fitted to 3D-RFT on the arm's face, or without a medium the
     authors' paper law whose normal coefficient grows with the arm's length."""
     a, m = scene.arm, scene.medium
@@ -110,7 +109,7 @@ def arm_law(scene: RobotScene) -> SegmentLaw:
     return SegmentLaw("sandswim", scene.rft.v_reg, {"c_s": fit.c_s, "c_f": fit.c_f, "gamma0": fit.gamma0})
 
 
-def body_resistance(scene: RobotScene) -> dict[str, float]:
+def body_resistance(scene: Any) -> dict[str, float]:
     """The whole robot's body resistance (N) from the medium: ``faces`` (3D-RFT on the body moving along its axis),
     ``cart`` (rolling) and their ``total``."""
     b = scene.body
@@ -118,7 +117,7 @@ def body_resistance(scene: RobotScene) -> dict[str, float]:
     return {"faces": faces, "cart": b.cart, "total": faces + b.cart}
 
 
-def body_drag(scene: RobotScene) -> float:
+def body_drag(scene: Any) -> float:
     """The whole robot's body drag (N): body.drag, or from the medium the body's faces and the cart."""
     return scene.body.drag if properties(scene) is None else body_resistance(scene)["total"]
 
@@ -126,7 +125,7 @@ def body_drag(scene: RobotScene) -> float:
 def resolve(scene: Any) -> Resolved:
     """A chain scene's forces (`Resolved`): done once per model build, by every consumer."""
     chain, scale = chain_law(scene)
-    if isinstance(scene, RobotScene):
+    if hasattr(scene, "arm"):  # the robot (finrft.experiments.swim): its arms and body too
         return Resolved(chain, scale, arm_law(scene), body_drag(scene))
     return Resolved(chain, scale)
 

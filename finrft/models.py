@@ -1,5 +1,5 @@
-"""MuJoCo models built from the MJCF files in ``mjcf/`` and a scene: the chain builder every model stands on, and
-the robot's model (the plate's is its experiment's, finrft.experiments.plate).
+"""MuJoCo models built from the MJCF files in ``mjcf/`` and a scene: the chain builder every model stands on (the
+plate's model is its experiment's, finrft.experiments.plate; the robot's, finrft.experiments.swim).
 
 ``plate.xml`` and ``robot.xml`` hold the plate's rod and the robot's body and arms; ``segment.xml`` holds one
 segment on its hinge, attached N times in series (MjSpec attach) to make the plate's chain and each fin. The specs
@@ -17,9 +17,8 @@ import mujoco
 import numpy as np
 
 from . import laws, native
-from .geometry import Resolved, resolve
 from .laws import SegmentLaw
-from .scene import Chain, RobotScene, SceneError, Sim
+from .scene import Chain, SceneError, Sim
 
 INTEGRATORS = {
     "euler": mujoco.mjtIntegrator.mjINT_EULER,
@@ -191,134 +190,3 @@ def addresses(model: mujoco.MjModel, joints: list[mujoco.MjsJoint]) -> tuple[np.
     """The qpos and dof addresses of compiled joints."""
     ids = [j.id for j in joints]
     return model.jnt_qposadr[ids].astype(int), model.jnt_dofadr[ids].astype(int)
-
-
-@dataclass(frozen=True)
-class RobotModel:
-    """A compiled robot model and the indices the simulation needs."""
-
-    model: mujoco.MjModel
-    backend: str
-    sides: tuple[str, ...]     # ("r",) for the half robot, ("r", "l") for the full one
-    travel_qpos: int           # the body's slide along +y
-    travel_dof: int
-    body: int
-    servo_qpos: np.ndarray     # (S,) per side
-    servo_dof: np.ndarray
-    armature: float            # prescribed servos: their armature; 0 with position servos
-    actuators: np.ndarray      # position servos' actuator ids (empty when prescribed)
-    fin_hinge_qpos: np.ndarray  # (S, H) fin hinges per side (H = 0 for a rigid fin)
-    fin_hinge_dof: np.ndarray   # (S, H)
-    fin_sites: np.ndarray      # (S, N) fin segment midpoints per side
-    groups: tuple[ForceGroup, ...]
-    resolved: Resolved         # the forces the scene's medium and geometry give (finrft.geometry.resolve)
-
-
-def body_share(scene: RobotScene) -> float:
-    """The share of the body's mass and drag a model carries: all of it, or half for the half robot."""
-    return 0.5 if scene.robot.model == "half" else 1.0
-
-
-def body_law(scene: RobotScene, resolved: Resolved) -> SegmentLaw:
-    """The velocity body drag as an isotropic law: F = -tanh(|v|/v_reg) drag v/|v|, the model's share of the whole
-    robot's resolved body drag."""
-    drag = body_share(scene) * resolved.body_drag
-    return SegmentLaw("paper", scene.body.v_reg, {"f_perp": drag, "f_par": drag})
-
-
-@dataclass(frozen=True)
-class _Robot:
-    spec: mujoco.MjSpec
-    travel: mujoco.MjsJoint
-    body: mujoco.MjsBody
-    arms: list[mujoco.MjsBody]            # per side
-    servos: list[mujoco.MjsJoint]
-    actuators: list[mujoco.MjsActuator]   # position servos, per side (empty when prescribed)
-    fins: list[AttachedChain]
-
-
-def _robot(scene: RobotScene, backend: str, resolved: Resolved) -> _Robot:
-    spec = new_spec("robot.xml", scene.sim)
-    r, a, fin = scene.robot, scene.arm, scene.fin
-    sides = ("r",) if r.model == "half" else ("r", "l")
-    if r.model == "half":
-        spec.delete(spec.body("l_arm"))
-    body = spec.body("body")
-    body.mass = body_share(scene) * scene.body.mass
-    arm_mass = a.mass_base + a.linear_density * a.length
-    # What a servo turns, about its pivot: the arm and the fin laid straight out.
-    moved = a.inertia + arm_mass * (a.length / 2) ** 2 + sum(
-        fin.segment_inertia + fin.segment_mass * (a.length + (i + 0.5) * fin.segment_length) ** 2
-        for i in range(fin.segments))
-    robot = _Robot(spec, spec.joint("travel"), body, [], [], [], [])
-    for side in sides:
-        arm = spec.body(f"{side}_arm")
-        arm.pos = [a.pivot if side == "r" else -a.pivot, 0, 0]
-        arm.mass, arm.ipos, arm.inertia = arm_mass, [a.length / 2, 0, 0], [a.inertia] * 3
-        spec.geom(f"{side}_arm").fromto = [0, 0, 0, a.length, 0, 0]
-        spec.site(f"{side}_arm").pos = [a.length / 2, 0, 0]
-        mount = spec.frame(f"{side}_fin")
-        mount.pos = [a.length, 0, 0]
-        robot.fins.append(attach_chain(spec, mount, fin, scene.sim.dt, f"{side}_"))
-        robot.arms.append(arm)
-        servo = spec.joint(f"{side}_servo")
-        robot.servos.append(servo)
-        if r.servo == "prescribed":
-            servo.armature = ARMATURE_RATIO * moved
-        else:
-            actuator = spec.add_actuator(name=f"{side}_servo", target=servo.name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
-            actuator.set_to_intvelocity(kp=r.servo_kp, dampratio=1.0)
-            actuator.actlimited = mujoco.mjtLimited.mjLIMITED_TRUE
-            actuator.actrange = [scene.gait.theta2, scene.gait.theta1]
-            robot.actuators.append(actuator)
-    if backend == "native":
-        bind_plugin(spec, "fin_sand", resolved.chain, penalty_stiffness(fin), _fin_bodies(robot))
-        bind_plugin(spec, "arm_sand", resolved.arm, 0.0, robot.arms)
-        if scene.body.drag_law == "velocity":
-            bind_plugin(spec, "body_sand", body_law(scene, resolved), 0.0, [body])
-    spec.modelname = f"finrft robot ({r.model}, {fin.kind} fins)"
-    return robot
-
-
-def _fin_bodies(robot: _Robot) -> list[mujoco.MjsBody]:
-    return [b for fin in robot.fins for b in fin.bodies]
-
-
-def robot_spec(scene: RobotScene, backend: str = "python") -> mujoco.MjSpec:
-    """The robot's MjSpec for a scene (see mjcf/robot.xml)."""
-    return _robot(scene, backend, resolve(scene)).spec
-
-
-def build_robot(scene: RobotScene) -> RobotModel:
-    """Compile the robot model for a scene and collect its indices."""
-    backend = native.resolve_backend(scene.sim.backend)
-    resolved = resolve(scene)
-    robot = _robot(scene, backend, resolved)
-    model = compile_spec(robot.spec)
-    fin = scene.fin
-    sides = ("r",) if scene.robot.model == "half" else ("r", "l")
-    groups = [force_group(model, "fin_sand", resolved.chain, penalty_stiffness(fin), _fin_bodies(robot)),
-              force_group(model, "arm_sand", resolved.arm, 0.0, robot.arms)]
-    if scene.body.drag_law == "velocity":
-        groups.append(force_group(model, "body_sand", body_law(scene, resolved), 0.0, [robot.body]))
-    (travel_qpos,), (travel_dof,) = addresses(model, [robot.travel])
-    servo_qpos, servo_dof = addresses(model, robot.servos)
-    hinges = [addresses(model, chain.hinges) for chain in robot.fins]
-    prescribed = scene.robot.servo == "prescribed"
-    return RobotModel(
-        model=model,
-        backend=backend,
-        sides=sides,
-        travel_qpos=int(travel_qpos),
-        travel_dof=int(travel_dof),
-        body=robot.body.id,
-        servo_qpos=servo_qpos,
-        servo_dof=servo_dof,
-        armature=float(model.dof_armature[servo_dof[0]]) if prescribed else 0.0,
-        actuators=np.array([u.id for u in robot.actuators], dtype=int),
-        fin_hinge_qpos=np.array([q for q, _ in hinges], dtype=int).reshape(len(sides), -1),
-        fin_hinge_dof=np.array([d for _, d in hinges], dtype=int).reshape(len(sides), -1),
-        fin_sites=np.array([[b.sites[0].id for b in chain.bodies] for chain in robot.fins]),
-        groups=tuple(groups),
-        resolved=resolved,
-    )

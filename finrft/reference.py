@@ -29,7 +29,7 @@ from scipy.integrate import solve_ivp
 from .drive import Drive
 
 if TYPE_CHECKING:
-    from .scene import RFT, RobotScene, Scene
+    from .scene import RFT, Scene
 
 
 def _paper_law(f_perp: float, f_par: float, v_reg: float) -> Callable[[np.ndarray, np.ndarray, np.ndarray],
@@ -233,7 +233,7 @@ class _HalfRobot:
     is prescribed. Point masses j (body, arm centre, segment midpoints) at r_j(q, psi), with J_j = dr_j/dq and
     w_j = dr_j/dpsi:  M q'' = Q - sum_j m_j J_j^T (J_j' q' + w_j' psi'),  M = sum_j m_j J_j^T J_j + diag(I)."""
 
-    def __init__(self, scene: RobotScene, drive: Drive, arm: Any, body_drag: float | None, fin: Any) -> None:
+    def __init__(self, scene: Any, drive: Drive, arm: Any, body_drag: float | None, fin: Any) -> None:
         f, a = scene.fin, scene.arm
         if scene.robot.model != "half" or scene.robot.servo != "prescribed":
             raise ValueError("the reference solves the half robot with a prescribed servo")
@@ -311,7 +311,7 @@ class _HalfRobot:
         return np.linalg.solve(M, -np.einsum("j,jak,ja->k", mass, J, w * jump))
 
 
-def solve_robot(scene: RobotScene, cycles: int, times: np.ndarray, *, rtol: float = 1e-9, atol: float = 1e-12,
+def solve_robot(scene: Any, cycles: int, times: np.ndarray, *, rtol: float = 1e-9, atol: float = 1e-12,
                 arm: Any = None, body_drag: float | None = None, fin: Any = None) -> RobotSolution:
     """Integrate the half robot's flap cycles with Radau; the same start and reversals as finrft.swim. A scene
     whose [medium] gives the arm's law and the body's drag (N, the whole robot's) needs them given, as numbers:

@@ -1,19 +1,19 @@
 """The scene schema: every physical and numerical parameter of a simulation, in SI units.
 
-A plate scene is a TOML file with the sections ``[plate]``, ``[rft]``, ``[medium]`` and ``[sim]``; a robot scene
-has ``[robot]``, ``[body]``, ``[arm]``, ``[fin]``, ``[rft]``, ``[medium]``, ``[gait]`` and ``[sim]`` (their
-``[medium]`` is `Immersion`); a user's model (`UserScene`) ``[model]``, ``[medium]``, ``[drive]`` and ``[sim]``; a
-plate intrusion (`IntrusionScene`) ``[plate]``, ``[medium]`` and ``[sim]`` (their ``[medium]`` is `Medium`, the
-surface laws'). This module declares the sections, their keys, types, units, allowed values and defaults, except
-the keys of the laws: each law declares its own (``KEYS`` in its module, `finrft.laws`), and `RFT` and `Medium` are
-built from them. The schema engine that validates, reads and writes any scene is `finrft.schema`; everything else
-reads a validated scene.
+A plate scene is a TOML file with the sections ``[plate]``, ``[rft]``, ``[medium]`` and ``[sim]`` (its
+``[medium]`` is `Immersion`); a user's model (`UserScene`) ``[model]``, ``[medium]``, ``[drive]`` and ``[sim]``
+(its ``[medium]`` is `Medium`, the surface laws'). This module declares the shared sections (the chain, the laws'
+``[rft]`` and ``[medium]``, the numerics) and these two kinds, their keys, types, units, allowed values and
+defaults; an experiment with a scene of its own declares its sections in its module and registers the kind
+(`register_scene`): the robot's in `finrft.experiments.swim` (`RobotScene`), the intrusion's in
+`finrft.experiments.intrusion` (`IntrusionScene`). The keys of the laws are not here either: each law declares
+its own (``KEYS`` in its module, `finrft.laws`), and `RFT` and `Medium` are built from them. The schema engine
+that validates, reads and writes any scene is `finrft.schema`; everything else reads a validated scene.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -92,60 +92,6 @@ class Sim:
 
 
 @dataclass(frozen=True)
-class Robot:
-    model: str = _f("half", "", "full: body and both arms; half: body and the right arm, with half the body's mass "
-                    "and drag (the paper's shortcut for symmetric gaits)", choices=("half", "full"))
-    servo: str = _f("prescribed", "", "prescribed: the arm follows the gait exactly; position: a stiff servo "
-                    "tracks it", choices=("prescribed", "position"))
-    servo_kp: float = _f(50.0, "N m/rad", "position servo stiffness (servo = position); critically damped",
-                         minimum=0.0)
-
-
-@dataclass(frozen=True)
-class Body:
-    mass: float = _f(0.309, "kg", "mass of the whole robot's body (the half model carries half)", minimum=0.0)
-    drag: float = _f(2.4612, "N", "body drag of the whole robot (the half model carries half)", minimum=0.0,
-                     exclusive=False)
-    drag_law: str = _f("velocity", "", "velocity: rate-independent, against the body's velocity (tanh below "
-                       "v_reg); stroke: the paper's shortcut, a constant force against the fin's sweep in the current "
-                       "stroke",
-                       choices=("velocity", "stroke"))
-    v_reg: float = _f(0.001, "m/s", "regularisation speed of the velocity body drag", minimum=0.0)
-    height: float = _f(0.045, "m", "with [medium]: body height H_r, its top edge at medium.depth",
-                       minimum=0.0)
-    width: float = _f(0.055, "m", "with [medium]: body width W_r, the front face", minimum=0.0)
-    length: float = _f(0.075, "m", "with [medium]: body length L_r, along its axis", minimum=0.0)
-    cart: float = _f(0.0, "N", "with [medium]: the cart's rolling resistance, against the body's motion (whole "
-                     "robot)", minimum=0.0, exclusive=False)
-
-
-@dataclass(frozen=True)
-class Arm:
-    length: float = _f(0.065, "m", "arm length L_a, pivot to the fin's first hinge", minimum=0.0)
-    pivot: float = _f(0.0275, "m", "distance of the arm's pivot from the body's axis", minimum=0.0,
-                      exclusive=False)
-    mass_base: float = _f(0.001158, "kg", "arm mass at zero length (servo horn)", minimum=0.0, exclusive=False)
-    linear_density: float = _f(0.1445, "kg/m", "arm mass per length", minimum=0.0, exclusive=False)
-    inertia: float = _f(1e-6, "kg m^2", "arm inertia about z through its centre", minimum=0.0)
-    f_perp_base: float = _f(2.0, "N", "arm RFT normal coefficient: f_perp_base + f_perp_per_length * length",
-                            minimum=0.0, exclusive=False)
-    f_perp_per_length: float = _f(17940.0, "N/m", "arm RFT normal coefficient per arm length", minimum=0.0,
-                                  exclusive=False)
-    f_par: float = _f(-0.3, "N", "arm RFT tangential coefficient")
-    height: float = _f(0.010, "m", "with [medium]: the arm's height, its top edge at medium.depth", minimum=0.0)
-
-
-@dataclass(frozen=True)
-class Gait:
-    theta1: float = _f(1.0471975511965976, "rad", "arm angle at the end of the recovery stroke (0 = sideways, "
-                       "+90 deg = forward)")
-    theta2: float = _f(-1.5707963267948966, "rad", "arm angle at the end of the power stroke; the gait starts here")
-    omega: float = _f(1.1519173063162575, "rad/s", "arm angular speed", minimum=0.0)
-    cycles: int = _f(1, "", "flap cycles a gait is evaluated over (table, optimize): 1, the first cycle from rest; "
-                     "N >= 2, eta over the steady cycles 2..N", minimum=1, exclusive=False)
-
-
-@dataclass(frozen=True)
 class Model:
     path: str = _f("", "", "the MJCF file (relative to the scene file); finrft run MODEL.xml overrides it")
     bodies: tuple[str, ...] = _f((), "", "the bodies the medium acts on (their geoms are cut into surface elements)")
@@ -202,7 +148,7 @@ class JointDrive:
     start: float = _f(0.0, "m or rad", "the joint's position at t = 0 (its qpos)")
 
 
-def _check_medium(m: Any) -> None:
+def check_medium(m: Any) -> None:
     material = media.medium(m.name) if m.name else None
     catalogued = material.get("bulk_density") if material else None
     drft.density(m.drft_lambda, m.bulk_density or None, None if catalogued is None else catalogued.value,
@@ -224,22 +170,7 @@ def resolution(sim: Any) -> str:
 EXPLICIT_ONLY = methods.explicit()
 
 
-@dataclass(frozen=True)
-class IntrusionPlate:
-    width: float = _f(0.025, "m", "plate width (along y, horizontal)", minimum=0.0)
-    length: float = _f(0.038, "m", "plate length (in the x-z plane, tilted by angle)", minimum=0.0)
-    thickness: float = _f(0.0005, "m", "plate thickness", minimum=0.0)
-    angle: float = _f(0.0, "rad", "beta: 0 horizontal, pi/2 vertical (cutting in edge first); positive turns the "
-                      "lower face towards -x", minimum=-math.pi / 2, exclusive=False, maximum=math.pi / 2,
-                      why_maximum="a plate's angle repeats every pi")
-    speed: float = _f(0.01, "m/s", "downward speed (the law is rate-independent unless medium.drft_lambda > 0)",
-                      minimum=0.0)
-    clearance: float = _f(0.002, "m", "height of the plate's lowest point above the surface at t = 0",
-                          minimum=0.0, exclusive=False)
-    depth: float = _f(0.05, "m", "depth of the plate's lowest point at the end", minimum=0.0)
-
-
-class _Sections:
+class Sections:
     def to_dict(self) -> dict[str, dict[str, Any]]:
         return dataclasses.asdict(self)
 
@@ -249,14 +180,14 @@ class _Sections:
         return scene_from_dict(schema.updated(data, type(self), updates), type(self))
 
 
-def _check_sim(sim: Sim) -> None:
+def check_sim(sim: Sim) -> None:
     if methods.get(sim.method).implicit and sim.integrator != "implicitfast":
         raise SceneError(f"sim.method = {sim.method!r} extends MuJoCo's implicitfast integrator: set "
                          f"sim.integrator = 'implicitfast' (got {sim.integrator!r}) or use sim.method = 'explicit'")
 
 
 @dataclass(frozen=True)
-class Scene(_Sections):
+class Scene(Sections):
     """A plate test: the plate, the RFT law on its segments, and the numerics."""
 
     plate: Plate = field(default_factory=Plate)
@@ -265,40 +196,8 @@ class Scene(_Sections):
     sim: Sim = field(default_factory=Sim)
 
     def __post_init__(self) -> None:
-        _check_chain_law(self)
-        _check_sim(self.sim)
-
-
-@dataclass(frozen=True)
-class RobotScene(_Sections):
-    """The two-fin robot: body, arms, fins, the RFT law on the fin segments, the gait and the numerics."""
-
-    robot: Robot = field(default_factory=Robot)
-    body: Body = field(default_factory=Body)
-    arm: Arm = field(default_factory=Arm)
-    fin: Chain = field(default_factory=lambda: Chain(segments=3, segment_length=0.02, segment_mass=0.00795,
-                                                     segment_inertia=2.65e-7, stiffness=0.5879, damping=0.4399,
-                                                     stop_stiffness=100.0))
-    # the authors' 6.779 N and -1 N per 20 mm fin segment, over its face 20 x 55 mm at 37.5 mm mean depth
-    rft: RFT = field(default_factory=lambda: RFT(f_perp=164339.39393939395, f_par=-24242.424242424244))
-    medium: Immersion = field(default_factory=Immersion)
-    gait: Gait = field(default_factory=Gait)
-    sim: Sim = field(default_factory=Sim)
-
-    def __post_init__(self) -> None:
-        _check_chain_law(self)
-        _check_sim(self.sim)
-        g = self.gait
-        for key in ("theta1", "theta2"):
-            if abs(getattr(g, key)) > math.pi / 2 + 1e-12:
-                raise SceneError(f"gait.{key} = {math.degrees(getattr(g, key)):g} deg is outside the servo's range "
-                                 f"-90..90 deg")
-        if g.theta1 <= g.theta2:
-            raise SceneError(f"gait.theta1 ({math.degrees(g.theta1):g} deg) must be greater than gait.theta2 "
-                             f"({math.degrees(g.theta2):g} deg)")
-        if self.body.drag_law != "velocity" and media.immersion_properties(self.medium) is not None:
-            raise SceneError("a robot in a [medium] is resisted against its body's velocity (its faces and the "
-                             "cart): set body.drag_law = 'velocity'")
+        check_chain_law(self)
+        check_sim(self.sim)
 
 
 @dataclass(frozen=True)
@@ -309,7 +208,7 @@ class ExplicitSim(Sim):
 
 
 @dataclass(frozen=True)
-class UserScene(_Sections):
+class UserScene(Sections):
     """A user's MJCF model in the medium: the bodies RFT acts on, the law, a prescribed joint, the numerics."""
 
     model: Model = field(default_factory=Model)
@@ -318,31 +217,52 @@ class UserScene(_Sections):
     sim: ExplicitSim = field(default_factory=ExplicitSim)
 
     def __post_init__(self) -> None:
-        _check_sim(self.sim)
-        _check_medium(self.medium)
+        check_sim(self.sim)
+        check_medium(self.medium)
 
 
-@dataclass(frozen=True)
-class IntrusionScene(_Sections):
-    """A thin plate pushed vertically down into the medium at an angle (Li, Zhang & Goldman 2013)."""
-
-    plate: IntrusionPlate = field(default_factory=IntrusionPlate)
-    medium: Medium = field(default_factory=Medium)
-    sim: ExplicitSim = field(default_factory=lambda: ExplicitSim(dt=1e-3, record_dt=0.01))
-
-    def __post_init__(self) -> None:
-        _check_sim(self.sim)
-        _check_medium(self.medium)
-
-
-def _check_chain_law(scene: Any) -> None:
+def check_chain_law(scene: Any) -> None:
     """Check a chain scene's medium and, with what the medium gives (a law may derive its coefficients from it at
     model build, `finrft.geometry.resolve`), its segment law's own keys (`finrft.laws.check`)."""
     laws.check(scene.rft, media.immersion_properties(scene.medium))
 
 
-PRESETS: dict[type, tuple[str, ...]] = {Scene: ("paper", "physical"), RobotScene: ("paper", "physical")}
-_PRESET_PREFIX = {Scene: "plate", RobotScene: "robot"}
+@dataclass(frozen=True)
+class SceneKind:
+    """A registered scene class: its built-in presets (``presets/PREFIX-NAME.toml``) and a line saying what it is
+    and which commands read it (the scene reference's heading)."""
+
+    cls: type
+    presets: tuple[str, ...] = ()
+    prefix: str = ""
+    title: str = ""
+
+
+_KINDS: dict[type, SceneKind] = {}
+# Each registered scene class's presets (see `register_scene`), filled as the kinds register.
+PRESETS: dict[type, tuple[str, ...]] = {}
+
+
+def register_scene(cls: type, *, presets: tuple[str, ...] = (), prefix: str = "", title: str = "") -> type:
+    """Register a scene class: its presets are read from ``finrft/presets/PREFIX-NAME.toml`` (`preset`), and the
+    scene reference lists its sections under ``title``. The experiments register their own scene kinds when
+    `finrft.experiments` is imported (``import finrft`` does it). Returns the class."""
+    if presets and not prefix:
+        raise ValueError(f"{cls.__name__}: a scene kind with presets needs the prefix of their files")
+    _KINDS[cls] = SceneKind(cls, tuple(presets), prefix, title or cls.__name__)
+    if presets:
+        PRESETS[cls] = tuple(presets)
+    return cls
+
+
+def scene_kinds() -> tuple[SceneKind, ...]:
+    """The registered scene kinds, in the order they registered."""
+    return tuple(_KINDS.values())
+
+
+register_scene(Scene, presets=("paper", "physical"), prefix="plate",
+               title="Plate tests: `finrft drag`, `rotate`, `fit`, `report`; `finrft.Scene`")
+register_scene(UserScene, title="Your own model: `finrft run`; `finrft.UserScene`")
 
 
 def scene_from_dict(data: Mapping[str, Any], cls: type = Scene):
@@ -356,10 +276,13 @@ FILE_KEYS = (("rft", "table"), ("model", "path"))
 
 
 def preset(name: str, cls: type = Scene):
-    """A built-in scene by name (see PRESETS)."""
-    if name not in PRESETS[cls]:
-        raise SceneError(f"unknown preset '{name}': use one of {', '.join(PRESETS[cls])}")
-    text = (resources.files("finrft") / "presets" / f"{_PRESET_PREFIX[cls]}-{name}.toml").read_text()
+    """A built-in scene of a registered kind by name (see `register_scene`)."""
+    kind = _KINDS.get(cls)
+    if kind is None:
+        raise SceneError(f"{getattr(cls, '__name__', cls)!s} is not a registered scene kind (import finrft)")
+    if name not in kind.presets:
+        raise SceneError(f"unknown preset '{name}': use one of {', '.join(kind.presets) or '(none)'}")
+    text = (resources.files("finrft") / "presets" / f"{kind.prefix}-{name}.toml").read_text()
     return scene_from_dict(read_toml(text, f"preset {name}"), cls)
 
 
@@ -371,7 +294,7 @@ def load_scene(path: str | Path | None = None, *, preset_name: str = "physical",
     A relative path in a file (``rft.table``, ``model.path``) is taken relative to that file.
     """
     if path is None:
-        scene = preset(preset_name, cls) if cls in PRESETS else scene_from_dict({}, cls)
+        scene = preset(preset_name, cls) if PRESETS.get(cls) else scene_from_dict({}, cls)
     else:
         path = Path(path)
         data = read_toml(read_text(path, "scene file"), str(path))

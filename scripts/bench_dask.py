@@ -12,7 +12,8 @@ import time
 
 from finrft import batch
 from finrft.studies.optimize import evaluate
-from finrft.scene import RobotScene, preset
+from finrft.experiments.swim import RobotScene
+from finrft.scene import preset
 
 
 def _gait(scene: RobotScene) -> dict[str, float]:

@@ -26,13 +26,12 @@ def cli_parser() -> argparse.ArgumentParser:
 
 
 def scene_classes() -> dict[str, type]:
-    """The scene kinds, each a frozen dataclass of sections, with the commands that read them."""
-    import finrft
+    """The scene kinds, each a frozen dataclass of sections, with the commands that read them: every kind
+    registered (`finrft.scene.register_scene`; importing finrft registers the experiments')."""
+    import finrft  # noqa: F401  (registers the experiments' scene kinds)
+    from finrft.scene import scene_kinds
 
-    return {"Plate tests: `finrft drag`, `rotate`, `fit`, `report`; `finrft.Scene`": finrft.Scene,
-            "The two-fin robot: `finrft swim`, `table`, `optimize`; `finrft.RobotScene`": finrft.RobotScene,
-            "Your own model: `finrft run`; `finrft.UserScene`": finrft.UserScene,
-            "Plate intrusion: `finrft intrude`; `finrft.IntrusionScene`": finrft.IntrusionScene}
+    return {kind.title: kind.cls for kind in scene_kinds()}
 
 
 def _cell(text: Any) -> str:

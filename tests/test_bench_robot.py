@@ -3,7 +3,8 @@
 import pytest
 
 from finrft.studies import bench
-from finrft.scene import RobotScene, preset
+from finrft.experiments.swim import RobotScene
+from finrft.scene import preset
 
 
 def test_physical_gait_is_measured_against_a_converged_run():

@@ -17,7 +17,8 @@ import pytest
 
 from finrft.laws.table import paper_table, write_table
 from finrft.cli import build_parser, main
-from finrft.scene import RobotScene, preset, to_toml
+from finrft.experiments.swim import RobotScene
+from finrft.scene import preset, to_toml
 
 # Subprocesses run outside the repository: from its root `python -m finrft` would import the source tree, which
 # holds neither the built plugin nor the packaged models, instead of the installed package.
@@ -183,7 +184,7 @@ def test_python_dash_m_entry_point():
 
 
 def test_robot_scene_dump_round_trips(capsys):
-    from finrft.scene import RobotScene
+    from finrft.experiments.swim import RobotScene
     assert main(["scene", "--robot", "--dump", "physical"]) == 0
     assert tomllib.loads(capsys.readouterr().out) == preset("physical", RobotScene).to_dict()
 

@@ -12,7 +12,8 @@ from finrft.cli import main
 from finrft.convergence import ErrorLimits, InaccurateResult, SimulationFailed, paired
 from finrft.errors import UndefinedResult
 from finrft.drive import Drive
-from finrft.scene import RobotScene, preset
+from finrft.experiments.swim import RobotScene
+from finrft.scene import preset
 from finrft.experiments.plate import simulate
 from finrft.experiments.swim import swim
 

@@ -13,7 +13,8 @@ from finrft.attach import attach
 from finrft.cli import main
 from finrft.experiments.intrusion import intrude
 from finrft.laws import drft, li2013, rft3d
-from finrft.scene import IntrusionScene, SceneError, scene_from_dict
+from finrft.experiments.intrusion import IntrusionScene
+from finrft.scene import SceneError, scene_from_dict
 
 RNG = np.random.default_rng(2021)
 RFT3D = {"law": "rft3d", "rho_c": 1500.0, "mu_int": 0.4, "mu_surf": 0.3}

@@ -9,8 +9,9 @@ import pytest
 from conftest import face
 from finrft import geometry, laws
 from finrft.drive import Drive
-from finrft.models import build_robot
-from finrft.scene import RobotScene, preset
+from finrft.experiments.swim import build_robot
+from finrft.experiments.swim import RobotScene
+from finrft.scene import preset
 from finrft.experiments.plate import build_plate, simulate
 
 DRIVE = Drive(speed=0.03, stroke=0.03)  # broadside: attack 90 deg

@@ -262,7 +262,7 @@ def test_the_package_never_pickles():
 def test_the_search_owns_its_random_numbers():
     # pycma's default draws from numpy's global generator; a caller drawing from it too must not change the search.
     from finrft.studies.optimize import Variable, optimize
-    scene = preset("paper", finrft.scene.RobotScene).replace(**{"gait.omega": 3.0})
+    scene = preset("paper", finrft.RobotScene).replace(**{"gait.omega": 3.0})
     variables = [Variable("gait.theta1", 0.5, 1.5)]
     plain = optimize(scene, variables=variables, budget=12, seed=5, workers=1)
     np.random.seed(0)

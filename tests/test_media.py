@@ -16,8 +16,9 @@ from finrft.attach import attach
 from finrft.cli import main
 from finrft.experiments.intrusion import intrude
 from finrft.laws import li2013, sandswim
-from finrft.scene import (IntrusionScene, RobotScene, Scene, SceneError, load_scene, preset, scene_from_dict,
-                          to_toml)
+from finrft.experiments.intrusion import IntrusionScene
+from finrft.experiments.swim import RobotScene
+from finrft.scene import Scene, SceneError, load_scene, preset, scene_from_dict, to_toml
 
 CM3 = li2013.N_PER_CM3
 # alpha_z(0, 90 deg) of the poppy-seed sets: the sum of their A and B coefficients (Li 2013's zeta of a medium)

@@ -81,7 +81,7 @@ def test_fixed_steps_take_the_nominal_count(method):
 
 
 def test_adaptive_counts_its_steps_on_the_paper_robot():
-    from finrft.scene import RobotScene
+    from finrft.experiments.swim import RobotScene
     from finrft.experiments.swim import swim
     scene = preset("paper", RobotScene)
     runs = [swim(scene.replace(**{"sim.backend": backend})) for backend in ("native", "python")]
@@ -96,7 +96,7 @@ def test_adaptive_counts_its_steps_on_the_paper_robot():
 
 @pytest.mark.parametrize("backend", ["native", "python"])
 def test_newton_halvings_count_as_rejected_and_taken(backend):
-    from finrft.scene import RobotScene
+    from finrft.experiments.swim import RobotScene
     from finrft.experiments.swim import swim
     # At 10 ms the paper robot's f_par < 0 leaves Newton's method without a root twice: a halving replaces one
     # step by two.
@@ -215,7 +215,7 @@ def test_adaptive_newton_converges_to_newton_on_the_light_plate():
 def test_adaptive_newton_converges_to_newton_on_the_physical_robot():
     # Newton at strokes of 5e4 and 1e5 steps (reversals on the grid), extrapolated to dt -> 0 as a first-order
     # method: adaptive-newton's eta and hinge angles at the preset's tolerance and at 1/10 of it.
-    from finrft.scene import RobotScene
+    from finrft.experiments.swim import RobotScene
     from finrft.experiments.swim import gait_drive, swim
     scene = preset("physical", RobotScene)
     stroke = gait_drive(scene, 1).stroke_time
@@ -234,7 +234,7 @@ def test_adaptive_newton_converges_to_newton_on_the_physical_robot():
 def test_adaptive_reversals_fall_on_the_drive_not_the_grid():
     # The robot's stroke (25/11 s) is no whole number of these grids' steps: rounded to the grid it would be up to
     # 7 µs off, which moves eta by ~1e-4; on the drive's instants eta does not depend on the grid.
-    from finrft.scene import RobotScene
+    from finrft.experiments.swim import RobotScene
     from finrft.experiments.swim import swim
     scene = preset("physical", RobotScene).replace(**{"sim.tolerance": 1e-5})
     etas = [swim(scene.replace(**{"sim.dt": dt}), estimate_error=False).series["eta"][0] for dt in (1e-5, 2e-5, 1e-3)]
@@ -248,7 +248,7 @@ def test_physical_robot_error_estimate_follows_its_error():
     # factor of 3 (the error comes from where the steps fall at the stops' engagement, not from a smooth truncation
     # error that Richardson's estimate would bound), far below the default limit.
     from finrft.studies.optimize import evaluation_scene
-    from finrft.scene import RobotScene
+    from finrft.experiments.swim import RobotScene
     from finrft.experiments.swim import swim
     from finrft.studies.table import table_scenes
     for scene in map(evaluation_scene, table_scenes(preset("physical", RobotScene))):

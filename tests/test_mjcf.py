@@ -9,7 +9,9 @@ import pytest
 
 from finrft import models
 from finrft.experiments.plate import build_plate
-from finrft.scene import RobotScene, Scene, preset
+from finrft.experiments import swim
+from finrft.experiments.swim import RobotScene
+from finrft.scene import Scene, preset
 
 FILES = sorted(f.name for f in resources.files("finrft.mjcf").iterdir() if f.name.endswith(".xml"))
 
@@ -66,7 +68,7 @@ def test_attached_chain_lies_along_the_rod(paper, overrides):
 def test_robot_fins_hang_from_the_arm_tips():
     # Full robot at rest: the right fin's midpoints along +x from the arm's tip, the left fin's mirrored.
     scene = preset("physical", RobotScene).replace(**{"robot.model": "full"})
-    robot = models.build_robot(scene)
+    robot = swim.build_robot(scene)
     d = mujoco.MjData(robot.model)
     mujoco.mj_kinematics(robot.model, d)
     a, f = scene.arm, scene.fin

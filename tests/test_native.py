@@ -182,13 +182,15 @@ ALLOCATION_RUN = r"""
 import ctypes, json, sys
 import mujoco
 from finrft import integrate, models
-from finrft.scene import RobotScene, preset
+from finrft.experiments import swim
+from finrft.experiments.swim import RobotScene
+from finrft.scene import preset
 counter = ctypes.CDLL(sys.argv[1])
 counter.count_stop.restype = ctypes.c_long
 out = {}
 for method in ("implicit", "newton", "adaptive", "adaptive-newton"):
     scene = preset("physical", RobotScene).replace(**{"sim.method": method, "sim.dt": 3e-4, "sim.max_step": 1e-3})
-    robot = models.build_robot(scene)
+    robot = swim.build_robot(scene)
     d = mujoco.MjData(robot.model)
     d.qpos[robot.servo_qpos] = scene.gait.theta2
     d.qvel[robot.servo_dof] = scene.gait.omega

@@ -194,7 +194,7 @@ def test_failed_rrd_write_leaves_no_file(runs, tmp_path, monkeypatch):
 
 
 def test_swim_recording_matches_its_hdf5(tmp_path):
-    from finrft.scene import RobotScene
+    from finrft.experiments.swim import RobotScene
     from finrft.experiments.swim import swim
 
     run = swim(preset("physical", RobotScene).replace(**{"sim.dt": 4e-4}), 1)

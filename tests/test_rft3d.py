@@ -298,7 +298,8 @@ def test_a_scene_file_selects_rft3d(tmp_path):
     # [medium] law = "rft3d" on the intrusion: a horizontal plate pushed straight down takes xi_n x 0.87504 (the
     # fit's sum, see test_horizontal_plate_pushed_down) x its area x its depth, upwards, nothing sideways.
     from finrft.experiments.intrusion import intrude
-    from finrft.scene import IntrusionScene, load_scene, scene_from_dict
+    from finrft.experiments.intrusion import IntrusionScene
+    from finrft.scene import load_scene, scene_from_dict
 
     path = tmp_path / "intrusion.toml"
     path.write_text('[medium]\nlaw = "rft3d"\nbulk_density = 1500.0\ninternal_friction = 0.4\n'

@@ -10,7 +10,8 @@ import pytest
 from finrft import reference
 from finrft.cli import main
 from finrft.studies.optimize import Variable, optimize, read_log
-from finrft.scene import RobotScene, SceneError, preset
+from finrft.experiments.swim import RobotScene
+from finrft.scene import SceneError, preset
 from finrft.experiments.swim import swim
 
 

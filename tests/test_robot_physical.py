@@ -8,8 +8,9 @@ import pytest
 
 from finrft import geometry, media
 from finrft.cli import main
-from finrft.models import body_law
-from finrft.scene import RobotScene, SceneError, preset
+from finrft.experiments.swim import body_law
+from finrft.experiments.swim import RobotScene
+from finrft.scene import SceneError, preset
 from finrft.experiments.swim import steady, swim
 
 

@@ -9,7 +9,9 @@ from finrft import laws, schema
 from finrft.errors import Error, SceneError, UsageError
 from finrft.experiments.flags import preset_name
 from finrft.laws import table
-from finrft.scene import RFT, IntrusionScene, Medium, RobotScene, Scene, UserScene, field_of, preset, scene_from_dict
+from finrft.experiments.intrusion import IntrusionScene
+from finrft.experiments.swim import RobotScene
+from finrft.scene import PRESETS, RFT, Medium, Scene, UserScene, field_of, preset, scene_from_dict, scene_kinds
 
 
 class Recorder:
@@ -64,9 +66,21 @@ def test_a_key_declared_twice_must_agree():
 
 def test_every_scene_round_trips_through_its_toml():
     import tomllib
-    for cls in (Scene, RobotScene, UserScene, IntrusionScene):
-        scene = preset("physical", cls) if cls in (Scene, RobotScene) else cls()
-        assert scene_from_dict(tomllib.loads(schema.to_toml(scene)), cls) == scene
+    kinds = scene_kinds()
+    assert {Scene, RobotScene, UserScene, IntrusionScene} <= {kind.cls for kind in kinds}
+    for kind in kinds:
+        for scene in [preset(name, kind.cls) for name in kind.presets] or [kind.cls()]:
+            assert scene_from_dict(tomllib.loads(schema.to_toml(scene)), kind.cls) == scene
+
+
+def test_scene_kinds_are_a_registry():
+    # preset and load_scene read the registry: a kind's presets, from its files; an unregistered class is refused
+    assert PRESETS[Scene] == PRESETS[RobotScene] == ("paper", "physical")
+    assert UserScene not in PRESETS and IntrusionScene not in PRESETS
+    with pytest.raises(SceneError, match="unknown preset 'nothing': use one of paper, physical"):
+        preset("nothing", RobotScene)
+    with pytest.raises(SceneError, match="not a registered scene kind"):
+        preset("paper", dict)
 
 
 def test_bad_input_is_one_error_family():

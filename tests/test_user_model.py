@@ -15,7 +15,8 @@ import finrft
 from finrft.cli import main
 from finrft.experiments.intrusion import Intrusion, intrude
 from finrft.laws import li2013
-from finrft.scene import IntrusionScene, UserScene, load_scene
+from finrft.experiments.intrusion import IntrusionScene
+from finrft.scene import UserScene, load_scene
 from finrft.experiments.user_model import UserModel
 
 # A 4 cm x 6 cm plate (1 mm thick), its top at the surface, on a slide along x: the README's attach example.

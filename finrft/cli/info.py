@@ -7,6 +7,7 @@ from typing import Any
 
 from .. import laws
 from .. import scene as scenes
+from ..experiments.swim import RobotScene
 from ..errors import UsageError
 from ..experiments.flags import add_force, add_json, add_quiet
 from ..files import atomic_path
@@ -18,7 +19,7 @@ def add_scene(sub: Any) -> None:
                        description="Print the full resolved scene (SI units) as TOML, to copy and edit.")
     p.add_argument("--dump", metavar="NAME", help=f"preset to print (default: physical): a plate preset "
                    f"({', '.join(scenes.PRESETS[scenes.Scene])}), or with --robot a robot preset "
-                   f"({', '.join(scenes.PRESETS[scenes.RobotScene])})")
+                   f"({', '.join(scenes.PRESETS[RobotScene])})")
     p.add_argument("--robot", action="store_true", help="a robot scene instead of a plate scene")
     p.add_argument("--scene", metavar="FILE.toml", help="resolve this file (instead of --dump)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a key (SI)")
@@ -29,7 +30,7 @@ def add_scene(sub: Any) -> None:
 def scene(args: argparse.Namespace) -> int:
     if args.scene and args.dump:
         raise UsageError(f"give --scene {args.scene} or --dump {args.dump}, not both")
-    kind = scenes.RobotScene if args.robot else scenes.Scene
+    kind = RobotScene if args.robot else scenes.Scene
     overrides = dict(scenes.parse_override(item, kind) for item in args.set)
     resolved = scenes.load_scene(args.scene, preset_name=args.dump or "physical", overrides=overrides, cls=kind)
     print(scenes.to_toml(resolved), end="")

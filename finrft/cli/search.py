@@ -12,6 +12,7 @@ import numpy as np
 
 from .. import geometry
 from .. import scene as scenes
+from ..experiments.swim import RobotScene
 from ..errors import UsageError
 from ..experiments.flags import add_force, add_json, add_max_error, add_quiet, add_workers, limits, number
 from ..experiments.plate import add_plate_scene, resolve_plate
@@ -87,7 +88,7 @@ def add_optimize(sub: Any) -> None:
     p.set_defaults(handler=optimize)
 
 
-def _variables(args: argparse.Namespace) -> tuple[scenes.RobotScene, dict[str, Any], list]:
+def _variables(args: argparse.Namespace) -> tuple[RobotScene, dict[str, Any], list]:
     """The scene, the searched variables (key -> Variable) and the generations logged so far (for --rrd)."""
     from ..studies.bounds import display_units, parse_bounds
     from ..studies.optimize import DEFAULT_VARIABLES, Variable, logged_problem, read_log
@@ -96,9 +97,9 @@ def _variables(args: argparse.Namespace) -> tuple[scenes.RobotScene, dict[str, A
         scene, logged = logged_problem(args.resume)
         variables = {v.key: v for v in logged}
         past = read_log(args.resume)
-        generations = [(display_units(scenes.RobotScene, list(variables), past["x"][past["generation"] == g]),
+        generations = [(display_units(RobotScene, list(variables), past["x"][past["generation"] == g]),
                         past["eta"][past["generation"] == g]) for g in range(len(past["state/sigma"]))]
-    for key, (low, high) in parse_bounds(args.bounds, scenes.RobotScene).items():
+    for key, (low, high) in parse_bounds(args.bounds, RobotScene).items():
         variables[key] = Variable(key, low, high)
     return scene, variables, generations
 
@@ -114,7 +115,7 @@ def optimize(args: argparse.Namespace) -> int:
     executor = _executor(args)
     with progress(args, args.budget, "optimize", "evaluations") as bar:
         def on_generation(g: int, values: np.ndarray, extras: dict[str, np.ndarray], es: Any) -> None:
-            generations.append((display_units(scenes.RobotScene, list(variables), values), extras["eta"]))
+            generations.append((display_units(RobotScene, list(variables), values), extras["eta"]))
             if bar:
                 best = np.nanmax([1 - c for c in es.fit.fit]) if len(es.fit.fit) else float("nan")
                 bar(es.countevals, f"generation {g + 1}, best eta {100 * best:.2f} %")

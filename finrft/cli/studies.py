@@ -6,6 +6,7 @@ import argparse
 from typing import Any
 
 from .. import scene as scenes
+from ..experiments.swim import RobotScene
 from ..experiments.flags import (add_force, add_json, add_max_error, add_quiet, add_workers, limits, number,
                                  preset_name)
 from ..experiments.swim import add_robot, resolve_robot
@@ -104,7 +105,7 @@ def _add_robot(kinds: Any) -> argparse.ArgumentParser:
                          "flap cycles, eta over the steady ones), measure its eta against a converged run of the "
                          "same gait, and time a CMA-ES optimisation of --budget evaluations on all cores, for a "
                          "robot preset.")
-    p.add_argument("--preset", default="physical", choices=scenes.PRESETS[scenes.RobotScene],
+    p.add_argument("--preset", default="physical", choices=scenes.PRESETS[RobotScene],
                    help="robot preset (default: %(default)s)")
     _budget(p, "optimisation budget")
     add_workers(p)
@@ -152,7 +153,7 @@ def _bench_figures(args: argparse.Namespace, log: Any, tick: Any) -> dict[str, A
     if args.bench == "fit":
         return bench.fit_speed(args.data, budget=args.budget, workers=args.workers, log=log, progress=tick)
     if args.bench == "robot":
-        return bench.robot(scenes.preset(args.preset, scenes.RobotScene), budget=args.budget, workers=args.workers,
+        return bench.robot(scenes.preset(args.preset, RobotScene), budget=args.budget, workers=args.workers,
                            log=log, progress=tick)
     if args.bench == "backends":
         return bench.backends(batch_size=args.batch, workers=args.workers, log=log, progress=tick)

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import argparse
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
@@ -27,7 +27,8 @@ from ..convergence import ErrorLimits
 from ..drive import Drive
 from ..errors import UsageError
 from ..experiment import Compared, Plot, Quantity, Result, run
-from ..scene import IntrusionScene, load_scene, parse_override
+from ..scene import ExplicitSim, Medium, Sections, check_medium, check_sim, load_scene, parse_override, register_scene
+from ..schema import field as _f
 from .command import Command, Output, register
 from .flags import add_force, add_json, add_quiet, add_scene_flags
 from .user_model import AttachedModel, JointTrial, build_attached
@@ -36,6 +37,37 @@ SIGN_CONVENTION = (
     "z up; the plate moves along -z. depth is the plate's lowest point below the free surface. force_z is the "
     "medium's vertical force on the plate (+z, up: against the intrusion), force_x its horizontal force along +x; "
     "at angle beta > 0 the plate's lower face looks down and towards -x.")
+
+
+@dataclass(frozen=True)
+class IntrusionPlate:
+    width: float = _f(0.025, "m", "plate width (along y, horizontal)", minimum=0.0)
+    length: float = _f(0.038, "m", "plate length (in the x-z plane, tilted by angle)", minimum=0.0)
+    thickness: float = _f(0.0005, "m", "plate thickness", minimum=0.0)
+    angle: float = _f(0.0, "rad", "beta: 0 horizontal, pi/2 vertical (cutting in edge first); positive turns the "
+                      "lower face towards -x", minimum=-math.pi / 2, exclusive=False, maximum=math.pi / 2,
+                      why_maximum="a plate's angle repeats every pi")
+    speed: float = _f(0.01, "m/s", "downward speed (the law is rate-independent unless medium.drft_lambda > 0)",
+                      minimum=0.0)
+    clearance: float = _f(0.002, "m", "height of the plate's lowest point above the surface at t = 0",
+                          minimum=0.0, exclusive=False)
+    depth: float = _f(0.05, "m", "depth of the plate's lowest point at the end", minimum=0.0)
+
+
+@dataclass(frozen=True)
+class IntrusionScene(Sections):
+    """A thin plate pushed vertically down into the medium at an angle (Li, Zhang & Goldman 2013)."""
+
+    plate: IntrusionPlate = field(default_factory=IntrusionPlate)
+    medium: Medium = field(default_factory=Medium)
+    sim: ExplicitSim = field(default_factory=lambda: ExplicitSim(dt=1e-3, record_dt=0.01))
+
+    def __post_init__(self) -> None:
+        check_sim(self.sim)
+        check_medium(self.medium)
+
+
+register_scene(IntrusionScene, title="Plate intrusion: `finrft intrude`; `finrft.IntrusionScene`")
 
 
 def plate_xml(scene: IntrusionScene) -> str:

@@ -14,19 +14,24 @@ from __future__ import annotations
 
 import argparse
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Callable
 
 import mujoco
 import numpy as np
 
-from .. import geometry
+from .. import geometry, media, native
 from ..convergence import ErrorLimits
 from ..errors import SimulationFailed, UndefinedResult
 from ..drive import Drive
 from ..experiment import Compared, Plot, Quantity, Result, run
-from ..models import RobotModel, body_share, build_robot
-from ..scene import PRESETS, RobotScene, load_scene, parse_override, resolution
+from ..geometry import Resolved, resolve
+from ..laws import SegmentLaw
+from ..models import (ARMATURE_RATIO, AttachedChain, ForceGroup, addresses, attach_chain, bind_plugin, compile_spec,
+                      force_group, new_spec, penalty_stiffness)
+from ..scene import (RFT, Chain, Immersion, SceneError, Sections, Sim, check_chain_law, check_sim, load_scene,
+                     parse_override, register_scene, resolution)
+from ..schema import field as _f
 from ..stepping import Prescribed
 from ..views import centre_line
 from .command import Command, authors_model_line, error_line, register, steps_line
@@ -37,6 +42,232 @@ SIGN_CONVENTION = (
     "Forward is +y, along the body's slide. The right arm's angle is 0 pointing sideways (+x) and +90 deg pointing "
     "forward; fin hinge angles are negative when the fin folds. The servo torque is what the servo applies to its "
     "arm about +z.")
+
+
+# The robot's scene: its sections, beside the shared ones of finrft.scene (the fin is a `Chain`).
+
+@dataclass(frozen=True)
+class Robot:
+    model: str = _f("half", "", "full: body and both arms; half: body and the right arm, with half the body's mass "
+                    "and drag (the paper's shortcut for symmetric gaits)", choices=("half", "full"))
+    servo: str = _f("prescribed", "", "prescribed: the arm follows the gait exactly; position: a stiff servo "
+                    "tracks it", choices=("prescribed", "position"))
+    servo_kp: float = _f(50.0, "N m/rad", "position servo stiffness (servo = position); critically damped",
+                         minimum=0.0)
+
+
+@dataclass(frozen=True)
+class Body:
+    mass: float = _f(0.309, "kg", "mass of the whole robot's body (the half model carries half)", minimum=0.0)
+    drag: float = _f(2.4612, "N", "body drag of the whole robot (the half model carries half)", minimum=0.0,
+                     exclusive=False)
+    drag_law: str = _f("velocity", "", "velocity: rate-independent, against the body's velocity (tanh below "
+                       "v_reg); stroke: the paper's shortcut, a constant force against the fin's sweep in the current "
+                       "stroke",
+                       choices=("velocity", "stroke"))
+    v_reg: float = _f(0.001, "m/s", "regularisation speed of the velocity body drag", minimum=0.0)
+    height: float = _f(0.045, "m", "with [medium]: body height H_r, its top edge at medium.depth",
+                       minimum=0.0)
+    width: float = _f(0.055, "m", "with [medium]: body width W_r, the front face", minimum=0.0)
+    length: float = _f(0.075, "m", "with [medium]: body length L_r, along its axis", minimum=0.0)
+    cart: float = _f(0.0, "N", "with [medium]: the cart's rolling resistance, against the body's motion (whole "
+                     "robot)", minimum=0.0, exclusive=False)
+
+
+@dataclass(frozen=True)
+class Arm:
+    length: float = _f(0.065, "m", "arm length L_a, pivot to the fin's first hinge", minimum=0.0)
+    pivot: float = _f(0.0275, "m", "distance of the arm's pivot from the body's axis", minimum=0.0,
+                      exclusive=False)
+    mass_base: float = _f(0.001158, "kg", "arm mass at zero length (servo horn)", minimum=0.0, exclusive=False)
+    linear_density: float = _f(0.1445, "kg/m", "arm mass per length", minimum=0.0, exclusive=False)
+    inertia: float = _f(1e-6, "kg m^2", "arm inertia about z through its centre", minimum=0.0)
+    f_perp_base: float = _f(2.0, "N", "arm RFT normal coefficient: f_perp_base + f_perp_per_length * length",
+                            minimum=0.0, exclusive=False)
+    f_perp_per_length: float = _f(17940.0, "N/m", "arm RFT normal coefficient per arm length", minimum=0.0,
+                                  exclusive=False)
+    f_par: float = _f(-0.3, "N", "arm RFT tangential coefficient")
+    height: float = _f(0.010, "m", "with [medium]: the arm's height, its top edge at medium.depth", minimum=0.0)
+
+
+@dataclass(frozen=True)
+class Gait:
+    theta1: float = _f(1.0471975511965976, "rad", "arm angle at the end of the recovery stroke (0 = sideways, "
+                       "+90 deg = forward)")
+    theta2: float = _f(-1.5707963267948966, "rad", "arm angle at the end of the power stroke; the gait starts here")
+    omega: float = _f(1.1519173063162575, "rad/s", "arm angular speed", minimum=0.0)
+    cycles: int = _f(1, "", "flap cycles a gait is evaluated over (table, optimize): 1, the first cycle from rest; "
+                     "N >= 2, eta over the steady cycles 2..N", minimum=1, exclusive=False)
+
+
+@dataclass(frozen=True)
+class RobotScene(Sections):
+    """The two-fin robot: body, arms, fins, the RFT law on the fin segments, the gait and the numerics."""
+
+    robot: Robot = field(default_factory=Robot)
+    body: Body = field(default_factory=Body)
+    arm: Arm = field(default_factory=Arm)
+    fin: Chain = field(default_factory=lambda: Chain(segments=3, segment_length=0.02, segment_mass=0.00795,
+                                                     segment_inertia=2.65e-7, stiffness=0.5879, damping=0.4399,
+                                                     stop_stiffness=100.0))
+    # the authors' 6.779 N and -1 N per 20 mm fin segment, over its face 20 x 55 mm at 37.5 mm mean depth
+    rft: RFT = field(default_factory=lambda: RFT(f_perp=164339.39393939395, f_par=-24242.424242424244))
+    medium: Immersion = field(default_factory=Immersion)
+    gait: Gait = field(default_factory=Gait)
+    sim: Sim = field(default_factory=Sim)
+
+    def __post_init__(self) -> None:
+        check_chain_law(self)
+        check_sim(self.sim)
+        g = self.gait
+        for key in ("theta1", "theta2"):
+            if abs(getattr(g, key)) > math.pi / 2 + 1e-12:
+                raise SceneError(f"gait.{key} = {math.degrees(getattr(g, key)):g} deg is outside the servo's range "
+                                 f"-90..90 deg")
+        if g.theta1 <= g.theta2:
+            raise SceneError(f"gait.theta1 ({math.degrees(g.theta1):g} deg) must be greater than gait.theta2 "
+                             f"({math.degrees(g.theta2):g} deg)")
+        if self.body.drag_law != "velocity" and media.immersion_properties(self.medium) is not None:
+            raise SceneError("a robot in a [medium] is resisted against its body's velocity (its faces and the "
+                             "cart): set body.drag_law = 'velocity'")
+
+
+PRESETS = ("paper", "physical")
+register_scene(RobotScene, presets=PRESETS, prefix="robot",
+               title="The two-fin robot: `finrft swim`, `table`, `optimize`; `finrft.RobotScene`")
+
+
+# The robot's model, built from mjcf/robot.xml and the chain builder (finrft.models).
+
+@dataclass(frozen=True)
+class RobotModel:
+    """A compiled robot model and the indices the simulation needs."""
+
+    model: mujoco.MjModel
+    backend: str
+    sides: tuple[str, ...]     # ("r",) for the half robot, ("r", "l") for the full one
+    travel_qpos: int           # the body's slide along +y
+    travel_dof: int
+    body: int
+    servo_qpos: np.ndarray     # (S,) per side
+    servo_dof: np.ndarray
+    armature: float            # prescribed servos: their armature; 0 with position servos
+    actuators: np.ndarray      # position servos' actuator ids (empty when prescribed)
+    fin_hinge_qpos: np.ndarray  # (S, H) fin hinges per side (H = 0 for a rigid fin)
+    fin_hinge_dof: np.ndarray   # (S, H)
+    fin_sites: np.ndarray      # (S, N) fin segment midpoints per side
+    groups: tuple[ForceGroup, ...]
+    resolved: Resolved         # the forces the scene's medium and geometry give (finrft.geometry.resolve)
+
+
+def body_share(scene: RobotScene) -> float:
+    """The share of the body's mass and drag a model carries: all of it, or half for the half robot."""
+    return 0.5 if scene.robot.model == "half" else 1.0
+
+
+def body_law(scene: RobotScene, resolved: Resolved) -> SegmentLaw:
+    """The velocity body drag as an isotropic law: F = -tanh(|v|/v_reg) drag v/|v|, the model's share of the whole
+    robot's resolved body drag."""
+    drag = body_share(scene) * resolved.body_drag
+    return SegmentLaw("paper", scene.body.v_reg, {"f_perp": drag, "f_par": drag})
+
+
+@dataclass(frozen=True)
+class _Robot:
+    spec: mujoco.MjSpec
+    travel: mujoco.MjsJoint
+    body: mujoco.MjsBody
+    arms: list[mujoco.MjsBody]            # per side
+    servos: list[mujoco.MjsJoint]
+    actuators: list[mujoco.MjsActuator]   # position servos, per side (empty when prescribed)
+    fins: list[AttachedChain]
+
+
+def _robot(scene: RobotScene, backend: str, resolved: Resolved) -> _Robot:
+    spec = new_spec("robot.xml", scene.sim)
+    r, a, fin = scene.robot, scene.arm, scene.fin
+    sides = ("r",) if r.model == "half" else ("r", "l")
+    if r.model == "half":
+        spec.delete(spec.body("l_arm"))
+    body = spec.body("body")
+    body.mass = body_share(scene) * scene.body.mass
+    arm_mass = a.mass_base + a.linear_density * a.length
+    # What a servo turns, about its pivot: the arm and the fin laid straight out.
+    moved = a.inertia + arm_mass * (a.length / 2) ** 2 + sum(
+        fin.segment_inertia + fin.segment_mass * (a.length + (i + 0.5) * fin.segment_length) ** 2
+        for i in range(fin.segments))
+    robot = _Robot(spec, spec.joint("travel"), body, [], [], [], [])
+    for side in sides:
+        arm = spec.body(f"{side}_arm")
+        arm.pos = [a.pivot if side == "r" else -a.pivot, 0, 0]
+        arm.mass, arm.ipos, arm.inertia = arm_mass, [a.length / 2, 0, 0], [a.inertia] * 3
+        spec.geom(f"{side}_arm").fromto = [0, 0, 0, a.length, 0, 0]
+        spec.site(f"{side}_arm").pos = [a.length / 2, 0, 0]
+        mount = spec.frame(f"{side}_fin")
+        mount.pos = [a.length, 0, 0]
+        robot.fins.append(attach_chain(spec, mount, fin, scene.sim.dt, f"{side}_"))
+        robot.arms.append(arm)
+        servo = spec.joint(f"{side}_servo")
+        robot.servos.append(servo)
+        if r.servo == "prescribed":
+            servo.armature = ARMATURE_RATIO * moved
+        else:
+            actuator = spec.add_actuator(name=f"{side}_servo", target=servo.name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
+            actuator.set_to_intvelocity(kp=r.servo_kp, dampratio=1.0)
+            actuator.actlimited = mujoco.mjtLimited.mjLIMITED_TRUE
+            actuator.actrange = [scene.gait.theta2, scene.gait.theta1]
+            robot.actuators.append(actuator)
+    if backend == "native":
+        bind_plugin(spec, "fin_sand", resolved.chain, penalty_stiffness(fin), _fin_bodies(robot))
+        bind_plugin(spec, "arm_sand", resolved.arm, 0.0, robot.arms)
+        if scene.body.drag_law == "velocity":
+            bind_plugin(spec, "body_sand", body_law(scene, resolved), 0.0, [body])
+    spec.modelname = f"finrft robot ({r.model}, {fin.kind} fins)"
+    return robot
+
+
+def _fin_bodies(robot: _Robot) -> list[mujoco.MjsBody]:
+    return [b for fin in robot.fins for b in fin.bodies]
+
+
+def robot_spec(scene: RobotScene, backend: str = "python") -> mujoco.MjSpec:
+    """The robot's MjSpec for a scene (see mjcf/robot.xml)."""
+    return _robot(scene, backend, resolve(scene)).spec
+
+
+def build_robot(scene: RobotScene) -> RobotModel:
+    """Compile the robot model for a scene and collect its indices."""
+    backend = native.resolve_backend(scene.sim.backend)
+    resolved = resolve(scene)
+    robot = _robot(scene, backend, resolved)
+    model = compile_spec(robot.spec)
+    fin = scene.fin
+    sides = ("r",) if scene.robot.model == "half" else ("r", "l")
+    groups = [force_group(model, "fin_sand", resolved.chain, penalty_stiffness(fin), _fin_bodies(robot)),
+              force_group(model, "arm_sand", resolved.arm, 0.0, robot.arms)]
+    if scene.body.drag_law == "velocity":
+        groups.append(force_group(model, "body_sand", body_law(scene, resolved), 0.0, [robot.body]))
+    (travel_qpos,), (travel_dof,) = addresses(model, [robot.travel])
+    servo_qpos, servo_dof = addresses(model, robot.servos)
+    hinges = [addresses(model, chain.hinges) for chain in robot.fins]
+    prescribed = scene.robot.servo == "prescribed"
+    return RobotModel(
+        model=model,
+        backend=backend,
+        sides=sides,
+        travel_qpos=int(travel_qpos),
+        travel_dof=int(travel_dof),
+        body=robot.body.id,
+        servo_qpos=servo_qpos,
+        servo_dof=servo_dof,
+        armature=float(model.dof_armature[servo_dof[0]]) if prescribed else 0.0,
+        actuators=np.array([u.id for u in robot.actuators], dtype=int),
+        fin_hinge_qpos=np.array([q for q, _ in hinges], dtype=int).reshape(len(sides), -1),
+        fin_hinge_dof=np.array([d for _, d in hinges], dtype=int).reshape(len(sides), -1),
+        fin_sites=np.array([[b.sites[0].id for b in chain.bodies] for chain in robot.fins]),
+        groups=tuple(groups),
+        resolved=resolved,
+    )
 
 
 @dataclass(frozen=True)
@@ -266,7 +497,7 @@ PRESETS_HELP = ("built-in robot scene when no --scene is given (default: physica
 
 def add_robot(p: argparse.ArgumentParser) -> None:
     """The robot scene's flags (also those of the studies on the robot: optimize, table)."""
-    g = add_scene_flags(p, "robot", "fin.stiffness=0.4", presets=PRESETS[RobotScene], presets_help=PRESETS_HELP,
+    g = add_scene_flags(p, "robot", "fin.stiffness=0.4", presets=PRESETS, presets_help=PRESETS_HELP,
                         title="robot scene", backend="")
     g.add_argument("--fin", choices=("origami", "soft", "rigid"), help="fin kind (overrides fin.kind)")
     g.add_argument("--model", choices=("full", "half"), help="full robot, or its right half with half the body's "

@@ -18,7 +18,8 @@ from ..errors import Chatter, NotConverged, SimulationFailed, StepUnderflow, Und
 from ..experiment import Experiment, run as run_experiment
 from ..experiments.plate import PlateTest
 from ..experiments.swim import Swim
-from ..scene import RobotScene, Scene, preset
+from ..experiments.swim import RobotScene
+from ..scene import Scene, preset
 from ..schema import field_of
 
 # Every fixed-step method, with each MuJoCo integrator it runs on: all of them for a method that takes no force

@@ -16,7 +16,8 @@ from .. import batch, methods, native
 from ..drive import Drive
 from ..experiments.plate import build_plate, simulate
 from ..experiments.swim import steady_cycles, swim
-from ..scene import PRESETS, RobotScene, Scene, preset, resolution
+from ..experiments.swim import RobotScene
+from ..scene import PRESETS, Scene, preset, resolution
 from .accuracy import PLATE_DRIVE
 from .fit import fit, read_drag, resolve_params, simulated_drag
 from .optimize import evaluation_scene, optimize

@@ -29,7 +29,8 @@ from .. import batch
 from . import searchlog
 from ..convergence import ErrorLimits, SimulationFailed
 from ..files import provenance
-from ..scene import RobotScene, SceneError, field_of, scene_from_dict, to_toml
+from ..experiments.swim import RobotScene
+from ..scene import SceneError, field_of, scene_from_dict, to_toml
 from ..experiments.swim import swim
 
 FAILED = 2.0

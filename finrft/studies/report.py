@@ -24,7 +24,8 @@ from ..experiment import Result
 from ..experiments.plate import plate_points
 from .fit import DragData, fit, read_drag, resolve_params, simulated_angles
 from .optimize import optimize
-from ..scene import RobotScene, Scene, SceneError, preset, resolution
+from ..experiments.swim import RobotScene
+from ..scene import Scene, SceneError, preset, resolution
 from ..experiments.swim import Swim, steady_cycles, swim
 from .table import PAPER_TABLE, PHYSICAL_FITTED, table_markdown, table_rows, table_scenes
 

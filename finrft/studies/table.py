@@ -10,7 +10,7 @@ from ..batch import run_experiments
 from ..convergence import ErrorLimits
 from ..experiment import Result
 from ..experiments.swim import Swim, steady_cycles
-from ..scene import RobotScene
+from ..experiments.swim import RobotScene
 
 
 # The paper's Table I: (name, theta1 deg, theta2 deg, L_a mm, fin, eta_exp %, eta_sim %, net speed mm/s exp).

@@ -72,10 +72,11 @@ def _section_default(field: dataclasses.Field) -> Any:
 
 def scene_reference() -> str:
     lines = ["# Scene reference", "",
-             "Generated from the scene schema (`finrft/scene.py`, each field's metadata) when the documentation is "
-             "built: it is the code's own list of keys. A scene file is TOML in SI units; a key it leaves out takes "
-             "the default below (a preset, `finrft scene --dump NAME`, sets many of them). On the command line any "
-             "key is `--set SECTION.KEY=VALUE`.", ""]
+             "Generated from the scene schema (the sections of `finrft/scene.py` and of each experiment's module in "
+             "`finrft/experiments/`, each field's metadata) when the documentation is built: it is the code's own "
+             "list of keys. A scene file is TOML in SI units; a key it leaves out takes the default below (a "
+             "preset, `finrft scene --dump NAME`, sets many of them). On the command line any key is "
+             "`--set SECTION.KEY=VALUE`.", ""]
     for title, cls in scene_classes().items():
         lines += [f"## {title}", ""]
         if cls.__doc__:

@@ -22,7 +22,7 @@ import numpy as np
 
 from .. import geometry, media, native
 from ..convergence import ErrorLimits
-from ..errors import SimulationFailed, UndefinedResult
+from ..errors import UndefinedResult
 from ..drive import Drive
 from ..experiment import Compared, Plot, Quantity, Result, run
 from ..geometry import Resolved, resolve

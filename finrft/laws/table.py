@@ -29,8 +29,8 @@ from . import components
 KIND = "segment"
 SUMMARY = "F_perp(theta), F_par(theta) from a CSV"  # what the scene's rft.law documents
 # The law's keys of [rft], with their units (`finrft.scene.RFT` is built from every law's).
-KEYS = (("table", str, field("", "", "table law: CSV with columns attack_deg, f_perp_N_m3, f_par_N_m3, the forces per unit "
-                             "area and depth (N/m^3) (relative to the scene file)")),)
+KEYS = (("table", str, field("", "", "table law: CSV with columns attack_deg, f_perp_N_m3, f_par_N_m3, the "
+                             "forces per unit area and depth (N/m^3) (relative to the scene file)")),)
 INTENSIVE = ("table",)
 TABLE_COLUMNS = ("attack_deg", "f_perp_N_m3", "f_par_N_m3")
 # The columns of a table of forces per segment, before the coefficients were per unit area and depth.

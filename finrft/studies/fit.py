@@ -24,7 +24,6 @@ from ..convergence import ErrorLimits, SimulationFailed
 from ..drive import Drive
 from .optimize import Search, Variable, cmaes, read_log, si_units
 from ..experiment import Result
-from ..files import atomic_path
 from ..laws.table import ForceTable
 from ..scene import RFT, Scene, SceneError, field_of, read_text, scene_from_dict, split_key, to_toml
 from ..experiments.plate import FORCE_COLUMNS, simulate

@@ -45,7 +45,7 @@ def feeds_energy(params: dict[str, float]) -> str:
     (``params``: one segment's, N):
     per unit speed its power is -(f_perp (v^.y^)^2 + f_par (v^.x^)^2), so either coefficient < 0 feeds energy in."""
     if params["f_par"] < 0:
-        return f"f_par = {params['f_par']:g} N < 0 pushes a segment along its axial motion"
+        return f"f_par = {params['f_par']:g} N < 0 (per segment) pushes a segment along its axial motion"
     if params["f_perp"] < 0:
-        return f"f_perp = {params['f_perp']:g} N < 0 pushes a segment along its sideways motion"
+        return f"f_perp = {params['f_perp']:g} N < 0 (per segment) pushes a segment along its sideways motion"
     return ""

@@ -13,6 +13,7 @@ from ..scene import SceneError, field_of
 SUFFIXES = {"deg": ("rad", math.pi / 180), "mm": ("m", 1e-3)}
 # SI units shown in the CLI's: radians (and per second) in degrees, metres in mm.
 DISPLAY = {"rad": 180 / math.pi, "rad/s": 180 / math.pi, "m": 1e3}
+DISPLAY_UNIT = {"rad": "deg", "rad/s": "deg/s", "m": "mm"}
 
 
 def unit_of(cls: type, key: str) -> str | None:
@@ -52,3 +53,10 @@ def parse_bounds(items: list[str], cls: type,
 def display_units(cls: type, keys: list[str], values: np.ndarray) -> np.ndarray:
     """Searched values in the CLI's units: angles in degrees, lengths in mm, the rest in SI."""
     return values * np.array([DISPLAY.get(unit_of(cls, k) or "", 1.0) for k in keys])
+
+
+def shown(cls: type, key: str, value: float) -> str:
+    """A scene key's SI value in the CLI's unit, with the unit: ``fin.segment_length 20 mm``."""
+    unit = unit_of(cls, key) or ""
+    return f"{key} {value * DISPLAY.get(unit, 1.0):.4g} {DISPLAY_UNIT.get(unit, unit)}".rstrip()
+

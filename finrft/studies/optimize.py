@@ -26,7 +26,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from .. import batch
-from . import searchlog
+from . import bounds, searchlog
 from ..convergence import ErrorLimits, SimulationFailed
 from ..files import provenance
 from ..experiments.swim import RobotScene
@@ -383,6 +383,10 @@ def best_gait(scene: RobotScene, result: Search, max_error: ErrorLimits = ErrorL
 
 
 def best_gait_text(summary: dict[str, Any]) -> str:
+    # the gait always; any other key searched (a fin's design, say) as well, in the CLI's units
+    others = [bounds.shown(RobotScene, key, value) for key, value in summary["best"].items()
+              if key not in ("gait.theta1", "gait.theta2", "arm.length")]
     return (f"best eta {100 * summary['eta']:.2f} % at theta1 {summary['theta1_deg']:.1f} deg, theta2 "
-            f"{summary['theta2_deg']:.1f} deg, arm {summary['arm_length_mm']:.1f} mm after {summary['evaluations']} "
-            f"evaluations in {summary['wall_s']:.1f} s")
+            f"{summary['theta2_deg']:.1f} deg, arm {summary['arm_length_mm']:.1f} mm"
+            f"{''.join(', ' + text for text in others)} after {summary['evaluations']} evaluations in "
+            f"{summary['wall_s']:.1f} s")

@@ -22,6 +22,7 @@ from ..data import plate_drag_dir
 from ..drive import Drive
 from ..experiment import Result
 from ..experiments.plate import plate_points
+from .bounds import unit_of
 from .fit import DragData, fit, read_drag, resolve_params, simulated_angles
 from .optimize import optimize
 from ..experiments.swim import RobotScene
@@ -202,7 +203,7 @@ def experiment(out: Path, quick: bool, workers: int | None, data: list[DragData]
         row[1].set_ylabel("MSE (deg^2)")
         row[1].legend(fontsize=7)
         row[1].grid(alpha=0.3, axis="y")
-        values = ", ".join(f"{k} = {v:.4g}" for k, v in result.search.best.items())
+        values = ", ".join(f"{k} = {v:.4g} {unit_of(Scene, k) or ''}".rstrip() for k, v in result.search.best.items())
         rmse = ", ".join(f"{k} {v:.2f} deg" for k, v in {**result.rmse_deg, **result.validate_rmse_deg}.items())
         lines.append(f"- {name}: {values}; RMSE {rmse}" + (" (validation: " + ", ".join(
             result.validate_rmse_deg) + ")" if result.validate_rmse_deg else ""))

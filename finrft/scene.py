@@ -240,9 +240,6 @@ class SceneKind:
 
 _KINDS: dict[type, SceneKind] = {}
 # Each registered scene class's presets (see `register_scene`), filled as the kinds register.
-PRESETS: dict[type, tuple[str, ...]] = {}
-
-
 def register_scene(cls: type, *, presets: tuple[str, ...] = (), prefix: str = "", title: str = "") -> type:
     """Register a scene class: its presets are read from ``finrft/presets/PREFIX-NAME.toml`` (`preset`), and the
     scene reference lists its sections under ``title``. The experiments register their own scene kinds when
@@ -250,9 +247,12 @@ def register_scene(cls: type, *, presets: tuple[str, ...] = (), prefix: str = ""
     if presets and not prefix:
         raise ValueError(f"{cls.__name__}: a scene kind with presets needs the prefix of their files")
     _KINDS[cls] = SceneKind(cls, tuple(presets), prefix, title or cls.__name__)
-    if presets:
-        PRESETS[cls] = tuple(presets)
     return cls
+
+
+def presets(cls: type) -> tuple[str, ...]:
+    """The built-in scenes of a registered scene kind, by name (none for a kind without presets)."""
+    return _KINDS[cls].presets if cls in _KINDS else ()
 
 
 def scene_kinds() -> tuple[SceneKind, ...]:
@@ -294,7 +294,7 @@ def load_scene(path: str | Path | None = None, *, preset_name: str = "physical",
     A relative path in a file (``rft.table``, ``model.path``) is taken relative to that file.
     """
     if path is None:
-        scene = preset(preset_name, cls) if PRESETS.get(cls) else scene_from_dict({}, cls)
+        scene = preset(preset_name, cls) if presets(cls) else scene_from_dict({}, cls)
     else:
         path = Path(path)
         data = read_toml(read_text(path, "scene file"), str(path))

@@ -11,7 +11,7 @@ from finrft.experiments.flags import preset_name
 from finrft.laws import table
 from finrft.experiments.intrusion import IntrusionScene
 from finrft.experiments.swim import RobotScene
-from finrft.scene import PRESETS, RFT, Medium, Scene, UserScene, field_of, preset, scene_from_dict, scene_kinds
+from finrft.scene import RFT, Medium, Scene, UserScene, field_of, preset, presets, scene_from_dict, scene_kinds
 
 
 class Recorder:
@@ -75,8 +75,8 @@ def test_every_scene_round_trips_through_its_toml():
 
 def test_scene_kinds_are_a_registry():
     # preset and load_scene read the registry: a kind's presets, from its files; an unregistered class is refused
-    assert PRESETS[Scene] == PRESETS[RobotScene] == ("paper", "physical")
-    assert UserScene not in PRESETS and IntrusionScene not in PRESETS
+    assert presets(Scene) == presets(RobotScene) == ("paper", "physical")
+    assert presets(UserScene) == presets(IntrusionScene) == ()
     with pytest.raises(SceneError, match="unknown preset 'nothing': use one of paper, physical"):
         preset("nothing", RobotScene)
     with pytest.raises(SceneError, match="not a registered scene kind"):

@@ -18,8 +18,8 @@ def add_scene(sub: Any) -> None:
     p = sub.add_parser("scene", help="print a resolved scene as TOML",
                        description="Print the full resolved scene (SI units) as TOML, to copy and edit.")
     p.add_argument("--dump", metavar="NAME", help=f"preset to print (default: physical): a plate preset "
-                   f"({', '.join(scenes.PRESETS[scenes.Scene])}), or with --robot a robot preset "
-                   f"({', '.join(scenes.PRESETS[RobotScene])})")
+                   f"({', '.join(scenes.presets(scenes.Scene))}), or with --robot a robot preset "
+                   f"({', '.join(scenes.presets(RobotScene))})")
     p.add_argument("--robot", action="store_true", help="a robot scene instead of a plate scene")
     p.add_argument("--scene", metavar="FILE.toml", help="resolve this file (instead of --dump)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a key (SI)")

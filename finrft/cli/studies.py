@@ -48,7 +48,7 @@ def add_report(sub: Any) -> None:
                        "appear in DIR only when every part has succeeded.")
     p.add_argument("--out", default="report", metavar="DIR", help="output folder (default: %(default)s)")
     p.add_argument("--quick", action="store_true", help="a smaller version: fewer cycles and evaluations")
-    p.add_argument("--preset", default="physical", choices=scenes.PRESETS[scenes.Scene],
+    p.add_argument("--preset", default="physical", choices=scenes.presets(scenes.Scene),
                    help="plate preset fitted to the measurements (default: %(default)s)")
     p.add_argument("--data", metavar="DIR", help="folder of plate-drag measurements (default: those shipped "
                    "with finrft)")
@@ -105,7 +105,7 @@ def _add_robot(kinds: Any) -> argparse.ArgumentParser:
                          "flap cycles, eta over the steady ones), measure its eta against a converged run of the "
                          "same gait, and time a CMA-ES optimisation of --budget evaluations on all cores, for a "
                          "robot preset.")
-    p.add_argument("--preset", default="physical", choices=scenes.PRESETS[RobotScene],
+    p.add_argument("--preset", default="physical", choices=scenes.presets(RobotScene),
                    help="robot preset (default: %(default)s)")
     _budget(p, "optimisation budget")
     add_workers(p)

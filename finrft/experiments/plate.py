@@ -30,7 +30,7 @@ from ..files import atomic_path
 from ..geometry import Resolved, resolve
 from ..models import (ARMATURE_RATIO, AttachedChain, ForceGroup, addresses, attach_chain, bind_plugin,
                       compile_spec, force_group, new_spec, penalty_stiffness)
-from ..scene import PRESETS, Chain, Scene, SceneError, load_scene, parse_override, read_text
+from ..scene import Chain, Scene, SceneError, load_scene, parse_override, presets, read_text
 from ..stepping import Prescribed
 from ..views import centre_line
 from .command import Command, Output, authors_model_line, error_line, register, steps_line
@@ -438,7 +438,7 @@ PRESETS_HELP = ("built-in plate scene when no --scene is given (default: physica
 
 def add_plate_scene(p: argparse.ArgumentParser, *, kinds: bool = False, backend: bool = True):
     """The plate scene's flags (also those of the studies on plates: fit, fit-rft)."""
-    g = add_scene_flags(p, "plate", "plate.segment_inertia=0.001", presets=PRESETS[Scene], presets_help=PRESETS_HELP,
+    g = add_scene_flags(p, "plate", "plate.segment_inertia=0.001", presets=presets(Scene), presets_help=PRESETS_HELP,
                         backend=backend and "where the RFT force is computed (overrides sim.backend; default native, "
                         "the C plugin, falling back to python when it cannot be loaded)")
     if kinds:

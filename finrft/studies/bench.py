@@ -17,7 +17,7 @@ from ..drive import Drive
 from ..experiments.plate import build_plate, simulate
 from ..experiments.swim import steady_cycles, swim
 from ..experiments.swim import RobotScene
-from ..scene import PRESETS, Scene, preset, resolution
+from ..scene import Scene, preset, presets, resolution
 from .accuracy import PLATE_DRIVE
 from .fit import fit, read_drag, resolve_params, simulated_drag
 from .optimize import evaluation_scene, optimize
@@ -82,7 +82,7 @@ def backends(scene: Scene | None = None, *, batch_size: int = 64, workers: int |
     log(f"native is {out['native_over_python']:.1f}x faster than the Python callback (target >= 10x); its step "
         f"costs {out['native_over_bare']:.2f}x bare mj_step (target <= 1.3x), the whole drag (model, recording, "
         f"chatter probe) {out['drag_over_bare']:.2f}x")
-    for name in PRESETS[Scene]:
+    for name in presets(Scene):
         out[f"error_estimate_overhead_{name}"] = _estimate_overhead(
             lambda **options: simulate(preset(name), drive, max_error=None, **options), repeat)
         log(f"error estimate on the {name} preset's drag: {100 * out[f'error_estimate_overhead_{name}']:.0f} % of "

@@ -25,7 +25,7 @@ from .files import read_text, read_toml
 from .laws import drft
 from .schema import field as _f
 # Importable from here as before; their homes are the schema engine, the errors and the file reader.
-from .schema import field_of, sections, split_key, to_toml  # noqa: F401
+from .schema import field_of, split_key, to_toml  # noqa: F401
 
 
 # A chain's mass matrix is dense (every hinge moves the segments beyond it), so the cost of a step grows as N^2 to

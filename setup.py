@@ -116,7 +116,7 @@ def plugin_extension() -> Extension:
     macros = [("FINRFT_LAWS", "".join(f"X({law.stem})" for law in laws))]
     macros += [(f"FINRFT_{code.name}", str(int(code))) for code in native.Code]
     return Extension("finrft.libfinrft_rft", sources=["plugins/finrft_rft.c", "plugins/steppers.c",
-                                                      "plugins/finrft_li2013.c", *(law.as_posix() for law in laws)],
+                                                      "plugins/finrft_surface.c", *(law.as_posix() for law in laws)],
                      depends=["plugins/finrft.h"], define_macros=macros)
 
 

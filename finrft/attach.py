@@ -6,7 +6,7 @@ velocity > 0) takes the law's stress times its depth and area (a surface law of 
 by its name: `finrft.laws.li2013.element_forces` or `finrft.laws.rft3d.element_forces`), plus, with
 ``drft_lambda`` > 0, DRFT's rate-dependent term (`finrft.laws.drft`). The force
 appears where MuJoCo's passive forces appear, ``data.qfrc_passive``: from the native plugin ``finrft.surface``
-(plugins/finrft_li2013.c, one instance per body, the elements in its config) or, with the Python backend, from a
+(plugins/finrft_surface.c, one instance per body, the elements in its config) or, with the Python backend, from a
 passive-force callback that `Attached.installed` sets for a block and then restores.
 
 Elements: a box's faces are cut into rectangles, a cylinder's side into rectangles and its caps into ring
@@ -112,7 +112,7 @@ class SurfaceForces:
         rotation = d.xmat[body].reshape(3, 3)
         arm = surface.centre @ rotation.T
         normal = surface.normal @ rotation.T
-        mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_BODY, body, self._twist, 0)
+        mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_XBODY, body, self._twist, 0)
         velocity = self._twist[3:] + np.cross(self._twist[:3], arm)
         depth = a.surface_z - (d.xpos[body, 2] + arm[:, 2])
         return a.element_forces(normal, velocity, depth, surface.area), arm

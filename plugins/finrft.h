@@ -107,4 +107,28 @@ static inline void finrft_site_axes(const mjData* d, int s, mjtNum x[3], mjtNum 
   y[0] = R[1]; y[1] = R[4]; y[2] = R[7];
 }
 
+// finrft.surface (plugins/finrft_surface.c): one instance per body, the body's surface elements and their law.
+#define FINRFT_SURFACE_PLUGIN "finrft.surface"
+enum { LAW_LI2013, LAW_RFT3D };
+
+typedef struct {
+  const mjModel* model;  // the model it was made for (finrft_surface_instance)
+  int law;
+  double coef[60];       // the law's coefficients: li2013 the first 9, rft3d 60
+  double zeta, xi, mu_surf, surface_z;
+  double drft_lambda, bulk_density;  // drft_lambda = 0: no DRFT term
+  int body;
+  int n;
+  double* element;  // n x 7: centre, normal (body frame), area
+} FinrftSurface;
+
+// The instance of finrft.surface with index `instance` for the model `m` that `d` is stepped with (made again for
+// another model, as finrft_instance); NULL, with the passive forces NaN, should that fail.
+const FinrftSurface* finrft_surface_instance(const mjModel* m, mjData* d, int instance);
+
+// The medium's force and torque on the instance's body, wrench = (torque about the body's origin, force), world
+// frame, had the body the twist (angular velocity, velocity of its origin), world frame, at the positions of d
+// (after mj_kinematics): the sum over its elements. The implicit steppers difference it in the twist.
+void finrft_surface_wrench(const FinrftSurface* p, const mjData* d, const mjtNum twist[6], mjtNum wrench[6]);
+
 #endif  // FINRFT_H_

@@ -227,7 +227,7 @@ static void add_attribute(const char* key) {
   if (nattribute < MAX_ATTRIBUTES) attributes[nattribute++] = key;
 }
 
-void finrft_register_surface(void);  // plugins/finrft_li2013.c
+void finrft_register_surface(void);  // plugins/finrft_surface.c
 
 mjPLUGIN_LIB_INIT(finrft_rft) {
   finrft_register_surface();

@@ -23,7 +23,7 @@ name. Its module provides
   units and documentation are declared in its module alone.
 
 A surface law (``KIND = "surface"``) gives the force on the surface elements of any body (`finrft.attach`); its C
-twin is in plugins/finrft_li2013.c. Its module provides
+twin is in plugins/finrft_surface.c. Its module provides
 
 - ``element_forces(normal, velocity, depth, area, coefficients=..., **parameters) -> (N, 3)``, pure numpy;
 - ``Coefficients`` (its fit's coefficients) and ``DEFAULT``, the set it takes unless given others;

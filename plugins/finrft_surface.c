@@ -133,24 +133,11 @@ FINRFT_EXPORT void finrft_drft_element_force(double drft_lambda, double rho_c, c
   for (int i = 0; i < 3; i++) force[i] = -pressure * n[i];
 }
 
-enum { LAW_LI2013, LAW_RFT3D };
-
-typedef struct {
-  const mjModel* model;  // the model it was made for (surface_instance)
-  int law;
-  double coef[NCOEF_RFT3D];  // the first NCOEF for li2013
-  double zeta, xi, mu_surf, surface_z;
-  double drft_lambda, bulk_density;  // drft_lambda = 0: no DRFT term
-  int body;
-  int n;
-  double* element;  // n x 7: centre, normal (body frame), area
-} SurfaceData;
-
 static const char* kSurfaceAttributes[] = {"law",       "coefficients", "zeta",        "xi",
                                            "mu_surf",   "surface_z",    "drft_lambda", "bulk_density",
                                            "elements"};
 
-static void surface_free(SurfaceData* p) {
+static void surface_free(FinrftSurface* p) {
   if (!p) return;
   free(p->element);
   free(p);
@@ -190,7 +177,7 @@ static int surface_init(const mjModel* m, mjData* d, int instance) {
     mju_warning("finrft.surface: config 'law' must be 'li2013' or 'rft3d', got '%s'", law ? law : "");
     return -1;
   }
-  SurfaceData* p = (SurfaceData*)calloc(1, sizeof(SurfaceData));
+  FinrftSurface* p = (FinrftSurface*)calloc(1, sizeof(FinrftSurface));
   if (!p) return -1;
   p->law = rft3d ? LAW_RFT3D : LAW_LI2013;
   int ncoef = rft3d ? NCOEF_RFT3D : NCOEF;
@@ -274,56 +261,67 @@ static int surface_nstate(const mjModel* m, int instance) {
 }
 
 static void surface_destroy(mjData* d, int instance) {
-  surface_free((SurfaceData*)d->plugin_data[instance]);
+  surface_free((FinrftSurface*)d->plugin_data[instance]);
   d->plugin_data[instance] = 0;
 }
 
 static void surface_reset(const mjModel* m, mjtNum* plugin_state, void* plugin_data, int instance) {}
 
 // The instance for the model `d` is stepped with, made again when it was made for another: as finrft_instance.
-static const SurfaceData* surface_instance(const mjModel* m, mjData* d, int instance) {
-  const SurfaceData* p = (const SurfaceData*)d->plugin_data[instance];
+const FinrftSurface* finrft_surface_instance(const mjModel* m, mjData* d, int instance) {
+  const FinrftSurface* p = (const FinrftSurface*)d->plugin_data[instance];
   if (p && p->model == m) return p;
   surface_destroy(d, instance);
   if (surface_init(m, d, instance)) {
     finrft_poison(m, d);
     return NULL;
   }
-  return (const SurfaceData*)d->plugin_data[instance];
+  return (const FinrftSurface*)d->plugin_data[instance];
+}
+
+// One element's force (world frame): the law's, plus DRFT's term.
+static void element_force(const FinrftSurface* p, const mjtNum normal[3], const mjtNum v[3], mjtNum depth,
+                          mjtNum area, mjtNum f[3]) {
+  if (p->law == LAW_RFT3D)
+    finrft_rft3d_element_force(p->coef, p->xi, p->mu_surf, normal, v, depth, area, f);
+  else
+    finrft_li2013_element_force(p->coef, p->zeta, normal, v, depth, area, f);
+  if (p->drft_lambda > 0) {
+    mjtNum inertial[3];
+    finrft_drft_element_force(p->drft_lambda, p->bulk_density, normal, v, depth, area, inertial);
+    mju_addTo3(f, inertial);
+  }
+}
+
+void finrft_surface_wrench(const FinrftSurface* p, const mjData* d, const mjtNum twist[6], mjtNum wrench[6]) {
+  const mjtNum* origin = d->xpos + 3 * p->body;
+  const mjtNum* R = d->xmat + 9 * p->body;
+  mju_zero(wrench, 6);
+  for (int i = 0; i < p->n; i++) {
+    const double* e = p->element + 7 * i;
+    mjtNum arm[3], normal[3], v[3], f[3], moment[3];
+    mju_mulMatVec3(arm, R, e);
+    double depth = p->surface_z - (origin[2] + arm[2]);
+    if (!(depth > 0)) continue;
+    mju_mulMatVec3(normal, R, e + 3);
+    mju_cross(v, twist, arm);
+    mju_addTo3(v, twist + 3);
+    element_force(p, normal, v, depth, e[6], f);
+    mju_addTo3(wrench + 3, f);
+    mju_cross(moment, arm, f);
+    mju_addTo3(wrench, moment);
+  }
 }
 
 // Every element's force, summed into one force and one torque about the body's origin, applied once.
 static void surface_compute(const mjModel* m, mjData* d, int instance, int capability_bit) {
   if (!(capability_bit & mjPLUGIN_PASSIVE)) return;
-  const SurfaceData* p = surface_instance(m, d, instance);
+  const FinrftSurface* p = finrft_surface_instance(m, d, instance);
   if (!p) return;
-  const mjtNum* origin = d->xpos + 3 * p->body;
-  const mjtNum* R = d->xmat + 9 * p->body;
-  mjtNum twist[6], total[3] = {0, 0, 0}, torque[3] = {0, 0, 0};
-  mj_objectVelocity(m, d, mjOBJ_BODY, p->body, twist, 0);
-  for (int i = 0; i < p->n; i++) {
-    const double* e = p->element + 7 * i;
-    mjtNum arm[3], normal[3], v[3], f[3], moment[3];
-    mju_mulMatVec3(arm, R, e);
-    mju_mulMatVec3(normal, R, e + 3);
-    double depth = p->surface_z - (origin[2] + arm[2]);
-    if (!(depth > 0)) continue;
-    mju_cross(v, twist, arm);
-    mju_addTo3(v, twist + 3);
-    if (p->law == LAW_RFT3D)
-      finrft_rft3d_element_force(p->coef, p->xi, p->mu_surf, normal, v, depth, e[6], f);
-    else
-      finrft_li2013_element_force(p->coef, p->zeta, normal, v, depth, e[6], f);
-    if (p->drft_lambda > 0) {
-      mjtNum inertial[3];
-      finrft_drft_element_force(p->drft_lambda, p->bulk_density, normal, v, depth, e[6], inertial);
-      mju_addTo3(f, inertial);
-    }
-    mju_addTo3(total, f);
-    mju_cross(moment, arm, f);
-    mju_addTo3(torque, moment);
-  }
-  mj_applyFT(m, d, total, torque, origin, p->body, d->qfrc_passive);
+  mjtNum twist[6], wrench[6];
+  mj_objectVelocity(m, d, mjOBJ_XBODY, p->body, twist, 0);
+  finrft_surface_wrench(p, d, twist, wrench);
+  mj_applyFT(m, d, wrench + 3, wrench, d->xpos + 3 * p->body, p->body, d->qfrc_passive);
 }
 
 void finrft_register_surface(void) {

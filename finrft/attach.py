@@ -80,6 +80,29 @@ class Attached:
         """The number of elements per body."""
         return {s.body: len(s.area) for s in self.surfaces}
 
+    def forces(self, model: mujoco.MjModel, data: mujoco.MjData) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """The medium's force (N) and its torque about the body's origin (N m) on each attached body, world frame,
+        at the state of ``data`` (after mj_forward, or at least mj_kinematics and mj_comVel): the law as both
+        backends apply it, whichever is in use."""
+        forces = SurfaceForces(self, model)
+        out = {}
+        for body, surface in forces.bodies:
+            force, arm = forces.element_forces(model, data, body, surface)
+            out[surface.body] = (force.sum(axis=0), np.cross(arm, force).sum(axis=0))
+        return out
+
+    def world_elements(self, model: mujoco.MjModel, data: mujoco.MjData
+                       ) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """Each attached body's elements at the state of ``data`` (after mj_kinematics): centres (N, 3, m) and
+        outward unit normals (N, 3), world frame, and areas (N, m^2): to draw or inspect them."""
+        out = {}
+        for surface in self.surfaces:
+            body = model.body(surface.body).id
+            rotation = data.xmat[body].reshape(3, 3)
+            out[surface.body] = (surface.centre @ rotation.T + data.xpos[body], surface.normal @ rotation.T,
+                                 surface.area.copy())
+        return out
+
     def callback(self, model: mujoco.MjModel) -> "SurfaceForces":
         """The Python backend's passive-force callback for the compiled model."""
         return SurfaceForces(self, model)
@@ -124,12 +147,14 @@ class SurfaceForces:
                               d.qfrc_passive)
 
 
-def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str, law: str = "li2013", zeta: float | None = None,
+def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str = (), law: str = "li2013", zeta: float | None = None,
            surface_z: float = 0.0, element_size: float = 0.005, backend: str = "native",
            coefficients: li2013.Coefficients | rft3d.Coefficients | None = None, medium: str | None = None,
            rho_c: float | None = None, mu_int: float | None = None, mu_surf: float | None = None,
-           drft_lambda: float = 0.0, bulk_density: float | None = None) -> Attached:
-    """Add granular RFT to the named bodies of ``spec`` (before it is compiled).
+           drft_lambda: float = 0.0, bulk_density: float | None = None, geoms: Sequence[str] = (),
+           cull: bool = True) -> Attached:
+    """Add granular RFT to the named bodies of ``spec`` (before it is compiled): all the geoms of each of
+    ``bodies``, and the geoms named in ``geoms`` (their bodies' other geoms left out).
 
     ``law``, a surface law of `finrft.laws`: ``li2013`` (`finrft.laws.li2013`) with ``coefficients`` (default:
     the generic medium) scaled by ``zeta`` (default 1), or instead of both a ``medium`` of the catalogue
@@ -141,10 +166,14 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str, law: str = "li2013"
     ``rho_c``, li2013's ``bulk_density`` (kg/m^3; else the catalogued ``medium``'s, if it has one);
     ``surface_z``: height of the free surface, m; ``element_size``: the elements' size, m; ``backend``:
     ``native`` (falls back to ``python``, with a warning, when the plugin cannot be loaded) or ``python`` (then run
-    the model inside ``Attached.installed``). Raises `SceneError` on bad input.
+    the model inside ``Attached.installed``); ``cull``: leave out the elements that face another geom of the same
+    kinematic tree closely (`TOUCHING`), such as the end faces of neighbouring links of a chain, which the grains
+    cannot reach. Raises `SceneError` on bad input.
     """
     material = media.medium(medium) if medium is not None else None
     names = [bodies] if isinstance(bodies, str) else list(bodies)
+    chosen = _chosen_geoms(spec, names, [geoms] if isinstance(geoms, str) else list(geoms))
+    names += [b for b in chosen if b not in names]
     _check(names, law, surface_z, element_size, backend)
     module = laws.module(law, laws.SURFACE)
     parameters, catalogued = laws.surface_parameters(
@@ -163,6 +192,8 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str, law: str = "li2013"
         raise SceneError(f"attach: law {law!r} takes finrft.laws.{law}.Coefficients")
     backend = native.resolve_backend(backend)
     model = spec.copy().compile()
+    data = mujoco.MjData(model)
+    mujoco.mj_kinematics(model, data)
     surfaces = []
     for name in names:
         if spec.body(name) is None:
@@ -170,7 +201,7 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str, law: str = "li2013"
         body = model.body(name).id
         if backend == "native" and model.body_plugin[body] >= 0:
             raise SceneError(f"attach: body {name!r} already has a plugin (a body takes one)")
-        surfaces.append(_surface(model, name, body, element_size))
+        surfaces.append(_surface(model, data, name, body, element_size, chosen.get(name), cull))
     total = sum(len(s.area) for s in surfaces)
     if total > MAX_ELEMENTS:
         raise SceneError(f"attach: element_size = {element_size:g} m gives {total} elements, more than "
@@ -218,8 +249,36 @@ def _bind(spec: mujoco.MjSpec, attached: Attached, surface: Surface) -> None:
     body.plugin.active = True
 
 
-def _surface(model: mujoco.MjModel, name: str, body: int, h: float) -> Surface:
+def _chosen_geoms(spec: mujoco.MjSpec, bodies: list[str], geoms: list[str]) -> dict[str, list[str]]:
+    """The geoms named, by body (in the order named), for the bodies not named whole; SceneError for a name the
+    model lacks or a geom named twice."""
+    if len(set(geoms)) != len(geoms):
+        raise SceneError("attach: a geom is named twice")
+    chosen: dict[str, list[str]] = {}
+    for name in geoms:
+        geom = spec.geom(name) if name else None
+        if geom is None:
+            raise SceneError(f"attach: the model has no geom named {name!r}")
+        body = geom.parent.name
+        if not body:
+            raise SceneError(f"attach: geom {name!r} belongs to an unnamed body: name the body")
+        if body not in bodies:
+            chosen.setdefault(body, []).append(name)
+    return chosen
+
+
+# Elements whose centre, moved this share of the element size outward along its normal, lies inside another geom of
+# the same kinematic tree face that geom closely (a link's end face against its neighbour's, a leg's capsules where
+# they overlap): the grains cannot get between them, so they are left out. Judged once, in the model's reference
+# pose (qpos0): a hinge that opens the gap later does not bring them back.
+TOUCHING = 0.1
+
+
+def _surface(model: mujoco.MjModel, data: mujoco.MjData, name: str, body: int, h: float,
+             chosen: list[str] | None, cull: bool) -> Surface:
     geoms = np.flatnonzero(model.geom_bodyid == body)
+    if chosen is not None:
+        geoms = np.array([model.geom(g).id for g in chosen], dtype=int)
     if not len(geoms):
         raise SceneError(f"attach: body {name!r} has no geoms to cut into elements")
     for g in geoms:
@@ -231,15 +290,65 @@ def _surface(model: mujoco.MjModel, name: str, body: int, h: float) -> Surface:
     if estimate > MAX_ELEMENTS:
         raise SceneError(f"attach: element_size = {h:g} m gives about {estimate:.3g} elements on body {name!r}, "
                          f"more than {MAX_ELEMENTS}: use a larger element_size")
+    tree = [int(g) for g in np.flatnonzero(model.body_rootid[model.geom_bodyid] == model.body_rootid[body])
+            if int(model.geom_type[g]) in SUPPORTED] if cull and model.body_rootid[body] != 0 else []
     parts = []
     for g in geoms:
         centre, normal, area = _geom_elements(model, g, h)
         rotation = np.empty(9)
         mujoco.mju_quat2Mat(rotation, model.geom_quat[g])
         rotation = rotation.reshape(3, 3)
-        parts.append((centre @ rotation.T + model.geom_pos[g], normal @ rotation.T, area))
+        centre, normal = centre @ rotation.T + model.geom_pos[g], normal @ rotation.T
+        if tree:
+            frame = data.xmat[body].reshape(3, 3)
+            probe = (centre + TOUCHING * h * normal) @ frame.T + data.xpos[body]
+            inside = np.zeros(len(area), dtype=bool)
+            for other in tree:
+                if other != g:
+                    inside |= _inside(model, data, other, probe)
+            centre, normal, area = centre[~inside], normal[~inside], area[~inside]
+        parts.append((centre, normal, area))
     centre, normal, area = (np.concatenate(p) for p in zip(*parts))
+    if not len(area):
+        raise SceneError(f"attach: every element of body {name!r} faces another geom of its tree closely (culled): "
+                         f"pass cull=False, or attach the geoms the medium reaches")
     return Surface(name, centre, normal, area)
+
+
+def _inside(model: mujoco.MjModel, data: mujoco.MjData, g: int, points: np.ndarray) -> np.ndarray:
+    """Which points (N, 3, world frame) lie strictly inside geom g, at the pose of ``data``."""
+    q = (points - data.geom_xpos[g]) @ data.geom_xmat[g].reshape(3, 3)
+    size, kind = model.geom_size[g], int(model.geom_type[g])
+    if kind == _G.mjGEOM_BOX:
+        return np.all(np.abs(q) < size, axis=1)
+    if kind == _G.mjGEOM_SPHERE:
+        return np.linalg.norm(q, axis=1) < size[0]
+    if kind == _G.mjGEOM_ELLIPSOID:
+        return np.sum((q / size) ** 2, axis=1) < 1
+    if kind == _G.mjGEOM_CYLINDER:
+        return (np.hypot(q[:, 0], q[:, 1]) < size[0]) & (np.abs(q[:, 2]) < size[1])
+    if kind == _G.mjGEOM_CAPSULE:
+        along = np.clip(q[:, 2], -size[1], size[1])
+        return np.linalg.norm(q - np.column_stack([np.zeros((len(q), 2)), along]), axis=1) < size[0]
+    return _inside_mesh(_mesh(model, g), q)
+
+
+def _inside_mesh(t: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Points (N, 3) strictly inside a closed triangle mesh (T, 3, 3), same frame: a ray along an irrational
+    direction crosses its triangles an odd number of times (Moller-Trumbore)."""
+    direction = np.array([0.5773, 0.5774, 0.5773 + 1e-4 * np.pi])
+    e1, e2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
+    p = np.cross(direction, e2)
+    det = np.einsum("ti,ti->t", e1, p)
+    ok = np.abs(det) > 1e-18
+    t, e1, e2, p, det = t[ok], e1[ok], e2[ok], p[ok], det[ok]
+    s = q[:, None] - t[None, :, 0]                       # (N, T, 3)
+    u = np.einsum("nti,ti->nt", s, p) / det
+    qv = np.cross(s, e1[None])
+    v = np.einsum("i,nti->nt", direction, qv) / det
+    distance = np.einsum("nti,ti->nt", qv, e2) / det
+    hits = (u >= 0) & (v >= 0) & (u + v <= 1) & (distance > 0)
+    return hits.sum(axis=1) % 2 == 1
 
 
 def _mesh(model: mujoco.MjModel, g: int) -> tuple[np.ndarray, np.ndarray]:

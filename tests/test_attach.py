@@ -212,3 +212,64 @@ def test_a_body_takes_one_plugin():
     attach(spec, ["probe"])
     with pytest.raises(SceneError, match="already has a plugin"):
         attach(spec, ["probe"])
+
+
+def test_a_body_turning_about_its_origin_away_from_its_centre_of_mass():
+    # A hinge at the body's origin; the plate 0.1 m out on +x, a heavy ball above the surface 0.5 m out on -x, so
+    # the centre of mass lies on the ball's side. Turning at +1 rad/s, the plate moves along +y, its face leading:
+    # -26.64 N along y (as dragged; its thin end faces add 0.13 N along x), a torque of -26.64 N x 0.1 m about the hinge. A velocity taken at the centre
+    # of mass instead of the origin would move the plate along -y.
+    xml = body_xml('<geom type="box" size="0.02 0.0005 0.03" pos="0.1 0 -0.03" mass="0.001"/>'
+                   '<geom type="sphere" size="0.05" pos="-0.5 0 0.5" mass="10"/>',
+                   joint='<joint type="hinge" axis="0 0 1"/>')
+    for backend in ("native", "python"):
+        torque, attached = passive(xml, [1.0], backend=backend)
+        assert torque[0] == pytest.approx(-2.664, rel=1e-9)
+    spec = mujoco.MjSpec.from_string(xml)
+    attached = attach(spec, ["probe"], backend="python")
+    model = spec.compile()
+    data = mujoco.MjData(model)
+    data.qvel[:] = 1.0
+    mujoco.mj_forward(model, data)
+    force, moment = attached.forces(model, data)["probe"]
+    # and the lift on a vertical plate dragged: alpha_z(90 deg, 0) / alpha_x(90 deg, 0) = 0.037 / 0.370
+    assert force[1:] == pytest.approx([-26.64, 2.664], rel=1e-4)
+    assert moment[2] == pytest.approx(-2.664, rel=1e-9)
+
+
+CHAIN = """<mujoco><option gravity="0 0 0"/><worldbody>
+  <body name="link1" pos="0 0 -0.03"><joint type="slide" axis="1 0 0"/>
+    <geom name="box1" type="box" size="0.02 0.005 0.01" mass="0.1"/>
+    <body name="link2" pos="0.04 0 0"><joint type="hinge" axis="0 0 1" pos="-0.02 0 0"/>
+      <geom name="box2" type="box" size="0.02 0.005 0.01" mass="0.1"/>
+      <geom name="fin" type="box" size="0.02 0.0005 0.01" pos="0 0 0.02" mass="0.01"/></body>
+  </body></worldbody></mujoco>"""
+
+
+@pytest.mark.parametrize("cull", [True, False])
+def test_a_chain_dragged_along_itself_feels_its_nose_only(cull):
+    # Two box links end to end, dragged along -x: the grains reach link1's nose, not link2's end face behind it,
+    # which touches link1's tail. alpha_x(90 deg, 0) w (z2^2 - z1^2) / 2 = 0.370 N/cm^3 x 1 cm x 6 cm^2 = 2.22 N, and
+    # the nose of link2's fin, 1 mm x 2 cm from the surface down: 0.370 N/cm^3 x 0.1 cm x 2 cm^2 = 0.074 N.
+    spec = mujoco.MjSpec.from_string(CHAIN)
+    attached = attach(spec, ["link1", "link2"], law="li2013", backend="python", cull=cull)
+    model = spec.compile()
+    data = mujoco.MjData(model)
+    data.qvel[0] = -0.1
+    mujoco.mj_forward(model, data)
+    total = sum(f for f, _ in attached.forces(model, data).values())
+    assert total[0] == pytest.approx(2.22 * (1 if cull else 2) + 0.074, rel=1e-3)
+    # culled: the two touching end faces (2 x 4 elements of 5 mm each) and the fin's underside (8) on link2's top
+    full = sum(attach(mujoco.MjSpec.from_string(CHAIN), ["link1", "link2"], cull=False).elements.values())
+    assert sum(attached.elements.values()) == full - (16 + 8 if cull else 0)
+
+
+def test_geoms_chosen_by_name():
+    spec = mujoco.MjSpec.from_string(CHAIN)
+    attached = attach(spec, geoms=["fin"], backend="python")
+    whole = attach(mujoco.MjSpec.from_string(CHAIN), geoms=["fin"], backend="python", cull=False)
+    assert list(attached.elements) == ["link2"]
+    # the fin's elements only (not box2's), less the 8 of its underside that lie on box2's top face
+    assert attached.elements["link2"] == whole.elements["link2"] - 8 == 2 * (8 * 4 + 8 * 1 + 1 * 4) - 8
+    with pytest.raises(SceneError, match="no geom named 'wing'"):
+        attach(mujoco.MjSpec.from_string(CHAIN), geoms=["wing"])

@@ -17,7 +17,7 @@ The API, by topic:
   a ValueError) and `SimulationFailed` (a run that cannot give a trustworthy result)
 - experiments: `run(experiment, scene)` -> `Result` runs any `Experiment` (finrft.experiment); the built-in ones,
   each in its module of finrft.experiments with its command (`finrft.experiments.REGISTRY`): `PlateTest`,
-  `Swim`, `UserModel` (a user's MJCF model, `UserScene`), `Intrusion` (a plate pushed into the medium,
+  `Swim`, `UserModel` (a user's MJCF model as a robot, `UserScene`; `run_robot(scene, control=...)`), `Intrusion` (a plate pushed into the medium,
   `IntrusionScene`); `SimulationUnstable` when a run blows up or chatters
 - plate tests: `Drive`, `simulate` (`run` of a `PlateTest`)
 - the robot: `swim` (`run` of a `Swim`); the paper's Table I with `table_scenes` and `table_rows`
@@ -54,7 +54,7 @@ from .experiment import Experiment, Result, run
 from .experiments.intrusion import Intrusion, IntrusionScene
 from .experiments.plate import PlateTest, simulate
 from .experiments.swim import RobotScene, Swim, swim
-from .experiments.user_model import UserModel
+from .experiments.user_model import UserModel, run_robot
 from .media import medium
 from .scene import Scene, UserScene, load_scene, preset, to_toml
 from .studies.fit import Fit, fit, read_drag, resolve_params
@@ -67,7 +67,7 @@ __all__ = ["Drive", "Error", "Experiment", "Fit", "Intrusion", "IntrusionScene",
            "Result", "RobotScene", "Scene", "SceneError", "SimulationFailed", "SimulationUnstable", "Swim",
            "UserModel", "UserScene", "Variable", "attach", "fit", "load_scene", "local_executor", "map_jobs", "medium",
            "optimize", "preset", "read_drag", "resolve_params", "rollout_plates", "run", "run_experiments",
-           "run_many", "simulate", "swim", "table_rows", "table_scenes", "to_toml", *_RECORDING]
+           "run_many", "run_robot", "simulate", "swim", "table_rows", "table_scenes", "to_toml", *_RECORDING]
 
 
 def __getattr__(name: str) -> Any:

@@ -104,3 +104,19 @@ def installed(callback: Callback | None) -> Iterator[None]:
         yield
     finally:
         mujoco.set_mjcb_passive(previous)
+
+
+@contextlib.contextmanager
+def controlled(callback: Callback | None) -> Iterator[None]:
+    """Install a control callback (MuJoCo calls it in every step and mj_forward, after the velocities and before
+    the actuation: the place to set ``ctrl`` and ``qfrc_applied`` from the time and state) for a block, then
+    restore whatever was there; None leaves the callback as it is."""
+    if callback is None:
+        yield
+        return
+    previous = mujoco.get_mjcb_control()
+    mujoco.set_mjcb_control(callback)
+    try:
+        yield
+    finally:
+        mujoco.set_mjcb_control(previous)

@@ -19,7 +19,7 @@ import numpy as np
 
 from . import geometry, laws, native
 from .convergence import ErrorLimits, Estimated, checked, max_difference, paired, require_finite
-from .coupling import PythonCoupling, installed
+from .coupling import PythonCoupling, controlled, installed
 from .drive import Drive
 from .integrate import stepper
 from .stepping import instants, schedule, step_through
@@ -71,6 +71,7 @@ class Trial(Protocol):
 
     reads: dict[str, Callable[[mujoco.MjData], Any]]  # readings at every recorded instant (after mj_forward)
     watch: list[int]                                  # dofs the chatter probe watches
+    # Optional: ``control(m, d)``, MuJoCo's control callback for the run (ctrl and qfrc_applied at every step).
 
     def on_stroke(self, k: int) -> None: ...
 
@@ -162,7 +163,9 @@ class Result(Estimated):
             out[c.key] = float(c.scale * max(
                 max_difference(self.series[s][i], other.series[s][j]) if quantities[s].per == "sample"
                 else max_difference(self.series[s], other.series[s]) for s in c.series))
-        return out
+        # An experiment may add differences relative to its own scale (a robot's travel or size).
+        relative = getattr(self.experiment, "relative_differences", None)
+        return out if relative is None else {**out, **relative(self, out)}
 
     def cycle_table(self) -> list[dict[str, float]]:
         return self.experiment.cycle_table(self)
@@ -226,7 +229,8 @@ def _once(experiment: Experiment, scene: Any, built: Any, d: mujoco.MjData, prog
             readings[name][i] = value
 
     advance = stepper(m, scene.sim, built.backend, built.groups)
-    with installed(python_forces(built) if built.backend == "python" else None), native.untimed():
+    with installed(python_forces(built) if built.backend == "python" else None), native.untimed(), \
+            controlled(getattr(trial, "control", None)):
         step_through(m, d, scene, advance, steps, starts, samples, trial.on_stroke, on_sample, progress,
                      [] if companion else trial.watch, forward=not companion, stroke_time=drive.stroke_time)
     series, values = trial.finish(d, readings)

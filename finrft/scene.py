@@ -1,8 +1,9 @@
 """The scene schema: every physical and numerical parameter of a simulation, in SI units.
 
 A plate scene is a TOML file with the sections ``[plate]``, ``[rft]``, ``[medium]`` and ``[sim]`` (its
-``[medium]`` is `Immersion`); a user's model (`UserScene`) ``[model]``, ``[medium]``, ``[drive]`` and ``[sim]``
-(its ``[medium]`` is `Medium`, the surface laws'). This module declares the shared sections (the chain, the laws'
+``[medium]`` is `Immersion`); a user's model (`UserScene`) ``[model]``, ``[medium]``, ``[[drive]]`` and
+``[[control]]`` (arrays of tables, see `finrft.schema`) and ``[sim]`` (its ``[medium]`` is `Medium`, the surface
+laws'). This module declares the shared sections (the chain, the laws'
 ``[rft]`` and ``[medium]``, the numerics) and these two kinds, their keys, types, units, allowed values and
 defaults; an experiment with a scene of its own declares its sections in its module and registers the kind
 (`register_scene`): the robot's in `finrft.experiments.swim` (`RobotScene`), the intrusion's in
@@ -140,12 +141,35 @@ class Immersion:
 
 @dataclass(frozen=True)
 class JointDrive:
-    joint: str = _f("", "", "the joint moved at constant speed (slide: m, m/s; hinge: rad, rad/s); it follows the "
-                    "motion exactly (a very large armature) and the force it needs is recorded")
-    speed: float = _f(0.1, "m/s or rad/s", "speed of the joint", minimum=0.0)
-    stroke: float = _f(0.05, "m or rad", "length of one stroke", minimum=0.0)
-    cycles: int = _f(0, "", "out-and-back cycles of a triangle wave; 0: one stroke out", minimum=0, exclusive=False)
-    start: float = _f(0.0, "m or rad", "the joint's position at t = 0 (its qpos)")
+    joint: str = _f("", "", "the joint moved on a prescribed profile (slide: m, m/s; hinge: rad, rad/s); it follows "
+                    "the profile exactly (a very large armature) and the force it needs is recorded")
+    profile: str = _f("constant", "", "constant: speed, reversed after each stroke; sine: start + amplitude "
+                      "sin(2 pi frequency t + phase)", choices=("constant", "sine"))
+    speed: float = _f(0.1, "m/s or rad/s", "constant: speed of the joint (> 0 when it has a stroke)")
+    stroke: float = _f(0.05, "m or rad", "constant: length of one stroke; 0: no reversal, the whole run",
+                       minimum=0.0, exclusive=False)
+    cycles: int = _f(0, "", "constant: out-and-back cycles of a triangle wave, then the joint holds still; 0: one "
+                     "stroke out", minimum=0, exclusive=False)
+    start: float = _f(0.0, "m or rad", "the joint's position at t = 0 (its qpos); a sine's centre")
+    amplitude: float = _f(0.0, "m or rad", "sine: amplitude")
+    frequency: float = _f(1.0, "Hz", "sine: frequency", minimum=0.0)
+    phase: float = _f(0.0, "rad", "sine: phase")
+
+
+@dataclass(frozen=True)
+class Control:
+    actuator: str = _f("", "", "the actuator (MJCF <actuator> name) whose ctrl this entry sets")
+    kind: str = _f("constant", "", "constant: value; sine: offset + amplitude sin(2 pi frequency t + phase); table: "
+                   "a CSV file of time_s,ctrl rows, linear in between (held beyond its ends)",
+                   choices=("constant", "sine", "table"))
+    value: float = _f(0.0, "actuator's unit", "constant: the ctrl")
+    offset: float = _f(0.0, "actuator's unit", "sine: offset")
+    amplitude: float = _f(0.0, "actuator's unit", "sine: amplitude")
+    frequency: float = _f(1.0, "Hz", "sine: frequency", minimum=0.0)
+    phase: float = _f(0.0, "rad", "sine: phase")
+    table: str = _f("", "", "table: the CSV file (relative to the scene file), a header time_s,ctrl then rows")
+    ramp: float = _f(0.0, "s", "the ctrl rises linearly from 0 to its profile over the first ramp seconds",
+                     minimum=0.0, exclusive=False)
 
 
 def check_medium(m: Any) -> None:
@@ -208,17 +232,69 @@ class ExplicitSim(Sim):
 
 
 @dataclass(frozen=True)
+class RobotSim(Sim):
+    method: str = _f("explicit", "", methods.described(), choices=methods.names())
+    duration: float = _f(0.0, "s", "length of the run; 0: the constant drives' own (one stroke, or their cycles)",
+                         minimum=0.0, exclusive=False)
+    settle: float = _f(0.0, "s", "the summaries average over [settle, duration]", minimum=0.0, exclusive=False)
+
+
+@dataclass(frozen=True)
 class UserScene(Sections):
-    """A user's MJCF model in the medium: the bodies RFT acts on, the law, a prescribed joint, the numerics."""
+    """A user's MJCF model in the medium: the bodies RFT acts on, the law, zero or more prescribed joints
+    ([[drive]]), zero or more actuators' controls ([[control]]), the numerics."""
 
     model: Model = field(default_factory=Model)
     medium: Medium = field(default_factory=Medium)
-    drive: JointDrive = field(default_factory=JointDrive)
-    sim: ExplicitSim = field(default_factory=ExplicitSim)
+    drive: tuple[JointDrive, ...] = ()
+    control: tuple[Control, ...] = ()
+    sim: RobotSim = field(default_factory=RobotSim)
 
     def __post_init__(self) -> None:
         check_sim(self.sim)
         check_medium(self.medium)
+
+    @property
+    def duration(self) -> float:
+        """The run's length (s): ``sim.duration``, or the constant drives' own."""
+        stroke_time, strokes = drive_timing(self)
+        return stroke_time * strokes
+
+
+def drive_timing(scene: UserScene) -> tuple[float, int]:
+    """The run's grid of reversals: the stroke time every constant drive with a stroke shares (the whole run
+    without one) and the strokes the run holds; SceneError when the drives and [sim] disagree (checked as the run
+    is made, `finrft.UserModel.of`: a scene without drives or a duration is a valid default to build on)."""
+    for i, j in enumerate(scene.drive):
+        if j.profile == "constant" and j.stroke > 0 and not j.speed > 0:
+            raise SceneError(f"drive.{i}.speed must be > 0 for a stroke of {j.stroke:g} (drive.{i}.stroke = 0: "
+                             f"no reversal), got {j.speed!r}")
+    times = {j.stroke / j.speed for j in scene.drive if j.profile == "constant" and j.stroke > 0}
+    if len(times) > 1 and max(times) - min(times) > 1e-9 * max(times):
+        each = ", ".join(f"{t:.4g} s" for t in sorted(times))
+        raise SceneError(f"the constant drives with a stroke take different times for one ({each}): give them one "
+                         f"stroke / speed, or stroke = 0")
+    duration, sim = scene.sim.duration, scene.sim
+    if times:
+        stroke_time = min(times)
+        own = max(1 if j.cycles == 0 else 2 * j.cycles for j in scene.drive
+                  if j.profile == "constant" and j.stroke > 0)
+        strokes = round(duration / stroke_time) if duration else own
+        if duration and abs(strokes * stroke_time - duration) > 1e-9 * duration:
+            raise SceneError(f"sim.duration = {duration:g} s is not a whole number of the drives' strokes "
+                             f"({stroke_time:.6g} s each)")
+        duration = strokes * stroke_time
+    elif not duration:
+        raise SceneError("sim.duration = 0 needs a constant [[drive]] with a stroke to take its length from: set "
+                         "sim.duration (s)")
+    else:
+        stroke_time, strokes = duration, 1
+    if not sim.settle < duration:
+        raise SceneError(f"sim.settle = {sim.settle:g} s must be shorter than the run ({duration:.6g} s)")
+    for i, c in enumerate(scene.control):
+        if not c.ramp < duration:
+            raise SceneError(f"control.{i}.ramp = {c.ramp:g} s must be shorter than the run ({duration:.6g} s)")
+    return stroke_time, strokes
 
 
 def check_chain_law(scene: Any) -> None:
@@ -272,7 +348,7 @@ def scene_from_dict(data: Mapping[str, Any], cls: type = Scene):
 
 
 # Keys that name files, relative to the scene file that gives them.
-FILE_KEYS = (("rft", "table"), ("model", "path"))
+FILE_KEYS = (("rft", "table"), ("model", "path"), ("control", "table"))
 
 
 def preset(name: str, cls: type = Scene):
@@ -299,9 +375,11 @@ def load_scene(path: str | Path | None = None, *, preset_name: str = "physical",
         path = Path(path)
         data = read_toml(read_text(path, "scene file"), str(path))
         for section, name in FILE_KEYS:
-            given = data.get(section, {}).get(name) if isinstance(data.get(section), dict) else None
-            if isinstance(given, str) and given and not Path(given).is_absolute():
-                data[section][name] = str(path.parent / given)
+            tables = data.get(section)
+            for table in tables if isinstance(tables, list) else [tables]:  # an array of tables: each entry
+                given = table.get(name) if isinstance(table, dict) else None
+                if isinstance(given, str) and given and not Path(given).is_absolute():
+                    table[name] = str(path.parent / given)
         scene = scene_from_dict(data, cls)
     return scene.replace(**dict(overrides or {}))
 

@@ -4,8 +4,10 @@ default, a unit, a line of documentation, and the allowed values). `finrft.scene
 scenes; each law declares its own keys (``KEYS`` in its module), from which the sections they belong to are built
 (`section`).
 
-Dotted keys name a section's entry: ``"plate.kind"``. Every failure is a SceneError naming the key and what is
-allowed.
+Dotted keys name a section's entry: ``"plate.kind"``. A scene field typed ``tuple[Section, ...]`` is an array of
+tables (TOML ``[[drive]]``): zero or more entries of one section, a single ``[drive]`` table read as one; its keys
+are ``"drive.0.speed"`` (``"drive.speed"`` while it has at most one entry; an index one past the last adds an
+entry). Every failure is a SceneError naming the key and what is allowed.
 """
 
 from __future__ import annotations
@@ -53,22 +55,46 @@ def section(name: str, keys: Iterable[Key], module: str, doc: str) -> type:
 
 @functools.cache
 def sections(cls: type) -> dict[str, type]:
-    """A scene class's sections and their types, in order."""
+    """A scene class's sections and their types, in order (an array of tables: its entries' section)."""
     hints = typing.get_type_hints(cls)
-    return {f.name: hints[f.name] for f in dataclasses.fields(cls)}
+    return {f.name: typing.get_args(hints[f.name])[0] if is_array(hints[f.name]) else hints[f.name]
+            for f in dataclasses.fields(cls)}
+
+
+def is_array(hint: Any) -> bool:
+    """Whether a scene field's type is an array of tables, ``tuple[Section, ...]``."""
+    return typing.get_origin(hint) is tuple
+
+
+@functools.cache
+def arrays(cls: type) -> frozenset[str]:
+    """The sections of a scene class that are arrays of tables."""
+    hints = typing.get_type_hints(cls)
+    return frozenset(f.name for f in dataclasses.fields(cls) if is_array(hints[f.name]))
 
 
 def split_key(cls: type, key: str) -> tuple[str, str]:
-    """``"plate.kind"`` -> ("plate", "kind"), or SceneError naming what exists."""
+    """``"plate.kind"`` -> ("plate", "kind"), ``"drive.1.speed"`` -> ("drive", "speed"), or SceneError naming
+    what exists."""
+    return _split(cls, key)[::2]
+
+
+def _split(cls: type, key: str) -> tuple[str, int | None, str]:
+    """A dotted key's section, entry index (None: not an array of tables, or the index left out) and name."""
     known = sections(cls)
     section_name, _, name = key.partition(".")
     if section_name not in known or not name:
         raise SceneError(f"unknown scene key '{key}': keys look like SECTION.NAME with SECTION one of "
                          f"{', '.join(known)}")
+    index = None
+    if section_name in arrays(cls):
+        first, dot, rest = name.partition(".")
+        if first.isdigit() and dot:
+            index, name = int(first), rest
     names = [f.name for f in dataclasses.fields(known[section_name])]
     if name not in names:
         raise SceneError(f"unknown scene key '{key}': [{section_name}] has {', '.join(names)}")
-    return section_name, name
+    return section_name, index, name
 
 
 def field_of(cls: type, key: str) -> dataclasses.Field:
@@ -128,23 +154,51 @@ def from_dict(data: Mapping[str, Any], cls: type) -> Any:
     defaults = cls()
     parts = {}
     for section_name, section_cls in known.items():
-        given = data.get(section_name, {})
-        if not isinstance(given, Mapping):
-            raise SceneError(f"[{section_name}] must be a table")
-        for name in given:
-            split_key(cls, f"{section_name}.{name}")
-        values = {f.name: check(section_name, f, given[f.name])
-                  for f in dataclasses.fields(section_cls) if f.name in given}
-        parts[section_name] = dataclasses.replace(getattr(defaults, section_name), **values)
+        if section_name in arrays(cls):
+            given = data.get(section_name, ())
+            entries = [given] if isinstance(given, Mapping) else given  # a single [drive] table: one entry
+            if not isinstance(entries, (list, tuple)):
+                raise SceneError(f"[[{section_name}]] must be an array of tables")
+            parts[section_name] = tuple(_section(f"{section_name}.{i}", section_name, section_cls, entry,
+                                                 section_cls()) for i, entry in enumerate(entries))
+            continue
+        parts[section_name] = _section(section_name, section_name, section_cls, data.get(section_name, {}),
+                                       getattr(defaults, section_name))
     return cls(**parts)
+
+
+def _section(where: str, section_name: str, section_cls: type, given: Any, default: Any) -> Any:
+    """One validated section (or entry of an array of tables, named ``where`` in messages)."""
+    if not isinstance(given, Mapping):
+        raise SceneError(f"[{where}] must be a table")
+    names = [f.name for f in dataclasses.fields(section_cls)]
+    for name in given:
+        if name not in names:
+            raise SceneError(f"unknown scene key '{where}.{name}': [{section_name}] has {', '.join(names)}")
+    return dataclasses.replace(default, **{f.name: check(where, f, given[f.name])
+                                           for f in dataclasses.fields(section_cls) if f.name in given})
 
 
 def updated(data: dict[str, dict[str, Any]], cls: type, updates: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
     """``data`` (a scene of class ``cls`` as nested dicts) with the dotted keys of ``updates`` set, in place; the
     keys are checked, the values are checked when the scene is validated (`from_dict`)."""
     for key, value in updates.items():
-        section_name, name = split_key(cls, key)
-        data[section_name][name] = value
+        section_name, index, name = _split(cls, key)
+        if section_name not in arrays(cls):
+            data[section_name][name] = value
+            continue
+        entries = data[section_name] = list(data[section_name])
+        if index is None:
+            if len(entries) > 1:
+                raise SceneError(f"scene key '{key}': there are {len(entries)} [[{section_name}]] entries; name one "
+                                 f"as {section_name}.N.{name} (N from 0)")
+            index = 0
+        if index > len(entries):
+            raise SceneError(f"scene key '{key}': [[{section_name}]] has {len(entries)} entries; the next is "
+                             f"{section_name}.{len(entries)}")
+        if index == len(entries):
+            entries.append({})
+        entries[index] = {**entries[index], name: value}
     return data
 
 
@@ -171,13 +225,17 @@ def parse_override(text: str, cls: type) -> tuple[str, Any]:
 def to_toml(scene: Any) -> str:
     """The full resolved scene as TOML, with units as comments, so a user can copy and edit it."""
     lines = ["# finrft scene: SI units throughout"]
+    many = arrays(type(scene))
     for section_name, cls in sections(type(scene)).items():
-        lines += ["", f"[{section_name}]"]
-        values = getattr(scene, section_name)
-        for f in dataclasses.fields(cls):
-            value = getattr(values, f.name)
-            text = json.dumps(list(value) if isinstance(value, tuple) else value) if isinstance(
-                value, (str, tuple)) else repr(value)
-            unit = f" [{f.metadata['unit']}]" if f.metadata["unit"] else ""
-            lines.append(f"{f.name} = {text}  #{unit} {f.metadata['doc']}")
+        entries = getattr(scene, section_name) if section_name in many else (getattr(scene, section_name),)
+        if section_name in many and not entries:
+            lines += ["", f"# [[{section_name}]]: none"]
+        for values in entries:
+            lines += ["", f"[[{section_name}]]" if section_name in many else f"[{section_name}]"]
+            for f in dataclasses.fields(cls):
+                value = getattr(values, f.name)
+                text = json.dumps(list(value) if isinstance(value, tuple) else value) if isinstance(
+                    value, (str, tuple)) else repr(value)
+                unit = f" [{f.metadata['unit']}]" if f.metadata["unit"] else ""
+                lines.append(f"{f.name} = {text}  #{unit} {f.metadata['doc']}")
     return "\n".join(lines) + "\n"

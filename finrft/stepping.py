@@ -48,7 +48,7 @@ class Prescribed:
         if k:
             self._close(d)
             d.qpos[self.qpos] = self.drive.stroke_start(k)
-            self._reverse(m, d, self.drive.stroke_velocity(k) - d.qvel[self.dofs])
+            jump_velocities(m, d, self.dofs, self.armature, self.drive.stroke_velocity(k) - d.qvel[self.dofs])
         else:
             d.qvel[self.dofs] = self.drive.stroke_velocity(0)
         self._stroke, self._stroke_velocity = k, d.qvel[self.dofs].copy()
@@ -75,15 +75,19 @@ class Prescribed:
                 f"({self.armature:.3g} {'kg m^2' if rotary else 'kg'}, {ARMATURE_RATIO:g} times what it moves), so "
                 f"the reported travel would be wrong: give the driven body more mass, or lighten the load")
 
-    def _reverse(self, m: mujoco.MjModel, d: mujoco.MjData, jump: np.ndarray) -> None:
-        """Velocity jumps ``jump`` on the driven joints: M0 dq = E mu with E^T dq = jump, where M0 is the mass
-        matrix without the artificial armature."""
-        mujoco.mj_forward(m, d)
-        mass = np.zeros((m.nv, m.nv))
-        mujoco.mj_fullM(m, d, mass)
-        mass[self.dofs, self.dofs] -= self.armature
-        columns = np.linalg.solve(mass, np.eye(m.nv)[:, self.dofs])
-        d.qvel[:] += columns @ np.linalg.solve(columns[self.dofs], jump)
+
+
+def jump_velocities(m: mujoco.MjModel, d: mujoco.MjData, dofs: Sequence[int], armature: float | np.ndarray,
+                    jump: np.ndarray) -> None:
+    """Velocity jumps ``jump`` on prescribed joints (``dofs``, each carrying its drive's ``armature``), the rest of
+    the system taking the impulse an ideal kinematic constraint would give it: M0 dq = E mu with E^T dq = jump,
+    where M0 is the mass matrix without the drives' armature."""
+    mujoco.mj_forward(m, d)
+    mass = np.zeros((m.nv, m.nv))
+    mujoco.mj_fullM(m, d, mass)
+    mass[dofs, dofs] -= armature
+    columns = np.linalg.solve(mass, np.eye(m.nv)[:, dofs])
+    d.qvel[:] += columns @ np.linalg.solve(columns[dofs], jump)
 
 
 # What a scene that steps explicitly only (a user's model, an intrusion: ExplicitSim) can change; such scenes have
@@ -91,12 +95,18 @@ class Prescribed:
 _EXPLICIT_ONLY = "reduce sim.dt or raise the inertias"
 
 
+def regularisation_key(scene: Any) -> str:
+    """The scene key of the regularisation speed: the segment law's (``rft.v_reg``), or a surface law's
+    (``medium.v_reg``) in a scene without [rft]."""
+    return "rft.v_reg" if hasattr(scene, "rft") else "medium.v_reg"
+
+
 def unstable(scene: Any, t: float, messages: list[str], code: int = 1) -> SimulationUnstable:
     sim = scene.sim
     if code == Code.STEP_TOO_SMALL:
         return StepUnderflow(
             f"the adaptive step fell below 1e-9 s at t = {t:.4g} s (tolerance {sim.tolerance:g}): raise "
-            f"sim.tolerance or rft.v_reg, or use sim.method = 'newton'")
+            f"sim.tolerance or {regularisation_key(scene)}, or use sim.method = 'newton'")
     if code == Code.ARENA_FULL:
         return SimulationUnstable(
             f"the native step's workspace does not fit in MuJoCo's arena at t = {t:.4g} s: use sim.backend = "
@@ -104,14 +114,15 @@ def unstable(scene: Any, t: float, messages: list[str], code: int = 1) -> Simula
     if code == Code.NOT_CONVERGED:
         return NotConverged(
             f"Newton's method of the implicit step did not converge at t = {t:.4g} s (dt = {sim.dt:g} s): reduce "
-            f"sim.dt or raise rft.v_reg")
+            f"sim.dt or raise {regularisation_key(scene)}")
     what = messages[0].rstrip(".") if messages else "the velocity became NaN or Inf"
+    v_reg = regularisation_key(scene)
     if isinstance(sim, ExplicitSim):
         advice = _EXPLICIT_ONLY
     elif not methods.get(sim.method).implicit:
-        advice = "reduce sim.dt, raise the inertias or rft.v_reg, or use sim.method = 'newton'"
+        advice = f"reduce sim.dt, raise the inertias or {v_reg}, or use sim.method = 'newton'"
     else:
-        advice = "reduce sim.dt (or sim.max_step), or raise rft.v_reg"
+        advice = f"reduce sim.dt (or sim.max_step), or raise {v_reg}"
     return SimulationUnstable(f"simulation went unstable at t = {t:.4g} s ({what}) with method {sim.method}, "
                               f"integrator {sim.integrator}, dt = {sim.dt:g} s: {advice}")
 

@@ -47,3 +47,83 @@ def draw_bodies(rec: Any, run: Result, times: Any, prefix: str, position: np.nda
                         [low[0] - span, low[1] - span, z]])
     rec.log(f"{prefix}bodies/surface", rr.LineStrips3D([corners], colors=[[200, 170, 110]]), static=True)
     return [rrb.Spatial3DView(name=f"{title} and the medium's force", origin=f"{prefix}bodies")]
+
+
+def _geom(rr: Any, m: Any, g: int, color: list[int]) -> Any | None:
+    """A MuJoCo geom as a rerun archetype in its own frame (None for a plane or height field)."""
+    size, kind = m.geom_size[g], int(m.geom_type[g])
+    gt = _GEOM_TYPES
+    if kind == gt["box"]:
+        return rr.Boxes3D(half_sizes=[size], colors=[color], fill_mode="solid")
+    if kind == gt["sphere"]:
+        return rr.Ellipsoids3D(half_sizes=[[size[0]] * 3], colors=[color], fill_mode="solid")
+    if kind == gt["ellipsoid"]:
+        return rr.Ellipsoids3D(half_sizes=[size], colors=[color], fill_mode="solid")
+    if kind == gt["capsule"]:  # rerun's capsule runs from its origin along +z; MuJoCo's is centred
+        return rr.Capsules3D(lengths=[2 * size[1]], radii=[size[0]], translations=[[0, 0, -size[1]]],
+                             colors=[color], fill_mode="solid")
+    if kind == gt["cylinder"]:
+        return rr.Cylinders3D(lengths=[2 * size[1]], radii=[size[0]], colors=[color], fill_mode="solid")
+    if kind == gt["mesh"]:
+        mesh = int(m.geom_dataid[g])
+        v0, nv = m.mesh_vertadr[mesh], m.mesh_vertnum[mesh]
+        f0, nf = m.mesh_faceadr[mesh], m.mesh_facenum[mesh]
+        return rr.Mesh3D(vertex_positions=m.mesh_vert[v0:v0 + nv], triangle_indices=m.mesh_face[f0:f0 + nf],
+                         albedo_factor=color)
+    return None
+
+
+_GEOM_TYPES: dict[str, int] = {}
+
+
+def draw_model(rec: Any, run: Result, times: Any, prefix: str) -> list[Any]:
+    """A user's model in 3D: each body's geoms (boxes, spheres, ellipsoids, capsules, cylinders, meshes) logged
+    once in the body's frame, the bodies' poses over time, the free surface as a translucent plane, and the
+    medium's force on each attached body as an arrow from its origin."""
+    import mujoco
+    import rerun as rr  # loads only when a recording is written
+    import rerun.blueprint as rrb
+    if not _GEOM_TYPES:
+        _GEOM_TYPES.update({name.removeprefix("mjGEOM_").lower(): int(t)
+                            for name, t in mujoco.mjtGeom.__members__.items()})
+    scene = run.scene
+    m = run.experiment.build(scene).model
+    root = f"{prefix}robot"
+    rec.log(root, rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+    attached = set(scene.model.bodies)
+    count = len(run.time)
+    for i, name in enumerate(run.experiment.links):
+        body = f"{root}/{name}"
+        quat = run.link_quat[:, i]
+        rec.send_columns(body, indexes=[times], columns=rr.Transform3D.columns(
+            translation=run.link_position[:, i], quaternion=np.c_[quat[:, 1:], quat[:, :1]]))
+        color = [200, 120, 60, 255] if name in attached else [150, 150, 165, 255]
+        for g in np.flatnonzero(m.geom_bodyid == i + 1):
+            shape = _geom(rr, m, int(g), color)
+            if shape is None:
+                continue
+            q = m.geom_quat[g]
+            rec.log(f"{body}/geom{g}", rr.Transform3D(translation=m.geom_pos[g], quaternion=[*q[1:], q[0]]),
+                    static=True)
+            rec.log(f"{body}/geom{g}", shape, static=True)
+    # The medium's force: arrows from the attached bodies' origins, scaled to half the motion's span.
+    position, force = run.body_position, run.medium_force
+    n = position.shape[1]
+    low = np.minimum(run.link_position.min(axis=(0, 1)), position.min(axis=(0, 1)))
+    high = np.maximum(run.link_position.max(axis=(0, 1)), position.max(axis=(0, 1)))
+    span = max(float(np.max(high - low)), run.model_size, 0.05)
+    peak = float(np.max(np.linalg.norm(force, axis=-1), initial=0.0))
+    arrow_scale = span / 2 / peak if peak > 0 else 0.0
+    rec.log(f"{root}/medium_force", rr.Arrows3D.from_fields(colors=[[230, 80, 20]], radii=[span / 300]),
+            static=True)
+    rec.log(f"{root}/medium_force", rr.AnyValues(arrow_scale_m_per_N=arrow_scale,
+                                                 note=f"arrow length = the medium's force x {arrow_scale:.4g} m/N"),
+            static=True)
+    rec.send_columns(f"{root}/medium_force", indexes=[times], columns=rr.Arrows3D.columns(
+        origins=position.reshape(-1, 3), vectors=arrow_scale * force.reshape(-1, 3)).partition([n] * count))
+    z = scene.medium.surface_z
+    corners = np.array([[low[0] - span, low[1] - span, z], [high[0] + span, low[1] - span, z],
+                        [high[0] + span, high[1] + span, z], [low[0] - span, high[1] + span, z]])
+    rec.log(f"{root}/surface", rr.Mesh3D(vertex_positions=corners, triangle_indices=[[0, 1, 2], [0, 2, 3]],
+                                         albedo_factor=[200, 170, 110, 90]), static=True)
+    return [rrb.Spatial3DView(name="The model, the sand's surface and the medium's force", origin=root)]

@@ -81,9 +81,14 @@ def scene_reference() -> str:
         lines += [f"## {title}", ""]
         if cls.__doc__:
             lines += [" ".join(cls.__doc__.split()), ""]
+        from finrft.schema import arrays, sections
+        many = arrays(cls)
         for section in dataclasses.fields(cls):
-            value = _section_default(section)
-            lines += [f"### `[{section.name}]`", "",
+            # An array of tables ([[drive]]): zero or more entries, each with the keys of its section.
+            value = sections(cls)[section.name]() if section.name in many else _section_default(section)
+            heading = f"[[{section.name}]]` (zero or more; `--set {section.name}.N.KEY=VALUE`, N from 0)" \
+                if section.name in many else f"[{section.name}]`"
+            lines += [f"### `{heading}", "",
                       "| key | unit | default | allowed | meaning |", "|---|---|---|---|---|"]
             for f in dataclasses.fields(value):
                 meta = dict(f.metadata)

@@ -52,7 +52,8 @@ def add_result_files(p: argparse.ArgumentParser) -> None:
 def add_max_error(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-error", type=number("degrees or points"), default=ErrorLimits().angle_deg,
                    metavar="X", help="largest estimated discretisation error accepted, in degrees for angles, "
-                   "percentage points for eta and mm for positions (default: %(default)s); every run estimates its "
+                   "percentage points for eta and percent of a run's scale (its travel or the model's size) for the "
+                   "positions of finrft run (default: %(default)s); every run estimates its "
                    "own from a companion run at another step, and a larger one stops with exit status 1, nothing "
                    "written")
 

@@ -95,7 +95,7 @@ class Intrusion:
     sign_convention = SIGN_CONVENTION
 
     def build(self, scene: IntrusionScene) -> AttachedModel:
-        return build_attached(mujoco.MjSpec.from_string(plate_xml(scene)), "push", ("plate",), scene.medium,
+        return build_attached(mujoco.MjSpec.from_string(plate_xml(scene)), ["push"], ("plate",), scene.medium,
                               scene.sim)
 
     def drive_for(self, scene: IntrusionScene) -> Drive:

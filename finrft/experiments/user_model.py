@@ -1,20 +1,24 @@
 """A user's MuJoCo model in the medium, as an experiment (finrft.experiment): RFT `attach`ed to the named bodies of
-an MJCF file, one joint moved at constant speed (or as a triangle wave) exactly as the plate's base is moved
-(`stepping.Prescribed`: a very large armature, impulses at reversals), and the force that motion needs.
+an MJCF file, run as a robot (``finrft run MODEL.xml --scene FILE.toml``, `run_robot`): any joints, free ones
+included; zero or more prescribed joints (`UserScene.drive`, ``[[drive]]``) held on their profile exactly as the
+plate's base is moved (`stepping.Prescribed`: a very large armature, impulses at reversals; a sine through the
+feed-forward force that lands each step on the profile's velocity); zero or more actuators driven by the scene
+(``[[control]]``: constant, sine, a CSV table; each with a ramp-in) or by a Python controller ``control(t, data) ->
+ctrl``. It reports the centre of mass's mean velocity, the medium's mean force, the drives' loads, the actuators'
+power and the cost of transport over the window [sim.settle, duration] (`RobotSummary`).
 
-`AttachedModel`, `build_attached` and `JointTrial` serve any experiment made of a spec, `attach` and a prescribed
-joint: `UserModel` (``finrft run MODEL.xml``) and `intrusion.Intrusion`.
-
-Only MuJoCo's own (explicit) step runs these models: the newton, implicit and adaptive steps treat implicitly the
-forces of the segment law's force groups, and the surface elements of `attach` are not among them.
+`AttachedModel`, `build_attached` and `JointTrial` serve any experiment made of a spec, `attach` and prescribed
+joints: `UserModel` and `intrusion.Intrusion`.
 """
 
 from __future__ import annotations
 
 import argparse
+import csv
+import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable, Sequence
 
 import mujoco
 import numpy as np
@@ -22,11 +26,13 @@ import numpy as np
 from .. import laws
 from ..attach import Attached, SurfaceForces, attach
 from ..drive import Drive
-from ..experiment import Compared, Plot, Quantity, Result
+from ..errors import SimulationFailed
+from ..experiment import Compared, Plot, Quantity, Result, run
+from ..convergence import ErrorLimits
 from ..models import ARMATURE_RATIO, INTEGRATORS, compile_spec
-from ..scene import ExplicitSim, Medium, SceneError, UserScene, load_scene, parse_override
-from ..stepping import Prescribed
-from .command import Command, error_line, register, steps_line
+from ..scene import Control, JointDrive, Medium, SceneError, UserScene, drive_timing, load_scene, parse_override
+from ..stepping import DRIVE_LAG, Prescribed, jump_velocities
+from .command import Command, register, steps_line
 from .flags import add_max_error, add_result_files, add_scene_flags
 
 _J = mujoco.mjtJoint
@@ -35,13 +41,13 @@ DRIVEN = {int(_J.mjJNT_SLIDE): "slide", int(_J.mjJNT_HINGE): "hinge"}
 
 @dataclass(frozen=True, eq=False)
 class AttachedModel:
-    """A compiled model with RFT attached, and the indices a prescribed-joint experiment needs."""
+    """A compiled model with RFT attached, and the indices of its prescribed joints (in the order named)."""
 
     model: mujoco.MjModel
     attached: Attached
-    drive_dof: int
-    drive_qpos: int
-    armature: float            # the driven joint's armature (kg or kg m^2)
+    drive_dofs: np.ndarray
+    drive_qpos: np.ndarray
+    armature: np.ndarray       # each driven joint's armature (kg or kg m^2)
     bodies: np.ndarray         # ids of the attached bodies, in the order named
     groups: tuple = ()         # no segment force groups: the forces are the attached surfaces'
 
@@ -65,24 +71,26 @@ def read_spec(path: str) -> mujoco.MjSpec:
         raise SceneError(f"model file {path}: {' '.join(str(exc).split())}") from None
 
 
-def driven_joint(spec: mujoco.MjSpec, name: str) -> mujoco.MjsJoint:
+def driven_joint(spec: mujoco.MjSpec, name: str, key: str = "drive.joint") -> mujoco.MjsJoint:
     """The named slide or hinge joint of a spec; SceneError naming the joints there are."""
     joint = spec.joint(name) if name else None
     if joint is None:
         names = ", ".join(j.name for j in spec.joints if j.name) or "none named"
-        raise SceneError(f"drive.joint: the model has no joint named {name!r} (its joints: {names})")
+        raise SceneError(f"{key}: the model has no joint named {name!r} (its joints: {names})")
     if int(joint.type) not in DRIVEN:
-        raise SceneError(f"drive.joint {name!r} is a {_J(joint.type).name.removeprefix('mjJNT_').lower()} joint: "
+        raise SceneError(f"{key} {name!r} is a {_J(joint.type).name.removeprefix('mjJNT_').lower()} joint: "
                          f"drive a slide or hinge joint")
     return joint
 
 
-def build_attached(spec: mujoco.MjSpec, joint_name: str, bodies: tuple[str, ...], medium: Medium,
-                   sim: ExplicitSim) -> AttachedModel:
-    """Give ``spec`` the numerics, the driven joint its armature and the bodies RFT, and compile it."""
+def build_attached(spec: mujoco.MjSpec, joints: Sequence[str], bodies: tuple[str, ...], medium: Medium,
+                   sim: Any) -> AttachedModel:
+    """Give ``spec`` the numerics, each driven joint its armature and the bodies RFT, and compile it."""
     if not bodies:
         raise SceneError("model.bodies is empty: name the bodies the medium acts on")
-    joint = driven_joint(spec, joint_name)
+    driven = [driven_joint(spec, name, f"drive.{i}.joint") for i, name in enumerate(joints)]
+    if len(set(joints)) < len(joints):
+        raise SceneError(f"a joint is driven twice: {', '.join(joints)}")
     spec.option.timestep = sim.dt
     spec.option.integrator = INTEGRATORS[sim.integrator]
     # The armature is relative to what the joint moves (its diagonal of the mass matrix at qpos0), as the plate's.
@@ -91,44 +99,51 @@ def build_attached(spec: mujoco.MjSpec, joint_name: str, bodies: tuple[str, ...]
     mujoco.mj_forward(plain, d)
     mass = np.zeros((plain.nv, plain.nv))
     mujoco.mj_fullM(plain, d, mass)
-    dof = int(plain.jnt_dofadr[plain.joint(joint_name).id])
-    joint.armature = ARMATURE_RATIO * mass[dof, dof]
+    for joint, name in zip(driven, joints):
+        dof = int(plain.jnt_dofadr[plain.joint(name).id])
+        joint.armature = ARMATURE_RATIO * mass[dof, dof]
     law = laws.module(medium.law, laws.SURFACE)
     attached = attach(spec, list(bodies), law=medium.law, surface_z=medium.surface_z,
                       element_size=medium.element_size, backend=sim.backend, medium=medium.name or None,
                       drft_lambda=medium.drft_lambda,
                       bulk_density=None if law.DENSITY else medium.bulk_density or None, **law.given(medium))
     model = compile_spec(spec)
-    jid = model.joint(joint_name).id
-    return AttachedModel(model, attached, int(model.jnt_dofadr[jid]), int(model.jnt_qposadr[jid]),
-                         float(model.dof_armature[model.jnt_dofadr[jid]]),
+    ids = [model.joint(name).id for name in joints]
+    dofs = np.array([model.jnt_dofadr[j] for j in ids], dtype=int)
+    return AttachedModel(model, attached, dofs, np.array([model.jnt_qposadr[j] for j in ids], dtype=int),
+                         np.array(model.dof_armature[dofs], dtype=float),
                          np.array([model.body(b).id for b in bodies], dtype=int))
 
 
+def medium_forces(built: AttachedModel) -> Callable[[mujoco.MjData], np.ndarray]:
+    """The resultant of the medium's force on each attached body (B, 3), world frame, recomputed from the law
+    whatever the backend (after mj_forward)."""
+    forces = built.python_forces()
+    surfaces = [(int(b), s) for b, s in zip(built.bodies, built.attached.surfaces)]
+    return lambda d: np.array([forces.element_forces(built.model, d, b, s)[0].sum(axis=0) for b, s in surfaces])
+
+
 class JointTrial:
-    """One run of an attached model on one MjData: the driven joint on its prescribed profile from
-    ``drive.start``; read at each recorded instant: the joint's position and the load its drive applies, each
-    attached body's origin and the resultant of the medium's force on it (recomputed from the law, whatever the
-    backend)."""
+    """One run of an attached model with one prescribed joint on one MjData: the joint on its constant-speed
+    profile from ``drive.start``; read at each recorded instant: the joint's position and the load its drive
+    applies, each attached body's origin and the resultant of the medium's force on it."""
 
     def __init__(self, built: AttachedModel, drive: Drive, d: mujoco.MjData, companion: bool) -> None:
         m = built.model
-        self.prescribed = Prescribed([built.drive_dof], [built.drive_qpos], built.armature, drive)
-        d.qpos[built.drive_qpos] = drive.start
+        dof, qpos = int(built.drive_dofs[0]), int(built.drive_qpos[0])
+        self.prescribed = Prescribed([dof], [qpos], float(built.armature[0]), drive)
+        d.qpos[qpos] = drive.start
         self.on_stroke = lambda k: self.prescribed.start_stroke(m, d, k)
-        self.watch = [i for i in range(m.nv) if i != built.drive_dof]
-        forces = built.python_forces()
-        surfaces = [(int(b), s) for b, s in zip(built.bodies, built.attached.surfaces)]
+        self.watch = [i for i in range(m.nv) if i != dof]
+        force = medium_forces(built)
 
         def bodies(d: mujoco.MjData) -> np.ndarray:
             if companion:  # a companion steps without mj_forward; its positions and forces need it here
                 mujoco.mj_forward(m, d)
-            force = [forces.element_forces(m, d, b, s)[0].sum(axis=0) for b, s in surfaces]
-            return np.concatenate([d.xpos[built.bodies], force], axis=1)
+            return np.concatenate([d.xpos[built.bodies], force(d)], axis=1)
 
         # In this order: "bodies" brings a companion's kinematics up to date for "drive".
-        self.reads = {"bodies": bodies,
-                      "drive": lambda d: np.array([d.qpos[built.drive_qpos], self.prescribed.load(d)[0]])}
+        self.reads = {"bodies": bodies, "drive": lambda d: np.array([d.qpos[qpos], self.prescribed.load(d)[0]])}
 
     def finish(self, d: mujoco.MjData, readings: dict[str, np.ndarray]) -> tuple[dict[str, np.ndarray],
                                                                                     dict[str, float]]:
@@ -139,94 +154,432 @@ class JointTrial:
                 {"peak_drive_load": float(np.max(np.abs(drive[:, 1])))})
 
 
-SIGN_CONVENTION = (
-    "World frame, z up; the medium lies below z = medium.surface_z. The drive load is what the drive applies to the "
-    "driven joint along (about) its axis; rft_force is the medium's force on each attached body.")
-
+# ---------------------------------------------------------------------------------------------------------
+# Robot runs: the schedule, the drives' profiles, the controls
 
 @dataclass(frozen=True)
-class UserModel:
-    """A user's MJCF model (`UserScene`) in the medium, its ``drive.joint`` prescribed. Its result's series, SI
-    units: ``drive_position`` and ``drive_load`` (T,) (m and N for a slide joint, rad and N m for a hinge),
-    ``body_position`` and ``rft_force`` (T, B, 3) per attached body, world frame, and ``stroke_impulse`` per
-    stroke. ``UserModel.of(scene)`` reads the joint's kind from the model."""
+class Schedule:
+    """A robot run's grid of reversals (`scene.drive_timing`): ``strokes`` strokes of ``stroke_time`` each."""
 
-    rotary: bool = False       # the driven joint is a hinge
+    stroke_time: float
+    strokes: int
+
+    @property
+    def duration(self) -> float:
+        return self.stroke_time * self.strokes
+
+
+def drive_velocity(j: JointDrive, stroke_time: float, t: float, k: int) -> float:
+    """The profile's velocity at time t in stroke k of the run's grid (a constant drive's reversals and its stop
+    after its cycles fall on the grid's stroke starts)."""
+    if j.profile == "sine":
+        return 2 * math.pi * j.frequency * j.amplitude * math.cos(2 * math.pi * j.frequency * t + j.phase)
+    if j.stroke == 0:
+        return j.speed
+    own = 1 if j.cycles == 0 else 2 * j.cycles
+    return 0.0 if k >= own else (j.speed if k % 2 == 0 else -j.speed)
+
+
+def drive_position(j: JointDrive, stroke_time: float, t: float) -> float:
+    """The profile's position at time t."""
+    if j.profile == "sine":
+        return j.start + j.amplitude * math.sin(2 * math.pi * j.frequency * t + j.phase)
+    if j.stroke == 0:
+        return j.start + j.speed * t
+    own = 1 if j.cycles == 0 else 2 * j.cycles
+    k = min(int(t / stroke_time + 1e-9), own)
+    if k >= own:
+        return j.start + (j.stroke if own == 1 else 0.0)
+    into = t - k * stroke_time
+    return j.start + (j.speed * into if k % 2 == 0 else j.stroke - j.speed * into)
+
+
+def drive_scale(j: JointDrive, duration: float) -> float:
+    """The length a drive's lag is measured against: its stroke, its travel over the run, or its amplitude."""
+    if j.profile == "sine":
+        return abs(j.amplitude)
+    return j.stroke if j.stroke > 0 else abs(j.speed) * duration
+
+
+def read_table(path: str, where: str) -> tuple[np.ndarray, np.ndarray]:
+    """A control table's times (s, increasing) and values; SceneError in one line when missing or ill-formed."""
+    if not path:
+        raise SceneError(f"{where}.table: give the CSV file (columns time_s,ctrl) of kind = 'table'")
+    if not Path(path).is_file():
+        raise SceneError(f"{where}.table: cannot read {path}: no such file")
+    with open(path, newline="") as f:
+        rows = [row for row in csv.reader(f) if row and any(cell.strip() for cell in row)]
+    if not rows or [c.strip() for c in rows[0]] != ["time_s", "ctrl"]:
+        raise SceneError(f"{where}.table {path}: the first line must be the header time_s,ctrl")
+    try:
+        values = np.array([[float(c) for c in row] for row in rows[1:]], dtype=float).reshape(-1, 2)
+    except ValueError:
+        raise SceneError(f"{where}.table {path}: every row after the header must be two numbers, time_s,ctrl")\
+            from None
+    if len(values) == 0 or not np.all(np.isfinite(values)) or np.any(np.diff(values[:, 0]) <= 0):
+        raise SceneError(f"{where}.table {path}: needs at least one row of finite numbers, times strictly "
+                         f"increasing")
+    return values[:, 0], values[:, 1]
+
+
+def control_value(c: Control, table: tuple[np.ndarray, np.ndarray] | None, t: float) -> float:
+    """An actuator's ctrl at time t: its profile, times the ramp-in."""
+    if c.kind == "constant":
+        value = c.value
+    elif c.kind == "sine":
+        value = c.offset + c.amplitude * math.sin(2 * math.pi * c.frequency * t + c.phase)
+    else:
+        value = float(np.interp(t, *table))
+    return value * (min(1.0, t / c.ramp) if c.ramp > 0 else 1.0)
+
+
+Controller = Callable[[float, mujoco.MjData], Any]
+
+
+class RobotTrial:
+    """One robot run on one MjData: its drives held on their profiles, its actuators' ctrl set at every step
+    (``control``, MuJoCo's control callback), and at each recorded instant the state the summaries need."""
+
+    def __init__(self, experiment: UserModel, scene: UserScene, built: AttachedModel, d: mujoco.MjData,
+                 companion: bool) -> None:
+        m = built.model
+        self.m, self.d, self.built, self.scene = m, d, built, scene
+        stroke_time, _ = drive_timing(scene)
+        self.stroke_time, duration = stroke_time, scene.duration
+        self.dofs, qpos, self.armature = list(built.drive_dofs), list(built.drive_qpos), built.armature
+        self.sines = [i for i, j in enumerate(scene.drive) if j.profile == "sine"]
+        self.scales = [drive_scale(j, duration) for j in scene.drive]
+        for i, j in enumerate(scene.drive):
+            d.qpos[qpos[i]] = drive_position(j, stroke_time, 0.0)
+        self.actuators = [m.actuator(c.actuator).id for c in scene.control]
+        self.tables = experiment.tables
+        self.controller = experiment.control
+        if self.controller is not None:
+            mujoco.mj_forward(m, d)
+            self._checked(self.controller(0.0, d))
+        self.watch = [i for i in range(m.nv) if i not in self.dofs]
+        force = medium_forces(built)
+        bodies = np.arange(1, m.nbody)
+
+        def state(d: mujoco.MjData) -> dict[str, np.ndarray]:
+            if companion:  # a companion steps without mj_forward; its positions and forces need it here
+                mujoco.mj_forward(m, d)
+            mujoco.mj_subtreeVel(m, d)
+            self._lag(d)
+            return {"com_position": d.subtree_com[0].copy(), "com_velocity": d.subtree_linvel[0].copy(),
+                    "body_position": d.xpos[built.bodies].copy(), "medium_force": force(d),
+                    "link_position": d.xpos[bodies].copy(), "link_quat": d.xquat[bodies].copy(),
+                    "drive_position": d.qpos[qpos].copy(), "drive_velocity": d.qvel[self.dofs].copy(),
+                    # What each drive applies: the feed-forward force, less what its armature takes.
+                    "drive_load": d.qfrc_applied[self.dofs] - self.armature * d.qacc[self.dofs],
+                    "actuator_force": d.actuator_force.copy(), "actuator_velocity": d.actuator_velocity.copy(),
+                    "ctrl": d.ctrl.copy()}
+
+        self.reads = {"state": lambda d: np.concatenate([v.ravel() for v in state(d).values()])}
+        self._unpack = lambda flat: _unpack(flat, m, len(built.bodies), len(self.dofs))
+
+    def _checked(self, ctrl: Any) -> np.ndarray:
+        values = np.asarray(ctrl, dtype=float).ravel()
+        if values.shape != (self.m.nu,):
+            raise SceneError(f"control(t, data) returned {values.size} values: give one ctrl per actuator "
+                             f"({self.m.nu})")
+        return values
+
+    def control(self, m: mujoco.MjModel, d: mujoco.MjData) -> None:
+        """MuJoCo's control callback: the actuators' ctrl, and each sine drive's feed-forward force."""
+        t = d.time
+        if self.controller is not None:
+            d.ctrl[:] = self._checked(self.controller(t, d))
+        for a, c, table in zip(self.actuators, self.scene.control, self.tables):
+            d.ctrl[a] = control_value(c, table, t)
+        # The force that makes this step end on the sine: the velocity v = (q(t + h) - q) / h that MuJoCo's
+        # (semi-implicit) position update takes there, reached by armature x (v - qvel) / h. It tracks the profile
+        # from the actual state, so no error accumulates; the drive's load, feed-forward less the armature's
+        # share, is what the rest of the system takes (its rounding in the feed-forward cancels in it).
+        h = m.opt.timestep
+        for i in self.sines:
+            j, dof = self.scene.drive[i], self.dofs[i]
+            target = (drive_position(j, 0.0, t + h) - d.qpos[self.built.drive_qpos[i]]) / h
+            d.qfrc_applied[dof] = self.armature[i] * (target - d.qvel[dof]) / h
+
+    def on_stroke(self, k: int) -> None:
+        """At each stroke of the grid, the constant drives take their stroke's velocity (an impulse at a
+        reversal or a stop; the sines their profile's velocity at t = 0)."""
+        m, d = self.m, self.d
+        target = np.array([drive_velocity(j, self.stroke_time, d.time, k) for j in self.scene.drive])
+        if not len(target):
+            return
+        if k == 0:
+            # A sine starts as if it had run before: the velocity its feed-forward keeps, (q(0) - q(-h)) / h.
+            h = m.opt.timestep
+            for i in self.sines:
+                j = self.scene.drive[i]
+                target[i] = (drive_position(j, 0.0, 0.0) - drive_position(j, 0.0, -h)) / h
+            d.qvel[self.dofs] = target
+            return
+        jump = np.where([j.profile == "constant" for j in self.scene.drive], target - d.qvel[self.dofs], 0.0)
+        if np.any(jump):
+            jump_velocities(m, d, self.dofs, self.armature, jump)
+
+    def _lag(self, d: mujoco.MjData) -> None:
+        for i, j in enumerate(self.scene.drive):
+            lag = abs(d.qpos[self.built.drive_qpos[i]] - drive_position(j, self.stroke_time, d.time))
+            if self.scales[i] > 0 and lag > DRIVE_LAG * self.scales[i]:
+                rotary = self.m.jnt_type[self.m.dof_jntid[self.dofs[i]]] == _J.mjJNT_HINGE
+                raise SimulationFailed(
+                    f"drive.{i} ({j.joint}) is {np.degrees(lag) if rotary else 1e3 * lag:.3g} "
+                    f"{'deg' if rotary else 'mm'} off its prescribed motion at t = {d.time:.4g} s "
+                    f"({100 * lag / self.scales[i]:.2g} % of its {'amplitude' if j.profile == 'sine' else 'stroke'}"
+                    f"; at most {100 * DRIVE_LAG:g} %): the load outweighs the drive's armature "
+                    f"({self.armature[i]:.3g} {'kg m^2' if rotary else 'kg'}, {ARMATURE_RATIO:g} times what it "
+                    f"moves), so the reported motion would be wrong: give the driven body more mass, or lighten "
+                    f"the load")
+
+    def finish(self, d: mujoco.MjData, readings: dict[str, np.ndarray]) -> tuple[dict[str, np.ndarray],
+                                                                                    dict[str, float]]:
+        m = self.m
+        return self._unpack(readings["state"]), {"model_size": model_size(self.built, m),
+                                                 "model_mass": float(m.body_mass.sum()),
+                                                 "gravity": float(np.linalg.norm(m.opt.gravity))}
+
+
+def _unpack(flat: np.ndarray, m: mujoco.MjModel, attached: int, drives: int) -> dict[str, np.ndarray]:
+    """The recorded state's series from its flat rows (RobotTrial.reads)."""
+    shapes = {"com_position": (3,), "com_velocity": (3,), "body_position": (attached, 3),
+              "medium_force": (attached, 3), "link_position": (m.nbody - 1, 3), "link_quat": (m.nbody - 1, 4),
+              "drive_position": (drives,), "drive_velocity": (drives,), "drive_load": (drives,),
+              "actuator_force": (m.nu,), "actuator_velocity": (m.nu,), "ctrl": (m.nu,)}
+    out, at = {}, 0
+    for name, shape in shapes.items():
+        size = int(np.prod(shape))
+        out[name] = flat[:, at:at + size].reshape(len(flat), *shape)
+        at += size
+    return out
+
+
+def model_size(built: AttachedModel, m: mujoco.MjModel) -> float:
+    """The diagonal (m) of the box around the attached bodies' geoms' bounding spheres at the model's rest pose."""
+    d = mujoco.MjData(m)
+    mujoco.mj_kinematics(m, d)
+    geoms = np.flatnonzero(np.isin(m.geom_bodyid, built.bodies))
+    low = (d.geom_xpos[geoms] - m.geom_rbound[geoms, None]).min(axis=0)
+    high = (d.geom_xpos[geoms] + m.geom_rbound[geoms, None]).max(axis=0)
+    return float(np.linalg.norm(high - low))
+
+
+def window_mean(time: np.ndarray, values: np.ndarray, start: float) -> np.ndarray:
+    """The time average of recorded samples over [start, time[-1]] (trapezoid rule; linear between samples)."""
+    inside = time > start
+    t = np.r_[start, time[inside]]
+    first = np.array([np.interp(start, time, column) for column in values.reshape(len(time), -1).T])
+    v = np.concatenate([first.reshape(1, *values.shape[1:]), values[inside]])
+    return np.trapezoid(v, t, axis=0) / (time[-1] - start)
+
+
+# Below this horizontal speed of the centre of mass (m/s) a run "does not move": its cost of transport is not
+# reported. A robot standing still creeps at most 0.1 mm/s (issue 23's benchmark).
+STILL_SPEED = 1e-4
+
+
+SIGN_CONVENTION = (
+    "World frame, z up; the medium lies below z = medium.surface_z. A drive's load is what it applies to its joint "
+    "along (about) the joint's axis; medium_force is the medium's force on each attached body; com_* is the "
+    "model's centre of mass.")
+
+
+@dataclass(frozen=True, eq=False)
+class UserModel:
+    """A user's MJCF model (`UserScene`) in the medium, run as a robot: its ``[[drive]]`` joints prescribed, its
+    ``[[control]]`` actuators driven (or every actuator by ``control(t, data) -> ctrl``, a Python controller).
+    ``UserModel.of(scene)`` reads and checks the model. Its result's series, SI units, world frame:
+    ``com_position``, ``com_velocity`` (T, 3); ``body_position``, ``medium_force`` (T, B, 3) per attached body;
+    ``link_position`` (T, N, 3), ``link_quat`` (T, N, 4, w x y z) of every body but the world;
+    ``drive_position``, ``drive_velocity``, ``drive_load`` (T, D) per drive (m, m/s, N for a slide joint; rad,
+    rad/s, N m for a hinge); ``actuator_force``, ``actuator_velocity``, ``ctrl`` (T, U) per actuator."""
+
+    joints: tuple[str, ...] = ()          # each drive's joint kind: "slide" or "hinge"
+    links: tuple[str, ...] = ()           # every body but the world, by name (or body<id>)
+    actuators: tuple[str, ...] = ()       # every actuator, by name (or actuator<id>)
+    tables: tuple = ()                    # each [[control]]'s table (times, values), or None
+    control: Controller | None = None     # the Python controller, if any
     name = "run"
-    schema = "finrft.user/1"
+    schema = "finrft.user/2"
     sign_convention = SIGN_CONVENTION
 
     @classmethod
-    def of(cls, scene: UserScene) -> UserModel:
-        joint = driven_joint(read_spec(scene.model.path), scene.drive.joint)
-        return cls(rotary=DRIVEN[int(joint.type)] == "hinge")
+    def of(cls, scene: UserScene, control: Controller | None = None) -> UserModel:
+        """The experiment of a scene, its model read and every name the scene gives checked (SceneError)."""
+        drive_timing(scene)
+        spec = read_spec(scene.model.path)
+        kinds = tuple(DRIVEN[int(driven_joint(spec, j.joint, f"drive.{i}.joint").type)]
+                      for i, j in enumerate(scene.drive))
+        m = compile_spec(spec)
+        for b in scene.model.bodies:
+            if mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, b) < 0:
+                raise SceneError(f"model.bodies: the model has no body named {b!r}")
+        actuators = tuple(m.actuator(i).name or f"actuator{i}" for i in range(m.nu))
+        for i, c in enumerate(scene.control):
+            if c.actuator not in actuators:
+                raise SceneError(f"control.{i}.actuator: the model has no actuator named {c.actuator!r} (its "
+                                 f"actuators: {', '.join(actuators) or 'none'})")
+        if len({c.actuator for c in scene.control}) < len(scene.control):
+            raise SceneError("an actuator has two [[control]] entries: give each one entry")
+        if control is not None and scene.control:
+            raise SceneError("give the actuators' ctrl by [[control]] or by a controller, not both")
+        tables = tuple(read_table(c.table, f"control.{i}") if c.kind == "table" else None
+                       for i, c in enumerate(scene.control))
+        links = tuple(m.body(i).name or f"body{i}" for i in range(1, m.nbody))
+        return cls(kinds, links, actuators, tables, control)
 
-    @property
-    def quantity(self) -> str:
-        return "torque" if self.rotary else "force"
-
-    @property
-    def unit(self) -> str:
-        return "Nm" if self.rotary else "N"
+    def unit(self, i: int) -> tuple[str, str, str]:
+        """Drive i's position, velocity and load units."""
+        return ("rad", "rad/s", "N m") if self.joints[i] == "hinge" else ("m", "m/s", "N")
 
     def build(self, scene: UserScene) -> AttachedModel:
-        built = build_attached(read_spec(scene.model.path), scene.drive.joint, scene.model.bodies, scene.medium,
-                               scene.sim)
-        if (built.model.jnt_type[built.model.dof_jntid[built.drive_dof]] == _J.mjJNT_HINGE) != self.rotary:
-            raise SceneError(f"drive.joint {scene.drive.joint!r} is not the kind of joint this run was made for")
-        return built
+        return build_attached(read_spec(scene.model.path), [j.joint for j in scene.drive], scene.model.bodies,
+                              scene.medium, scene.sim)
 
-    def drive_for(self, scene: UserScene) -> Drive:
-        j = scene.drive
-        return Drive("rotate" if self.rotary else "drag", j.speed, j.stroke, j.cycles or None, start=j.start)
+    def drive_for(self, scene: UserScene) -> Schedule:
+        return Schedule(*drive_timing(scene))
 
     def quantities(self, scene: UserScene) -> dict[str, Quantity]:
-        joint, bodies = scene.drive.joint, ",".join(scene.model.bodies)
-        return {
-            "drive_position": Quantity("rad" if self.rotary else "m", f"position of the driven joint {joint} (qpos)",
-                                       plot=Plot("drive/position", f"{joint} ({'deg' if self.rotary else 'mm'})",
-                                                 joint, "deg" if self.rotary else "mm")),
-            "drive_load": Quantity("N m" if self.rotary else "N", f"{self.quantity} the drive applies to {joint} "
-                                   f"about (along) its axis", plot=Plot("drive/load", f"Drive {self.quantity} "
-                                   f"({'N m' if self.rotary else 'N'})", f"drive {self.quantity}")),
-            "body_position": Quantity("m", "origin of each attached body", attrs={"frame": "world", "bodies": bodies}),
-            "rft_force": Quantity("N", "resultant of the medium's force on each attached body",
-                                  attrs={"frame": "world", "bodies": bodies}),
-            "stroke_impulse": Quantity("N m s" if self.rotary else "N s", "integral of the drive load over each "
-                                       "stroke", per="stroke"),
+        bodies, joints = ",".join(scene.model.bodies), ",".join(j.joint for j in scene.drive)
+        world = {"frame": "world"}
+        out = {
+            "com_position": Quantity("m", "the model's centre of mass", attrs=world,
+                                     plot=Plot("com/position", "Centre of mass (mm)", "com", "mm", "axis")),
+            "com_velocity": Quantity("m/s", "velocity of the model's centre of mass", attrs=world),
+            "body_position": Quantity("m", "origin of each attached body", attrs={**world, "bodies": bodies}),
+            "medium_force": Quantity("N", "resultant of the medium's force on each attached body",
+                                     attrs={**world, "bodies": bodies}),
+            "link_position": Quantity("m", "origin of every body but the world",
+                                      attrs={**world, "bodies": ",".join(self.links)}),
+            "link_quat": Quantity("", "orientation of every body but the world, quaternion w x y z",
+                                  attrs={**world, "bodies": ",".join(self.links)}),
         }
+        if scene.drive:
+            units = [self.unit(i) for i in range(len(scene.drive))]
+            out.update({
+                "drive_position": Quantity(",".join(u[0] for u in units), f"position of each driven joint "
+                                           f"({joints})", attrs={"joints": joints}),
+                "drive_velocity": Quantity(",".join(u[1] for u in units), "velocity of each driven joint",
+                                           attrs={"joints": joints}),
+                "drive_load": Quantity(",".join(u[2] for u in units), "force (torque) each drive applies to its "
+                                       "joint along (about) its axis", attrs={"joints": joints},
+                                       plot=Plot("drive/load", "Drive loads (N or N m)", "drive load", "",
+                                                 "drive")),
+            })
+        if self.actuators:
+            names = {"actuators": ",".join(self.actuators)}
+            out.update({
+                "actuator_force": Quantity("N or N m", "each actuator's force (torque) on its joint or tendon",
+                                           attrs=names, plot=Plot("actuator/force", "Actuator forces (N or N m)",
+                                                                  "actuator", "", "actuator")),
+                "actuator_velocity": Quantity("m/s or rad/s", "each actuator's velocity", attrs=names),
+                "ctrl": Quantity("actuator's unit", "each actuator's control input", attrs=names),
+            })
+        return out
 
     def compared(self, scene: UserScene) -> tuple[Compared, ...]:
-        """The attached bodies' positions (mm, bounded by --max-error) and the per-stroke mean drive load."""
-        return (Compared("position_mm", ("body_position",), 1e3),
-                Compared(f"{self.quantity}_{self.unit}", ("stroke_impulse",), 1 / self.drive_for(scene).stroke_time))
+        """The attached bodies' positions and the centre of mass (mm), its velocity (mm/s); `relative_differences`
+        adds the positions in percent of the run's scale, which --max-error bounds."""
+        return (Compared("position_mm", ("body_position", "com_position"), 1e3),
+                Compared("velocity_mm_s", ("com_velocity",), 1e3))
 
-    def start(self, scene: UserScene, built: AttachedModel, d: mujoco.MjData, companion: bool) -> JointTrial:
-        return JointTrial(built, self.drive_for(scene), d, companion)
+    def relative_differences(self, result: Result, differences: dict[str, float]) -> dict[str, float]:
+        return {"position_percent": 100 * 1e-3 * differences["position_mm"] / run_scale(result)}
+
+    def start(self, scene: UserScene, built: AttachedModel, d: mujoco.MjData, companion: bool) -> RobotTrial:
+        return RobotTrial(self, scene, built, d, companion)
 
     def check(self, result: Result) -> None:
         pass
 
     def attrs(self) -> dict[str, Any]:
-        return {"drive_joint_type": "hinge" if self.rotary else "slide"}
+        return {"drive_joint_types": ",".join(self.joints), "controller": "python" if self.control else "scene"}
 
     def cycle_table(self, run: Result) -> list[dict[str, float]]:
         return []
 
     def summary(self, run: Result) -> dict[str, Any]:
-        q, u, scene = self.quantity, self.unit, run.scene
-        final = run.body_position[-1]
-        return {
-            "model": scene.model.path, "joint": scene.drive.joint, "bodies": list(scene.model.bodies),
-            f"peak_drive_{q}_{u}": run.peak_drive_load,
-            f"mean_drive_{q}_{u}_per_stroke": (run.stroke_impulse / self.drive_for(scene).stroke_time).tolist(),
-            "final_body_position_mm": {b: (1e3 * final[i]).tolist() for i, b in enumerate(scene.model.bodies)},
-            "final_rft_force_N": {b: run.rft_force[-1, i].tolist() for i, b in enumerate(scene.model.bodies)},
-        }
+        """The figures of `RobotSummary`, SI units."""
+        return robot_summary(self, run)
 
     def draw(self, rec: Any, run: Result, times: Any, prefix: str) -> list[Any]:
-        from ..views import draw_bodies
-        return draw_bodies(rec, run, times, prefix, run.body_position, run.rft_force, "Attached bodies")
+        from ..views import draw_model
+        return draw_model(rec, run, times, prefix)
+
+
+def run_scale(run: Result) -> float:
+    """The length a robot run's position errors are measured against (`ErrorLimits.position_percent`): the
+    farthest its attached bodies or its centre of mass get from where they started, or the model's size."""
+    travel = max(float(np.max(np.linalg.norm(run.body_position - run.body_position[0], axis=-1))),
+                 float(np.max(np.linalg.norm(run.com_position - run.com_position[0], axis=-1))))
+    return max(travel, run.model_size)
+
+
+def robot_summary(experiment: UserModel, run: Result) -> dict[str, Any]:
+    """What a robot run reports over the window [sim.settle, end] (`finrft run --json`; SI units):
+
+    - ``com_velocity_m_s``: the centre of mass's mean velocity, its displacement over the window / the window;
+      ``com_position_m``: where it ends.
+    - ``medium_force_N``: the mean total force of the medium on the attached bodies; ``body_medium_force_N``: per
+      body.
+    - ``drive_load``: per [[drive]], the mean force (N) or torque (N m) it applies (``drive_load_units``).
+    - ``actuator_power_W``: the mean mechanical power of the actuators, sum of actuator_force x
+      actuator_velocity (negative: they absorb work).
+    - ``cost_of_transport``: P+ / (m g v), with P+ the mean positive power of the actuators and the drives (each
+      one's power clipped at 0: work they absorb is not recovered), m the model's mass, g gravity's magnitude and
+      v the centre of mass's mean horizontal speed; null, with ``cost_of_transport_note`` saying why, when the
+      robot does not move (v < STILL_SPEED) or there is no gravity.
+
+    Means of the recorded samples (trapezoid rule); the centre of mass's velocity is exact whatever record_dt.
+    """
+    scene = run.scene
+    t, settle = run.time, scene.sim.settle
+    com = run.com_position
+    start = np.array([np.interp(settle, t, com[:, i]) for i in range(3)])
+    velocity = (com[-1] - start) / (t[-1] - settle)
+    body_force = window_mean(t, run.medium_force, settle)
+    out: dict[str, Any] = {
+        "model": scene.model.path, "bodies": list(scene.model.bodies),
+        "drives": [j.joint for j in scene.drive], "actuators": list(experiment.actuators),
+        "window_s": [settle, float(t[-1])],
+        "com_velocity_m_s": velocity.tolist(), "com_position_m": com[-1].tolist(),
+        "medium_force_N": body_force.sum(axis=0).tolist(),
+        "body_medium_force_N": {b: body_force[i].tolist() for i, b in enumerate(scene.model.bodies)},
+        "drive_load": [], "drive_load_units": [], "actuator_power_W": 0.0}
+    positive = 0.0
+    if scene.drive:
+        out["drive_load"] = window_mean(t, run.drive_load, settle).tolist()
+        out["drive_load_units"] = [experiment.unit(i)[2] for i in range(len(scene.drive))]
+        positive += float(window_mean(t, np.maximum(run.drive_load * run.drive_velocity, 0).sum(axis=1), settle))
+    if experiment.actuators:
+        power = run.actuator_force * run.actuator_velocity
+        out["actuator_power_W"] = float(window_mean(t, power.sum(axis=1), settle))
+        positive += float(window_mean(t, np.maximum(power, 0).sum(axis=1), settle))
+    out["positive_power_W"] = positive
+    mass, gravity = run.model_mass, run.gravity
+    speed = float(np.hypot(*velocity[:2]))
+    if gravity == 0:
+        cot, note = None, "no gravity: the weight m g is 0"
+    elif speed < STILL_SPEED:
+        cot, note = None, (f"the robot does not move: its centre of mass's horizontal speed {1e3 * speed:.3g} mm/s "
+                           f"< {1e3 * STILL_SPEED:g} mm/s")
+    else:
+        cot, note = positive / (mass * gravity * speed), (f"positive power {positive:.4g} W / (mass {mass:.4g} kg "
+                                                          f"x g {gravity:.4g} m/s^2 x speed {speed:.4g} m/s)")
+    out.update(cost_of_transport=cot, cost_of_transport_note=note, model_size_m=run.model_size,
+               scale_m=run_scale(run))
+    return out
+
+
+def run_robot(scene: UserScene, *, control: Controller | None = None, progress: Callable[[float], None] | None = None,
+              max_error: ErrorLimits | None = ErrorLimits()) -> Result:
+    """Run a user's model as a robot (`UserModel`): ``control(t, data) -> ctrl`` (one value per actuator, called
+    at every step) drives its actuators instead of the scene's [[control]]. The result carries its error
+    estimate as every run (`finrft.run`); `robot_summary` says what ``result.summary()`` reports."""
+    return run(UserModel.of(scene, control), scene, progress=progress, max_error=max_error)
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -235,18 +588,22 @@ class UserModel:
 @register
 class RunCommand(Command):
     name = "run"
-    help = "RFT on your own MuJoCo model: a joint driven through the medium"
-    description = ("Attach the granular RFT of Li, Zhang & Goldman 2013 to bodies of an MJCF model and move one "
-                   "slide or hinge joint at constant speed (one stroke, or --set drive.cycles=N back-and-forth "
-                   "cycles), exactly: the joint carries a very large armature and the force (torque) it needs is "
-                   "recorded, with each attached body's position and the medium's force on it. The scene (SI units) "
-                   "has [model] (path, bodies), [medium] (law, name or zeta, surface_z, element_size), [drive] "
-                   "(joint, speed, stroke, cycles, start) and [sim] (dt, integrator, backend, record_dt; MuJoCo's "
-                   "explicit step only).")
+    help = "RFT on your own MuJoCo model: a robot driven by its actuators and prescribed joints"
+    description = ("Attach granular RFT (medium.law: li2013, rft3d, ...) to bodies of an MJCF model and run it as "
+                   "a robot for sim.duration seconds: any joints, free ones included; [[drive]] entries hold slide "
+                   "or hinge joints on a prescribed profile (constant speed with strokes and cycles, or a sine) "
+                   "exactly (a very large armature) and record the force (torque) each needs; [[control]] entries "
+                   "drive actuators by name (a constant, a sine, a CSV table of time_s,ctrl; each with a linear "
+                   "ramp-in). It reports, averaged over [sim.settle, sim.duration], the centre of mass's velocity, "
+                   "the medium's force on each attached body, the drives' loads, the actuators' power and the cost "
+                   "of transport, with the run's estimated discretisation error. The scene (SI units) has [model] "
+                   "(path, bodies), [medium] (law, name or the law's keys, surface_z, element_size), [[drive]], "
+                   "[[control]] and [sim] (dt, method, duration, settle, backend, record_dt); the text output "
+                   "speaks mm, mm/s and degrees, --json SI.")
 
     def add_flags(self, p: argparse.ArgumentParser) -> None:
         p.add_argument("model", nargs="?", metavar="MODEL.xml", help="the MJCF file (overrides model.path)")
-        add_scene_flags(p, "user-model", "drive.speed=0.05", required=True, backend="where the RFT force is "
+        add_scene_flags(p, "user-model", "drive.0.speed=0.05", required=True, backend="where the RFT force is "
                         "computed (overrides sim.backend)")
         add_max_error(p)
         add_result_files(p)
@@ -264,14 +621,28 @@ class RunCommand(Command):
 
     def describe(self, args: argparse.Namespace, runs: list[Result]) -> str:
         run, = runs
-        scene, summary = run.scene, run.summary()
-        q, u = run.quantity, run.unit.replace("Nm", "N m")
-        lines = [f"{scene.model.path}: joint {scene.drive.joint} driven, RFT on {', '.join(scene.model.bodies)} "
-                 f"({run.backend}; dt {scene.sim.dt:g} s, {scene.sim.integrator}): {steps_line(summary)} in "
-                 f"{run.wall_s:.2f} s",
-                 f"mean drive {q} per stroke: " + ", ".join(
-                     f"{value:+.4g} {u}" for value in summary[f"mean_drive_{q}_{run.unit}_per_stroke"])]
-        for body, position in summary["final_body_position_mm"].items():
-            lines.append(f"{body}: final position (mm) " + ", ".join(f"{x:.2f}" for x in position))
-        lines.append(error_line(run))
+        scene, s = run.scene, run.summary()
+        mm = ", ".join
+        lines = [f"{scene.model.path}: RFT ({scene.medium.law}) on {', '.join(scene.model.bodies)} ({run.backend}; "
+                 f"{scene.sim.method}, dt {scene.sim.dt:g} s): {s['sim_time_s']:.4g} s simulated, "
+                 f"{steps_line(s)} in {run.wall_s:.2f} s",
+                 f"over {s['window_s'][0]:g}..{s['window_s'][1]:.4g} s: centre of mass velocity (mm/s) "
+                 f"{mm(f'{1e3 * v:+.3f}' for v in s['com_velocity_m_s'])}; at the end (mm) "
+                 f"{mm(f'{1e3 * v:.2f}' for v in s['com_position_m'])}",
+                 f"medium's mean force (N) {mm(f'{v:+.4g}' for v in s['medium_force_N'])}"]
+        for body, force in s["body_medium_force_N"].items():
+            lines.append(f"  on {body} (N) " + mm(f"{v:+.4g}" for v in force))
+        for joint, load, unit, q in zip(s["drives"], s["drive_load"], s["drive_load_units"],
+                                        run.drive_position[-1] if scene.drive else ()):
+            end = f"{math.degrees(q):.2f} deg" if unit == "N m" else f"{1e3 * q:.2f} mm"
+            lines.append(f"drive {joint}: mean load {load:+.4g} {unit}, at the end {end}")
+        if s["actuators"]:
+            lines.append(f"actuators' mean power {s['actuator_power_W']:+.4g} W")
+        cot = s["cost_of_transport"]
+        lines.append(f"cost of transport {cot:.4g} ({s['cost_of_transport_note']})" if cot is not None
+                     else f"cost of transport: none ({s['cost_of_transport_note']})")
+        e = s["error_estimate"]
+        lines.append(f"estimated discretisation error (companion run at {s['error_companion']}): positions "
+                     f"{e['position_mm']:.2g} mm ({e['position_percent']:.2g} % of the run's scale, "
+                     f"{1e3 * s['scale_m']:.3g} mm), centre of mass velocity {e['velocity_mm_s']:.2g} mm/s")
         return "\n".join(lines)

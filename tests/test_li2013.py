@@ -156,6 +156,6 @@ def test_c_twin_element_force_equals_numpy(library, form, twin):
     out = np.zeros(3)
     assert np.abs(expected).max(axis=1).astype(bool).sum() > n / 4
     for i in range(n):
-        getattr(library, twin)(_p(coef), 1.3, _p(normal[i].copy()), _p(velocity[i].copy()),
-                                            depth[i], area[i], _p(out))
+        getattr(library, twin)(_p(coef), 1.3, _p(normal[i].copy()), _p(velocity[i].copy()), depth[i], area[i],
+                               _p(out))
         np.testing.assert_allclose(out, expected[i], rtol=1e-12, atol=1e-12 * np.abs(expected[i]).max())

@@ -3,8 +3,9 @@ elements and gives them a granular resistive force law, before the spec is compi
 
 Each element below the free surface (z < surface_z, gravity along -z) that leads the motion (outward normal .
 velocity > 0) takes the law's stress times its depth and area (a surface law of the registry `finrft.laws`, found
-by its name: `finrft.laws.li2013.element_forces` or `finrft.laws.rft3d.element_forces`), plus, with
-``drft_lambda`` > 0, DRFT's rate-dependent term (`finrft.laws.drft`). The force
+by its name: `finrft.laws.li2013.element_forces` (Li 2013 in 3D, Treers et al. 2021), `li2013-planar` or
+`finrft.laws.rft3d.element_forces`), plus, with ``drft_lambda`` > 0, DRFT's rate-dependent term
+(`finrft.laws.drft`), all times the ramp tanh(max(n . v, 0) / v_reg) (`finrft.laws.regularised`). The force
 appears where MuJoCo's passive forces appear, ``data.qfrc_passive``: from the native plugin ``finrft.surface``
 (plugins/finrft_surface.c, one instance per body, the elements in its config) or, with the Python backend, from a
 passive-force callback that `Attached.installed` sets for a block and then restores.
@@ -65,15 +66,16 @@ class Attached:
     surfaces: tuple[Surface, ...] = field(repr=False)
     drft_lambda: float = 0.0   # DRFT's lambda; 0: the quasi-static law alone
     bulk_density: float = 0.0  # kg/m^3, DRFT's rho_c (0: none known)
+    v_reg: float = laws.SURFACE_V_REG  # m/s, the ramp of `finrft.laws.regularised` (0: none)
 
     def element_forces(self, normal: np.ndarray, velocity: np.ndarray, depth: np.ndarray, area: np.ndarray
                        ) -> np.ndarray:
-        """The law's force on each element (world frame), as the native plugin computes it."""
+        """The law's force on each element (world frame), regularised, as the native plugin computes it."""
         force = laws.module(self.law, laws.SURFACE).element_forces(normal, velocity, depth, area,
                                                                    coefficients=self.coefficients, **self.parameters)
         if self.drft_lambda > 0:
             force = force + drft.element_forces(normal, velocity, depth, area, self.drft_lambda, self.bulk_density)
-        return force
+        return laws.regularised(force, normal, velocity, self.v_reg)
 
     @property
     def elements(self) -> dict[str, int]:
@@ -151,19 +153,22 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str = (), law: str = "li
            surface_z: float = 0.0, element_size: float = 0.005, backend: str = "native",
            coefficients: li2013.Coefficients | rft3d.Coefficients | None = None, medium: str | None = None,
            rho_c: float | None = None, mu_int: float | None = None, mu_surf: float | None = None,
-           drft_lambda: float = 0.0, bulk_density: float | None = None, geoms: Sequence[str] = (),
-           cull: bool = True) -> Attached:
+           drft_lambda: float = 0.0, bulk_density: float | None = None,
+           v_reg: float = laws.SURFACE_V_REG, geoms: Sequence[str] = (), cull: bool = True) -> Attached:
     """Add granular RFT to the named bodies of ``spec`` (before it is compiled): all the geoms of each of
     ``bodies``, and the geoms named in ``geoms`` (their bodies' other geoms left out).
 
-    ``law``, a surface law of `finrft.laws`: ``li2013`` (`finrft.laws.li2013`) with ``coefficients`` (default:
-    the generic medium) scaled by ``zeta`` (default 1), or instead of both a ``medium`` of the catalogue
-    (`finrft.media`, e.g. ``"poppy_seeds_lp"``); or ``rft3d`` (`finrft.laws.rft3d`) with ``coefficients`` (default:
+    ``law``, a surface law of `finrft.laws`: ``li2013`` (`finrft.laws.li2013`: Li 2013 in 3D as Treers, Cao &
+    Stuart 2021 extend it) or ``li2013-planar`` (its planar form, which cannot swim: it warns) with
+    ``coefficients`` (default: the generic medium) scaled by ``zeta`` (default 1), or instead of both a ``medium``
+    of the catalogue (`finrft.media`, e.g. ``"poppy_seeds_lp"``); or ``rft3d`` (`finrft.laws.rft3d`) with ``coefficients`` (default:
     `rft3d.AGARWAL_2023`) and the medium's critical density ``rho_c`` (kg/m^3), internal friction ``mu_int`` and
     the bodies' surface friction ``mu_surf``, all three required (a catalogued ``medium`` gives rho_c and mu_int
     when it has them); ``drft_lambda`` (dimensionless, default 0: off):
     DRFT's rate-dependent term on top of either law (`finrft.laws.drft`), with the medium's density: rft3d's
     ``rho_c``, li2013's ``bulk_density`` (kg/m^3; else the catalogued ``medium``'s, if it has one);
+    ``v_reg`` (m/s, default 1e-3; 0: none): every element's force times tanh(max(n . v, 0) / v_reg), the smooth
+    onset of the leading-face switch and of the speed (`finrft.laws.regularised`);
     ``surface_z``: height of the free surface, m; ``element_size``: the elements' size, m; ``backend``:
     ``native`` (falls back to ``python``, with a warning, when the plugin cannot be loaded) or ``python`` (then run
     the model inside ``Attached.installed``); ``cull``: leave out the elements that face another geom of the same
@@ -175,6 +180,8 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str = (), law: str = "li
     chosen = _chosen_geoms(spec, names, [geoms] if isinstance(geoms, str) else list(geoms))
     names += [b for b in chosen if b not in names]
     _check(names, law, surface_z, element_size, backend)
+    if not (math.isfinite(v_reg) and v_reg >= 0):
+        raise SceneError(f"attach: v_reg must be >= 0 m/s, got {v_reg!r}")
     module = laws.module(law, laws.SURFACE)
     parameters, catalogued = laws.surface_parameters(
         law, {"zeta": zeta, "rho_c": rho_c, "mu_int": mu_int, "mu_surf": mu_surf}, material, "attach")
@@ -207,12 +214,13 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str = (), law: str = "li
         raise SceneError(f"attach: element_size = {element_size:g} m gives {total} elements, more than "
                          f"{MAX_ELEMENTS}: use a larger element_size")
     attached = Attached(law, parameters, float(surface_z), float(element_size), backend, coefficients,
-                        tuple(surfaces), float(drft_lambda), rho)
+                        tuple(surfaces), float(drft_lambda), rho, float(v_reg))
     if backend == "native":
         spec.activate_plugin(PLUGIN)
         for surface in surfaces:
             _bind(spec, attached, surface)
     laws.warn_feeds_energy(law, module.FEEDS_ENERGY, "kept as published")
+    laws.warn_caveat(law)
     return attached
 
 
@@ -241,6 +249,7 @@ def _bind(spec: mujoco.MjSpec, attached: Attached, surface: Surface) -> None:
         **({"drft_lambda": repr(attached.drft_lambda), "bulk_density": repr(attached.bulk_density)}
            if attached.drft_lambda > 0 else {}),
         "surface_z": repr(attached.surface_z),
+        "v_reg": repr(attached.v_reg),
         "elements": " ".join(map(repr, elements.ravel().tolist())),  # repr: the Python backend's exact numbers
     }
     body = spec.body(surface.body)

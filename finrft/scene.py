@@ -100,13 +100,17 @@ class Model:
 
 Medium = schema.section("Medium", (
     ("law", str, _f("li2013", "", "the surface law on the surface elements: li2013, the granular RFT of Li, Zhang & "
-                    "Goldman 2013; rft3d, the 3D RFT of Agarwal, Goldman & Kamrin 2023",
+                    "Goldman 2013 in 3D (Treers, Cao & Stuart 2021); li2013-planar, its planar form (no force across "
+                    "an element's plane of motion: cannot swim); rft3d, the 3D RFT of Agarwal, Goldman & Kamrin 2023",
                     choices=lambda: laws.names(laws.SURFACE))),
     ("name", str, _f("", "", "a named medium of the catalogue (finrft medium --list), which gives li2013's zeta or "
                      "its own coefficients, rft3d's bulk density and internal friction; empty: li2013's generic "
                      "coefficients scaled by zeta")),
     ("surface_z", float, _f(0.0, "m", "height of the free surface (gravity along -z); the medium lies below")),
     ("element_size", float, _f(0.005, "m", "size of the surface elements", minimum=0.0)),
+    ("v_reg", float, _f(laws.SURFACE_V_REG, "m/s", "every element's force times tanh(max(n.v, 0) / v_reg): the "
+                        "smooth onset of the leading-face switch and of the speed (finrft.laws.regularised); 0: "
+                        "none, the law's step as published", minimum=0.0, exclusive=False)),
     ("drft_lambda", float, _f(0.0, "", "DRFT's rate-dependent term (Agarwal et al. 2021 Sci. Adv.): the leading "
                               "elements also take a pressure drft_lambda * bulk_density * (v.n)^2; 0: off, the "
                               "quasi-static law alone; the paper fits O(1) values", minimum=0.0, exclusive=False)),

@@ -109,13 +109,13 @@ static inline void finrft_site_axes(const mjData* d, int s, mjtNum x[3], mjtNum 
 
 // finrft.surface (plugins/finrft_surface.c): one instance per body, the body's surface elements and their law.
 #define FINRFT_SURFACE_PLUGIN "finrft.surface"
-enum { LAW_LI2013, LAW_RFT3D };
 
 typedef struct {
   const mjModel* model;  // the model it was made for (finrft_surface_instance)
-  int law;
+  int law;               // index into the table of surface laws in finrft_surface.c
   double coef[60];       // the law's coefficients: li2013 the first 9, rft3d 60
   double zeta, xi, mu_surf, surface_z;
+  double v_reg;          // m/s, the ramp tanh(max(n.v, 0) / v_reg) of every element's force; 0: none
   double drft_lambda, bulk_density;  // drft_lambda = 0: no DRFT term
   int body;
   int n;

@@ -1,16 +1,18 @@
 // finrft.surface: a MuJoCo engine plugin (passive force) applying a granular surface law to the surface elements
-// of a body: Li, Zhang & Goldman 2013 or the 3D-RFT of Agarwal, Goldman & Kamrin 2023, optionally with DRFT's
-// rate-dependent term on top. The C twin of finrft/laws/li2013.py, finrft/laws/rft3d.py, finrft/laws/drft.py and
-// of the Python backend in finrft/attach.py: same formulas, same folding, same choice of plane.
+// of a body: Li, Zhang & Goldman 2013 in 3D (Treers, Cao & Stuart 2021) or in the plane of motion, or the 3D-RFT
+// of Agarwal, Goldman & Kamrin 2023, optionally with DRFT's rate-dependent term on top, all regularised by one
+// ramp. The C twin of finrft/laws/li2013.py, li2013_planar.py, rft3d.py, drft.py, of `regularised` in
+// finrft/laws/__init__.py and of the Python backend in finrft/attach.py: same formulas, same folding, same planes.
 //
 // One instance per body (finrft.attach makes them). Config, all required for its law:
-//   law           "li2013" or "rft3d"
+//   law           "li2013", "li2013-planar" or "rft3d" (kLaws)
 //   coefficients  li2013: the fit's nine coefficients A00 A10 B11 B01 B-11 C11 C01 C-11 D10, N/m^3;
 //                 rft3d: the fit's c1, c2, c3 (20 each, dimensionless)
-//   zeta          li2013: > 0, the medium's scale
+//   zeta          li2013, li2013-planar: > 0, the medium's scale
 //   xi            rft3d: > 0, the medium's scale xi_n, N/m^3
 //   mu_surf       rft3d: >= 0, the intruder's surface friction
 //   surface_z     m, height of the free surface (gravity along -z)
+//   v_reg         optional, >= 0 m/s (absent: 0, none): every element's force times tanh(max(n . v, 0) / v_reg)
 //   drft_lambda   optional, >= 0 (absent: 0, off): DRFT's dimensionless lambda
 //   bulk_density  with drft_lambda > 0: > 0, the medium's density rho_c, kg/m^3
 //   elements      "cx cy cz nx ny nz area ..." per element: centre and outward unit normal in the body frame, m^2
@@ -52,8 +54,8 @@ FINRFT_EXPORT void finrft_li2013_alpha(const double coef[NCOEF], double zeta, do
 }
 
 // The force on one element (world frame, z up): outward unit normal n, velocity v, depth below the surface,
-// area. As element_forces in li2013.py.
-FINRFT_EXPORT void finrft_li2013_element_force(const double coef[NCOEF], double zeta, const double n[3],
+// area. As element_forces in li2013_planar.py.
+FINRFT_EXPORT void finrft_li2013_planar_element_force(const double coef[NCOEF], double zeta, const double n[3],
                                                const double v[3], double depth, double area,
                                                double force[3]) {
   force[0] = force[1] = force[2] = 0;
@@ -78,6 +80,74 @@ FINRFT_EXPORT void finrft_li2013_element_force(const double coef[NCOEF], double 
   force[0] = -scale * a[0] * r[0];
   force[1] = -scale * a[0] * r[1];
   force[2] = scale * a[1];
+}
+
+// Treers et al.'s weights of the two parts of a unit velocity, as F1_FIT, F23_FIT in li2013.py.
+static double weight_across(double size) {
+  return 0.440850096954369 * (tanh(3.62263982880971 * size - 1.60910808139526) + tanh(1.60910808139526)) /
+         0.832324700111401;
+}
+
+static double weight_within(double size) {
+  return 1.99392673405210 * (atanh(1.61146827229181 * size - 0.973746396532650) + atanh(0.973746396532650)) /
+         5.81083560370960;
+}
+
+// The unit horizontal direction of a, else of b, else x (as _horizontal_unit in li2013.py).
+static void horizontal_unit(const double a[3], const double b[3], double e[2]) {
+  double size = hypot(a[0], a[1]);
+  const double* pick = a;
+  if (!(size > 0)) {
+    size = hypot(b[0], b[1]);
+    pick = b;
+  }
+  e[0] = 1;
+  e[1] = 0;
+  if (size > 0) {
+    e[0] = pick[0] / size;
+    e[1] = pick[1] / size;
+  }
+}
+
+// Treers et al.'s stress per unit depth on an element of unit normal n moving along u (unit or zero), in the
+// vertical plane of the horizontal unit vector e2 (as _stress in li2013.py).
+static void li2013_stress(const double coef[NCOEF], double zeta, const double n[3], const double u[3],
+                          const double e2[2], double stress[3]) {
+  double e1[2] = {e2[1], -e2[0]};
+  double across = u[0] * e1[0] + u[1] * e1[1];
+  double along = u[0] * e2[0] + u[1] * e2[1];
+  double f1 = weight_across(fabs(across)), f23 = weight_within(hypot(along, u[2]));
+  double a[2], a1[2];
+  finrft_li2013_alpha(coef, zeta, atan2(-(n[0] * e2[0] + n[1] * e2[1]), n[2]), atan2(-u[2], along), a);
+  finrft_li2013_alpha(coef, zeta, 0, 0, a1);
+  double side = f1 * a1[0] * (across > 0 ? 1 : across < 0 ? -1 : 0);
+  for (int i = 0; i < 2; i++) stress[i] = -side * e1[i] - f23 * a[0] * e2[i];
+  stress[2] = f23 * a[1];
+}
+
+// The force on one element (world frame, z up) of Li's law in 3D (Treers, Cao & Stuart 2021): outward unit normal
+// n, velocity v, depth below the surface, area. As element_forces in li2013.py, the blend of nearly horizontal
+// faces included.
+FINRFT_EXPORT void finrft_li2013_element_force(const double coef[NCOEF], double zeta, const double n[3],
+                                               const double v[3], double depth, double area,
+                                               double force[3]) {
+  force[0] = force[1] = force[2] = 0;
+  if (!(depth > 0) || !(n[0] * v[0] + n[1] * v[1] + n[2] * v[2] > 0)) return;
+  double speed = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+  double u[3] = {v[0] / speed, v[1] / speed, v[2] / speed};
+  double tilt = hypot(n[0], n[1]) / sqrt(1 - (1 - 1e-3) * (1 - 1e-3));
+  if (tilt > 1) tilt = 1;
+  double w = tilt * tilt * (3 - 2 * tilt);
+  double e2[2], stress[3];
+  horizontal_unit(n, v, e2);
+  li2013_stress(coef, zeta, n, u, e2, stress);
+  if (w < 1) {
+    double own[3];
+    horizontal_unit(v, n, e2);
+    li2013_stress(coef, zeta, n, u, e2, own);
+    for (int i = 0; i < 3; i++) stress[i] = w * stress[i] + (1 - w) * own[i];
+  }
+  for (int i = 0; i < 3; i++) force[i] = area * depth * stress[i];
 }
 
 // The 20 monomials of the 3D-RFT fit, in the order of terms() in rft3d.py.
@@ -133,8 +203,8 @@ FINRFT_EXPORT void finrft_drft_element_force(double drft_lambda, double rho_c, c
   for (int i = 0; i < 3; i++) force[i] = -pressure * n[i];
 }
 
-static const char* kSurfaceAttributes[] = {"law",       "coefficients", "zeta",        "xi",
-                                           "mu_surf",   "surface_z",    "drft_lambda", "bulk_density",
+static const char* kSurfaceAttributes[] = {"law",         "coefficients", "zeta",  "xi",      "mu_surf",
+                                           "surface_z",   "v_reg",        "drft_lambda", "bulk_density",
                                            "elements"};
 
 static void surface_free(FinrftSurface* p) {
@@ -170,47 +240,76 @@ static int read_scalar(const mjModel* m, int instance, const char* key, double* 
   return 0;
 }
 
+// A surface law's scale keys read into the instance; 0, or -1 after a warning.
+static int read_zeta(const mjModel* m, int instance, FinrftSurface* p) {
+  if (read_scalar(m, instance, "zeta", &p->zeta)) return -1;
+  if (p->zeta > 0) return 0;
+  mju_warning("finrft.surface: config 'zeta' must be > 0");
+  return -1;
+}
+
+static int read_xi(const mjModel* m, int instance, FinrftSurface* p) {
+  if (read_scalar(m, instance, "xi", &p->xi) || read_scalar(m, instance, "mu_surf", &p->mu_surf)) return -1;
+  if (p->xi > 0 && p->mu_surf >= 0) return 0;
+  mju_warning("finrft.surface: config 'xi' must be > 0 and 'mu_surf' >= 0");
+  return -1;
+}
+
+static void li2013_force(const FinrftSurface* p, const double n[3], const double v[3], double depth, double area,
+                         double f[3]) {
+  finrft_li2013_element_force(p->coef, p->zeta, n, v, depth, area, f);
+}
+
+static void li2013_planar_force(const FinrftSurface* p, const double n[3], const double v[3], double depth,
+                                double area, double f[3]) {
+  finrft_li2013_planar_element_force(p->coef, p->zeta, n, v, depth, area, f);
+}
+
+static void rft3d_force(const FinrftSurface* p, const double n[3], const double v[3], double depth, double area,
+                        double f[3]) {
+  finrft_rft3d_element_force(p->coef, p->xi, p->mu_surf, n, v, depth, area, f);
+}
+
+// The surface laws by name (the registry finrft.laws of KIND "surface"): coefficient count, scale keys, force.
+static const struct {
+  const char* name;
+  int ncoef;
+  int (*read)(const mjModel* m, int instance, FinrftSurface* p);
+  void (*force)(const FinrftSurface* p, const double n[3], const double v[3], double depth, double area,
+                double f[3]);
+} kLaws[] = {{"li2013", NCOEF, read_zeta, li2013_force},
+             {"li2013-planar", NCOEF, read_zeta, li2013_planar_force},
+             {"rft3d", NCOEF_RFT3D, read_xi, rft3d_force}};
+#define NLAWS ((int)(sizeof(kLaws) / sizeof(kLaws[0])))
+
 static int surface_init(const mjModel* m, mjData* d, int instance) {
   const char* law = mj_getPluginConfig(m, instance, "law");
-  int rft3d = law && !strcmp(law, "rft3d");
-  if (!law || (strcmp(law, "li2013") && !rft3d)) {
-    mju_warning("finrft.surface: config 'law' must be 'li2013' or 'rft3d', got '%s'", law ? law : "");
+  int index = 0;
+  while (index < NLAWS && !(law && !strcmp(law, kLaws[index].name))) index++;
+  if (index == NLAWS) {
+    mju_warning("finrft.surface: config 'law' must be 'li2013', 'li2013-planar' or 'rft3d', got '%s'",
+                law ? law : "");
     return -1;
   }
   FinrftSurface* p = (FinrftSurface*)calloc(1, sizeof(FinrftSurface));
   if (!p) return -1;
-  p->law = rft3d ? LAW_RFT3D : LAW_LI2013;
-  int ncoef = rft3d ? NCOEF_RFT3D : NCOEF;
+  p->law = index;
+  int ncoef = kLaws[index].ncoef;
   const char* coef = mj_getPluginConfig(m, instance, "coefficients");
   if (!coef || read_numbers(coef, p->coef, ncoef) != ncoef) {
     mju_warning("finrft.surface: config 'coefficients' must hold %d numbers for law '%s'", ncoef, law);
     surface_free(p);
     return -1;
   }
-  if (read_scalar(m, instance, "surface_z", &p->surface_z)) {
+  if (read_scalar(m, instance, "surface_z", &p->surface_z) || kLaws[index].read(m, instance, p)) {
     surface_free(p);
     return -1;
   }
-  if (rft3d) {
-    if (read_scalar(m, instance, "xi", &p->xi) || read_scalar(m, instance, "mu_surf", &p->mu_surf)) {
-      surface_free(p);
-      return -1;
-    }
-    if (!(p->xi > 0) || !(p->mu_surf >= 0)) {
-      mju_warning("finrft.surface: config 'xi' must be > 0 and 'mu_surf' >= 0");
-      surface_free(p);
-      return -1;
-    }
-  } else {
-    if (read_scalar(m, instance, "zeta", &p->zeta)) {
-      surface_free(p);
-      return -1;
-    }
-    if (!(p->zeta > 0)) {
-      mju_warning("finrft.surface: config 'zeta' must be > 0");
-      surface_free(p);
-      return -1;
-    }
+  const char* v_reg = mj_getPluginConfig(m, instance, "v_reg");
+  if (v_reg && *v_reg && (read_scalar(m, instance, "v_reg", &p->v_reg) || !(p->v_reg >= 0))) {
+    mju_warning("finrft.surface: config 'v_reg' must be >= 0");
+    surface_free(p);
+    return -1;
   }
   const char* drft = mj_getPluginConfig(m, instance, "drft_lambda");
   if (drft && *drft) {
@@ -279,18 +378,17 @@ const FinrftSurface* finrft_surface_instance(const mjModel* m, mjData* d, int in
   return (const FinrftSurface*)d->plugin_data[instance];
 }
 
-// One element's force (world frame): the law's, plus DRFT's term.
+// One element's force (world frame): the law's, plus DRFT's term, times the ramp tanh(max(n . v, 0) / v_reg) (as
+// Attached.element_forces in attach.py and `regularised` in finrft/laws/__init__.py).
 static void element_force(const FinrftSurface* p, const mjtNum normal[3], const mjtNum v[3], mjtNum depth,
                           mjtNum area, mjtNum f[3]) {
-  if (p->law == LAW_RFT3D)
-    finrft_rft3d_element_force(p->coef, p->xi, p->mu_surf, normal, v, depth, area, f);
-  else
-    finrft_li2013_element_force(p->coef, p->zeta, normal, v, depth, area, f);
+  kLaws[p->law].force(p, normal, v, depth, area, f);
   if (p->drft_lambda > 0) {
     mjtNum inertial[3];
     finrft_drft_element_force(p->drft_lambda, p->bulk_density, normal, v, depth, area, inertial);
     mju_addTo3(f, inertial);
   }
+  if (p->v_reg > 0) mju_scl3(f, f, tanh(fmax(mju_dot3(normal, v), 0) / p->v_reg));
 }
 
 void finrft_surface_wrench(const FinrftSurface* p, const mjData* d, const mjtNum twist[6], mjtNum wrench[6]) {

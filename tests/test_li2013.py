@@ -1,5 +1,6 @@
 """The Li, Zhang & Goldman 2013 law: the paper's sanity values, its symmetries and folding, the physics of its
-signs, and its C twin in the plugin library equal to the numpy law."""
+signs, its planar form (li2013-planar), and the C twins in the plugin library equal to the numpy law. Its 3D form:
+tests/test_li2013_3d.py."""
 
 import ctypes
 
@@ -7,7 +8,7 @@ import numpy as np
 import pytest
 
 from finrft import media, native
-from finrft.laws import li2013
+from finrft.laws import li2013, li2013_planar
 
 CM3 = li2013.N_PER_CM3
 RNG = np.random.default_rng(2013)
@@ -90,15 +91,19 @@ def test_plate_moving_normal_to_its_face_is_resisted():
     np.testing.assert_allclose(down, [[0, 0, 2.0]], atol=1e-12)
 
 
-def test_only_leading_submerged_elements_feel_the_medium():
+@pytest.mark.parametrize("form", [li2013, li2013_planar])
+def test_only_leading_submerged_elements_feel_the_medium(form):
     normal = np.array([[1.0, 0, 0]] * 3)
     velocity = np.array([[-0.1, 0, 0], [0.1, 0, 0], [0.1, 0, 0]])
-    force = li2013.element_forces(normal, velocity, [0.02, -0.01, 0.02], [1e-4] * 3)
+    force = form.element_forces(normal, velocity, [0.02, -0.01, 0.02], [1e-4] * 3)
     assert not force[:2].any() and force[2, 0] < 0
+
+
+def test_the_planar_form_has_no_force_across_the_plane_of_motion():
     # a face parallel to the plane of motion takes nothing; one tilted out of it, its share |n_p|
-    side = li2013.element_forces([[0.0, 1, 0]], [[0.1, 1e-3, 0]], [0.02], [1e-4])
-    tilted = li2013.element_forces([[0.6, 0.8, 0]], [[0.1, 0, 0]], [0.02], [1e-4])
-    face = li2013.element_forces([[1.0, 0, 0]], [[0.1, 0, 0]], [0.02], [1e-4])
+    side = li2013_planar.element_forces([[0.0, 1, 0]], [[0.1, 1e-3, 0]], [0.02], [1e-4])
+    tilted = li2013_planar.element_forces([[0.6, 0.8, 0]], [[0.1, 0, 0]], [0.02], [1e-4])
+    face = li2013_planar.element_forces([[1.0, 0, 0]], [[0.1, 0, 0]], [0.02], [1e-4])
     assert np.abs(side).max() < 1e-2 * np.abs(face).max()
     np.testing.assert_allclose(tilted, 0.6 * face, rtol=1e-12)
 
@@ -109,8 +114,9 @@ def library():
     lib = ctypes.CDLL(str(native.library_path()))
     double_p = ctypes.POINTER(ctypes.c_double)
     lib.finrft_li2013_alpha.argtypes = [double_p, ctypes.c_double, ctypes.c_double, ctypes.c_double, double_p]
-    lib.finrft_li2013_element_force.argtypes = [double_p, ctypes.c_double, double_p, double_p, ctypes.c_double,
-                                                ctypes.c_double, double_p]
+    for form in ("finrft_li2013_element_force", "finrft_li2013_planar_element_force"):
+        getattr(lib, form).argtypes = [double_p, ctypes.c_double, double_p, double_p, ctypes.c_double,
+                                       ctypes.c_double, double_p]
     return lib
 
 
@@ -132,21 +138,24 @@ def test_c_twin_alpha_equals_numpy(library, name):
         np.testing.assert_allclose(out, (x[i], z[i]), rtol=1e-12, atol=1e-12 * CM3)
 
 
-def test_c_twin_element_force_equals_numpy(library):
+@pytest.mark.parametrize("form, twin", [(li2013, "finrft_li2013_element_force"),
+                                        (li2013_planar, "finrft_li2013_planar_element_force")])
+def test_c_twin_element_force_equals_numpy(library, form, twin):
     coef = np.array(li2013.GENERIC.values())
     n = 3000
     normal = RNG.normal(size=(n, 3))
     velocity = RNG.normal(size=(n, 3))
     normal[:200, :2] = 0          # horizontal faces
+    normal[400:600, :2] *= 0.02   # nearly horizontal: the 3D form's blend
     velocity[100:300, :2] = 0     # vertical motion
     velocity[300:400, 2] = 0      # horizontal motion
     normal /= np.linalg.norm(normal, axis=1, keepdims=True)
     depth = RNG.uniform(-0.01, 0.05, n)
     area = RNG.uniform(1e-6, 1e-4, n)
-    expected = li2013.element_forces(normal, velocity, depth, area, 1.3)
+    expected = form.element_forces(normal, velocity, depth, area, 1.3)
     out = np.zeros(3)
     assert np.abs(expected).max(axis=1).astype(bool).sum() > n / 4
     for i in range(n):
-        library.finrft_li2013_element_force(_p(coef), 1.3, _p(normal[i].copy()), _p(velocity[i].copy()),
-                                            depth[i], area[i], _p(out))
+        getattr(library, twin)(_p(coef), 1.3, _p(normal[i].copy()), _p(velocity[i].copy()), depth[i], area[i],
+                               _p(out))
         np.testing.assert_allclose(out, expected[i], rtol=1e-12, atol=1e-12 * np.abs(expected[i]).max())

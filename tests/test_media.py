@@ -186,7 +186,7 @@ def _attached_plate_force(psi: float, mu_surf: float) -> np.ndarray:
       <geom type="box" size="{p['length'] / 2} {p['thickness'] / 2} {p['height'] / 2}"
             pos="0 0 {-p['depth'] - p['height'] / 2}" mass="1000"/></body></worldbody></mujoco>""")
     attach(spec, ["plate"], law="rft3d", rho_c=GRANULAR["bulk_density"], mu_int=GRANULAR["internal_friction"],
-           mu_surf=mu_surf, element_size=0.003)
+           mu_surf=mu_surf, element_size=0.003, v_reg=0.0)  # the bare law, as plate_forces
     model = spec.compile()
     data = mujoco.MjData(model)
     data.qvel[:] = 0.05 * np.array([math.cos(psi), math.sin(psi)])

@@ -314,6 +314,6 @@ def test_a_scene_file_selects_rft3d(tmp_path):
     assert np.abs(run.force_x).max() < 1e-9 * np.abs(run.force_z).max()
     for medium, message in [({"law": "rft3d", "internal_friction": 0.4}, "rft3d needs medium.bulk_density"),
                             ({"law": "rft3d", "bulk_density": 1500.0}, "rft3d needs medium.internal_friction"),
-                            ({"law": "surface"}, "use one of li2013, rft3d")]:
+                            ({"law": "surface"}, "use one of li2013, li2013-planar, rft3d")]:
         with pytest.raises(SceneError, match=message):
             scene_from_dict({"medium": medium}, IntrusionScene)

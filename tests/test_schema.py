@@ -54,7 +54,7 @@ def test_each_law_declares_its_own_keys_and_reads_only_them(tmp_path):
         assert set(module.given(Medium(law=name))) == set(module.PARAMETERS)
         assert set(module.SECTION_KEYS) == set(module.PARAMETERS)
         assert set(module.SECTION_KEYS.values()) <= {f.name for f in dataclasses.fields(Medium)}
-    assert laws.names(laws.SURFACE) == ("li2013", "rft3d")
+    assert laws.names(laws.SURFACE) == ("li2013", "li2013-planar", "rft3d")
 
 
 def test_a_key_declared_twice_must_agree():

@@ -6,9 +6,9 @@ joint along -z, prescribed at constant speed from ``clearance`` above the free s
 ``depth`` below it. Fully submerged, each face leading the motion takes alpha_z(beta, pi/2) times its
 area-weighted mean depth times its area (`finrft.laws.li2013`): a horizontal plate zeta * 1 N/cm^3 * w L d; a
 tilted one alpha_z(beta, pi/2) on its lower face and alpha_z(pi/2 - beta, pi/2) on its lower edge (a horizontal
-plate's edges move in their own plane and take nothing). At beta = 90 deg the faces are parallel to the motion,
-where `attach`'s leading test (n . v > 0) is decided by rounding: one face leads, which gives the limit from either
-side, alpha_z(pi/2, pi/2) = 0.128 zeta N/cm^3 on one face plus the edge (tested).
+plate's edges move in their own plane and take nothing). Each face's force is ramped by tanh(n . v / v_reg)
+(`finrft.laws.regularised`, medium.v_reg): at beta = 90 deg the faces are parallel to the motion and take nothing,
+only the lower edge does (tested).
 """
 
 from __future__ import annotations

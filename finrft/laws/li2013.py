@@ -1,5 +1,8 @@
 """The granular RFT law of Li, Zhang & Goldman, "A terradynamics of legged locomotion on granular media",
-Science 339:1408 (2013), in SI units: stresses per unit depth in N/m^3 (1 N/cm^3 = 1e6 N/m^3).
+Science 339:1408 (2013), in SI units: stresses per unit depth in N/m^3 (1 N/cm^3 = 1e6 N/m^3), extended to three
+dimensions by Treers, Cao & Stuart, "Granular resistive force theory implementation for three-dimensional
+trajectories", IEEE RA-L 6(2):1887 (2021): the law ``li2013`` (`element_forces`). Its planar form, each element a
+plate in the vertical plane of its own velocity, is the law ``li2013-planar`` (`finrft.laws.li2013_planar`).
 
 A plate element of area dA at depth |z| below the free surface, moving in the vertical x-z plane, feels
 
@@ -44,7 +47,7 @@ SECTION_KEYS = {"zeta": "zeta"}
 DENSITY = ""  # none of its parameters is the medium's bulk density
 FEEDS_ENERGY = ""  # dissipative over the whole range (the module's docstring)
 # The law's own keys of a scene's [medium] (`finrft.scene.Medium` is built from every surface law's).
-KEYS = (("zeta", float, field(1.0, "", "li2013: the medium's scale: alpha_z of a horizontal plate pushed down, in "
+KEYS = (("zeta", float, field(1.0, "", "li2013, li2013-planar: the medium's scale: alpha_z of a horizontal plate pushed down, in "
                               "N/cm^3 (the generic coefficients are scaled by it; only without medium.name)",
                               minimum=0.0)),)
 
@@ -97,42 +100,94 @@ def alpha(beta, gamma, zeta: float = 1.0, coefficients: Coefficients = GENERIC) 
     return zeta * np.where(mirrored, -alpha_x, alpha_x), zeta * alpha_z
 
 
-# Below this fraction of the speed, a velocity's horizontal part is taken as none (the motion is vertical).
-VERTICAL = 1e-12
+# Treers, Cao & Stuart's fitted weights of the two parts of an element's unit velocity (their public code
+# granular_rft_3D, rft_3D_body.m, as the wheel experimenters' code qishuny/3D-RFT-wheel uses them): f1 of the part
+# across the element's vertical plane, f23 of the part in it. Both are 0 at 0 and 1 at 1 (to 4e-16; to 2.6e-4 with the digits the paper prints).
+F1_FIT = (0.440850096954369, 3.62263982880971, 1.60910808139526, 0.832324700111401)
+F23_FIT = (1.99392673405210, 1.61146827229181, 0.973746396532650, 5.81083560370960)
+# A face tilted less than this from horizontal (|n_h| < sin 2.56 deg, Treers' |n_z| >= 1 - 1e-3) has no reliable
+# vertical plane of its own: its force blends towards that of the plane of the velocity (`element_forces`).
+HORIZONTAL = float(np.sqrt(1 - (1 - 1e-3) ** 2))
+SUMMARY = "Li 2013 in 3D (Treers, Cao & Stuart 2021: lateral and swimming forces)"
+
+
+def weights(across, within) -> tuple[np.ndarray, np.ndarray]:
+    """Treers et al.'s f1(|v1|) and f23(|v23|) of the sizes of the two parts of a unit velocity (each in [0, 1])."""
+    a, b, c, d = F1_FIT
+    f1 = a * (np.tanh(b * np.asarray(across, dtype=float) - c) + np.tanh(c)) / d
+    a, b, c, d = F23_FIT
+    f23 = a * (np.arctanh(b * np.asarray(within, dtype=float) - c) + np.arctanh(c)) / d
+    return f1, f23
+
+
+def _horizontal_unit(vector: np.ndarray, fallback: np.ndarray) -> np.ndarray:
+    """The unit horizontal direction (..., 2) of vectors (..., 3); fallback's where they are vertical, x where
+    both are."""
+    size = np.hypot(vector[..., 0], vector[..., 1])
+    other = np.hypot(fallback[..., 0], fallback[..., 1])
+    pick = np.where((size > 0)[..., None], vector[..., :2], fallback[..., :2])
+    length = np.where(size > 0, size, other)
+    return np.where((length > 0)[..., None], pick / np.where(length > 0, length, 1.0)[..., None], [1.0, 0.0])
+
+
+def _stress(normal: np.ndarray, unit: np.ndarray, e2: np.ndarray, zeta: float,
+            coefficients: Coefficients) -> np.ndarray:
+    """Treers et al.'s stress per unit depth (..., 3, N/m^3) on elements of unit normals ``normal`` moving along
+    ``unit`` (unit or zero velocity), the vertical plane being that of the horizontal unit vector e2 (..., 2)."""
+    e1 = np.stack([e2[..., 1], -e2[..., 0]], axis=-1)  # e2 x z
+    across = np.einsum("...i,...i", unit[..., :2], e1)
+    along = np.einsum("...i,...i", unit[..., :2], e2)
+    f1, f23 = weights(np.abs(across), np.hypot(along, unit[..., 2]))
+    # Li's angles in the (e2, z) plane: the paper's x axis is -e2 (as -r of the planar form)
+    beta = np.arctan2(-np.einsum("...i,...i", normal[..., :2], e2), normal[..., 2])
+    gamma = np.arctan2(-unit[..., 2], along)
+    alpha_x, alpha_z = alpha(beta, gamma, zeta, coefficients)
+    alpha_1 = alpha(0.0, 0.0, zeta, coefficients)[0]
+    stress = np.empty(normal.shape)
+    stress[..., :2] = -(f1 * alpha_1 * np.sign(across))[..., None] * e1 - (f23 * alpha_x)[..., None] * e2
+    stress[..., 2] = f23 * alpha_z
+    return stress
 
 
 def element_forces(normal: np.ndarray, velocity: np.ndarray, depth: np.ndarray, area: np.ndarray,
                    zeta: float = 1.0, coefficients: Coefficients = GENERIC) -> np.ndarray:
     """The force (N, 3), world frame, z up, on surface elements with outward unit normals (N, 3), velocities
-    (N, 3, m/s), depths below the free surface (N, m; <= 0 above it) and areas (N, m^2).
+    (N, 3, m/s), depths below the free surface (N, m; <= 0 above it) and areas (N, m^2): Li's law extended to 3D
+    by Treers, Cao & Stuart 2021 (RA-L 6(2):1887).
 
-    Each element is a plate in the vertical plane of its velocity: r = the horizontal direction of the velocity
-    (if the velocity is vertical, that of the normal; if both are vertical, any: the force is then vertical).
-    The normal's projection n_p onto that plane gives beta, the velocity gives gamma, and the element takes
-    alpha |z| dA |n_p|: |n_p| dA is the element's share of the plane's slices, as when the 2D law is integrated
-    over a body's width, so a face parallel to the plane of motion takes nothing. Only leading elements (n . v > 0)
-    below the surface feel the medium.
+    e2 is the horizontal direction of the normal and e1 = e2 x z; the unit velocity v^ splits into v1 = (v^.e1) e1,
+    across the element's vertical plane, and v23 = v^ - v1, in it. Li's alpha_x, alpha_z are taken at the angles
+    of n and v23 in the (e2, z) plane, and the stress per unit depth is
+
+        -f1(|v1|) alpha_1 sign(v^.e1) e1 - f23(|v23|) alpha_x e2 + f23(|v23|) alpha_z z,   alpha_1 = alpha_x(0, 0),
+
+    times depth and area; only leading elements (n . v > 0) below the surface feel the medium. The law is
+    unchanged by e2 -> -e2 (Li's mirror symmetry), so only e2's line matters. A motion in the element's vertical
+    plane is the planar form's (`finrft.laws.li2013_planar`): f23(1) = 1.
+
+    Degenerate cases, continuous: a horizontal face has no e2 of its own. Treers' code takes e2 along the
+    velocity's horizontal part for faces within 2.56 deg of horizontal (`HORIZONTAL`), a step at that tilt; here
+    the force blends from that plane's (w = 0, the planar form at an exactly horizontal face) to the normal's
+    plane's (w = 1, at 2.56 deg) with w = smoothstep(|n_h| / HORIZONTAL). When the velocity is vertical its plane
+    is the normal's; when both are vertical the force is vertical and any plane gives it. A zero velocity gives
+    zero (f1(0) = f23(0) = 0; and the element does not lead). Left: a face tilted less than 2.56 deg moving exactly
+    vertically takes the normal's plane for its share 1 - w, whatever its tilt's azimuth; a rate-independent law
+    still steps at v = 0, which `finrft.laws.regularised` ramps.
     """
     normal = np.asarray(normal, dtype=float)
     velocity = np.asarray(velocity, dtype=float)
-    horizontal = np.hypot(velocity[..., 0], velocity[..., 1])
-    moving_sideways = horizontal > VERTICAL * np.linalg.norm(velocity, axis=-1)
-    normal_sideways = np.hypot(normal[..., 0], normal[..., 1])
-    reference = np.where(moving_sideways[..., None], velocity, normal)[..., :2]
-    length = np.where(moving_sideways, horizontal, normal_sideways)
-    r = np.where((length > 0)[..., None], reference / np.where(length > 0, length, 1.0)[..., None], [1.0, 0.0])
-    n_r = np.einsum("...i,...i", normal[..., :2], r)
-    n_z = normal[..., 2]
-    v_r = np.einsum("...i,...i", velocity[..., :2], r)
-    beta = np.arctan2(-n_r, n_z)  # the paper's x axis is -r
-    gamma = np.arctan2(-velocity[..., 2], v_r)
-    alpha_x, alpha_z = alpha(beta, gamma, zeta, coefficients)
+    speed = np.linalg.norm(velocity, axis=-1)
+    unit = velocity / np.where(speed > 0, speed, 1.0)[..., None]
+    tilt = np.clip(np.hypot(normal[..., 0], normal[..., 1]) / HORIZONTAL, 0.0, 1.0)
+    w = tilt * tilt * (3 - 2 * tilt)
+    stress = _stress(normal, unit, _horizontal_unit(normal, velocity), zeta, coefficients)
+    flat = w < 1
+    if flat.any():
+        own = _stress(normal, unit, _horizontal_unit(velocity, normal), zeta, coefficients)
+        stress = np.where(flat[..., None], w[..., None] * stress + (1 - w)[..., None] * own, stress)
     leading = (np.einsum("...i,...i", normal, velocity) > 0) & (np.asarray(depth) > 0)
-    scale = np.where(leading, np.asarray(area) * np.asarray(depth) * np.hypot(n_r, n_z), 0.0)
-    force = np.empty(normal.shape)
-    force[..., :2] = -(scale * alpha_x)[..., None] * r
-    force[..., 2] = scale * alpha_z
-    return force
+    scale = np.where(leading, np.asarray(area) * np.asarray(depth), 0.0)
+    return scale[..., None] * stress
 
 
 def medium_parameters(medium) -> tuple[float, Coefficients]:

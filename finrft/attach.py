@@ -65,12 +65,17 @@ class Attached:
     surfaces: tuple[Surface, ...] = field(repr=False)
     drft_lambda: float = 0.0   # DRFT's lambda; 0: the quasi-static law alone
     bulk_density: float = 0.0  # kg/m^3, DRFT's rho_c (0: none known)
+    v_reg: float = 0.0         # m/s: the law's force weighted by tanh(max(n . v, 0) / v_reg); 0: unweighted
 
     def element_forces(self, normal: np.ndarray, velocity: np.ndarray, depth: np.ndarray, area: np.ndarray
                        ) -> np.ndarray:
         """The law's force on each element (world frame), as the native plugin computes it."""
         force = laws.module(self.law, laws.SURFACE).element_forces(normal, velocity, depth, area,
                                                                    coefficients=self.coefficients, **self.parameters)
+        if self.v_reg > 0:
+            # the leading face's switch made continuous, as element_force in finrft_surface.c
+            lead = np.maximum(np.einsum("...i,...i", normal, velocity), 0.0)
+            force = force * np.tanh(lead / self.v_reg)[..., None]
         if self.drft_lambda > 0:
             force = force + drft.element_forces(normal, velocity, depth, area, self.drft_lambda, self.bulk_density)
         return force
@@ -108,14 +113,26 @@ class SurfaceForces:
     def element_forces(self, m: mujoco.MjModel, d: mujoco.MjData, body: int, surface: Surface
                        ) -> tuple[np.ndarray, np.ndarray]:
         """Each element's force (N, 3) and its arm from the body's origin (N, 3), world frame."""
+        mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_XBODY, body, self._twist, 0)
+        return self.twist_forces(d, body, surface, self._twist)
+
+    def twist_forces(self, d: mujoco.MjData, body: int, surface: Surface, twist: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray]:
+        """As `element_forces`, had the body the ``twist`` (angular velocity, velocity of its origin; world
+        frame) at the positions of ``d``."""
         a = self.attached
         rotation = d.xmat[body].reshape(3, 3)
         arm = surface.centre @ rotation.T
         normal = surface.normal @ rotation.T
-        mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_XBODY, body, self._twist, 0)
-        velocity = self._twist[3:] + np.cross(self._twist[:3], arm)
+        velocity = twist[3:] + np.cross(twist[:3], arm)
         depth = a.surface_z - (d.xpos[body, 2] + arm[:, 2])
         return a.element_forces(normal, velocity, depth, surface.area), arm
+
+    def wrench(self, d: mujoco.MjData, body: int, surface: Surface, twist: np.ndarray) -> np.ndarray:
+        """The body's wrench (torque about its origin, force; world frame) at ``twist``: the twin of
+        finrft_surface_wrench, which the implicit steps difference."""
+        force, arm = self.twist_forces(d, body, surface, twist)
+        return np.concatenate([np.cross(arm, force).sum(axis=0), force.sum(axis=0)])
 
     def __call__(self, m: mujoco.MjModel, d: mujoco.MjData) -> None:
         for body, surface in self.bodies:
@@ -128,7 +145,7 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str, law: str = "li2013"
            surface_z: float = 0.0, element_size: float = 0.005, backend: str = "native",
            coefficients: li2013.Coefficients | rft3d.Coefficients | None = None, medium: str | None = None,
            rho_c: float | None = None, mu_int: float | None = None, mu_surf: float | None = None,
-           drft_lambda: float = 0.0, bulk_density: float | None = None) -> Attached:
+           drft_lambda: float = 0.0, bulk_density: float | None = None, v_reg: float = 0.0) -> Attached:
     """Add granular RFT to the named bodies of ``spec`` (before it is compiled).
 
     ``law``, a surface law of `finrft.laws`: ``li2013`` (`finrft.laws.li2013`) with ``coefficients`` (default:
@@ -139,6 +156,8 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str, law: str = "li2013"
     when it has them); ``drft_lambda`` (dimensionless, default 0: off):
     DRFT's rate-dependent term on top of either law (`finrft.laws.drft`), with the medium's density: rft3d's
     ``rho_c``, li2013's ``bulk_density`` (kg/m^3; else the catalogued ``medium``'s, if it has one);
+    ``v_reg`` (m/s, default 0: off): each element's force weighted by tanh(max(n . v, 0) / v_reg), which makes
+    the leading face's switch continuous (the implicit steps need a force that is);
     ``surface_z``: height of the free surface, m; ``element_size``: the elements' size, m; ``backend``:
     ``native`` (falls back to ``python``, with a warning, when the plugin cannot be loaded) or ``python`` (then run
     the model inside ``Attached.installed``). Raises `SceneError` on bad input.
@@ -146,6 +165,8 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str, law: str = "li2013"
     material = media.medium(medium) if medium is not None else None
     names = [bodies] if isinstance(bodies, str) else list(bodies)
     _check(names, law, surface_z, element_size, backend)
+    if not (math.isfinite(v_reg) and v_reg >= 0):
+        raise SceneError(f"attach: v_reg must be >= 0 m/s, got {v_reg!r}")
     module = laws.module(law, laws.SURFACE)
     parameters, catalogued = laws.surface_parameters(
         law, {"zeta": zeta, "rho_c": rho_c, "mu_int": mu_int, "mu_surf": mu_surf}, material, "attach")
@@ -176,7 +197,7 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str, law: str = "li2013"
         raise SceneError(f"attach: element_size = {element_size:g} m gives {total} elements, more than "
                          f"{MAX_ELEMENTS}: use a larger element_size")
     attached = Attached(law, parameters, float(surface_z), float(element_size), backend, coefficients,
-                        tuple(surfaces), float(drft_lambda), rho)
+                        tuple(surfaces), float(drft_lambda), rho, float(v_reg))
     if backend == "native":
         spec.activate_plugin(PLUGIN)
         for surface in surfaces:
@@ -210,6 +231,7 @@ def _bind(spec: mujoco.MjSpec, attached: Attached, surface: Surface) -> None:
         **({"drft_lambda": repr(attached.drft_lambda), "bulk_density": repr(attached.bulk_density)}
            if attached.drft_lambda > 0 else {}),
         "surface_z": repr(attached.surface_z),
+        **({"v_reg": repr(attached.v_reg)} if attached.v_reg > 0 else {}),
         "elements": " ".join(map(repr, elements.ravel().tolist())),  # repr: the Python backend's exact numbers
     }
     body = spec.body(surface.body)

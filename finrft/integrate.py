@@ -38,12 +38,14 @@ An adaptive stepper also steps ``until(d, t)``, to an instant off the grid (a re
 from __future__ import annotations
 
 import ctypes
+import functools
 from typing import Callable, Protocol, Sequence
 
 import mujoco
 import numpy as np
 
 from . import laws, methods, native
+from .attach import Attached
 from .coupling import penalty_stop
 from .models import ForceGroup
 from .native import Code
@@ -53,6 +55,9 @@ NEWTON_ITERATIONS = 50
 NEWTON_TOLERANCE = 1e-10
 NEWTON_HALVINGS = 10
 NEWTON_SHARE = 1e-2  # the adaptive newton method stops Newton's method at this share of the step's tolerance
+# The speed (m/s) on whose scale a body's wrench is differenced besides its own (SURFACE_SPEED in steppers.c): the
+# surface laws are rate-independent, so any step small against the elements' speeds would do but for a body at rest.
+SURFACE_SPEED = 1e-3
 
 
 def _native(name: str, *argtypes) -> Callable[..., int]:
@@ -73,15 +78,18 @@ class Stepper(Protocol):
 Counts = ctypes.c_int64 * 2  # steps taken, steps rejected: the native functions add to it
 
 
-def stepper(m: mujoco.MjModel, sim: Sim, backend: str, groups: Sequence[ForceGroup]) -> Stepper:
+def stepper(m: mujoco.MjModel, sim: Sim, backend: str, groups: Sequence[ForceGroup],
+            attached: Attached | None = None) -> Stepper:
     """The step function for a model: MuJoCo's step, or the implicit or adaptive method (native or numpy), as the
-    method's entry in `finrft.methods` says."""
+    method's entry in `finrft.methods` says. The implicit methods take implicitly the forces of the segment force
+    ``groups`` and of the ``attached`` surfaces (`finrft.attach`; the native steppers find both in the model's
+    plugin instances)."""
     method = methods.get(sim.method)
     iterations = NEWTON_ITERATIONS if method.newton else 1
     if method.adaptive:
-        return Adaptive(m, sim, method.stepper, iterations, backend, groups)
+        return Adaptive(m, sim, method.stepper, iterations, backend, groups, attached)
     if method.implicit:
-        return Implicit(m, method.stepper, iterations, backend, groups)
+        return Implicit(m, method.stepper, iterations, backend, groups, attached)
     return Explicit(m)
 
 
@@ -115,13 +123,13 @@ class Implicit(_Counted):
     """The implicit (one Newton iteration) or newton method, native or numpy."""
 
     def __init__(self, m: mujoco.MjModel, native_stepper: str, iterations: int, backend: str,
-                 groups: Sequence[ForceGroup]) -> None:
+                 groups: Sequence[ForceGroup], attached: Attached | None = None) -> None:
         super().__init__()
         self.m, self.iterations = m, iterations
         if backend == "native":
             self._native = _native(native_stepper, ctypes.c_int, ctypes.c_int, ctypes.POINTER(ctypes.c_int64))
         else:
-            self._native, self._python = None, PythonImplicit(m, groups)
+            self._native, self._python = None, PythonImplicit(m, groups, attached)
 
     def __call__(self, d: mujoco.MjData, n: int) -> int:
         if self._native is not None:
@@ -134,7 +142,7 @@ class Adaptive(_Counted):
     call to the next."""
 
     def __init__(self, m: mujoco.MjModel, sim: Sim, native_stepper: str, iterations: int, backend: str,
-                 groups: Sequence[ForceGroup]) -> None:
+                 groups: Sequence[ForceGroup], attached: Attached | None = None) -> None:
         super().__init__()
         self.m, self.max_step, self.tolerance, self.h = m, sim.max_step, sim.tolerance, sim.dt
         self.iterations = iterations
@@ -143,7 +151,7 @@ class Adaptive(_Counted):
             self._native = _native(native_stepper, ctypes.c_double, ctypes.c_double, ctypes.c_double,
                                    ctypes.c_int, ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int64))
         else:
-            self._implicit = PythonImplicit(m, groups)
+            self._implicit = PythonImplicit(m, groups, attached)
             # Newton's error, a velocity, moves a position by h times it: far below what the step's test allows
             self._implicit.tolerance = max(NEWTON_TOLERANCE, NEWTON_SHARE * sim.tolerance)
             self._spec = mujoco.mjtState.mjSTATE_INTEGRATION
@@ -214,9 +222,14 @@ class Adaptive(_Counted):
 class PythonImplicit:
     """The implicit method in numpy: the twin of finrft_implicit_step, used with the python backend."""
 
-    def __init__(self, m: mujoco.MjModel, groups: Sequence[ForceGroup]) -> None:
+    def __init__(self, m: mujoco.MjModel, groups: Sequence[ForceGroup], attached: Attached | None = None) -> None:
         self.m = m
         self.laws = [(laws.bind(g.law), g) for g in groups if len(g.sites)]
+        # per attached body: its id, the callback's wrench of it and the largest arm of its elements
+        forces = attached.callback(m) if attached is not None else None
+        self.bodies = [] if forces is None else [
+            (body, surface, forces.wrench, float(np.linalg.norm(surface.centre, axis=1).max(initial=0.0)) or 1.0)
+            for body, surface in forces.bodies]
         self.damping = np.diag(m.dof_damping)
         servo = [a for a in range(m.nu) if m.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT
                  and m.actuator_biastype[a] == mujoco.mjtBias.mjBIAS_AFFINE]
@@ -227,10 +240,16 @@ class PythonImplicit:
         self._rhs = np.zeros(m.nv)
         self.tolerance = NEWTON_TOLERANCE  # Newton's method stops when the change is below this times (1 + |qvel|)
 
-    def _segments(self, d: mujoco.MjData) -> tuple[list, list]:
-        """Per force group: its law, v_reg, the site Jacobians (k, 3, nv) and the segments' axes and normals; and per
-        penalty stop: its stiffness, hinge dofs and their deflections from the rest angle now."""
-        segments, stops = [], []
+    def _segments(self, d: mujoco.MjData) -> tuple[list, list, list]:
+        """Per force group: its law, v_reg, the site Jacobians (k, 3, nv) and the segments' axes and normals; per
+        penalty stop: its stiffness, hinge dofs and their deflections from the rest angle now; per attached body:
+        its wrench as a function of its twist at the present positions, the Jacobian of its origin (6, nv: angular
+        rows, then linear, the twist's order) and its elements' largest arm."""
+        segments, stops, bodies = [], [], []
+        for body, surface, wrench, reach in self.bodies:
+            jac = np.zeros((6, self.m.nv))
+            mujoco.mj_jacBody(self.m, d, jac[3:], jac[:3], body)
+            bodies.append((functools.partial(wrench, d, body, surface), jac, reach))
         for law, group in self.laws:
             jacp = np.zeros((len(group.sites), 3, self.m.nv))
             for row, site in zip(jacp, group.sites):
@@ -240,16 +259,16 @@ class PythonImplicit:
             if group.stop_stiffness > 0:
                 deflection = d.qpos[group.hinge_qpos] - self.m.qpos_spring[group.hinge_qpos]
                 stops.append((group.stop_stiffness, group.hinge_dof, deflection))
-        return segments, stops
+        return segments, stops, bodies
 
     @staticmethod
-    def _forces(forces: tuple[list, list], u: np.ndarray, ahead: float, slope: bool,
+    def _forces(forces: tuple[list, list, list], u: np.ndarray, ahead: float, slope: bool,
                 forward: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
-        """At generalised velocity ``u``: the RFT force plus the penalty stops' torque at the deflection they
-        reach ``ahead`` seconds on at ``u``, and, with ``slope``, its derivative in ``u`` (the law's by central
-        differences, or with ``forward`` forward ones: half the law's calls, for Newton's method, whose root does
-        not depend on the derivative)."""
-        segments, stops = forces
+        """At generalised velocity ``u``: the RFT force (segments' and attached surfaces') plus the penalty stops'
+        torque at the deflection they reach ``ahead`` seconds on at ``u``, and, with ``slope``, its derivative in
+        ``u`` (the laws' by central differences, or with ``forward`` forward ones: half the laws' calls, for
+        Newton's method, whose root does not depend on the derivative)."""
+        segments, stops, bodies = forces
         nv = len(u)
         force, jacobian = np.zeros(nv), np.zeros((nv, nv)) if slope else None
         for law, v_reg, jacp, x, y in segments:
@@ -263,6 +282,20 @@ class PythonImplicit:
                 step = h.sum(axis=2, keepdims=True) * (1 if forward else 2)
                 dfdv = np.swapaxes((up - down) / step, 1, 2)  # (k, force, v)
                 jacobian += np.einsum("kin,kij,kjm->nm", jacp, dfdv, jacp)
+        for wrench, jac, reach in bodies:
+            twist = jac @ u
+            w = wrench(twist)
+            force += jac.T @ w
+            if slope:
+                # steps that move the elements by about h whether linear or angular (h / reach), as body_wrench
+                h = 1e-6 * (np.linalg.norm(twist[3:]) + reach * np.linalg.norm(twist[:3]) + SURFACE_SPEED)
+                dwdt = np.empty((6, 6))
+                for k, step in enumerate(np.r_[np.full(3, h / reach), np.full(3, h)]):
+                    probe = np.zeros(6)
+                    probe[k] = step
+                    dwdt[:, k] = ((wrench(twist + probe) - w) / step if forward
+                                  else (wrench(twist + probe) - wrench(twist - probe)) / (2 * step))
+                jacobian += jac.T @ dwdt @ jac
         for stiffness, dofs, deflection in stops:
             torque, stiffening = penalty_stop(deflection + ahead * u[dofs], stiffness)
             force[dofs] += torque

@@ -117,6 +117,7 @@ typedef struct {
   double coef[60];       // the law's coefficients: li2013 the first 9, rft3d 60
   double zeta, xi, mu_surf, surface_z;
   double drft_lambda, bulk_density;  // drft_lambda = 0: no DRFT term
+  double v_reg;          // m/s, > 0: the law's force weighted by tanh(max(n . v, 0) / v_reg); 0: unweighted
   int body;
   int n;
   double* element;  // n x 7: centre, normal (body frame), area

@@ -14,6 +14,7 @@
 //   drft_lambda   optional, >= 0 (absent: 0, off): DRFT's dimensionless lambda
 //   bulk_density  with drft_lambda > 0: > 0, the medium's density rho_c, kg/m^3
 //   elements      "cx cy cz nx ny nz area ..." per element: centre and outward unit normal in the body frame, m^2
+//   v_reg         optional, > 0 (absent: unweighted), m/s: the law's force weighted by tanh(max(n . v, 0) / v_reg)
 //
 // No static state: everything lives in the per-mjData struct, so instances and threads never share memory; the
 // compute callback allocates nothing, unless it is stepped with another model than its instance's (rollout).
@@ -135,7 +136,7 @@ FINRFT_EXPORT void finrft_drft_element_force(double drft_lambda, double rho_c, c
 
 static const char* kSurfaceAttributes[] = {"law",       "coefficients", "zeta",        "xi",
                                            "mu_surf",   "surface_z",    "drft_lambda", "bulk_density",
-                                           "elements"};
+                                           "elements",  "v_reg"};
 
 static void surface_free(FinrftSurface* p) {
   if (!p) return;
@@ -226,6 +227,12 @@ static int surface_init(const mjModel* m, mjData* d, int instance) {
       return -1;
     }
   }
+  const char* v_reg = mj_getPluginConfig(m, instance, "v_reg");
+  if (v_reg && *v_reg && (read_scalar(m, instance, "v_reg", &p->v_reg) || !(p->v_reg > 0))) {
+    mju_warning("finrft.surface: config 'v_reg' must be > 0 m/s");
+    surface_free(p);
+    return -1;
+  }
   p->body = -1;
   for (int b = 0; b < m->nbody; b++) {
     if (m->body_plugin[b] != instance) continue;
@@ -286,6 +293,10 @@ static void element_force(const FinrftSurface* p, const mjtNum normal[3], const 
     finrft_rft3d_element_force(p->coef, p->xi, p->mu_surf, normal, v, depth, area, f);
   else
     finrft_li2013_element_force(p->coef, p->zeta, normal, v, depth, area, f);
+  if (p->v_reg > 0) {
+    // the leading face's switch made continuous: the law's force weighted by tanh(max(n . v, 0) / v_reg)
+    mju_scl3(f, f, tanh(mju_max(mju_dot3(normal, v), 0) / p->v_reg));
+  }
   if (p->drft_lambda > 0) {
     mjtNum inertial[3];
     finrft_drft_element_force(p->drft_lambda, p->bulk_density, normal, v, depth, area, inertial);

@@ -30,25 +30,43 @@
 #define NEWTON_HALVINGS 10
 // The adaptive newton method stops Newton's method at NEWTON_SHARE of the step's tolerance.
 #define NEWTON_SHARE 1e-2
+// The speed (m/s) on whose scale a body's wrench is differenced besides its own: the surface laws are
+// rate-independent, so any step small against the elements' speeds would do but for a body at rest.
+#define SURFACE_SPEED 1e-3
 
-// The forces the implicit methods take at the new velocity: every RFT segment of the model (its instance, site
-// Jacobian and axes at the current positions) and every penalty stop (its hinge and deflection now).
+// The forces the implicit methods take at the new velocity, as items: every RFT segment of the model (its instance,
+// site Jacobian and axes at the current positions), every body with attached surfaces (its finrft.surface instance
+// and the Jacobian of its origin, angular rows then linear: its twist) and every penalty stop (its hinge and
+// deflection now). Item i < n is segment i (3 rows); item n + j is body j (6 rows).
 typedef struct {
-  int ninst, n, nv, nstop;
+  int ninst, n, nbody, nv, nstop;
   const FinrftInstance** inst;  // ninst
   const FinrftInstance** law;   // n: each segment's instance
-  mjtNum* jacp;                 // n x 3 x nv
+  const FinrftSurface** surface;  // nbody: each body's instance
+  const mjData* data;           // the positions the surfaces' wrenches are taken at (the step's start)
+  mjtNum* jac;                  // per item, rows x nv: 3 per segment, then 6 per body
   mjtNum* axes;                 // n x 6: x axis, then normal y
-  int* ncol;                    // n: how many dofs move the segment (its body's chain)
-  int* col;                     // n x nv: those dofs, ascending; the Jacobian's other columns are zero
+  mjtNum* reach;                // nbody: the largest arm of a body's elements, m (angular steps are scaled by it)
+  int* ncol;                    // n + nbody: how many dofs move the item (its body's chain)
+  int* col;                     // (n + nbody) x nv: those dofs, ascending; the Jacobian's other columns are zero
   int* moves;                   // n: bit k set when the segment's velocity has a component k (a planar chain's
                                 // segments have no z row): dF/dv needs no difference along the others
-  mjtNum* vel;                  // n x 3: each segment's velocity at the last rft_force, world frame
-  mjtNum* seg_force;            // n x 3: the law's force there
+  mjtNum* vel;                  // per item its velocity at the last rft_force (3 per segment, then a body's twist,
+                                // 6), world frame
+  mjtNum* out;                  // per item the law's force (segment) or wrench (body: torque, force) there
   int* stop_dof;                // nstop
   mjtNum* stop_k;               // nstop, N m/rad
   mjtNum* stop_q;               // nstop, deflection from the rest angle
 } Segments;
+
+// Item i's rows (3 for a segment, 6 for a body) and the offsets of its Jacobian and of its velocity.
+static int item_rows(const Segments* s, int i) {
+  return i < s->n ? 3 : 6;
+}
+
+static size_t item_offset(const Segments* s, int i) {
+  return i < s->n ? 3 * (size_t)i : 3 * (size_t)s->n + 6 * (size_t)(i - s->n);
+}
 
 // Workspace of the Newton solve, all of size nv or nv x nv.
 typedef struct {
@@ -68,57 +86,83 @@ typedef struct {
   mjtNum newton_tolerance;  // Newton's method stops when the change is below this times (1 + |qvel|)
 } Workspace;
 
+// Item i's dofs (its body's chain, ascending) from `last`, the last dof of the nearest body up the tree that has
+// dofs (-1: none): the model's, for every step.
+static void item_chain(const mjModel* m, Segments* s, int i, int last) {
+  int* col = s->col + (size_t)s->nv * i;
+  int c = 0;
+  for (int dof = last; dof >= 0; dof = m->dof_parentid[dof]) col[c++] = dof;
+  for (int a = 0, b = c - 1; a < b; a++, b--) {
+    int t = col[a]; col[a] = col[b]; col[b] = t;
+  }
+  s->ncol[i] = c;
+}
+
 // The workspace of a model's steps, and `extra` more numbers (NULL when not wanted), on the mjData stack (after
 // mj_markStack); FINRFT_ARENA_FULL, before allocating anything, when the stack cannot hold it beside what
 // MuJoCo's own functions have needed of it.
 static int workspace_make(const mjModel* m, mjData* d, Workspace* ws, int extra, mjtNum** extra_out) {
   Segments* s = &ws->segments;
   int nv = m->nv;
-  s->ninst = s->n = s->nstop = 0;
+  s->ninst = s->n = s->nbody = s->nstop = 0;
   s->nv = nv;
-  int slot = -1;
+  s->data = d;
+  int slot = -1, surface_slot = -1;
   mjp_getPlugin(FINRFT_PLUGIN, &slot);
+  mjp_getPlugin(FINRFT_SURFACE_PLUGIN, &surface_slot);
   for (int i = 0; i < m->nplugin; i++) {
+    if (m->plugin[i] == surface_slot && finrft_surface_instance(m, d, i)) s->nbody++;
     const FinrftInstance* p = m->plugin[i] == slot ? finrft_instance(m, d, i) : NULL;
     if (!p) continue;
     s->ninst++;
     s->n += p->nseg;
     if (p->stop_stiffness > 0) s->nstop += p->nhinge;
   }
-  size_t numbers = 3 * (size_t)s->n * nv + 12 * (size_t)s->n + 2 * (size_t)s->nstop + 5 * (size_t)nv * nv +
-                   13 * (size_t)nv + extra;
-  size_t ints = (size_t)s->n * (nv + 2) + s->nstop;
-  size_t bytes = numbers * sizeof(mjtNum) + (s->ninst + s->n) * sizeof(void*) + ints * sizeof(int) + 1024;
+  int items = s->n + s->nbody;
+  size_t rows = 3 * (size_t)s->n + 6 * (size_t)s->nbody;
+  size_t numbers = rows * nv + 6 * (size_t)s->n + 2 * rows + s->nbody + 2 * (size_t)s->nstop +
+                   5 * (size_t)nv * nv + 13 * (size_t)nv + extra;
+  size_t ints = (size_t)items * (nv + 1) + s->n + s->nstop;
+  size_t pointers = s->ninst + s->n + s->nbody;
+  size_t bytes = numbers * sizeof(mjtNum) + pointers * sizeof(void*) + ints * sizeof(int) + 1024;
   if (bytes + d->maxuse_stack > d->narena - d->pstack - d->parena) return FINRFT_ARENA_FULL;
   s->inst = (const FinrftInstance**)mj_stackAllocByte(d, (s->ninst + 1) * sizeof(void*), sizeof(void*));
   s->law = (const FinrftInstance**)mj_stackAllocByte(d, (s->n + 1) * sizeof(void*), sizeof(void*));
-  s->jacp = mj_stackAllocNum(d, 3 * (size_t)s->n * nv + 1);
+  s->surface = (const FinrftSurface**)mj_stackAllocByte(d, (s->nbody + 1) * sizeof(void*), sizeof(void*));
+  s->jac = mj_stackAllocNum(d, rows * nv + 1);
   s->axes = mj_stackAllocNum(d, 6 * (size_t)s->n + 1);
-  s->ncol = mj_stackAllocInt(d, s->n + 1);
-  s->col = mj_stackAllocInt(d, (size_t)s->n * nv + 1);
+  s->reach = mj_stackAllocNum(d, s->nbody + 1);
+  s->ncol = mj_stackAllocInt(d, items + 1);
+  s->col = mj_stackAllocInt(d, (size_t)items * nv + 1);
   s->moves = mj_stackAllocInt(d, s->n + 1);
-  s->vel = mj_stackAllocNum(d, 3 * (size_t)s->n + 1);
-  s->seg_force = mj_stackAllocNum(d, 3 * (size_t)s->n + 1);
+  s->vel = mj_stackAllocNum(d, rows + 1);
+  s->out = mj_stackAllocNum(d, rows + 1);
   s->stop_dof = mj_stackAllocInt(d, s->nstop + 1);
   s->stop_k = mj_stackAllocNum(d, s->nstop + 1);
   s->stop_q = mj_stackAllocNum(d, s->nstop + 1);
-  for (int i = 0, k = 0; i < m->nplugin; i++) {
+  for (int i = 0, k = 0, j = 0; i < m->nplugin; i++) {
+    if (m->plugin[i] == surface_slot) {
+      const FinrftSurface* p = finrft_surface_instance(m, d, i);
+      if (p) s->surface[j++] = p;
+    }
     const FinrftInstance* p = m->plugin[i] == slot ? finrft_instance(m, d, i) : NULL;
     if (p) s->inst[k++] = p;
   }
-  // Each segment's law and the dofs that move it (its body's chain, ascending): the model's, for every step.
   for (int j = 0, i = 0; j < s->ninst; j++) {
     const FinrftInstance* p = s->inst[j];
     for (int k = 0; k < p->nseg; k++, i++) {
       s->law[i] = p;
-      int* col = s->col + (size_t)nv * i;
-      int c = 0;
-      for (int dof = p->last_dof[k]; dof >= 0; dof = m->dof_parentid[dof]) col[c++] = dof;
-      for (int a = 0, b = c - 1; a < b; a++, b--) {
-        int t = col[a]; col[a] = col[b]; col[b] = t;
-      }
-      s->ncol[i] = c;
+      item_chain(m, s, i, p->last_dof[k]);
     }
+  }
+  for (int j = 0; j < s->nbody; j++) {
+    const FinrftSurface* p = s->surface[j];
+    int b = p->body;
+    while (b > 0 && !m->body_dofnum[b]) b = m->body_parentid[b];
+    item_chain(m, s, s->n + j, b > 0 ? m->body_dofadr[b] + m->body_dofnum[b] - 1 : -1);
+    mjtNum reach = 0;
+    for (int e = 0; e < p->n; e++) reach = mju_max(reach, mju_norm3(p->element + 7 * e));
+    s->reach[j] = reach > 0 ? reach : 1;
   }
   Newton* w = &ws->w;
   mjtNum** squares[] = {&w->matrix, &w->jacobian, &w->slope, &ws->mass, &ws->start_slope};
@@ -140,7 +184,7 @@ static void segments_update(const mjModel* m, mjData* d, Segments* s) {
     const FinrftInstance* p = s->inst[j];
     for (int k = 0; k < p->nseg; k++, i++) {
       finrft_site_axes(d, p->site[k], s->axes + 6 * i, s->axes + 6 * i + 3);
-      mjtNum* jac = s->jacp + 3 * (size_t)s->nv * i;
+      mjtNum* jac = s->jac + item_offset(s, i) * s->nv;
       mj_jacSite(m, d, jac, NULL, p->site[k]);
       const int* col = s->col + (size_t)s->nv * i;
       s->moves[i] = 0;
@@ -155,6 +199,10 @@ static void segments_update(const mjModel* m, mjData* d, Segments* s) {
       s->stop_k[h] = p->stop_stiffness;
       s->stop_q[h] = d->qpos[p->hinge_qpos[k]] - m->qpos_spring[p->hinge_qpos[k]];
     }
+  }
+  for (int j = 0; j < s->nbody; j++) {
+    mjtNum* jac = s->jac + item_offset(s, s->n + j) * s->nv;  // angular rows, then linear: the twist's order
+    mj_jacBody(m, d, jac + 3 * s->nv, jac, s->surface[j]->body);
   }
 }
 
@@ -187,46 +235,88 @@ static void segment_jacobian(const FinrftInstance* p, const mjtNum v[3], const m
   }
 }
 
-// The RFT force at generalised velocity u (nv), each segment's velocity and force kept for rft_slope.
-static void rft_force(const Segments* s, const mjtNum* u, mjtNum* force) {
-  int nv = s->nv;
-  mju_zero(force, nv);
-  for (int i = 0; i < s->n; i++) {
-    const FinrftInstance* p = s->law[i];
-    const mjtNum* jac = s->jacp + 3 * (size_t)nv * i;
-    const int* col = s->col + (size_t)nv * i;
-    mjtNum *v = s->vel + 3 * i, *f = s->seg_force + 3 * i;
-    for (int r = 0; r < 3; r++) {
-      v[r] = 0;
-      for (int c = 0; c < s->ncol[i]; c++) v[r] += jac[r * nv + col[c]] * u[col[c]];
-    }
-    p->law->force(p->params, p->v_reg, v, s->axes + 6 * i, s->axes + 6 * i + 3, f);
-    for (int c = 0; c < s->ncol[i]; c++) {
-      int k = col[c];
-      force[k] += jac[k] * f[0] + jac[nv + k] * f[1] + jac[2 * nv + k] * f[2];
+// A body's wrench (6) at twist t, and into dw (6 x 6, row-major, when not NULL) its derivative in the twist: by
+// forward differences given the wrench w0 at t, else central ones. The steps are h = 1e-6 (|linear| + reach
+// |angular| + SURFACE_SPEED) along the linear components and h / reach along the angular ones, so that both move
+// the elements' velocities by about h.
+static void body_wrench(const Segments* s, int j, const mjtNum t[6], const mjtNum* w0, mjtNum w[6], mjtNum* dw) {
+  const FinrftSurface* p = s->surface[j];
+  if (w) finrft_surface_wrench(p, s->data, t, w);
+  if (!dw) return;
+  mjtNum reach = s->reach[j];
+  mjtNum h = 1e-6 * (mju_norm3(t + 3) + reach * mju_norm3(t) + SURFACE_SPEED);
+  for (int k = 0; k < 6; k++) {
+    mjtNum step = k < 3 ? h / reach : h, up[6], down[6], wu[6], wd[6];
+    mju_copy(up, t, 6);
+    mju_copy(down, t, 6);
+    up[k] += step;
+    down[k] -= step;
+    finrft_surface_wrench(p, s->data, up, wu);
+    if (w0) {
+      for (int r = 0; r < 6; r++) dw[6 * r + k] = (wu[r] - w0[r]) / step;
+    } else {
+      finrft_surface_wrench(p, s->data, down, wd);
+      for (int r = 0; r < 6; r++) dw[6 * r + k] = (wu[r] - wd[r]) / (2 * step);
     }
   }
 }
 
-// The derivative of the RFT force (nv x nv) at the velocity of the last rft_force, the law's by forward
-// differences when `forward`, else central ones.
+// The RFT force at generalised velocity u (nv), each item's velocity and force kept for rft_slope: segments'
+// J^T F(J u), bodies' J^T W(J u).
+static void rft_force(const Segments* s, const mjtNum* u, mjtNum* force) {
+  int nv = s->nv;
+  mju_zero(force, nv);
+  for (int i = 0; i < s->n + s->nbody; i++) {
+    int rows = item_rows(s, i);
+    const mjtNum* jac = s->jac + item_offset(s, i) * nv;
+    const int* col = s->col + (size_t)nv * i;
+    mjtNum *v = s->vel + item_offset(s, i), *f = s->out + item_offset(s, i);
+    for (int r = 0; r < rows; r++) {
+      v[r] = 0;
+      for (int c = 0; c < s->ncol[i]; c++) v[r] += jac[r * nv + col[c]] * u[col[c]];
+    }
+    if (i < s->n) {
+      s->law[i]->law->force(s->law[i]->params, s->law[i]->v_reg, v, s->axes + 6 * i, s->axes + 6 * i + 3, f);
+    } else {
+      body_wrench(s, i - s->n, v, NULL, f, NULL);
+    }
+    for (int c = 0; c < s->ncol[i]; c++) {
+      int k = col[c];
+      mjtNum sum = 0;
+      for (int r = 0; r < rows; r++) sum += jac[r * nv + k] * f[r];
+      force[k] += sum;
+    }
+  }
+}
+
+// The derivative of the RFT force (nv x nv) at the velocity of the last rft_force, J^T (dF/dv) J summed over the
+// items, the laws' by forward differences when `forward`, else central ones.
 static void rft_slope(const Segments* s, mjtNum* slope, int forward) {
   int nv = s->nv;
   mju_zero(slope, nv * nv);
-  for (int i = 0; i < s->n; i++) {
-    const mjtNum* jac = s->jacp + 3 * (size_t)nv * i;
+  for (int i = 0; i < s->n + s->nbody; i++) {
+    int rows = item_rows(s, i);
+    size_t at = item_offset(s, i);
+    const mjtNum* jac = s->jac + at * nv;
     const int* col = s->col + (size_t)nv * i;
-    mjtNum c[9], cj[3];
-    segment_jacobian(s->law[i], s->vel + 3 * i, s->axes + 6 * i, s->axes + 6 * i + 3,
-                     forward ? s->seg_force + 3 * i : NULL, s->moves[i], c);
+    mjtNum c[36], cj[6];
+    if (i < s->n) {
+      segment_jacobian(s->law[i], s->vel + at, s->axes + 6 * i, s->axes + 6 * i + 3,
+                       forward ? s->out + at : NULL, s->moves[i], c);
+    } else {
+      body_wrench(s, i - s->n, s->vel + at, forward ? s->out + at : NULL, NULL, c);
+    }
     for (int b = 0; b < s->ncol[i]; b++) {
       int k = col[b];
-      for (int r = 0; r < 3; r++) {
-        cj[r] = c[3 * r] * jac[k] + c[3 * r + 1] * jac[nv + k] + c[3 * r + 2] * jac[2 * nv + k];
+      for (int r = 0; r < rows; r++) {
+        cj[r] = 0;
+        for (int q = 0; q < rows; q++) cj[r] += c[rows * r + q] * jac[q * nv + k];
       }
       for (int a = 0; a < s->ncol[i]; a++) {
         int row = col[a];
-        slope[row * nv + k] += jac[row] * cj[0] + jac[nv + row] * cj[1] + jac[2 * nv + row] * cj[2];
+        mjtNum sum = 0;
+        for (int r = 0; r < rows; r++) sum += jac[r * nv + row] * cj[r];
+        slope[row * nv + k] += sum;
       }
     }
   }

@@ -1,7 +1,8 @@
 """Time stepping, ``sim.method`` (what each method is and can do: `finrft.methods`):
 
-- ``explicit``: MuJoCo's own step. The RFT force enters as it is, so light segments under a rate-independent
-  law need dt < 2 m v_reg / F or they chatter (MuJoCo's implicit integrators cannot see a plugin's derivative).
+- ``explicit``: MuJoCo's own step. The RFT force enters as it is, so light segments (and light attached bodies)
+  under a rate-independent law need dt < 2 m v_reg / F or they chatter (MuJoCo's implicit integrators cannot see
+  a plugin's derivative).
 - ``implicit``: a linearly implicit step, MuJoCo's implicitfast with the RFT force's velocity Jacobian added:
   (M - dt D) qacc' = M qacc, D = joint damping + affine actuator bias + sum_i J_i^T dF_i/dv J_i, then
   activations, qvel += dt qacc', positions and time as MuJoCo advances them. dF/dv comes from central
@@ -26,6 +27,26 @@
   engaging or a segment reversing is where the positions disagree, so the steps shrink there and grow through the
   quasi-static sweep between; a step whose Newton solve finds no root is rejected and retried at a quarter of its
   size.
+
+Attached surfaces (`finrft.attach`, the plugin finrft.surface: one instance per body) are taken implicitly as the
+segments are: F(u) sums, besides J_i^T F_i(J_i u) over the segments, J_b^T W_b(J_b u) over the bodies, J_b the
+6 x nv Jacobian of body b's origin (angular rows, then linear: its twist) and W_b its wrench (torque about the
+origin, force) at the positions of the step's start; dW/dtwist by differences of the same wrench, the linear steps
+1e-6 (|v| + reach |omega| + SURFACE_SPEED) and the angular ones that over the body's largest element arm (reach), so
+both move the elements by about the same speed. Both backends apply the surfaces' forces among MuJoCo's passive
+forces at v; the step takes them out there (``other``) and back at v + dv, as the segments'.
+
+What is stable, and why: a rate-independent force regularised over v_reg is, on a light body of mass m, a damper
+F / v_reg, which an explicit step resolves only for dt < 2 m v_reg / F (a 0.5 kg box resting on li2013 with
+v_reg = 1e-5 m/s: about 1 µs; at 1 ms its vertical velocity flips by 19 mm/s every step). Backward Euler in that
+force (``newton``) is unconditionally stable for it, a damper being dissipative at any step: the box dropped at
+1 ms settles at the closed-form depth and creeps at the regularised law's own rate, v_reg atanh(load / capacity),
+its velocity never reversing (tests/test_implicit_surfaces.py). The linearised step (``implicit``) has no such
+guarantee: it extrapolates the damper's slope at v across the switch and overshoots once dt F / (m v_reg) is large.
+Unweighted (``v_reg`` 0 in `attach`) a leading face switches its full stress on at n . v = 0, and the step may
+have no root: Newton's method then stops at the switch where it can (a box pressed onto the medium rests there,
+within 1e-9 m/s: the exact sticking solution), but a box thrown spinning into the medium finds no step at 1 ms
+(NOT_CONVERGED). Weighted over v_reg the force is continuous, and the step has a root near v.
 
 A stepper advances ``n`` steps of ``sim.dt`` and returns 0 or a `finrft.native.Code`: UNSTABLE when the state
 stopped being finite, STEP_TOO_SMALL when the adaptive step fell below 1e-9 s, NOT_CONVERGED when Newton's method

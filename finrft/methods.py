@@ -25,7 +25,8 @@ class Method:
 
 
 METHODS: dict[str, Method] = {m.name: m for m in (
-    Method("explicit", "MuJoCo's step, the RFT force as it is (light bodies need dt < 2 m v_reg / F)", implicit=False, newton=False, adaptive=False,
+    Method("explicit", "MuJoCo's step, the RFT force as it is (light bodies need dt < 2 m v_reg / F)",
+           implicit=False, newton=False, adaptive=False,
            stepper=""),
     Method("implicit", "implicitfast with the RFT force linearised in velocity", implicit=True, newton=False,
            adaptive=False, stepper="finrft_implicit_step"),

@@ -9,12 +9,14 @@
 // derivative of affine actuator bias) implicitly; on top of that the RFT force is taken at the new velocity: the
 // velocity change dv solves
 //     G(dv) = (M - dt D) dv - dt (f(v) - F(v) + F(v + dv)) = 0,
-// f every force MuJoCo computed at v, F the RFT force summed over every segment of every finrft.rft instance,
-// F(u) = sum_i J_i^T F_i(J_i u). A rate-independent law is a near-discontinuity in velocity, so a linearisation
-// at v (the first Newton iterate: the "implicit" method) overshoots on light segments; the "newton" method
+// f every force MuJoCo computed at v, F the RFT force summed over every segment of every finrft.rft instance and
+// every body of a finrft.surface instance, F(u) = sum_i J_i^T F_i(J_i u) + sum_b J_b^T W_b(J_b u), J_b the Jacobian
+// of body b's origin (angular rows, then linear) and W_b its wrench (finrft_surface_wrench) at that twist. A
+// rate-independent law is a near-discontinuity in velocity, so a linearisation at v (the first Newton iterate: the
+// "implicit" method) overshoots on light segments and bodies; the "newton" method
 // iterates, with a backtracking line search on |G|, to the root, the penalty stops taken at the new positions.
-// dF_i/dv comes from central differences of the same law (forward ones in Newton's method, whose root does not
-// depend on it), so no law needs a derivative of its own. Then, as
+// dF_i/dv and dW_b/dtwist come from central differences of the same law or wrench (forward ones in Newton's method,
+// whose root does not depend on it), so no law needs a derivative of its own. Then, as
 // MuJoCo's implicitfast: activations, qvel += dv, positions, time.
 
 #include <math.h>

@@ -59,14 +59,14 @@ typedef struct {
   int* stop_dof;                // nstop
   mjtNum* stop_k;               // nstop, N m/rad
   mjtNum* stop_q;               // nstop, deflection from the rest angle
-} Segments;
+} Items;
 
 // Item i's rows (3 for a segment, 6 for a body) and the offsets of its Jacobian and of its velocity.
-static int item_rows(const Segments* s, int i) {
+static int item_rows(const Items* s, int i) {
   return i < s->n ? 3 : 6;
 }
 
-static size_t item_offset(const Segments* s, int i) {
+static size_t item_offset(const Items* s, int i) {
   return i < s->n ? 3 * (size_t)i : 3 * (size_t)s->n + 6 * (size_t)(i - s->n);
 }
 
@@ -76,7 +76,7 @@ typedef struct {
 } Newton;
 
 typedef struct {
-  Segments segments;
+  Items items;
   Newton w;
   mjtNum* rhs;
   mjtNum* mass;     // nv x nv, the mass matrix at the step's start
@@ -90,7 +90,7 @@ typedef struct {
 
 // Item i's dofs (its body's chain, ascending) from `last`, the last dof of the nearest body up the tree that has
 // dofs (-1: none): the model's, for every step.
-static void item_chain(const mjModel* m, Segments* s, int i, int last) {
+static void item_chain(const mjModel* m, Items* s, int i, int last) {
   int* col = s->col + (size_t)s->nv * i;
   int c = 0;
   for (int dof = last; dof >= 0; dof = m->dof_parentid[dof]) col[c++] = dof;
@@ -104,7 +104,7 @@ static void item_chain(const mjModel* m, Segments* s, int i, int last) {
 // mj_markStack); FINRFT_ARENA_FULL, before allocating anything, when the stack cannot hold it beside what
 // MuJoCo's own functions have needed of it.
 static int workspace_make(const mjModel* m, mjData* d, Workspace* ws, int extra, mjtNum** extra_out) {
-  Segments* s = &ws->segments;
+  Items* s = &ws->items;
   int nv = m->nv;
   s->ninst = s->n = s->nbody = s->nstop = 0;
   s->nv = nv;
@@ -180,7 +180,7 @@ static int workspace_make(const mjModel* m, mjData* d, Workspace* ws, int extra,
 }
 
 // Fill in the Jacobians, axes, moved directions and deflections at the current positions (after mj_forward).
-static void segments_update(const mjModel* m, mjData* d, Segments* s) {
+static void items_update(const mjModel* m, mjData* d, Items* s) {
   int i = 0, h = 0;
   for (int j = 0; j < s->ninst; j++) {
     const FinrftInstance* p = s->inst[j];
@@ -241,7 +241,7 @@ static void segment_jacobian(const FinrftInstance* p, const mjtNum v[3], const m
 // forward differences given the wrench w0 at t, else central ones. The steps are h = 1e-6 (|linear| + reach
 // |angular| + SURFACE_SPEED) along the linear components and h / reach along the angular ones, so that both move
 // the elements' velocities by about h.
-static void body_wrench(const Segments* s, int j, const mjtNum t[6], const mjtNum* w0, mjtNum w[6], mjtNum* dw) {
+static void body_wrench(const Items* s, int j, const mjtNum t[6], const mjtNum* w0, mjtNum w[6], mjtNum* dw) {
   const FinrftSurface* p = s->surface[j];
   if (w) finrft_surface_wrench(p, s->data, t, w);
   if (!dw) return;
@@ -265,7 +265,7 @@ static void body_wrench(const Segments* s, int j, const mjtNum t[6], const mjtNu
 
 // The RFT force at generalised velocity u (nv), each item's velocity and force kept for rft_slope: segments'
 // J^T F(J u), bodies' J^T W(J u).
-static void rft_force(const Segments* s, const mjtNum* u, mjtNum* force) {
+static void rft_force(const Items* s, const mjtNum* u, mjtNum* force) {
   int nv = s->nv;
   mju_zero(force, nv);
   for (int i = 0; i < s->n + s->nbody; i++) {
@@ -293,7 +293,7 @@ static void rft_force(const Segments* s, const mjtNum* u, mjtNum* force) {
 
 // The derivative of the RFT force (nv x nv) at the velocity of the last rft_force, J^T (dF/dv) J summed over the
 // items, the laws' by forward differences when `forward`, else central ones.
-static void rft_slope(const Segments* s, mjtNum* slope, int forward) {
+static void rft_slope(const Items* s, mjtNum* slope, int forward) {
   int nv = s->nv;
   mju_zero(slope, nv * nv);
   for (int i = 0; i < s->n + s->nbody; i++) {
@@ -326,7 +326,7 @@ static void rft_slope(const Segments* s, mjtNum* slope, int forward) {
 
 // Add the penalty stops' torque at the deflection they reach after `ahead` seconds at u to force (when not NULL),
 // and its derivative in u to slope (when not NULL).
-static void stops_add(const Segments* s, const mjtNum* u, mjtNum ahead, mjtNum* force, mjtNum* slope) {
+static void stops_add(const Items* s, const mjtNum* u, mjtNum ahead, mjtNum* force, mjtNum* slope) {
   for (int h = 0; h < s->nstop; h++) {
     int dof = s->stop_dof[h];
     mjtNum stiffening, torque = finrft_stop_torque(s->stop_q[h] + ahead * u[dof], s->stop_k[h], &stiffening);
@@ -362,7 +362,7 @@ static int solve_dense(mjtNum* a, mjtNum* b, int n) {
 }
 
 // G(dv) into out: matrix dv - dt (other + F(qvel + dv)), the stops dt ahead; returns |G|.
-static mjtNum newton_residual(const Segments* s, Newton* w, const mjtNum* qvel, const mjtNum* dv, mjtNum dt,
+static mjtNum newton_residual(const Items* s, Newton* w, const mjtNum* qvel, const mjtNum* dv, mjtNum dt,
                               mjtNum* out) {
   int nv = s->nv;
   for (int i = 0; i < nv; i++) w->u[i] = qvel[i] + dv[i];
@@ -378,7 +378,7 @@ static mjtNum newton_residual(const Segments* s, Newton* w, const mjtNum* qvel, 
 // MuJoCo computed them); otherwise the root of G, with the stops' torque taken at the new positions too, by
 // Newton's method, or FINRFT_NOT_CONVERGED.
 static int newton_solve(Workspace* ws, const mjtNum* qvel, mjtNum dt, int iterations) {
-  const Segments* s = &ws->segments;
+  const Items* s = &ws->items;
   Newton* w = &ws->w;
   int nv = s->nv;
   mjtNum ahead = iterations > 1 ? dt : 0, tolerance = ws->newton_tolerance;
@@ -436,7 +436,7 @@ static void step_prepare(const mjModel* m, mjData* d, Workspace* ws) {
   mj_forward(m, d);
   mj_mulM(m, d, ws->rhs, d->qacc);
   mj_fullM(m, d, ws->mass);
-  segments_update(m, d, &ws->segments);
+  items_update(m, d, &ws->items);
   ws->start_ready = 0;
 }
 

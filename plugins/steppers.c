@@ -179,7 +179,8 @@ static int workspace_make(const mjModel* m, mjData* d, Workspace* ws, int extra,
   return 0;
 }
 
-// Fill in the Jacobians, axes, moved directions and deflections at the current positions (after mj_forward).
+// Fill in the segments' and bodies' Jacobians, the axes, moved directions and deflections at the current positions
+// (after mj_forward).
 static void items_update(const mjModel* m, mjData* d, Items* s) {
   int i = 0, h = 0;
   for (int j = 0; j < s->ninst; j++) {

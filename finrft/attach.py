@@ -133,14 +133,26 @@ class SurfaceForces:
     def element_forces(self, m: mujoco.MjModel, d: mujoco.MjData, body: int, surface: Surface
                        ) -> tuple[np.ndarray, np.ndarray]:
         """Each element's force (N, 3) and its arm from the body's origin (N, 3), world frame."""
+        mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_XBODY, body, self._twist, 0)
+        return self.twist_forces(d, body, surface, self._twist)
+
+    def twist_forces(self, d: mujoco.MjData, body: int, surface: Surface, twist: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray]:
+        """As `element_forces`, had the body the ``twist`` (angular velocity, velocity of its origin; world
+        frame) at the positions of ``d``."""
         a = self.attached
         rotation = d.xmat[body].reshape(3, 3)
         arm = surface.centre @ rotation.T
         normal = surface.normal @ rotation.T
-        mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_XBODY, body, self._twist, 0)
-        velocity = self._twist[3:] + np.cross(self._twist[:3], arm)
+        velocity = twist[3:] + np.cross(twist[:3], arm)
         depth = a.surface_z - (d.xpos[body, 2] + arm[:, 2])
         return a.element_forces(normal, velocity, depth, surface.area), arm
+
+    def wrench(self, d: mujoco.MjData, body: int, surface: Surface, twist: np.ndarray) -> np.ndarray:
+        """The body's wrench (torque about its origin, force; world frame) at ``twist``: the twin of
+        finrft_surface_wrench, which the implicit steps difference."""
+        force, arm = self.twist_forces(d, body, surface, twist)
+        return np.concatenate([np.cross(arm, force).sum(axis=0), force.sum(axis=0)])
 
     def __call__(self, m: mujoco.MjModel, d: mujoco.MjData) -> None:
         for body, surface in self.bodies:

@@ -22,7 +22,7 @@ from .convergence import ErrorLimits, Estimated, checked, max_difference, paired
 from .coupling import PythonCoupling, controlled, installed
 from .drive import Drive
 from .integrate import stepper
-from .stepping import instants, schedule, step_through
+from .stepping import chatter_speeds, instants, schedule, step_through
 
 
 @dataclass(frozen=True)
@@ -228,11 +228,14 @@ def _once(experiment: Experiment, scene: Any, built: Any, d: mujoco.MjData, prog
                 readings[name] = np.zeros((len(samples), *np.shape(value)))
             readings[name][i] = value
 
-    advance = stepper(m, scene.sim, built.backend, built.groups)
+    attached = getattr(built, "attached", None)
+    advance = stepper(m, scene.sim, built.backend, built.groups, attached)
+    watch = [] if companion else trial.watch
+    speeds = chatter_speeds(m, d, built.groups, attached, watch)
     with installed(python_forces(built) if built.backend == "python" else None), native.untimed(), \
             controlled(getattr(trial, "control", None)):
-        step_through(m, d, scene, advance, steps, starts, samples, trial.on_stroke, on_sample, progress,
-                     [] if companion else trial.watch, forward=not companion, stroke_time=drive.stroke_time)
+        step_through(m, d, scene, advance, steps, starts, samples, trial.on_stroke, on_sample, progress, watch,
+                     forward=not companion, stroke_time=drive.stroke_time, speeds=speeds)
     series, values = trial.finish(d, readings)
     result = Result(experiment=experiment, scene=scene,
                     time=instants(samples, steps, starts, scene.sim, drive.stroke_time), series=series, values=values,

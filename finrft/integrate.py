@@ -1,7 +1,8 @@
 """Time stepping, ``sim.method`` (what each method is and can do: `finrft.methods`):
 
-- ``explicit``: MuJoCo's own step. The RFT force enters as it is, so light segments under a rate-independent
-  law need dt < 2 m v_reg / F or they chatter (MuJoCo's implicit integrators cannot see a plugin's derivative).
+- ``explicit``: MuJoCo's own step. The RFT force enters as it is, so light segments (and light attached bodies)
+  under a rate-independent law need dt < 2 m v_reg / F or they chatter (MuJoCo's implicit integrators cannot see
+  a plugin's derivative).
 - ``implicit``: a linearly implicit step, MuJoCo's implicitfast with the RFT force's velocity Jacobian added:
   (M - dt D) qacc' = M qacc, D = joint damping + affine actuator bias + sum_i J_i^T dF_i/dv J_i, then
   activations, qvel += dt qacc', positions and time as MuJoCo advances them. dF/dv comes from central
@@ -27,6 +28,26 @@
   quasi-static sweep between; a step whose Newton solve finds no root is rejected and retried at a quarter of its
   size.
 
+Attached surfaces (`finrft.attach`, the plugin finrft.surface: one instance per body) are taken implicitly as the
+segments are: F(u) sums, besides J_i^T F_i(J_i u) over the segments, J_b^T W_b(J_b u) over the bodies, J_b the
+6 x nv Jacobian of body b's origin (angular rows, then linear: its twist) and W_b its wrench (torque about the
+origin, force) at the positions of the step's start; dW/dtwist by differences of the same wrench, the linear steps
+1e-6 (|v| + reach |omega| + SURFACE_SPEED) and the angular ones that over the body's largest element arm (reach), so
+both move the elements by about the same speed. Both backends apply the surfaces' forces among MuJoCo's passive
+forces at v; the step takes them out there (``other``) and back at v + dv, as the segments'.
+
+What is stable, and why: a rate-independent force regularised over v_reg is, on a light body of mass m, a damper
+F / v_reg, which an explicit step resolves only for dt < 2 m v_reg / F (a 0.5 kg box resting on li2013 with
+v_reg = 1e-5 m/s: about 1 µs; at 1 ms its vertical velocity flips by 19 mm/s every step). Backward Euler in that
+force (``newton``) is unconditionally stable for it, a damper being dissipative at any step: the box dropped at
+1 ms settles at the closed-form depth and creeps at the regularised law's own rate, v_reg atanh(load / capacity),
+its velocity never reversing (tests/test_implicit_surfaces.py). The linearised step (``implicit``) has no such
+guarantee: it extrapolates the damper's slope at v across the switch and overshoots once dt F / (m v_reg) is large.
+Unweighted (``v_reg`` 0 in `attach`) a leading face switches its full stress on at n . v = 0, and the step may
+have no root: Newton's method then stops at the switch where it can (a box pressed onto the medium rests there,
+within 1e-9 m/s: the exact sticking solution), but a box thrown spinning into the medium finds no step at 1 ms
+(NOT_CONVERGED). Weighted over v_reg the force is continuous, and the step has a root near v.
+
 A stepper advances ``n`` steps of ``sim.dt`` and returns 0 or a `finrft.native.Code`: UNSTABLE when the state
 stopped being finite, STEP_TOO_SMALL when the adaptive step fell below 1e-9 s, NOT_CONVERGED when Newton's method
 did not converge, ARENA_FULL when the native step's workspace does not fit on the mjData stack. It counts
@@ -38,12 +59,14 @@ An adaptive stepper also steps ``until(d, t)``, to an instant off the grid (a re
 from __future__ import annotations
 
 import ctypes
+import functools
 from typing import Callable, Protocol, Sequence
 
 import mujoco
 import numpy as np
 
 from . import laws, methods, native
+from .attach import Attached
 from .coupling import penalty_stop
 from .models import ForceGroup
 from .native import Code
@@ -53,6 +76,9 @@ NEWTON_ITERATIONS = 50
 NEWTON_TOLERANCE = 1e-10
 NEWTON_HALVINGS = 10
 NEWTON_SHARE = 1e-2  # the adaptive newton method stops Newton's method at this share of the step's tolerance
+# The speed (m/s) on whose scale a body's wrench is differenced besides its own (SURFACE_SPEED in steppers.c): the
+# surface laws are rate-independent, so any step small against the elements' speeds would do but for a body at rest.
+SURFACE_SPEED = 1e-3
 
 
 def _native(name: str, *argtypes) -> Callable[..., int]:
@@ -73,15 +99,18 @@ class Stepper(Protocol):
 Counts = ctypes.c_int64 * 2  # steps taken, steps rejected: the native functions add to it
 
 
-def stepper(m: mujoco.MjModel, sim: Sim, backend: str, groups: Sequence[ForceGroup]) -> Stepper:
+def stepper(m: mujoco.MjModel, sim: Sim, backend: str, groups: Sequence[ForceGroup],
+            attached: Attached | None = None) -> Stepper:
     """The step function for a model: MuJoCo's step, or the implicit or adaptive method (native or numpy), as the
-    method's entry in `finrft.methods` says."""
+    method's entry in `finrft.methods` says. The implicit methods take implicitly the forces of the segment force
+    ``groups`` and of the ``attached`` surfaces (`finrft.attach`; the native steppers find both in the model's
+    plugin instances)."""
     method = methods.get(sim.method)
     iterations = NEWTON_ITERATIONS if method.newton else 1
     if method.adaptive:
-        return Adaptive(m, sim, method.stepper, iterations, backend, groups)
+        return Adaptive(m, sim, method.stepper, iterations, backend, groups, attached)
     if method.implicit:
-        return Implicit(m, method.stepper, iterations, backend, groups)
+        return Implicit(m, method.stepper, iterations, backend, groups, attached)
     return Explicit(m)
 
 
@@ -115,13 +144,13 @@ class Implicit(_Counted):
     """The implicit (one Newton iteration) or newton method, native or numpy."""
 
     def __init__(self, m: mujoco.MjModel, native_stepper: str, iterations: int, backend: str,
-                 groups: Sequence[ForceGroup]) -> None:
+                 groups: Sequence[ForceGroup], attached: Attached | None = None) -> None:
         super().__init__()
         self.m, self.iterations = m, iterations
         if backend == "native":
             self._native = _native(native_stepper, ctypes.c_int, ctypes.c_int, ctypes.POINTER(ctypes.c_int64))
         else:
-            self._native, self._python = None, PythonImplicit(m, groups)
+            self._native, self._python = None, PythonImplicit(m, groups, attached)
 
     def __call__(self, d: mujoco.MjData, n: int) -> int:
         if self._native is not None:
@@ -134,7 +163,7 @@ class Adaptive(_Counted):
     call to the next."""
 
     def __init__(self, m: mujoco.MjModel, sim: Sim, native_stepper: str, iterations: int, backend: str,
-                 groups: Sequence[ForceGroup]) -> None:
+                 groups: Sequence[ForceGroup], attached: Attached | None = None) -> None:
         super().__init__()
         self.m, self.max_step, self.tolerance, self.h = m, sim.max_step, sim.tolerance, sim.dt
         self.iterations = iterations
@@ -143,7 +172,7 @@ class Adaptive(_Counted):
             self._native = _native(native_stepper, ctypes.c_double, ctypes.c_double, ctypes.c_double,
                                    ctypes.c_int, ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int64))
         else:
-            self._implicit = PythonImplicit(m, groups)
+            self._implicit = PythonImplicit(m, groups, attached)
             # Newton's error, a velocity, moves a position by h times it: far below what the step's test allows
             self._implicit.tolerance = max(NEWTON_TOLERANCE, NEWTON_SHARE * sim.tolerance)
             self._spec = mujoco.mjtState.mjSTATE_INTEGRATION
@@ -214,9 +243,14 @@ class Adaptive(_Counted):
 class PythonImplicit:
     """The implicit method in numpy: the twin of finrft_implicit_step, used with the python backend."""
 
-    def __init__(self, m: mujoco.MjModel, groups: Sequence[ForceGroup]) -> None:
+    def __init__(self, m: mujoco.MjModel, groups: Sequence[ForceGroup], attached: Attached | None = None) -> None:
         self.m = m
         self.laws = [(laws.bind(g.law), g) for g in groups if len(g.sites)]
+        # per attached body: its id, the callback's wrench of it and the largest arm of its elements
+        forces = attached.callback(m) if attached is not None else None
+        self.bodies = [] if forces is None else [
+            (body, surface, forces.wrench, float(np.linalg.norm(surface.centre, axis=1).max(initial=0.0)) or 1.0)
+            for body, surface in forces.bodies]
         self.damping = np.diag(m.dof_damping)
         servo = [a for a in range(m.nu) if m.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT
                  and m.actuator_biastype[a] == mujoco.mjtBias.mjBIAS_AFFINE]
@@ -227,10 +261,16 @@ class PythonImplicit:
         self._rhs = np.zeros(m.nv)
         self.tolerance = NEWTON_TOLERANCE  # Newton's method stops when the change is below this times (1 + |qvel|)
 
-    def _segments(self, d: mujoco.MjData) -> tuple[list, list]:
-        """Per force group: its law, v_reg, the site Jacobians (k, 3, nv) and the segments' axes and normals; and per
-        penalty stop: its stiffness, hinge dofs and their deflections from the rest angle now."""
-        segments, stops = [], []
+    def _segments(self, d: mujoco.MjData) -> tuple[list, list, list]:
+        """Per force group: its law, v_reg, the site Jacobians (k, 3, nv) and the segments' axes and normals; per
+        penalty stop: its stiffness, hinge dofs and their deflections from the rest angle now; per attached body:
+        its wrench as a function of its twist at the present positions, the Jacobian of its origin (6, nv: angular
+        rows, then linear, the twist's order) and its elements' largest arm."""
+        segments, stops, bodies = [], [], []
+        for body, surface, wrench, reach in self.bodies:
+            jac = np.zeros((6, self.m.nv))
+            mujoco.mj_jacBody(self.m, d, jac[3:], jac[:3], body)
+            bodies.append((functools.partial(wrench, d, body, surface), jac, reach))
         for law, group in self.laws:
             jacp = np.zeros((len(group.sites), 3, self.m.nv))
             for row, site in zip(jacp, group.sites):
@@ -240,16 +280,16 @@ class PythonImplicit:
             if group.stop_stiffness > 0:
                 deflection = d.qpos[group.hinge_qpos] - self.m.qpos_spring[group.hinge_qpos]
                 stops.append((group.stop_stiffness, group.hinge_dof, deflection))
-        return segments, stops
+        return segments, stops, bodies
 
     @staticmethod
-    def _forces(forces: tuple[list, list], u: np.ndarray, ahead: float, slope: bool,
+    def _forces(forces: tuple[list, list, list], u: np.ndarray, ahead: float, slope: bool,
                 forward: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
-        """At generalised velocity ``u``: the RFT force plus the penalty stops' torque at the deflection they
-        reach ``ahead`` seconds on at ``u``, and, with ``slope``, its derivative in ``u`` (the law's by central
-        differences, or with ``forward`` forward ones: half the law's calls, for Newton's method, whose root does
-        not depend on the derivative)."""
-        segments, stops = forces
+        """At generalised velocity ``u``: the RFT force (segments' and attached surfaces') plus the penalty stops'
+        torque at the deflection they reach ``ahead`` seconds on at ``u``, and, with ``slope``, its derivative in
+        ``u`` (the laws' by central differences, or with ``forward`` forward ones: half the laws' calls, for
+        Newton's method, whose root does not depend on the derivative)."""
+        segments, stops, bodies = forces
         nv = len(u)
         force, jacobian = np.zeros(nv), np.zeros((nv, nv)) if slope else None
         for law, v_reg, jacp, x, y in segments:
@@ -263,6 +303,20 @@ class PythonImplicit:
                 step = h.sum(axis=2, keepdims=True) * (1 if forward else 2)
                 dfdv = np.swapaxes((up - down) / step, 1, 2)  # (k, force, v)
                 jacobian += np.einsum("kin,kij,kjm->nm", jacp, dfdv, jacp)
+        for wrench, jac, reach in bodies:
+            twist = jac @ u
+            w = wrench(twist)
+            force += jac.T @ w
+            if slope:
+                # steps that move the elements by about h whether linear or angular (h / reach), as body_wrench
+                h = 1e-6 * (np.linalg.norm(twist[3:]) + reach * np.linalg.norm(twist[:3]) + SURFACE_SPEED)
+                dwdt = np.empty((6, 6))
+                for k, step in enumerate(np.r_[np.full(3, h / reach), np.full(3, h)]):
+                    probe = np.zeros(6)
+                    probe[k] = step
+                    dwdt[:, k] = ((wrench(twist + probe) - w) / step if forward
+                                  else (wrench(twist + probe) - wrench(twist - probe)) / (2 * step))
+                jacobian += jac.T @ dwdt @ jac
         for stiffness, dofs, deflection in stops:
             torque, stiffening = penalty_stop(deflection + ahead * u[dofs], stiffness)
             force[dofs] += torque

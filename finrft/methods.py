@@ -15,8 +15,9 @@ class Method:
 
     name: str
     doc: str
-    implicit: bool  # takes the segment law's force implicitly, differencing it on the scale of rft.v_reg; such a
-                    # method extends MuJoCo's implicitfast integrator and acts on the segment law's forces only
+    implicit: bool  # takes the RFT forces implicitly (the segment laws', differenced on the scale of rft.v_reg, and
+                    # the attached surfaces' wrench on each body, differenced in its twist); such a method extends
+                    # MuJoCo's implicitfast integrator; every other force is MuJoCo's, as implicitfast takes it
     newton: bool    # solves the step by Newton's method at the new velocity (else one linearised iteration)
     adaptive: bool  # sizes its steps by an error estimate (sim.tolerance, sim.max_step); sim.dt is then only the
                     # grid of reversals and samples
@@ -24,12 +25,13 @@ class Method:
 
 
 METHODS: dict[str, Method] = {m.name: m for m in (
-    Method("explicit", "MuJoCo's step, the RFT force as it is", implicit=False, newton=False, adaptive=False,
+    Method("explicit", "MuJoCo's step, the RFT force as it is (light bodies need dt < 2 m v_reg / F)",
+           implicit=False, newton=False, adaptive=False,
            stepper=""),
     Method("implicit", "implicitfast with the RFT force linearised in velocity", implicit=True, newton=False,
            adaptive=False, stepper="finrft_implicit_step"),
     Method("newton", "implicitfast with the RFT force at the new velocity, solved by Newton's method (stable and "
-           "accurate at large steps on light segments)", implicit=True, newton=True, adaptive=False,
+           "accurate at large steps on light segments and bodies)", implicit=True, newton=True, adaptive=False,
            stepper="finrft_implicit_step"),
     Method("adaptive", "implicit steps sized by an error estimate (dt is then the grid of samples)", implicit=True,
            newton=False, adaptive=True, stepper="finrft_adaptive_advance"),
@@ -49,8 +51,8 @@ def get(name: str) -> Method:
 
 
 def explicit() -> tuple[str, ...]:
-    """The methods that take no force implicitly: all a model with forces other than the segment law's (the
-    surface elements of `finrft.attach`) can use."""
+    """The methods that take no force implicitly (MuJoCo's own step): all a scene whose only moving joint is
+    prescribed (`finrft.scene.ExplicitSim`) needs, as no free body there feels the medium."""
     return tuple(name for name, m in METHODS.items() if not m.implicit)
 
 

@@ -193,8 +193,7 @@ def resolution(sim: Any) -> str:
         return f"{sim.method} method, tolerance {sim.tolerance:g}, steps up to {sim.max_step:g} s"
     return f"{sim.method} method, dt {sim.dt:g} s"
 
-# Newton, implicit and adaptive steps take implicitly only the forces of the segment law's force groups (the
-# plugin finrft.rft); the surface elements of `attach` are not among them, so a user's model runs MuJoCo's step.
+# The methods of a scene that offers MuJoCo's step only (ExplicitSim).
 EXPLICIT_ONLY = methods.explicit()
 
 
@@ -230,8 +229,7 @@ class Scene(Sections):
 
 @dataclass(frozen=True)
 class ExplicitSim(Sim):
-    method: str = _f("explicit", "", "explicit: MuJoCo's step (the only one here: the newton, implicit and "
-                     "adaptive steps treat only the segment law's forces implicitly, not attached surfaces)",
+    method: str = _f("explicit", "", "explicit: MuJoCo's step, the only method of this scene",
                      choices=EXPLICIT_ONLY)
 
 

@@ -13,8 +13,9 @@ from . import methods
 from .convergence import check_resolution, check_size, record_every
 from .drive import Drive
 from .errors import Chatter, NotConverged, SimulationFailed, SimulationUnstable, StepUnderflow
-from .integrate import Stepper
-from .models import ARMATURE_RATIO
+from .attach import Attached
+from .integrate import SURFACE_SPEED, Stepper
+from .models import ARMATURE_RATIO, ForceGroup
 from .native import Code, captured_warnings
 from .scene import ExplicitSim
 
@@ -90,23 +91,24 @@ def jump_velocities(m: mujoco.MjModel, d: mujoco.MjData, dofs: Sequence[int], ar
     d.qvel[:] += columns @ np.linalg.solve(columns[dofs], jump)
 
 
-# What a scene that steps explicitly only (a user's model, an intrusion: ExplicitSim) can change; such scenes have
-# no other method and no [rft] section.
+# What a scene that offers MuJoCo's step only (ExplicitSim) can change; such scenes have no other method.
 _EXPLICIT_ONLY = "reduce sim.dt or raise the inertias"
 
 
-def regularisation_key(scene: Any) -> str:
-    """The scene key of the regularisation speed: the segment law's (``rft.v_reg``), or a surface law's
-    (``medium.v_reg``) in a scene without [rft]."""
-    return "rft.v_reg" if hasattr(scene, "rft") else "medium.v_reg"
+def regularisation(scene: Any) -> str:
+    """The scene's key of the speed its rate-independent forces fade out below: a chain's ``rft.v_reg``, or for
+    attached surfaces ``medium.v_reg`` where the scene has it; "" when it has none."""
+    if hasattr(scene, "rft"):
+        return "rft.v_reg"
+    return "medium.v_reg" if hasattr(getattr(scene, "medium", None), "v_reg") else ""
 
 
 def unstable(scene: Any, t: float, messages: list[str], code: int = 1) -> SimulationUnstable:
-    sim = scene.sim
+    sim, key = scene.sim, regularisation(scene)
     if code == Code.STEP_TOO_SMALL:
         return StepUnderflow(
             f"the adaptive step fell below 1e-9 s at t = {t:.4g} s (tolerance {sim.tolerance:g}): raise "
-            f"sim.tolerance or {regularisation_key(scene)}, or use sim.method = 'newton'")
+            f"sim.tolerance{f' or {key}' if key else ''}, or use sim.method = 'newton'")
     if code == Code.ARENA_FULL:
         return SimulationUnstable(
             f"the native step's workspace does not fit in MuJoCo's arena at t = {t:.4g} s: use sim.backend = "
@@ -114,15 +116,14 @@ def unstable(scene: Any, t: float, messages: list[str], code: int = 1) -> Simula
     if code == Code.NOT_CONVERGED:
         return NotConverged(
             f"Newton's method of the implicit step did not converge at t = {t:.4g} s (dt = {sim.dt:g} s): reduce "
-            f"sim.dt or raise {regularisation_key(scene)}")
+            f"sim.dt{f' or raise {key}' if key else ''}")
     what = messages[0].rstrip(".") if messages else "the velocity became NaN or Inf"
-    v_reg = regularisation_key(scene)
     if isinstance(sim, ExplicitSim):
         advice = _EXPLICIT_ONLY
     elif not methods.get(sim.method).implicit:
-        advice = f"reduce sim.dt, raise the inertias or {v_reg}, or use sim.method = 'newton'"
+        advice = f"reduce sim.dt, raise the inertias{f' or {key}' if key else ''}, or use sim.method = 'newton'"
     else:
-        advice = f"reduce sim.dt (or sim.max_step), or raise {v_reg}"
+        advice = f"reduce sim.dt (or sim.max_step){f', or raise {key}' if key else ''}"
     return SimulationUnstable(f"simulation went unstable at t = {t:.4g} s ({what}) with method {sim.method}, "
                               f"integrator {sim.integrator}, dt = {sim.dt:g} s: {advice}")
 
@@ -131,7 +132,7 @@ def chatter(scene: Any, t: float) -> Chatter:
     sim = scene.sim
     advice = _EXPLICIT_ONLY if isinstance(sim, ExplicitSim) else "use sim.method = 'newton', or reduce sim.dt"
     return Chatter(
-        f"the RFT force chatters at t = {t:.4g} s (it reverses every step: the segments overshoot) with method "
+        f"the RFT force chatters at t = {t:.4g} s (it reverses every step: the velocities overshoot) with method "
         f"{sim.method}, dt = {sim.dt:g} s: {advice}")
 
 
@@ -159,25 +160,61 @@ def instants(events: np.ndarray, steps: int, starts: np.ndarray, sim: Any, strok
     return times
 
 
-# A recorded sample chatters when some watched dof's velocity, over the three steps before it, moves by more than
-# CHATTER_DV (rad/s or m/s) one way, back, and that way again: an overshoot every step (the RFT force reversing
-# each step), which no oscillation the steps resolve can do. Every PROBE_EVERY-th sample is checked (each check
-# costs three single steps); CHATTER_SAMPLES checked samples in a row stop the run.
-# Chatter swings a segment across the law's regularisation speed (v_reg ~ 1 mm/s at levers of centimetres:
-# ~0.1 rad/s); a hinge resting on a MuJoCo limit jitters by ~2e-3 rad/s, which is no chatter.
-CHATTER_DV = 1e-2
+# A recorded sample chatters when some watched dof's velocity, over the three steps before it, moves one way, back,
+# and that way again, each time by more than the dof's chatter speed (`chatter_speeds`): an overshoot every step (the
+# RFT force reversing each step), which no oscillation the steps resolve can do. Every PROBE_EVERY-th sample is
+# checked (each check costs three single steps); CHATTER_SAMPLES checked samples in a row stop the run.
 CHATTER_SAMPLES = 3
 PROBE_EVERY = 2
+# The chatter speed of a dof that moves no point the medium acts on (rad/s or m/s): no RFT force can reverse there.
+# A hinge resting on a MuJoCo limit jitters by ~2e-3 rad/s, which is no chatter.
+CHATTER_DV = 1e-2
+
+
+def chatter_speeds(m: mujoco.MjModel, d: mujoco.MjData, groups: Sequence[ForceGroup], attached: Attached | None,
+                   watch: Sequence[int]) -> np.ndarray:
+    """Per watched dof, the smallest swing of its velocity that counts as chatter, at the positions of ``d``: the
+    regularisation speed of the forces on the points it moves (a segment group's v_reg; an attached surface's
+    v_reg, or `integrate.SURFACE_SPEED` when unweighted) over the largest speed those points take per unit velocity
+    of the dof (its lever: 1 for a slide, the distance from a hinge's axis; for a body's elements, the speed of its
+    origin plus its largest arm times its angular velocity). A swing below it keeps every point within the law's
+    linear range, where the force does not reverse and an explicit step damps the swing out; above it the force
+    flips each step. So a body resting on the medium (its velocities settled to within v_reg) passes, whatever its
+    size, while the absolute threshold this replaces (CHATTER_DV for every dof) stopped a hexapod standing still
+    (0.026 rad/s on 3e-5 kg m^2 at 25 µs) and would pass a chattering 1 m lever. Dofs that move no such point keep
+    CHATTER_DV."""
+    watch = list(watch)
+    speeds = np.full(len(watch), np.inf)
+    if not watch:
+        return speeds
+    mujoco.mj_kinematics(m, d)
+    mujoco.mj_comPos(m, d)
+    jacp, jacr = np.zeros((3, m.nv)), np.zeros((3, m.nv))
+    for group in groups:
+        for site in group.sites:
+            mujoco.mj_jacSite(m, d, jacp, None, site)
+            lever = np.linalg.norm(jacp[:, watch], axis=0)
+            speeds = np.minimum(speeds, group.law.v_reg / np.where(lever > 0, lever, np.nan))
+    if attached is not None:
+        speed = attached.v_reg if attached.v_reg > 0 else SURFACE_SPEED
+        for surface in attached.surfaces:
+            mujoco.mj_jacBody(m, d, jacp, jacr, m.body(surface.body).id)
+            reach = np.linalg.norm(surface.centre, axis=1).max(initial=0.0)
+            lever = np.linalg.norm(jacp[:, watch], axis=0) + reach * np.linalg.norm(jacr[:, watch], axis=0)
+            speeds = np.minimum(speeds, speed / np.where(lever > 0, lever, np.nan))
+    return np.where(np.isfinite(speeds), speeds, CHATTER_DV)
 
 
 def step_through(m: mujoco.MjModel, d: mujoco.MjData, scene: Any, advance: Stepper, steps: int,
                  starts: np.ndarray, samples: np.ndarray, on_stroke: Callable[[int], None],
                  on_sample: Callable[[int], None], progress: Callable[[float], None] | None = None,
-                 watch: Sequence[int] = (), forward: bool = True, stroke_time: float = 0.0) -> None:
+                 watch: Sequence[int] = (), forward: bool = True, stroke_time: float = 0.0,
+                 speeds: np.ndarray | None = None) -> None:
     """Step a model through a run: ``on_stroke(k)`` as stroke k starts, ``on_sample(i)`` (after mj_forward, unless
     ``forward`` is False: then only the state is current) at recorded step ``samples[i]``; ``advance`` steps in
     chunks in between. Stops loudly if the state blows up, or if the ``watch`` dofs chatter (fixed-step methods:
-    the three steps before every PROBE_EVERY-th sample are taken one by one and checked when the run ends).
+    the three steps before every PROBE_EVERY-th sample are taken one by one and checked when the run ends), each
+    by more than its chatter speed in ``speeds`` (`chatter_speeds`; None: CHATTER_DV).
     An adaptive method steps to each event's `instants` (the drive's strokes last ``stroke_time``) and restarts its
     step size at each reversal."""
     adaptive = methods.get(scene.sim.method).adaptive
@@ -220,7 +257,8 @@ def step_through(m: mujoco.MjModel, d: mujoco.MjData, scene: Any, advance: Stepp
         # Samples whose three steps before lie in one stroke (a reversal jumps the velocities on purpose).
         inside = np.searchsorted(starts, samples - 3, side="right") == np.searchsorted(starts, samples, side="right")
         moves = np.diff(velocity, axis=1)
-        flips = np.any(np.all(np.abs(moves) > CHATTER_DV, axis=1) & np.all(moves[:, 1:] * moves[:, :-1] < 0, axis=1),
+        limit = np.full(len(watch), CHATTER_DV) if speeds is None else np.asarray(speeds)
+        flips = np.any(np.all(np.abs(moves) > limit, axis=1) & np.all(moves[:, 1:] * moves[:, :-1] < 0, axis=1),
                        axis=1) & inside
         probed = np.arange(0, len(samples), PROBE_EVERY)
         runs = np.convolve(flips[probed], np.ones(CHATTER_SAMPLES, int), mode="valid")

@@ -9,12 +9,14 @@
 // derivative of affine actuator bias) implicitly; on top of that the RFT force is taken at the new velocity: the
 // velocity change dv solves
 //     G(dv) = (M - dt D) dv - dt (f(v) - F(v) + F(v + dv)) = 0,
-// f every force MuJoCo computed at v, F the RFT force summed over every segment of every finrft.rft instance,
-// F(u) = sum_i J_i^T F_i(J_i u). A rate-independent law is a near-discontinuity in velocity, so a linearisation
-// at v (the first Newton iterate: the "implicit" method) overshoots on light segments; the "newton" method
+// f every force MuJoCo computed at v, F the RFT force summed over every segment of every finrft.rft instance and
+// every body of a finrft.surface instance, F(u) = sum_i J_i^T F_i(J_i u) + sum_b J_b^T W_b(J_b u), J_b the Jacobian
+// of body b's origin (angular rows, then linear) and W_b its wrench (finrft_surface_wrench) at that twist. A
+// rate-independent law is a near-discontinuity in velocity, so a linearisation at v (the first Newton iterate: the
+// "implicit" method) overshoots on light segments and bodies; the "newton" method
 // iterates, with a backtracking line search on |G|, to the root, the penalty stops taken at the new positions.
-// dF_i/dv comes from central differences of the same law (forward ones in Newton's method, whose root does not
-// depend on it), so no law needs a derivative of its own. Then, as
+// dF_i/dv and dW_b/dtwist come from central differences of the same law or wrench (forward ones in Newton's method,
+// whose root does not depend on it), so no law needs a derivative of its own. Then, as
 // MuJoCo's implicitfast: activations, qvel += dv, positions, time.
 
 #include <math.h>
@@ -30,25 +32,43 @@
 #define NEWTON_HALVINGS 10
 // The adaptive newton method stops Newton's method at NEWTON_SHARE of the step's tolerance.
 #define NEWTON_SHARE 1e-2
+// The speed (m/s) on whose scale a body's wrench is differenced besides its own: the surface laws are
+// rate-independent, so any step small against the elements' speeds would do but for a body at rest.
+#define SURFACE_SPEED 1e-3
 
-// The forces the implicit methods take at the new velocity: every RFT segment of the model (its instance, site
-// Jacobian and axes at the current positions) and every penalty stop (its hinge and deflection now).
+// The forces the implicit methods take at the new velocity, as items: every RFT segment of the model (its instance,
+// site Jacobian and axes at the current positions), every body with attached surfaces (its finrft.surface instance
+// and the Jacobian of its origin, angular rows then linear: its twist) and every penalty stop (its hinge and
+// deflection now). Item i < n is segment i (3 rows); item n + j is body j (6 rows).
 typedef struct {
-  int ninst, n, nv, nstop;
+  int ninst, n, nbody, nv, nstop;
   const FinrftInstance** inst;  // ninst
   const FinrftInstance** law;   // n: each segment's instance
-  mjtNum* jacp;                 // n x 3 x nv
+  const FinrftSurface** surface;  // nbody: each body's instance
+  const mjData* data;           // the positions the surfaces' wrenches are taken at (the step's start)
+  mjtNum* jac;                  // per item, rows x nv: 3 per segment, then 6 per body
   mjtNum* axes;                 // n x 6: x axis, then normal y
-  int* ncol;                    // n: how many dofs move the segment (its body's chain)
-  int* col;                     // n x nv: those dofs, ascending; the Jacobian's other columns are zero
+  mjtNum* reach;                // nbody: the largest arm of a body's elements, m (angular steps are scaled by it)
+  int* ncol;                    // n + nbody: how many dofs move the item (its body's chain)
+  int* col;                     // (n + nbody) x nv: those dofs, ascending; the Jacobian's other columns are zero
   int* moves;                   // n: bit k set when the segment's velocity has a component k (a planar chain's
                                 // segments have no z row): dF/dv needs no difference along the others
-  mjtNum* vel;                  // n x 3: each segment's velocity at the last rft_force, world frame
-  mjtNum* seg_force;            // n x 3: the law's force there
+  mjtNum* vel;                  // per item its velocity at the last rft_force (3 per segment, then a body's twist,
+                                // 6), world frame
+  mjtNum* out;                  // per item the law's force (segment) or wrench (body: torque, force) there
   int* stop_dof;                // nstop
   mjtNum* stop_k;               // nstop, N m/rad
   mjtNum* stop_q;               // nstop, deflection from the rest angle
-} Segments;
+} Items;
+
+// Item i's rows (3 for a segment, 6 for a body) and the offsets of its Jacobian and of its velocity.
+static int item_rows(const Items* s, int i) {
+  return i < s->n ? 3 : 6;
+}
+
+static size_t item_offset(const Items* s, int i) {
+  return i < s->n ? 3 * (size_t)i : 3 * (size_t)s->n + 6 * (size_t)(i - s->n);
+}
 
 // Workspace of the Newton solve, all of size nv or nv x nv.
 typedef struct {
@@ -56,7 +76,7 @@ typedef struct {
 } Newton;
 
 typedef struct {
-  Segments segments;
+  Items items;
   Newton w;
   mjtNum* rhs;
   mjtNum* mass;     // nv x nv, the mass matrix at the step's start
@@ -68,57 +88,83 @@ typedef struct {
   mjtNum newton_tolerance;  // Newton's method stops when the change is below this times (1 + |qvel|)
 } Workspace;
 
+// Item i's dofs (its body's chain, ascending) from `last`, the last dof of the nearest body up the tree that has
+// dofs (-1: none): the model's, for every step.
+static void item_chain(const mjModel* m, Items* s, int i, int last) {
+  int* col = s->col + (size_t)s->nv * i;
+  int c = 0;
+  for (int dof = last; dof >= 0; dof = m->dof_parentid[dof]) col[c++] = dof;
+  for (int a = 0, b = c - 1; a < b; a++, b--) {
+    int t = col[a]; col[a] = col[b]; col[b] = t;
+  }
+  s->ncol[i] = c;
+}
+
 // The workspace of a model's steps, and `extra` more numbers (NULL when not wanted), on the mjData stack (after
 // mj_markStack); FINRFT_ARENA_FULL, before allocating anything, when the stack cannot hold it beside what
 // MuJoCo's own functions have needed of it.
 static int workspace_make(const mjModel* m, mjData* d, Workspace* ws, int extra, mjtNum** extra_out) {
-  Segments* s = &ws->segments;
+  Items* s = &ws->items;
   int nv = m->nv;
-  s->ninst = s->n = s->nstop = 0;
+  s->ninst = s->n = s->nbody = s->nstop = 0;
   s->nv = nv;
-  int slot = -1;
+  s->data = d;
+  int slot = -1, surface_slot = -1;
   mjp_getPlugin(FINRFT_PLUGIN, &slot);
+  mjp_getPlugin(FINRFT_SURFACE_PLUGIN, &surface_slot);
   for (int i = 0; i < m->nplugin; i++) {
+    if (m->plugin[i] == surface_slot && finrft_surface_instance(m, d, i)) s->nbody++;
     const FinrftInstance* p = m->plugin[i] == slot ? finrft_instance(m, d, i) : NULL;
     if (!p) continue;
     s->ninst++;
     s->n += p->nseg;
     if (p->stop_stiffness > 0) s->nstop += p->nhinge;
   }
-  size_t numbers = 3 * (size_t)s->n * nv + 12 * (size_t)s->n + 2 * (size_t)s->nstop + 5 * (size_t)nv * nv +
-                   13 * (size_t)nv + extra;
-  size_t ints = (size_t)s->n * (nv + 2) + s->nstop;
-  size_t bytes = numbers * sizeof(mjtNum) + (s->ninst + s->n) * sizeof(void*) + ints * sizeof(int) + 1024;
+  int items = s->n + s->nbody;
+  size_t rows = 3 * (size_t)s->n + 6 * (size_t)s->nbody;
+  size_t numbers = rows * nv + 6 * (size_t)s->n + 2 * rows + s->nbody + 2 * (size_t)s->nstop +
+                   5 * (size_t)nv * nv + 13 * (size_t)nv + extra;
+  size_t ints = (size_t)items * (nv + 1) + s->n + s->nstop;
+  size_t pointers = s->ninst + s->n + s->nbody;
+  size_t bytes = numbers * sizeof(mjtNum) + pointers * sizeof(void*) + ints * sizeof(int) + 1024;
   if (bytes + d->maxuse_stack > d->narena - d->pstack - d->parena) return FINRFT_ARENA_FULL;
   s->inst = (const FinrftInstance**)mj_stackAllocByte(d, (s->ninst + 1) * sizeof(void*), sizeof(void*));
   s->law = (const FinrftInstance**)mj_stackAllocByte(d, (s->n + 1) * sizeof(void*), sizeof(void*));
-  s->jacp = mj_stackAllocNum(d, 3 * (size_t)s->n * nv + 1);
+  s->surface = (const FinrftSurface**)mj_stackAllocByte(d, (s->nbody + 1) * sizeof(void*), sizeof(void*));
+  s->jac = mj_stackAllocNum(d, rows * nv + 1);
   s->axes = mj_stackAllocNum(d, 6 * (size_t)s->n + 1);
-  s->ncol = mj_stackAllocInt(d, s->n + 1);
-  s->col = mj_stackAllocInt(d, (size_t)s->n * nv + 1);
+  s->reach = mj_stackAllocNum(d, s->nbody + 1);
+  s->ncol = mj_stackAllocInt(d, items + 1);
+  s->col = mj_stackAllocInt(d, (size_t)items * nv + 1);
   s->moves = mj_stackAllocInt(d, s->n + 1);
-  s->vel = mj_stackAllocNum(d, 3 * (size_t)s->n + 1);
-  s->seg_force = mj_stackAllocNum(d, 3 * (size_t)s->n + 1);
+  s->vel = mj_stackAllocNum(d, rows + 1);
+  s->out = mj_stackAllocNum(d, rows + 1);
   s->stop_dof = mj_stackAllocInt(d, s->nstop + 1);
   s->stop_k = mj_stackAllocNum(d, s->nstop + 1);
   s->stop_q = mj_stackAllocNum(d, s->nstop + 1);
-  for (int i = 0, k = 0; i < m->nplugin; i++) {
+  for (int i = 0, k = 0, j = 0; i < m->nplugin; i++) {
+    if (m->plugin[i] == surface_slot) {
+      const FinrftSurface* p = finrft_surface_instance(m, d, i);
+      if (p) s->surface[j++] = p;
+    }
     const FinrftInstance* p = m->plugin[i] == slot ? finrft_instance(m, d, i) : NULL;
     if (p) s->inst[k++] = p;
   }
-  // Each segment's law and the dofs that move it (its body's chain, ascending): the model's, for every step.
   for (int j = 0, i = 0; j < s->ninst; j++) {
     const FinrftInstance* p = s->inst[j];
     for (int k = 0; k < p->nseg; k++, i++) {
       s->law[i] = p;
-      int* col = s->col + (size_t)nv * i;
-      int c = 0;
-      for (int dof = p->last_dof[k]; dof >= 0; dof = m->dof_parentid[dof]) col[c++] = dof;
-      for (int a = 0, b = c - 1; a < b; a++, b--) {
-        int t = col[a]; col[a] = col[b]; col[b] = t;
-      }
-      s->ncol[i] = c;
+      item_chain(m, s, i, p->last_dof[k]);
     }
+  }
+  for (int j = 0; j < s->nbody; j++) {
+    const FinrftSurface* p = s->surface[j];
+    int b = p->body;
+    while (b > 0 && !m->body_dofnum[b]) b = m->body_parentid[b];
+    item_chain(m, s, s->n + j, b > 0 ? m->body_dofadr[b] + m->body_dofnum[b] - 1 : -1);
+    mjtNum reach = 0;
+    for (int e = 0; e < p->n; e++) reach = mju_max(reach, mju_norm3(p->element + 7 * e));
+    s->reach[j] = reach > 0 ? reach : 1;
   }
   Newton* w = &ws->w;
   mjtNum** squares[] = {&w->matrix, &w->jacobian, &w->slope, &ws->mass, &ws->start_slope};
@@ -133,14 +179,15 @@ static int workspace_make(const mjModel* m, mjData* d, Workspace* ws, int extra,
   return 0;
 }
 
-// Fill in the Jacobians, axes, moved directions and deflections at the current positions (after mj_forward).
-static void segments_update(const mjModel* m, mjData* d, Segments* s) {
+// Fill in the segments' and bodies' Jacobians, the axes, moved directions and deflections at the current positions
+// (after mj_forward).
+static void items_update(const mjModel* m, mjData* d, Items* s) {
   int i = 0, h = 0;
   for (int j = 0; j < s->ninst; j++) {
     const FinrftInstance* p = s->inst[j];
     for (int k = 0; k < p->nseg; k++, i++) {
       finrft_site_axes(d, p->site[k], s->axes + 6 * i, s->axes + 6 * i + 3);
-      mjtNum* jac = s->jacp + 3 * (size_t)s->nv * i;
+      mjtNum* jac = s->jac + item_offset(s, i) * s->nv;
       mj_jacSite(m, d, jac, NULL, p->site[k]);
       const int* col = s->col + (size_t)s->nv * i;
       s->moves[i] = 0;
@@ -155,6 +202,10 @@ static void segments_update(const mjModel* m, mjData* d, Segments* s) {
       s->stop_k[h] = p->stop_stiffness;
       s->stop_q[h] = d->qpos[p->hinge_qpos[k]] - m->qpos_spring[p->hinge_qpos[k]];
     }
+  }
+  for (int j = 0; j < s->nbody; j++) {
+    mjtNum* jac = s->jac + item_offset(s, s->n + j) * s->nv;  // angular rows, then linear: the twist's order
+    mj_jacBody(m, d, jac + 3 * s->nv, jac, s->surface[j]->body);
   }
 }
 
@@ -187,46 +238,88 @@ static void segment_jacobian(const FinrftInstance* p, const mjtNum v[3], const m
   }
 }
 
-// The RFT force at generalised velocity u (nv), each segment's velocity and force kept for rft_slope.
-static void rft_force(const Segments* s, const mjtNum* u, mjtNum* force) {
-  int nv = s->nv;
-  mju_zero(force, nv);
-  for (int i = 0; i < s->n; i++) {
-    const FinrftInstance* p = s->law[i];
-    const mjtNum* jac = s->jacp + 3 * (size_t)nv * i;
-    const int* col = s->col + (size_t)nv * i;
-    mjtNum *v = s->vel + 3 * i, *f = s->seg_force + 3 * i;
-    for (int r = 0; r < 3; r++) {
-      v[r] = 0;
-      for (int c = 0; c < s->ncol[i]; c++) v[r] += jac[r * nv + col[c]] * u[col[c]];
-    }
-    p->law->force(p->params, p->v_reg, v, s->axes + 6 * i, s->axes + 6 * i + 3, f);
-    for (int c = 0; c < s->ncol[i]; c++) {
-      int k = col[c];
-      force[k] += jac[k] * f[0] + jac[nv + k] * f[1] + jac[2 * nv + k] * f[2];
+// A body's wrench (6) at twist t, and into dw (6 x 6, row-major, when not NULL) its derivative in the twist: by
+// forward differences given the wrench w0 at t, else central ones. The steps are h = 1e-6 (|linear| + reach
+// |angular| + SURFACE_SPEED) along the linear components and h / reach along the angular ones, so that both move
+// the elements' velocities by about h.
+static void body_wrench(const Items* s, int j, const mjtNum t[6], const mjtNum* w0, mjtNum w[6], mjtNum* dw) {
+  const FinrftSurface* p = s->surface[j];
+  if (w) finrft_surface_wrench(p, s->data, t, w);
+  if (!dw) return;
+  mjtNum reach = s->reach[j];
+  mjtNum h = 1e-6 * (mju_norm3(t + 3) + reach * mju_norm3(t) + SURFACE_SPEED);
+  for (int k = 0; k < 6; k++) {
+    mjtNum step = k < 3 ? h / reach : h, up[6], down[6], wu[6], wd[6];
+    mju_copy(up, t, 6);
+    mju_copy(down, t, 6);
+    up[k] += step;
+    down[k] -= step;
+    finrft_surface_wrench(p, s->data, up, wu);
+    if (w0) {
+      for (int r = 0; r < 6; r++) dw[6 * r + k] = (wu[r] - w0[r]) / step;
+    } else {
+      finrft_surface_wrench(p, s->data, down, wd);
+      for (int r = 0; r < 6; r++) dw[6 * r + k] = (wu[r] - wd[r]) / (2 * step);
     }
   }
 }
 
-// The derivative of the RFT force (nv x nv) at the velocity of the last rft_force, the law's by forward
-// differences when `forward`, else central ones.
-static void rft_slope(const Segments* s, mjtNum* slope, int forward) {
+// The RFT force at generalised velocity u (nv), each item's velocity and force kept for rft_slope: segments'
+// J^T F(J u), bodies' J^T W(J u).
+static void rft_force(const Items* s, const mjtNum* u, mjtNum* force) {
+  int nv = s->nv;
+  mju_zero(force, nv);
+  for (int i = 0; i < s->n + s->nbody; i++) {
+    int rows = item_rows(s, i);
+    const mjtNum* jac = s->jac + item_offset(s, i) * nv;
+    const int* col = s->col + (size_t)nv * i;
+    mjtNum *v = s->vel + item_offset(s, i), *f = s->out + item_offset(s, i);
+    for (int r = 0; r < rows; r++) {
+      v[r] = 0;
+      for (int c = 0; c < s->ncol[i]; c++) v[r] += jac[r * nv + col[c]] * u[col[c]];
+    }
+    if (i < s->n) {
+      s->law[i]->law->force(s->law[i]->params, s->law[i]->v_reg, v, s->axes + 6 * i, s->axes + 6 * i + 3, f);
+    } else {
+      body_wrench(s, i - s->n, v, NULL, f, NULL);
+    }
+    for (int c = 0; c < s->ncol[i]; c++) {
+      int k = col[c];
+      mjtNum sum = 0;
+      for (int r = 0; r < rows; r++) sum += jac[r * nv + k] * f[r];
+      force[k] += sum;
+    }
+  }
+}
+
+// The derivative of the RFT force (nv x nv) at the velocity of the last rft_force, J^T (dF/dv) J summed over the
+// items, the laws' by forward differences when `forward`, else central ones.
+static void rft_slope(const Items* s, mjtNum* slope, int forward) {
   int nv = s->nv;
   mju_zero(slope, nv * nv);
-  for (int i = 0; i < s->n; i++) {
-    const mjtNum* jac = s->jacp + 3 * (size_t)nv * i;
+  for (int i = 0; i < s->n + s->nbody; i++) {
+    int rows = item_rows(s, i);
+    size_t at = item_offset(s, i);
+    const mjtNum* jac = s->jac + at * nv;
     const int* col = s->col + (size_t)nv * i;
-    mjtNum c[9], cj[3];
-    segment_jacobian(s->law[i], s->vel + 3 * i, s->axes + 6 * i, s->axes + 6 * i + 3,
-                     forward ? s->seg_force + 3 * i : NULL, s->moves[i], c);
+    mjtNum c[36], cj[6];
+    if (i < s->n) {
+      segment_jacobian(s->law[i], s->vel + at, s->axes + 6 * i, s->axes + 6 * i + 3,
+                       forward ? s->out + at : NULL, s->moves[i], c);
+    } else {
+      body_wrench(s, i - s->n, s->vel + at, forward ? s->out + at : NULL, NULL, c);
+    }
     for (int b = 0; b < s->ncol[i]; b++) {
       int k = col[b];
-      for (int r = 0; r < 3; r++) {
-        cj[r] = c[3 * r] * jac[k] + c[3 * r + 1] * jac[nv + k] + c[3 * r + 2] * jac[2 * nv + k];
+      for (int r = 0; r < rows; r++) {
+        cj[r] = 0;
+        for (int q = 0; q < rows; q++) cj[r] += c[rows * r + q] * jac[q * nv + k];
       }
       for (int a = 0; a < s->ncol[i]; a++) {
         int row = col[a];
-        slope[row * nv + k] += jac[row] * cj[0] + jac[nv + row] * cj[1] + jac[2 * nv + row] * cj[2];
+        mjtNum sum = 0;
+        for (int r = 0; r < rows; r++) sum += jac[r * nv + row] * cj[r];
+        slope[row * nv + k] += sum;
       }
     }
   }
@@ -234,7 +327,7 @@ static void rft_slope(const Segments* s, mjtNum* slope, int forward) {
 
 // Add the penalty stops' torque at the deflection they reach after `ahead` seconds at u to force (when not NULL),
 // and its derivative in u to slope (when not NULL).
-static void stops_add(const Segments* s, const mjtNum* u, mjtNum ahead, mjtNum* force, mjtNum* slope) {
+static void stops_add(const Items* s, const mjtNum* u, mjtNum ahead, mjtNum* force, mjtNum* slope) {
   for (int h = 0; h < s->nstop; h++) {
     int dof = s->stop_dof[h];
     mjtNum stiffening, torque = finrft_stop_torque(s->stop_q[h] + ahead * u[dof], s->stop_k[h], &stiffening);
@@ -270,7 +363,7 @@ static int solve_dense(mjtNum* a, mjtNum* b, int n) {
 }
 
 // G(dv) into out: matrix dv - dt (other + F(qvel + dv)), the stops dt ahead; returns |G|.
-static mjtNum newton_residual(const Segments* s, Newton* w, const mjtNum* qvel, const mjtNum* dv, mjtNum dt,
+static mjtNum newton_residual(const Items* s, Newton* w, const mjtNum* qvel, const mjtNum* dv, mjtNum dt,
                               mjtNum* out) {
   int nv = s->nv;
   for (int i = 0; i < nv; i++) w->u[i] = qvel[i] + dv[i];
@@ -286,7 +379,7 @@ static mjtNum newton_residual(const Segments* s, Newton* w, const mjtNum* qvel, 
 // MuJoCo computed them); otherwise the root of G, with the stops' torque taken at the new positions too, by
 // Newton's method, or FINRFT_NOT_CONVERGED.
 static int newton_solve(Workspace* ws, const mjtNum* qvel, mjtNum dt, int iterations) {
-  const Segments* s = &ws->segments;
+  const Items* s = &ws->items;
   Newton* w = &ws->w;
   int nv = s->nv;
   mjtNum ahead = iterations > 1 ? dt : 0, tolerance = ws->newton_tolerance;
@@ -344,7 +437,7 @@ static void step_prepare(const mjModel* m, mjData* d, Workspace* ws) {
   mj_forward(m, d);
   mj_mulM(m, d, ws->rhs, d->qacc);
   mj_fullM(m, d, ws->mass);
-  segments_update(m, d, &ws->segments);
+  items_update(m, d, &ws->items);
   ws->start_ready = 0;
 }
 

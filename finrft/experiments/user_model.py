@@ -105,7 +105,7 @@ def build_attached(spec: mujoco.MjSpec, joints: Sequence[str], bodies: tuple[str
     law = laws.module(medium.law, laws.SURFACE)
     attached = attach(spec, list(bodies), law=medium.law, surface_z=medium.surface_z,
                       element_size=medium.element_size, backend=sim.backend, medium=medium.name or None,
-                      drft_lambda=medium.drft_lambda,
+                      drft_lambda=medium.drft_lambda, v_reg=medium.v_reg,
                       bulk_density=None if law.DENSITY else medium.bulk_density or None, **law.given(medium))
     model = compile_spec(spec)
     ids = [model.joint(name).id for name in joints]

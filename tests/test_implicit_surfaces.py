@@ -1,0 +1,165 @@
+"""The implicit methods on attached surfaces (`finrft.attach`): each body's wrench taken at the step's new velocity,
+in both twins; a light box resting on the medium at 1 ms against the closed forms of li2013; convergence in dt;
+and the chatter probe, which tells a body at rest from a step that chatters."""
+
+import types
+
+import mujoco
+import numpy as np
+import pytest
+
+from finrft import integrate, methods
+from finrft.attach import attach
+from finrft.errors import Chatter
+from finrft.laws import li2013
+from finrft.scene import Sim
+from finrft.stepping import chatter_speeds, step_through
+
+# A 10 x 10 x 2 cm box of 0.5 kg on a free joint, its lower face at height z.
+BOX = """<mujoco><option timestep="{dt}" integrator="implicitfast"/><worldbody>
+  <body name="box" pos="0 0 {z}"><freejoint/><geom type="box" size="0.05 0.05 0.01" mass="0.5"/></body>
+</worldbody></mujoco>"""
+MASS, AREA, HALF = 0.5, 0.1 * 0.1, 0.01
+
+# A block dragged sideways at 5 cm/s, 4 cm deep: the carriage on a stiff velocity servo, the block free to rise and
+# pitch under it (a light body whose lift and pitch the stiff medium sets).
+DRAG = """<mujoco><option timestep="{dt}" integrator="implicitfast"/><worldbody>
+  <body name="carriage"><joint name="x" type="slide" axis="1 0 0"/><geom type="sphere" size="0.001" mass="1"/>
+    <body name="block" pos="0 0 -0.04"><joint name="z" type="slide" axis="0 0 1"/>
+      <joint name="pitch" type="hinge" axis="0 1 0"/><geom type="box" size="0.02 0.0125 0.01" mass="0.05"/></body>
+  </body></worldbody><actuator><velocity joint="x" kv="1000"/></actuator></mujoco>"""
+DRAG_SPEED = 0.05
+
+
+def _box(backend: str, dt: float, z: float = HALF, **medium):
+    spec = mujoco.MjSpec.from_string(BOX.format(dt=dt, z=z))
+    attached = attach(spec, "box", backend=backend, element_size=0.01, **medium)
+    return spec.compile(), attached
+
+
+def _steps(m, attached, backend: str, method: str, d, n: int) -> np.ndarray:
+    """The positions after each of n steps (stopping the test on a failure code)."""
+    advance = integrate.stepper(m, Sim(method=method, dt=m.opt.timestep), backend, [], attached)
+    out = np.empty((n, m.nq))
+    with attached.installed(m):
+        for i in range(n):
+            assert advance(d, 1) == 0
+            out[i] = d.qpos
+    return out
+
+
+MEDIA = {"li2013": dict(law="li2013", v_reg=1e-3),
+         "rft3d": dict(law="rft3d", rho_c=1617.0, mu_int=1.07, mu_surf=0.1806, v_reg=1e-3)}
+
+
+@pytest.mark.parametrize("law", MEDIA)
+@pytest.mark.parametrize("method", [name for name, m in methods.METHODS.items() if m.implicit])
+def test_native_and_python_steppers_agree_on_a_free_body(law, method):
+    # A box half in the medium, thrown sideways, down and spinning: every row of its twist and wrench is in play.
+    # Adaptive steps are sized by each twin's own estimate, equal only to rounding (as test_methods says).
+    runs = {}
+    for backend in ("native", "python"):
+        m, attached = _box(backend, 1e-3, z=0.005, **MEDIA[law])
+        d = mujoco.MjData(m)
+        d.qvel[:] = [0.05, 0.02, -0.05, 0.5, -0.3, 1.0]
+        runs[backend] = _steps(m, attached, backend, method, d, 150)
+    atol = 1e-6 if methods.get(method).adaptive else 1e-9
+    np.testing.assert_allclose(runs["native"], runs["python"], atol=atol, rtol=0)
+    # the medium did act: without it the box would have fallen 150 ms and kept its speed
+    assert abs(runs["native"][-1, 0] - 0.05 * 0.15) > 1e-3
+
+
+def _alpha_z_flat() -> float:
+    """li2013's alpha_z of a horizontal plate pushed straight down: alpha_z(beta = 0, gamma = pi/2), N/m^3."""
+    return float(li2013.alpha(np.array(0.0), np.array(np.pi / 2), 1.0, li2013.GENERIC)[1])
+
+
+def test_dropped_box_settles_at_the_closed_form_depth_and_stays():
+    # li2013 (planar form, generic medium, zeta 1): the lower face resists sinking with alpha_z A depth, so the
+    # static depth is m g / (alpha_z A) (0.49 mm). Released at rest with its lower face on the surface, the box
+    # sinks until the work of that force equals its weight's, alpha_z A x^2 / 2 = m g x: x = 2 m g / (alpha_z A);
+    # rising meets no leading face below the surface, so it stays there. Regularised over v_reg it creeps on at the
+    # speed where the weighted force carries the weight: v_reg atanh(m g / (alpha_z A x)).
+    v_reg = 1e-5
+    m, attached = _box("native", 1e-3, v_reg=v_reg)
+    d = mujoco.MjData(m)
+    z = _steps(m, attached, "native", "newton", d, 3000)[:, 2]
+    depth = HALF - z
+    weight = MASS * -m.opt.gravity[2]
+    static = weight / (_alpha_z_flat() * AREA)
+    assert depth[-1] == pytest.approx(2 * static, rel=0.03)
+    creep = (depth[-1] - depth[-1001]) / 1.0
+    assert creep == pytest.approx(v_reg * np.arctanh(weight / (_alpha_z_flat() * AREA * depth[-1])), rel=0.1)
+    assert creep < 1e-4  # < 0.1 mm/s
+    velocity = np.diff(z[-1001:]) / 1e-3
+    assert np.all(np.diff(velocity) <= 0) or np.all(np.diff(velocity) >= 0)  # no step reverses: no chatter
+
+
+def _flips(z: np.ndarray) -> float:
+    """The share of steps whose velocity change reverses the previous one's."""
+    change = np.sign(np.diff(z, n=2))
+    return float(np.mean(change[1:] != change[:-1]))
+
+
+def test_explicit_step_chatters_on_the_resting_box():
+    # Same box, MuJoCo's step at 1 ms: the medium's force, stiff on the scale v_reg, overshoots every step
+    # (dt >> 2 m v_reg / F, about 1e-6 s here), where newton's velocity changes keep one sign (above).
+    m, attached = _box("native", 1e-3, v_reg=1e-5)
+    d = mujoco.MjData(m)
+    z = _steps(m, attached, "native", "explicit", d, 3000)[:, 2]
+    assert _flips(z[-1000:]) > 0.9
+
+
+def _drag(method: str, dt: float, backend: str = "native") -> np.ndarray:
+    spec = mujoco.MjSpec.from_string(DRAG.format(dt=dt))
+    attached = attach(spec, "block", backend=backend, element_size=0.005, v_reg=1e-3)
+    m = spec.compile()
+    d = mujoco.MjData(m)
+    d.ctrl[0] = d.qvel[0] = DRAG_SPEED
+    return _steps(m, attached, backend, method, d, round(0.2 / dt))[-1]
+
+
+def test_dragged_block_converges_in_dt():
+    # Newton steps at 2, 1 and 0.5 ms against 25 µs: the error falls with the step (first order: halves or
+    # better), and at 1 ms the block's rise and pitch are within 0.02 mm and 0.02 mrad.
+    reference = _drag("newton", 2.5e-5)
+    errors = [np.abs(_drag("newton", dt) - reference).max() for dt in (2e-3, 1e-3, 5e-4)]
+    assert errors[1] < 0.6 * errors[0] and errors[2] < 0.6 * errors[1]
+    assert errors[1] < 2e-5
+    # the medium lifts and pitches the block (Ding et al. 2011's drag-induced lift), far beyond that error
+    assert reference[1] > 2e-3 and abs(reference[2]) > 0.05
+
+
+def test_chatter_speeds_are_the_regularisation_over_the_lever():
+    # A free body's translations move every element one to one; its rotations move the farthest by its arm: on
+    # 1 cm elements, the centre of a side face's corner element, (5, 4.5, 0.5) cm from the box's centre.
+    v_reg = 1e-3
+    m, attached = _box("native", 1e-3, v_reg=v_reg)
+    d = mujoco.MjData(m)
+    speeds = chatter_speeds(m, d, [], attached, range(6))
+    arm = np.linalg.norm([0.05, 0.045, 0.005])
+    np.testing.assert_allclose(speeds, v_reg / np.r_[np.ones(3), np.full(3, arm)])
+
+
+@pytest.mark.parametrize("method", ["newton", "explicit"])
+def test_chatter_probe_passes_a_body_at_rest_and_stops_a_chattering_step(method):
+    # The box placed at rest at twice its static depth, where it stays (above): with newton at 1 ms its velocity
+    # settles to the creep and the probe passes; MuJoCo's step at 1 ms flips it every step, and the run stops.
+    v_reg = 1e-5
+    static = MASS * 9.81 / (_alpha_z_flat() * AREA)
+    m, attached = _box("native", 1e-3, z=HALF - 2 * static, v_reg=v_reg)
+    d = mujoco.MjData(m)
+    scene = types.SimpleNamespace(sim=Sim(method=method, dt=1e-3))
+    advance = integrate.stepper(m, scene.sim, "native", [], attached)
+    watch = list(range(6))
+    steps, samples = 1000, np.arange(0, 1001, 10)
+
+    def run() -> None:
+        step_through(m, d, scene, advance, steps, np.array([0]), samples, lambda k: None, lambda i: None,
+                     watch=watch, speeds=chatter_speeds(m, d, [], attached, watch))
+    if method == "explicit":
+        with pytest.raises(Chatter, match="use sim.method = 'newton'"):
+            run()
+    else:
+        run()
+        assert abs(d.qvel[2]) < 1e-4

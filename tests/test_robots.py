@@ -6,6 +6,7 @@ Li et al. 2013's law over the submerged arc; and their TOML scenes against the m
 The runs use the Python API with MuJoCo's own step at 0.1 ms, where the explicitly integrated surface forces have
 converged to about 1 % (the scenes' 1 ms defaults need the implicit steps)."""
 
+import dataclasses
 import math
 import tomllib
 from pathlib import Path
@@ -19,6 +20,7 @@ import finrft
 from finrft import laws
 from finrft.laws import li2013
 from finrft.models import mjcf_path
+from finrft.scene import Medium
 
 DT = 1e-4
 SAND = dict(law="rft3d", rho_c=1500.0, mu_int=0.4, mu_surf=0.4)  # the robots' sand: rho_c kg/m^3, frictions
@@ -51,6 +53,7 @@ def test_scene_names_what_the_model_has(name):
     for body in scene["model"]["bodies"]:
         assert mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, body) >= 0, body
     assert scene["medium"]["law"] in laws.names(laws.SURFACE)
+    assert set(scene["medium"]) <= {f.name for f in dataclasses.fields(Medium)}   # the scene schema's keys
     duration = scene["sim"]["duration"]
     assert 0 <= scene["sim"]["settle"] < duration
     for control in scene.get("control", []):

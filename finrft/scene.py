@@ -235,7 +235,8 @@ class ExplicitSim(Sim):
 
 @dataclass(frozen=True)
 class RobotSim(Sim):
-    method: str = _f("explicit", "", methods.described(), choices=methods.names())
+    # MuJoCo's usual step: the newton method takes the attached surfaces' stiff forces implicitly there
+    dt: float = _f(1.0e-3, "s", "time step", minimum=0.0)
     duration: float = _f(0.0, "s", "length of the run; 0: the constant drives' own (one stroke, or their cycles)",
                          minimum=0.0, exclusive=False)
     settle: float = _f(0.0, "s", "the summaries average over [settle, duration]", minimum=0.0, exclusive=False)

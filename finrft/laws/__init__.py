@@ -210,8 +210,11 @@ def warn_if_feeds_energy(law: SegmentLaw | None) -> None:
                           "kept to reproduce published runs; result files record it as law_feeds_energy")
 
 
-# The surface laws' default regularisation speed, m/s: see `regularised`.
-SURFACE_V_REG = 1e-3
+# The surface laws' default regularisation speed, m/s: see `regularised`. A body resting on the medium creeps at
+# about v_reg atanh(weight / full force) (the ramp needs some speed to carry any load): 0.05 mm/s for a 0.5 kg box
+# at 0.1 mm/s against 0.32 mm/s at 1 mm/s (newton, 1 ms steps; tests/test_implicit_surfaces.py). The implicit
+# methods take the stiffness that brings; MuJoCo's explicit step needs dt below about 2 m v_reg / F.
+SURFACE_V_REG = 1e-4
 
 
 def regularised(force: np.ndarray, normal: np.ndarray, velocity: np.ndarray, v_reg: float) -> np.ndarray:
@@ -223,9 +226,9 @@ def regularised(force: np.ndarray, normal: np.ndarray, velocity: np.ndarray, v_r
     (-lambda rho (n.v)^2 n) is already continuous at n . v = 0 and ramped with the rest: below v_reg it is less
     than lambda rho v_reg^2 per unit area, 1.6e-3 Pa at 1 mm/s, against a law's kPa. The ramp costs
     1 - tanh(u/v_reg) of an element's force at normal speed u: 4e-9 at 10 v_reg, 0.5 % at 3 v_reg, so a face moving
-    at >= 3 mm/s into the medium keeps its force within 0.5 % at the default v_reg = 1 mm/s (`SURFACE_V_REG`);
-    grazing faces of curved bodies lose more: a 6 cm sphere dragged at 0.1 m/s 0.024 % of its force, at 0.01 m/s
-    5.4 % (the loss goes as v_reg / speed: a slow body wants a smaller v_reg); tests/test_regularisation.py."""
+    at >= 0.3 mm/s into the medium keeps its force within 0.5 % at the default v_reg = 0.1 mm/s (`SURFACE_V_REG`);
+    grazing faces of curved bodies lose more: at v_reg = 1 mm/s a 6 cm sphere dragged at 0.1 m/s loses 0.024 % of its
+    force, at 0.01 m/s 5.4 % (the loss goes as v_reg / speed); tests/test_regularisation.py."""
     force = np.asarray(force, dtype=float)
     if v_reg == 0:
         return force

@@ -10,6 +10,7 @@ from ..experiments.swim import RobotScene
 from ..experiments.flags import (add_force, add_json, add_max_error, add_quiet, add_workers, limits, number,
                                  preset_name)
 from ..experiments.swim import add_robot, resolve_robot
+from ..experiments.user_model import EXAMPLES
 from .common import check_output, check_output_dir, print_json, progress, said_written, say
 
 
@@ -72,7 +73,7 @@ def report(args: argparse.Namespace) -> int:
 def add_bench(sub: Any) -> None:
     bench = sub.add_parser("bench", help="benchmarks, measured as ratios in one run on this machine")
     kinds = bench.add_subparsers(dest="bench", required=True, parser_class=type(bench))
-    for add in (_add_backends, _add_robot, _add_accuracy, _add_modelling, _add_fit):
+    for add in (_add_backends, _add_robot, _add_robots, _add_accuracy, _add_modelling, _add_fit):
         kind = add(kinds)
         add_quiet(kind)
         if add is not _add_accuracy:
@@ -109,6 +110,21 @@ def _add_robot(kinds: Any) -> argparse.ArgumentParser:
                    help="robot preset (default: %(default)s)")
     _budget(p, "optimisation budget")
     add_workers(p)
+    return p
+
+
+def _add_robots(kinds: Any) -> argparse.ArgumentParser:
+    p = kinds.add_parser("robots", help="the example robots: speed, accuracy, cost against bare MuJoCo and the "
+                         "explicit step", description="For each example robot (finrft run --example NAME) at its "
+                         "default settings: simulated seconds per wall second; its error against a converged run "
+                         "(the same method at 1/8 of the step): the mean speed of the centre of mass (swimmer, "
+                         "hexapod) or the mean force of the medium (wheel), in percent; the cost against bare mj_step "
+                         "of the model without the medium at the same step, and per element per step; and the "
+                         "speed-up over MuJoCo's explicit step at the largest step (1/2 to 1/32 of the default) that "
+                         "is as accurate. A few minutes.")
+    p.add_argument("--robot", action="append", choices=EXAMPLES, help="only this example (repeatable; default: all)")
+    p.add_argument("--duration", type=number("s", minimum=0.0, inclusive=False), default=0.0, metavar="S",
+                   help="simulate S seconds instead of each example's duration (its settle scaled alike)")
     return p
 
 
@@ -157,6 +173,8 @@ def _bench_figures(args: argparse.Namespace, log: Any, tick: Any) -> dict[str, A
                            log=log, progress=tick)
     if args.bench == "backends":
         return bench.backends(batch_size=args.batch, workers=args.workers, log=log, progress=tick)
+    if args.bench == "robots":
+        return bench.robots(tuple(args.robot or ()), duration=args.duration, log=log, progress=tick)
     return bench.modelling(log=log, progress=tick)
 
 

@@ -26,10 +26,10 @@ import numpy as np
 from .. import laws
 from ..attach import Attached, SurfaceForces, attach
 from ..drive import Drive
-from ..errors import SimulationFailed
+from ..errors import SimulationFailed, UsageError
 from ..experiment import Compared, Plot, Quantity, Result, run
 from ..convergence import ErrorLimits
-from ..models import ARMATURE_RATIO, INTEGRATORS, compile_spec
+from ..models import ARMATURE_RATIO, INTEGRATORS, compile_spec, mjcf_path
 from ..scene import Control, JointDrive, Medium, SceneError, UserScene, drive_timing, load_scene, parse_override
 from ..stepping import DRIVE_LAG, Prescribed, jump_velocities
 from .command import Command, register, steps_line
@@ -582,6 +582,18 @@ def run_robot(scene: UserScene, *, control: Controller | None = None, progress: 
     return run(UserModel.of(scene, control), scene, progress=progress, max_error=max_error)
 
 
+# The example robots shipped in finrft.mjcf, each a model, its scene and a TOML scene for a robot run (their
+# physics: tests/test_robots.py; their figures: docs/guide/robots.md).
+EXAMPLES = ("sand_swimmer", "hexapod", "wheel_rig")
+
+
+def example(name: str) -> str:
+    """The TOML scene of an example robot (`EXAMPLES`), as a path `load_scene` reads."""
+    if name not in EXAMPLES:
+        raise SceneError(f"no example robot named {name!r} (the examples: {', '.join(EXAMPLES)})")
+    return str(mjcf_path(f"{name}.toml"))
+
+
 # ---------------------------------------------------------------------------------------------------------
 # The command: finrft run
 
@@ -603,18 +615,23 @@ class RunCommand(Command):
 
     def add_flags(self, p: argparse.ArgumentParser) -> None:
         p.add_argument("model", nargs="?", metavar="MODEL.xml", help="the MJCF file (overrides model.path)")
-        add_scene_flags(p, "user-model", "drive.0.speed=0.05", required=True, backend="where the RFT force is "
-                        "computed (overrides sim.backend)")
+        g = add_scene_flags(p, "user-model", "drive.0.speed=0.05", backend="where the RFT force is computed "
+                            "(overrides sim.backend)")
+        g.add_argument("--example", choices=EXAMPLES, help="an example robot shipped with finrft instead of "
+                       "--scene: its model and TOML scene (mjcf/NAME.toml)")
         add_max_error(p)
         add_result_files(p)
 
     def scene(self, args: argparse.Namespace) -> UserScene:
+        if bool(args.scene) == bool(args.example):
+            raise UsageError("give the scene: --scene FILE.toml, or --example NAME (one of "
+                             f"{', '.join(EXAMPLES)})")
         overrides = dict(parse_override(item, UserScene) for item in args.set)
         if args.backend:
             overrides["sim.backend"] = args.backend
         if args.model:
             overrides["model.path"] = args.model
-        return load_scene(args.scene, overrides=overrides, cls=UserScene)
+        return load_scene(args.scene or example(args.example), overrides=overrides, cls=UserScene)
 
     def jobs(self, args: argparse.Namespace, scene: UserScene) -> list[tuple[UserModel, UserScene]]:
         return [(UserModel.of(scene), scene)]

@@ -13,6 +13,7 @@ import mujoco
 import numpy as np
 
 from .. import batch, methods, native
+from ..errors import SimulationFailed
 from ..drive import Drive
 from ..experiments.plate import build_plate, simulate
 from ..experiments.swim import steady_cycles, swim
@@ -349,3 +350,106 @@ def modelling(*, repeat: int = 3, log: Callable[[str], None] = print, progress: 
     table = "\n".join(lines) + "\n"
     log(table)
     return {"date": date.today().isoformat(), "rows": rows, "table": table}
+
+
+# What each example robot's benchmark compares: the swimmer's and the hexapod's mean speed over the window, the
+# wheel's mean force of the medium (m/s, N).
+ROBOT_FIGURE = {"sand_swimmer": "speed", "hexapod": "speed", "wheel_rig": "force"}
+# Explicit steps tried for the speed-up, as fractions of the default step, coarsest first.
+EXPLICIT_FRACTIONS = (1 / 2, 1 / 4, 1 / 8, 1 / 16, 1 / 32)
+
+
+def _robot_figure(name: str, result: Any) -> np.ndarray:
+    s = result.summary()
+    if ROBOT_FIGURE[name] == "speed":
+        return np.array([float(np.hypot(*s["com_velocity_m_s"][:2]))])
+    return np.array(s["medium_force_N"], dtype=float)
+
+
+def _relative(value: np.ndarray, reference: np.ndarray) -> float:
+    return float(np.linalg.norm(value - reference) / max(np.linalg.norm(reference), 1e-12))
+
+
+def robots(names: tuple[str, ...] | None = None, *, duration: float = 0.0, log: Callable[[str], None] = print,
+           progress: Progress = None) -> dict[str, Any]:
+    """Each example robot (``finrft run --example NAME``) at its default settings (``duration`` > 0: that long
+    instead, with the settle scaled alike): simulated seconds per wall second, its error against a converged run
+    (the same method at 1/8 of the step), the cost against bare ``mj_step`` of the same model without the medium at
+    the same step, the cost per element per step, and the speed-up over MuJoCo's explicit step at the largest step
+    (1/2 ... 1/32 of the default) whose error is no larger. Errors are relative: the mean speed of the centre of
+    mass over the window (swimmer, hexapod), the mean force of the medium (wheel)."""
+    from ..experiment import run
+    from ..experiments.user_model import EXAMPLES, UserModel, example
+    from ..scene import UserScene, load_scene
+    names = names or EXAMPLES
+    out: dict[str, Any] = {"date": date.today().isoformat(), "machine": f"{platform.machine()}, "
+                           f"{batch.default_workers()} cores", "mujoco": mujoco.__version__, "robots": {}}
+    for i, name in enumerate(names):
+        scene = load_scene(example(name), cls=UserScene)
+        if duration > 0:
+            scene = scene.replace(**{"sim.duration": duration,
+                                     "sim.settle": scene.sim.settle * duration / scene.sim.duration})
+        dt = scene.sim.dt
+
+        def timed(s: UserScene) -> tuple[Any, float]:
+            start = time.perf_counter()
+            result = run(UserModel.of(s), s, estimate_error=False, max_error=None)
+            return result, time.perf_counter() - start
+
+        default, wall = timed(scene)
+        figure = _robot_figure(name, default)
+        converged, _ = timed(scene.replace(**{"sim.dt": dt / 8}))
+        reference = _robot_figure(name, converged)
+        error = _relative(figure, reference)
+        elements = _elements(scene)
+        bare = _bare_step_s(scene, default.steps)
+        row: dict[str, Any] = {
+            "method": scene.sim.method, "dt": dt, "duration_s": float(default.time[-1]), "steps": default.steps,
+            "wall_s": wall, "sim_s_per_wall_s": float(default.time[-1]) / wall, "figure": ROBOT_FIGURE[name],
+            "value": figure.tolist(), "converged_value": reference.tolist(), "error": error,
+            "us_per_step": 1e6 * wall / default.steps, "bare_us_per_step": 1e6 * bare,
+            "cost_over_bare": wall / default.steps / bare, "elements": elements,
+            "ns_per_element_step": 1e9 * (wall / default.steps - bare) / elements}
+        for fraction in EXPLICIT_FRACTIONS:
+            explicit = scene.replace(**{"sim.method": "explicit", "sim.dt": dt * fraction})
+            try:
+                result, explicit_wall = timed(explicit)
+            except SimulationFailed as exc:
+                row.setdefault("explicit_failures", []).append(f"dt {dt * fraction:g} s: {type(exc).__name__}")
+                continue
+            explicit_error = _relative(_robot_figure(name, result), reference)
+            row.setdefault("explicit", []).append({"dt": dt * fraction, "error": explicit_error,
+                                                   "wall_s": explicit_wall})
+            if explicit_error <= error:
+                row.update(explicit_dt=dt * fraction, explicit_wall_s=explicit_wall,
+                           speedup_over_explicit=explicit_wall / wall)
+                break
+        out["robots"][name] = row
+        speedup = (f"{row['speedup_over_explicit']:.2f}x faster than the explicit step at {row['explicit_dt']:g} s"
+                   if "speedup_over_explicit" in row else
+                   f"no explicit step down to {dt * EXPLICIT_FRACTIONS[-1]:g} s was as accurate")
+        log(f"{name}: {scene.sim.method} at {dt:g} s, {row['sim_s_per_wall_s']:.2f} simulated s per wall s; "
+            f"{ROBOT_FIGURE[name]} {100 * error:.2f} % from the converged run (dt {dt / 8:g} s); "
+            f"{row['cost_over_bare']:.1f}x bare mj_step, {row['ns_per_element_step']:.0f} ns per element per step "
+            f"({elements} elements); {speedup}")
+        _tick(progress, i + 1, len(names))
+    return out
+
+
+def _elements(scene: Any) -> int:
+    from ..experiments.user_model import UserModel
+    return sum(UserModel.of(scene).build(scene).attached.elements.values())
+
+
+def _bare_step_s(scene: Any, steps: int) -> float:
+    """Wall seconds of one ``mj_step`` of the scene's model without the medium, at its step, in C (mj_step's
+    nstep), the best of three."""
+    from ..experiments.user_model import read_spec
+    spec = read_spec(scene.model.path)
+    spec.option.timestep = scene.sim.dt
+    model = spec.compile()
+    data = mujoco.MjData(model)
+    n = min(steps, 20000)
+    with native.untimed():
+        wall = _best(lambda: mujoco.mj_step(model, data, n), 3)
+    return wall / n

@@ -96,27 +96,26 @@ class PythonCoupling:
 
 
 @contextlib.contextmanager
-def installed(callback: Callback | None) -> Iterator[None]:
-    """Install a passive-force callback (None: none at all) for a block, then restore whatever was there."""
-    previous = mujoco.get_mjcb_passive()
-    mujoco.set_mjcb_passive(callback)
+def _swapped(get: Callable[[], Callback | None], put: Callable[[Callback | None], None],
+             callback: Callback | None) -> Iterator[None]:
+    """One of MuJoCo's process-global callbacks set to ``callback`` for a block, then restored."""
+    previous = get()
+    put(callback)
     try:
         yield
     finally:
-        mujoco.set_mjcb_passive(previous)
+        put(previous)
 
 
-@contextlib.contextmanager
-def controlled(callback: Callback | None) -> Iterator[None]:
+def installed(callback: Callback | None) -> contextlib.AbstractContextManager[None]:
+    """Install a passive-force callback (None: none at all) for a block, then restore whatever was there."""
+    return _swapped(mujoco.get_mjcb_passive, mujoco.set_mjcb_passive, callback)
+
+
+def controlled(callback: Callback | None) -> contextlib.AbstractContextManager[None]:
     """Install a control callback (MuJoCo calls it in every step and mj_forward, after the velocities and before
     the actuation: the place to set ``ctrl`` and ``qfrc_applied`` from the time and state) for a block, then
     restore whatever was there; None leaves the callback as it is."""
     if callback is None:
-        yield
-        return
-    previous = mujoco.get_mjcb_control()
-    mujoco.set_mjcb_control(callback)
-    try:
-        yield
-    finally:
-        mujoco.set_mjcb_control(previous)
+        return contextlib.nullcontext()
+    return _swapped(mujoco.get_mjcb_control, mujoco.set_mjcb_control, callback)

@@ -2,7 +2,6 @@
 controller) against force balances and closed forms; the reports, the files, the scene's arrays of tables and bad
 input."""
 
-import json
 import math
 import subprocess
 import sys
@@ -13,7 +12,7 @@ import pytest
 
 import finrft
 from finrft.cli import main
-from finrft.experiments.user_model import UserModel, run_robot, window_mean
+from finrft.experiments.user_model import run_robot, window_mean
 from finrft.scene import SceneError, UserScene, load_scene, to_toml
 
 # The 4 cm x 6 cm plate of the guide on a slide along x, 10 kg (its drag: 0.370 N/cm^3 x 4 cm x (6 cm)^2 / 2).

@@ -31,7 +31,7 @@ from ..scene import ExplicitSim, Medium, Sections, check_medium, check_sim, load
 from ..schema import field as _f
 from .command import Command, Output, register
 from .flags import add_force, add_json, add_quiet, add_scene_flags
-from .user_model import AttachedModel, JointTrial, build_attached
+from .attached_model import AttachedModel, JointTrial, build_attached
 
 SIGN_CONVENTION = (
     "z up; the plate moves along -z. depth is the plate's lowest point below the free surface. force_z is the "

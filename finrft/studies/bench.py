@@ -444,7 +444,7 @@ def _elements(scene: Any) -> int:
 def _bare_step_s(scene: Any, steps: int) -> float:
     """Wall seconds of one ``mj_step`` of the scene's model without the medium, at its step, in C (mj_step's
     nstep), the best of three."""
-    from ..experiments.user_model import read_spec
+    from ..experiments.attached_model import read_spec
     spec = read_spec(scene.model.path)
     spec.option.timestep = scene.sim.dt
     model = spec.compile()

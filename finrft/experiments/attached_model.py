@@ -1,0 +1,137 @@
+"""A user's MJCF model with RFT attached and prescribed joints, compiled and run: what `finrft run` (`user_model`)
+and `finrft intrude` (`intrusion`) build on. `build_attached` gives the model its numerics, each driven joint its
+armature and the named bodies (and geoms) the medium; `JointTrial` runs one joint on a prescribed profile."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import mujoco
+import numpy as np
+
+from .. import laws
+from ..attach import Attached, SurfaceForces, attach
+from ..drive import Drive
+from ..models import ARMATURE_RATIO, INTEGRATORS, compile_spec
+from ..scene import Medium, SceneError
+from ..stepping import Prescribed
+
+_J = mujoco.mjtJoint
+DRIVEN = {int(_J.mjJNT_SLIDE): "slide", int(_J.mjJNT_HINGE): "hinge"}
+
+
+@dataclass(frozen=True, eq=False)
+class AttachedModel:
+    """A compiled model with RFT attached, and the indices of its prescribed joints (in the order named)."""
+
+    model: mujoco.MjModel
+    attached: Attached
+    drive_dofs: np.ndarray
+    drive_qpos: np.ndarray
+    armature: np.ndarray       # each driven joint's armature (kg or kg m^2)
+    bodies: np.ndarray         # ids of the attached bodies, in the order named
+    groups: tuple = ()         # no segment force groups: the forces are the attached surfaces'
+
+    @property
+    def backend(self) -> str:
+        return self.attached.backend
+
+    def python_forces(self) -> SurfaceForces:
+        return self.attached.callback(self.model)
+
+
+def read_spec(path: str) -> mujoco.MjSpec:
+    """An MJCF file's spec; SceneError in one line when it is missing or MuJoCo cannot parse it."""
+    if not path:
+        raise SceneError("no model: give the MJCF file (finrft run MODEL.xml, or model.path in the scene)")
+    if not Path(path).is_file():
+        raise SceneError(f"cannot read model file {path}: no such file")
+    try:
+        return mujoco.MjSpec.from_file(str(path))
+    except ValueError as exc:
+        raise SceneError(f"model file {path}: {' '.join(str(exc).split())}") from None
+
+
+def driven_joint(spec: mujoco.MjSpec, name: str, key: str = "drive.joint") -> mujoco.MjsJoint:
+    """The named slide or hinge joint of a spec; SceneError naming the joints there are."""
+    joint = spec.joint(name) if name else None
+    if joint is None:
+        names = ", ".join(j.name for j in spec.joints if j.name) or "none named"
+        raise SceneError(f"{key}: the model has no joint named {name!r} (its joints: {names})")
+    if int(joint.type) not in DRIVEN:
+        raise SceneError(f"{key} {name!r} is a {_J(joint.type).name.removeprefix('mjJNT_').lower()} joint: "
+                         f"drive a slide or hinge joint")
+    return joint
+
+
+def build_attached(spec: mujoco.MjSpec, joints: Sequence[str], bodies: tuple[str, ...], medium: Medium,
+                   sim: Any) -> AttachedModel:
+    """Give ``spec`` the numerics, each driven joint its armature and the bodies RFT, and compile it."""
+    if not bodies:
+        raise SceneError("model.bodies is empty: name the bodies the medium acts on")
+    driven = [driven_joint(spec, name, f"drive.{i}.joint") for i, name in enumerate(joints)]
+    if len(set(joints)) < len(joints):
+        raise SceneError(f"a joint is driven twice: {', '.join(joints)}")
+    spec.option.timestep = sim.dt
+    spec.option.integrator = INTEGRATORS[sim.integrator]
+    # The armature is relative to what the joint moves (its diagonal of the mass matrix at qpos0), as the plate's.
+    plain = compile_spec(spec)
+    d = mujoco.MjData(plain)
+    mujoco.mj_forward(plain, d)
+    mass = np.zeros((plain.nv, plain.nv))
+    mujoco.mj_fullM(plain, d, mass)
+    for joint, name in zip(driven, joints):
+        dof = int(plain.jnt_dofadr[plain.joint(name).id])
+        joint.armature = ARMATURE_RATIO * mass[dof, dof]
+    law = laws.module(medium.law, laws.SURFACE)
+    attached = attach(spec, list(bodies), law=medium.law, surface_z=medium.surface_z,
+                      element_size=medium.element_size, backend=sim.backend, medium=medium.name or None,
+                      drft_lambda=medium.drft_lambda, v_reg=medium.v_reg,
+                      bulk_density=None if law.DENSITY else medium.bulk_density or None, **law.given(medium))
+    model = compile_spec(spec)
+    ids = [model.joint(name).id for name in joints]
+    dofs = np.array([model.jnt_dofadr[j] for j in ids], dtype=int)
+    return AttachedModel(model, attached, dofs, np.array([model.jnt_qposadr[j] for j in ids], dtype=int),
+                         np.array(model.dof_armature[dofs], dtype=float),
+                         np.array([model.body(b).id for b in bodies], dtype=int))
+
+
+def medium_forces(built: AttachedModel) -> Callable[[mujoco.MjData], np.ndarray]:
+    """The resultant of the medium's force on each attached body (B, 3), world frame, recomputed from the law
+    whatever the backend (after mj_forward)."""
+    forces = built.python_forces()
+    surfaces = [(int(b), s) for b, s in zip(built.bodies, built.attached.surfaces)]
+    return lambda d: np.array([forces.element_forces(built.model, d, b, s)[0].sum(axis=0) for b, s in surfaces])
+
+
+class JointTrial:
+    """One run of an attached model with one prescribed joint on one MjData: the joint on its constant-speed
+    profile from ``drive.start``; read at each recorded instant: the joint's position and the load its drive
+    applies, each attached body's origin and the resultant of the medium's force on it."""
+
+    def __init__(self, built: AttachedModel, drive: Drive, d: mujoco.MjData, companion: bool) -> None:
+        m = built.model
+        dof, qpos = int(built.drive_dofs[0]), int(built.drive_qpos[0])
+        self.prescribed = Prescribed([dof], [qpos], float(built.armature[0]), drive)
+        d.qpos[qpos] = drive.start
+        self.on_stroke = lambda k: self.prescribed.start_stroke(m, d, k)
+        self.watch = [i for i in range(m.nv) if i != dof]
+        force = medium_forces(built)
+
+        def bodies(d: mujoco.MjData) -> np.ndarray:
+            if companion:  # a companion steps without mj_forward; its positions and forces need it here
+                mujoco.mj_forward(m, d)
+            return np.concatenate([d.xpos[built.bodies], force(d)], axis=1)
+
+        # In this order: "bodies" brings a companion's kinematics up to date for "drive".
+        self.reads = {"bodies": bodies, "drive": lambda d: np.array([d.qpos[qpos], self.prescribed.load(d)[0]])}
+
+    def finish(self, d: mujoco.MjData, readings: dict[str, np.ndarray]) -> tuple[dict[str, np.ndarray],
+                                                                                    dict[str, float]]:
+        self.prescribed.finish(d)
+        bodies, drive = readings["bodies"], readings["drive"]
+        return ({"drive_position": drive[:, 0], "drive_load": drive[:, 1], "body_position": bodies[..., :3],
+                 "rft_force": bodies[..., 3:], "stroke_impulse": self.prescribed.impulse},
+                {"peak_drive_load": float(np.max(np.abs(drive[:, 1])))})

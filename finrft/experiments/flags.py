@@ -50,12 +50,13 @@ def add_result_files(p: argparse.ArgumentParser) -> None:
 
 
 def add_max_error(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--max-error", type=number("degrees or points"), default=ErrorLimits().angle_deg,
-                   metavar="X", help="largest estimated discretisation error accepted, in degrees for angles, "
-                   "percentage points for eta and percent of a run's scale (its travel or the model's size) for the "
-                   "positions of finrft run (default: %(default)s); every run estimates its "
-                   "own from a companion run at another step, and a larger one stops with exit status 1, nothing "
-                   "written")
+    d = ErrorLimits()
+    p.add_argument("--max-error", type=number("degrees or points"), metavar="X", help="largest estimated "
+                   "discretisation error accepted, one number for every bounded quantity: degrees for angles, "
+                   "percentage points for eta, percent of a run's scale (its travel or the model's size) for the "
+                   f"positions of finrft run (default: {d.angle_deg:g} deg, {d.eta_points:g} points, "
+                   f"{d.position_percent:g} %%); every run estimates its own from a companion run at another step, and "
+                   "a larger one stops with exit status 1, nothing written")
 
 
 def limits(args: argparse.Namespace) -> ErrorLimits:

@@ -179,8 +179,9 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str = (), law: str = "li
     when it has them); ``drft_lambda`` (dimensionless, default 0: off):
     DRFT's rate-dependent term on top of either law (`finrft.laws.drft`), with the medium's density: rft3d's
     ``rho_c``, li2013's ``bulk_density`` (kg/m^3; else the catalogued ``medium``'s, if it has one);
-    ``v_reg`` (m/s, default `finrft.laws.SURFACE_V_REG`, 1e-4; 0: none): every element's force times tanh(max(n . v, 0) / v_reg), the smooth
-    onset of the leading-face switch and of the speed (`finrft.laws.regularised`);
+    ``v_reg`` (m/s, default `finrft.laws.SURFACE_V_REG`, 1e-4; 0: none): every element's force times
+    tanh(max(n . v, 0) / v_reg), the smooth onset of the leading-face switch and of the speed
+    (`finrft.laws.regularised`);
     ``surface_z``: height of the free surface, m; ``element_size``: the elements' size, m; ``backend``:
     ``native`` (falls back to ``python``, with a warning, when the plugin cannot be loaded) or ``python`` (then run
     the model inside ``Attached.installed``); ``cull``: leave out the elements that face another geom of the same

@@ -128,7 +128,8 @@ def test_swimmer_swims_forward_at_a_sand_swimmers_wave_efficiency(medium):
     assert abs(vy) < 0.25 * vx
 
 
-def test_planar_li2013_warns_that_it_cannot_swim():
+def test_planar_li2013_warns_that_it_cannot_swim(monkeypatch):
+    monkeypatch.setattr(laws, "_cautioned", set())  # it warns once per process: this process may have been told
     with pytest.warns(UserWarning, match="planar"):
         finrft.attach(mujoco.MjSpec.from_file(str(mjcf_path("sand_swimmer_scene.xml"))), ["link1", "link2"],
                       law="li2013-planar")

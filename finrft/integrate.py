@@ -80,6 +80,9 @@ NEWTON_SHARE = 1e-2  # the adaptive newton method stops Newton's method at this 
 # The speed (m/s) on whose scale an element's force is differenced besides its own (SURFACE_SPEED in steppers.c):
 # the surface laws are rate-independent, so any step small against the element's speed would do but for one at rest.
 SURFACE_SPEED = 1e-3
+# Newton's method on attached surfaces alone keeps its slope while each full step cuts the residual at least this
+# much (SURFACE_DECREASE in steppers.c).
+SURFACE_DECREASE = 0.1
 
 
 def _native(name: str, *argtypes) -> Callable[..., int]:
@@ -355,10 +358,14 @@ class PythonImplicit:
             return matrix @ dv - dt * (other + self._forces(forces, qvel + dv, dt, False)[0])
         dv = np.zeros(m.nv)
         g = -dt * (other + force)
+        # attached surfaces alone: the leaner Newton's method of newton_solve in steppers.c (the same root)
+        lean, fresh = not self.laws, True
         for _ in range(iterations):
             step = np.linalg.solve(matrix - dt * slope, -g)
             if iterations == 1:
                 return step
+            if lean and np.abs(step).max() <= self.tolerance * (1 + np.abs(qvel + dv + step).max()):
+                return dv + step
             norm, alpha = np.linalg.norm(g), 1.0
             while True:
                 trial = residual(dv + alpha * step)
@@ -366,9 +373,12 @@ class PythonImplicit:
                     break
                 alpha /= 2
             dv, g = dv + alpha * step, trial
-            if np.abs(alpha * step).max() <= self.tolerance * (1 + np.abs(qvel + dv).max()):
+            if (np.abs(alpha * step).max() <= self.tolerance * (1 + np.abs(qvel + dv).max())
+                    and (fresh or alpha >= 1e-6)):
                 return dv
-            _, slope = self._forces(forces, qvel + dv, dt, True, forward=True)
+            fresh = not (lean and alpha == 1 and np.linalg.norm(trial) <= SURFACE_DECREASE * norm)
+            if fresh:
+                _, slope = self._forces(forces, qvel + dv, dt, True, forward=True)
         return None
 
     def steps(self, d: mujoco.MjData, n: int, dt: float, iterations: int, counts: Counts | None = None) -> int:

@@ -38,6 +38,9 @@
 // The speed (m/s) on whose scale an element's force is differenced besides its own: the surface laws are
 // rate-independent, so any step small against the element's speed would do but for an element at rest.
 #define SURFACE_SPEED 1e-3
+// Newton's method on attached surfaces alone keeps its slope while each full step cuts the residual at least this
+// much (see newton_solve).
+#define SURFACE_DECREASE 0.1
 
 // The forces the implicit methods take at the new velocity, as items: every RFT segment of the model (its instance,
 // site Jacobian and axes at the current positions), every body with attached surfaces (its finrft.surface instance
@@ -474,6 +477,12 @@ static int newton_solve(Workspace* ws, const mjtNum* qvel, mjtNum dt, int iterat
     w->g[i] = -dt * (w->other[i] + w->force[i]);
   }
   mjtNum norm = mju_norm(w->g, nv);
+  // With attached surfaces alone, a leaner Newton's method, to the same root: the slope is kept while full steps
+  // cut the residual by SURFACE_DECREASE each (made fresh when they stop doing so, or when a search stalls on a
+  // kept one), and a step below the tolerance is taken without a residual to confirm it: the sand-swimmer's steps
+  // take a third of the slopes and 40 % fewer calls of the law. Segments keep full Newton's method: a slope kept
+  // on a segment law that feeds energy in (f_par < 0) once led it to another root.
+  int lean = s->n == 0, fresh = 1;
   for (int it = 0; it < iterations; it++) {
     for (int i = 0; i < nv * nv; i++) w->jacobian[i] = w->matrix[i] - dt * w->slope[i];
     for (int i = 0; i < nv; i++) w->step[i] = -w->g[i];
@@ -481,6 +490,17 @@ static int newton_solve(Workspace* ws, const mjtNum* qvel, mjtNum dt, int iterat
     if (iterations == 1) {
       mju_copy(w->dv, w->step, nv);
       return 0;
+    }
+    if (lean) {
+      mjtNum size = 0, scale = 0;
+      for (int i = 0; i < nv; i++) {
+        size = mju_max(size, fabs(w->step[i]));
+        scale = mju_max(scale, fabs(qvel[i] + w->dv[i] + w->step[i]));
+      }
+      if (size <= tolerance * (1 + scale)) {
+        for (int i = 0; i < nv; i++) w->dv[i] += w->step[i];
+        return 0;
+      }
     }
     mjtNum alpha = 1, trial_norm;
     for (;;) {
@@ -496,8 +516,11 @@ static int newton_solve(Workspace* ws, const mjtNum* qvel, mjtNum dt, int iterat
       change = mju_max(change, fabs(alpha * w->step[i]));
       scale = mju_max(scale, fabs(qvel[i] + w->dv[i]));
     }
+    mjtNum before = norm;
     norm = trial_norm;
-    if (change <= tolerance * (1 + scale)) return 0;
+    if (change <= tolerance * (1 + scale) && (fresh || alpha >= 1e-6)) return 0;
+    fresh = !(lean && alpha == 1 && trial_norm <= SURFACE_DECREASE * before);
+    if (!fresh) continue;
     // the search's last residual was taken at the accepted iterate: rft_force's segments are there
     rft_slope(s, w->slope, 1);
     stops_add(s, w->u, dt, NULL, w->slope);

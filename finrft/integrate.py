@@ -12,7 +12,10 @@
   A rate-independent law is nearly a step function of the velocity's direction, so on light segments the
   linearisation at v (the implicit step, Newton's first iterate) overshoots and chatters; Newton's method with a
   backtracking line search on the residual converges to the root (|change| <= 1e-10 (1 + |qvel|)). The
-  penalty stops are taken at the step's end too, at the deflection d + dt (v + dv).
+  penalty stops are taken at the step's end too, at the deflection d + dt (v + dv). With attached surfaces alone
+  (no segments) it keeps its slope while each full step cuts the residual by SURFACE_DECREASE (fresh again when
+  that stops, or when a search stalls on a kept one) and takes a step below the tolerance without a residual to
+  confirm it: the same root for fewer law calls.
 - ``adaptive``: implicit steps whose size follows a step-doubling error estimate: one step of h and two of h/2
   must agree to ``sim.tolerance`` (max over qpos and qvel of |difference| / (1e-3 + |value|)), never above
   ``sim.max_step``; the accepted state is extrapolated, 2 (two halves) - (one step), which cancels the implicit

@@ -148,11 +148,16 @@ class SurfaceForces:
         depth = a.surface_z - (d.xpos[body, 2] + arm[:, 2])
         return a.element_forces(normal, velocity, depth, surface.area), arm
 
-    def wrench(self, d: mujoco.MjData, body: int, surface: Surface, twist: np.ndarray) -> np.ndarray:
-        """The body's wrench (torque about its origin, force; world frame) at ``twist``: the twin of
-        finrft_surface_wrench, which the implicit steps difference."""
-        force, arm = self.twist_forces(d, body, surface, twist)
-        return np.concatenate([np.cross(arm, force).sum(axis=0), force.sum(axis=0)])
+    def submerged(self, d: mujoco.MjData, body: int, surface: Surface
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The body's elements below the free surface at the positions of ``d``, world frame: arms from its origin
+        (N, 3), outward unit normals (N, 3), depths (N), areas (N); the twin of finrft_surface_submerged. The
+        implicit steps take them once per step: an element above the surface has no force at any velocity."""
+        rotation = d.xmat[body].reshape(3, 3)
+        arm = surface.centre @ rotation.T
+        depth = self.attached.surface_z - (d.xpos[body, 2] + arm[:, 2])
+        below = depth > 0
+        return arm[below], surface.normal[below] @ rotation.T, depth[below], surface.area[below]
 
     def __call__(self, m: mujoco.MjModel, d: mujoco.MjData) -> None:
         for body, surface in self.bodies:

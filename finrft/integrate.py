@@ -12,7 +12,10 @@
   A rate-independent law is nearly a step function of the velocity's direction, so on light segments the
   linearisation at v (the implicit step, Newton's first iterate) overshoots and chatters; Newton's method with a
   backtracking line search on the residual converges to the root (|change| <= 1e-10 (1 + |qvel|)). The
-  penalty stops are taken at the step's end too, at the deflection d + dt (v + dv).
+  penalty stops are taken at the step's end too, at the deflection d + dt (v + dv). With attached surfaces alone
+  (no segments) it keeps its slope while each full step cuts the residual by SURFACE_DECREASE (fresh again when
+  that stops, or when a search stalls on a kept one) and takes a step below the tolerance without a residual to
+  confirm it: the same root for fewer law calls.
 - ``adaptive``: implicit steps whose size follows a step-doubling error estimate: one step of h and two of h/2
   must agree to ``sim.tolerance`` (max over qpos and qvel of |difference| / (1e-3 + |value|)), never above
   ``sim.max_step``; the accepted state is extrapolated, 2 (two halves) - (one step), which cancels the implicit
@@ -30,10 +33,12 @@
 
 Attached surfaces (`finrft.attach`, the plugin finrft.surface: one instance per body) are taken implicitly as the
 segments are: F(u) sums, besides J_i^T F_i(J_i u) over the segments, J_b^T W_b(J_b u) over the bodies, J_b the
-6 x nv Jacobian of body b's origin (angular rows, then linear: its twist) and W_b its wrench (torque about the
-origin, force) at the positions of the step's start; dW/dtwist by differences of the same wrench, the linear steps
-1e-6 (|v| + reach |omega| + SURFACE_SPEED) and the angular ones that over the body's largest element arm (reach), so
-both move the elements by about the same speed. Both backends apply the surfaces' forces among MuJoCo's passive
+6 x nv Jacobian of body b's origin (angular rows, then linear: its twist t) and W_b its wrench (torque about the
+origin, force) at the positions of the step's start, summed over the elements below the surface there (taken once
+per step). Element e at arm a_e moves at v_e = A_e t, A_e = [-[a_e]x | I], and W_b = sum_e A_e^T F_e(v_e), so
+dW/dtwist = sum_e A_e^T (dF_e/dv_e) A_e, each element's 3 x 3 by differences of its own law in steps
+1e-6 (|v_e| + SURFACE_SPEED): three law calls per element (forward differences), none for an element that trails
+(n . v <= 0, where every surface law is 0) at v_e and at every probe. Both backends apply the surfaces' forces among MuJoCo's passive
 forces at v; the step takes them out there (``other``) and back at v + dv, as the segments'.
 
 What is stable, and why: a rate-independent force regularised over v_reg is, on a light body of mass m, a damper
@@ -59,7 +64,6 @@ An adaptive stepper also steps ``until(d, t)``, to an instant off the grid (a re
 from __future__ import annotations
 
 import ctypes
-import functools
 from typing import Callable, Protocol, Sequence
 
 import mujoco
@@ -76,9 +80,12 @@ NEWTON_ITERATIONS = 50
 NEWTON_TOLERANCE = 1e-10
 NEWTON_HALVINGS = 10
 NEWTON_SHARE = 1e-2  # the adaptive newton method stops Newton's method at this share of the step's tolerance
-# The speed (m/s) on whose scale a body's wrench is differenced besides its own (SURFACE_SPEED in steppers.c): the
-# surface laws are rate-independent, so any step small against the elements' speeds would do but for a body at rest.
+# The speed (m/s) on whose scale an element's force is differenced besides its own (SURFACE_SPEED in steppers.c):
+# the surface laws are rate-independent, so any step small against the element's speed would do but for one at rest.
 SURFACE_SPEED = 1e-3
+# Newton's method on attached surfaces alone keeps its slope while each full step cuts the residual at least this
+# much (SURFACE_DECREASE in steppers.c).
+SURFACE_DECREASE = 0.1
 
 
 def _native(name: str, *argtypes) -> Callable[..., int]:
@@ -240,17 +247,23 @@ class Adaptive(_Counted):
         return 0
 
 
+def _cross_matrices(a: np.ndarray) -> np.ndarray:
+    """[a]x for each row of ``a`` (N, 3): (N, 3, 3), [a]x b = a x b."""
+    out = np.zeros((len(a), 3, 3))
+    out[:, 0, 1], out[:, 0, 2], out[:, 1, 2] = -a[:, 2], a[:, 1], -a[:, 0]
+    out[:, 1, 0], out[:, 2, 0], out[:, 2, 1] = a[:, 2], -a[:, 1], a[:, 0]
+    return out
+
+
 class PythonImplicit:
     """The implicit method in numpy: the twin of finrft_implicit_step, used with the python backend."""
 
     def __init__(self, m: mujoco.MjModel, groups: Sequence[ForceGroup], attached: Attached | None = None) -> None:
         self.m = m
         self.laws = [(laws.bind(g.law), g) for g in groups if len(g.sites)]
-        # per attached body: its id, the callback's wrench of it and the largest arm of its elements
-        forces = attached.callback(m) if attached is not None else None
-        self.bodies = [] if forces is None else [
-            (body, surface, forces.wrench, float(np.linalg.norm(surface.centre, axis=1).max(initial=0.0)) or 1.0)
-            for body, surface in forces.bodies]
+        # per attached body: its id and surface; the callback's submerged elements, the law's forces on them
+        self._surfaces = attached.callback(m) if attached is not None else None
+        self.bodies = [] if self._surfaces is None else self._surfaces.bodies
         self.damping = np.diag(m.dof_damping)
         servo = [a for a in range(m.nu) if m.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT
                  and m.actuator_biastype[a] == mujoco.mjtBias.mjBIAS_AFFINE]
@@ -264,13 +277,13 @@ class PythonImplicit:
     def _segments(self, d: mujoco.MjData) -> tuple[list, list, list]:
         """Per force group: its law, v_reg, the site Jacobians (k, 3, nv) and the segments' axes and normals; per
         penalty stop: its stiffness, hinge dofs and their deflections from the rest angle now; per attached body:
-        its wrench as a function of its twist at the present positions, the Jacobian of its origin (6, nv: angular
-        rows, then linear, the twist's order) and its elements' largest arm."""
+        the law's element forces, the Jacobian of its origin (6, nv: angular rows, then linear, the twist's order)
+        and its elements below the surface now (arms, normals, depths, areas)."""
         segments, stops, bodies = [], [], []
-        for body, surface, wrench, reach in self.bodies:
+        for body, surface in self.bodies:
             jac = np.zeros((6, self.m.nv))
             mujoco.mj_jacBody(self.m, d, jac[3:], jac[:3], body)
-            bodies.append((functools.partial(wrench, d, body, surface), jac, reach))
+            bodies.append((self._surfaces.attached.element_forces, jac, self._surfaces.submerged(d, body, surface)))
         for law, group in self.laws:
             jacp = np.zeros((len(group.sites), 3, self.m.nv))
             for row, site in zip(jacp, group.sites):
@@ -303,20 +316,25 @@ class PythonImplicit:
                 step = h.sum(axis=2, keepdims=True) * (1 if forward else 2)
                 dfdv = np.swapaxes((up - down) / step, 1, 2)  # (k, force, v)
                 jacobian += np.einsum("kin,kij,kjm->nm", jacp, dfdv, jacp)
-        for wrench, jac, reach in bodies:
+        for law, jac, (arm, normal, depth, area) in bodies:
             twist = jac @ u
-            w = wrench(twist)
-            force += jac.T @ w
-            if slope:
-                # steps that move the elements by about h whether linear or angular (h / reach), as body_wrench
-                h = 1e-6 * (np.linalg.norm(twist[3:]) + reach * np.linalg.norm(twist[:3]) + SURFACE_SPEED)
-                dwdt = np.empty((6, 6))
-                for k, step in enumerate(np.r_[np.full(3, h / reach), np.full(3, h)]):
-                    probe = np.zeros(6)
-                    probe[k] = step
-                    dwdt[:, k] = ((wrench(twist + probe) - w) / step if forward
-                                  else (wrench(twist + probe) - wrench(twist - probe)) / (2 * step))
-                jacobian += jac.T @ dwdt @ jac
+            v = twist[3:] + np.cross(twist[:3], arm)
+            f = law(normal, v, depth, area)
+            force += jac.T @ np.concatenate([np.cross(arm, f).sum(axis=0), f.sum(axis=0)])
+            if slope and len(area):
+                # each element's dF/dv (as body_slope): probes (element, probe, 3), the law on all of them at once
+                h = 1e-6 * (np.linalg.norm(v, axis=1) + SURFACE_SPEED)
+                probe = h[:, None, None] * np.eye(3)
+                each = [np.repeat(x, 3, axis=0) for x in (normal, depth, area)]
+                up = law(each[0], (v[:, None] + probe).reshape(-1, 3), *each[1:]).reshape(-1, 3, 3)
+                down = f[:, None] if forward else law(each[0], (v[:, None] - probe).reshape(-1, 3),
+                                                      *each[1:]).reshape(-1, 3, 3)
+                dfdv = np.swapaxes((up - down) / (h * (1 if forward else 2))[:, None, None], 1, 2)
+                # A_e = [-[arm]x | I]: v_e = A_e twist, and the wrench is sum_e A_e^T F_e
+                a = np.zeros((len(area), 3, 6))
+                a[:, :, :3] = -_cross_matrices(arm)
+                a[:, :, 3:] = np.eye(3)
+                jacobian += jac.T @ np.einsum("eri,erk,ekj->ij", a, dfdv, a) @ jac
         for stiffness, dofs, deflection in stops:
             torque, stiffening = penalty_stop(deflection + ahead * u[dofs], stiffness)
             force[dofs] += torque
@@ -343,10 +361,14 @@ class PythonImplicit:
             return matrix @ dv - dt * (other + self._forces(forces, qvel + dv, dt, False)[0])
         dv = np.zeros(m.nv)
         g = -dt * (other + force)
+        # attached surfaces alone: the leaner Newton's method of newton_solve in steppers.c (the same root)
+        lean, fresh = not self.laws, True
         for _ in range(iterations):
             step = np.linalg.solve(matrix - dt * slope, -g)
             if iterations == 1:
                 return step
+            if lean and np.abs(step).max() <= self.tolerance * (1 + np.abs(qvel + dv + step).max()):
+                return dv + step
             norm, alpha = np.linalg.norm(g), 1.0
             while True:
                 trial = residual(dv + alpha * step)
@@ -354,9 +376,12 @@ class PythonImplicit:
                     break
                 alpha /= 2
             dv, g = dv + alpha * step, trial
-            if np.abs(alpha * step).max() <= self.tolerance * (1 + np.abs(qvel + dv).max()):
+            if (np.abs(alpha * step).max() <= self.tolerance * (1 + np.abs(qvel + dv).max())
+                    and (fresh or alpha >= 1e-6)):
                 return dv
-            _, slope = self._forces(forces, qvel + dv, dt, True, forward=True)
+            fresh = not (lean and alpha == 1 and np.linalg.norm(trial) <= SURFACE_DECREASE * norm)
+            if fresh:
+                _, slope = self._forces(forces, qvel + dv, dt, True, forward=True)
         return None
 
     def steps(self, d: mujoco.MjData, n: int, dt: float, iterations: int, counts: Counts | None = None) -> int:

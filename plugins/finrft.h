@@ -128,7 +128,19 @@ const FinrftSurface* finrft_surface_instance(const mjModel* m, mjData* d, int in
 
 // The medium's force and torque on the instance's body, wrench = (torque about the body's origin, force), world
 // frame, had the body the twist (angular velocity, velocity of its origin), world frame, at the positions of d
-// (after mj_kinematics): the sum over its elements. The implicit steppers difference it in the twist.
+// (after mj_kinematics): the sum over its elements, as the plugin applies it.
 void finrft_surface_wrench(const FinrftSurface* p, const mjData* d, const mjtNum twist[6], mjtNum wrench[6]);
+
+// One element's force (world frame) under the instance's law, DRFT term and ramp: outward unit normal, velocity,
+// depth below the surface (m), area (m^2).
+void finrft_surface_element_force(const FinrftSurface* p, const mjtNum normal[3], const mjtNum v[3], mjtNum depth,
+                                  mjtNum area, mjtNum f[3]);
+
+// The instance's elements below the free surface at the positions of d (after mj_kinematics), world frame, into
+// out (FINRFT_SUBMERGED numbers each: arm from the body's origin, outward normal, depth, area; room for all p->n);
+// returns their count. Positions are fixed within a step, so the implicit steps take them once per step and loop
+// over these alone: an element above the surface has no force at any velocity.
+#define FINRFT_SUBMERGED 8
+int finrft_surface_submerged(const FinrftSurface* p, const mjData* d, mjtNum* out);
 
 #endif  // FINRFT_H_

@@ -380,8 +380,8 @@ const FinrftSurface* finrft_surface_instance(const mjModel* m, mjData* d, int in
 
 // One element's force (world frame): the law's, plus DRFT's term, times the ramp tanh(max(n . v, 0) / v_reg) (as
 // Attached.element_forces in attach.py and `regularised` in finrft/laws/__init__.py).
-static void element_force(const FinrftSurface* p, const mjtNum normal[3], const mjtNum v[3], mjtNum depth,
-                          mjtNum area, mjtNum f[3]) {
+void finrft_surface_element_force(const FinrftSurface* p, const mjtNum normal[3], const mjtNum v[3], mjtNum depth,
+                                  mjtNum area, mjtNum f[3]) {
   kLaws[p->law].force(p, normal, v, depth, area, f);
   if (p->drft_lambda > 0) {
     mjtNum inertial[3];
@@ -404,11 +404,28 @@ void finrft_surface_wrench(const FinrftSurface* p, const mjData* d, const mjtNum
     mju_mulMatVec3(normal, R, e + 3);
     mju_cross(v, twist, arm);
     mju_addTo3(v, twist + 3);
-    element_force(p, normal, v, depth, e[6], f);
+    finrft_surface_element_force(p, normal, v, depth, e[6], f);
     mju_addTo3(wrench + 3, f);
     mju_cross(moment, arm, f);
     mju_addTo3(wrench, moment);
   }
+}
+
+int finrft_surface_submerged(const FinrftSurface* p, const mjData* d, mjtNum* out) {
+  const mjtNum* origin = d->xpos + 3 * p->body;
+  const mjtNum* R = d->xmat + 9 * p->body;
+  int count = 0;
+  for (int i = 0; i < p->n; i++) {
+    const double* e = p->element + 7 * i;
+    mjtNum* o = out + FINRFT_SUBMERGED * count;
+    mju_mulMatVec3(o, R, e);
+    o[6] = p->surface_z - (origin[2] + o[2]);
+    if (!(o[6] > 0)) continue;
+    mju_mulMatVec3(o + 3, R, e + 3);
+    o[7] = e[6];
+    count++;
+  }
+  return count;
 }
 
 // Every element's force, summed into one force and one torque about the body's origin, applied once.

@@ -130,7 +130,12 @@ def unstable(scene: Any, t: float, messages: list[str], code: int = 1) -> Simula
 
 def chatter(scene: Any, t: float) -> Chatter:
     sim = scene.sim
-    advice = _EXPLICIT_ONLY if isinstance(sim, ExplicitSim) else "use sim.method = 'newton', or reduce sim.dt"
+    if isinstance(sim, ExplicitSim):
+        advice = _EXPLICIT_ONLY
+    elif methods.get(sim.method).newton:
+        advice = "reduce sim.dt: a light body's mode overshoots even the solved step there"
+    else:
+        advice = "use sim.method = 'newton', or reduce sim.dt"
     return Chatter(
         f"the RFT force chatters at t = {t:.4g} s (it reverses every step: the velocities overshoot) with method "
         f"{sim.method}, dt = {sim.dt:g} s: {advice}")

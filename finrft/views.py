@@ -77,9 +77,9 @@ _GEOM_TYPES: dict[str, int] = {}
 
 
 def draw_model(rec: Any, run: Result, times: Any, prefix: str) -> list[Any]:
-    """A user's model in 3D: each body's geoms (boxes, spheres, ellipsoids, capsules, cylinders, meshes) logged
-    once in the body's frame, the bodies' poses over time, the free surface as a translucent plane, and the
-    medium's force on each attached body as an arrow from its origin."""
+    """A user's model in 3D: each body's geoms (boxes, spheres, ellipsoids, capsules, cylinders, meshes) and the
+    surface elements of the attached ones logged once in the body's frame, the bodies' poses over time, the free
+    surface as a translucent plane, and the medium's force on each attached body as an arrow from its origin."""
     import mujoco
     import rerun as rr  # loads only when a recording is written
     import rerun.blueprint as rrb
@@ -87,7 +87,8 @@ def draw_model(rec: Any, run: Result, times: Any, prefix: str) -> list[Any]:
         _GEOM_TYPES.update({name.removeprefix("mjGEOM_").lower(): int(t)
                             for name, t in mujoco.mjtGeom.__members__.items()})
     scene = run.scene
-    m = run.experiment.build(scene).model
+    built = run.experiment.build(scene)
+    m = built.model
     root = f"{prefix}robot"
     rec.log(root, rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     attached = set(scene.model.bodies)
@@ -106,6 +107,11 @@ def draw_model(rec: Any, run: Result, times: Any, prefix: str) -> list[Any]:
             rec.log(f"{body}/geom{g}", rr.Transform3D(translation=m.geom_pos[g], quaternion=[*q[1:], q[0]]),
                     static=True)
             rec.log(f"{body}/geom{g}", shape, static=True)
+    # The surface elements the medium acts on (culled faces left out), in their body's frame: they move with it.
+    for surface in built.attached.surfaces:
+        rec.log(f"{root}/{surface.body}/elements", rr.Points3D(surface.centre, colors=[[40, 90, 200]],
+                                                                radii=[0.25 * built.attached.element_size]),
+                static=True)
     # The medium's force: arrows from the attached bodies' origins, scaled to half the motion's span.
     position, force = run.body_position, run.medium_force
     n = position.shape[1]

@@ -192,7 +192,8 @@ def test_the_recordings_hold_the_series_and_the_geometry(tmp_path, capsys):
     printed = subprocess.run([sys.executable, "-m", "rerun", "rrd", "print", str(rrd)], capture_output=True,
                              text=True, timeout=120).stdout
     for entity, archetype in (("/robot/rod/geom0", "Capsules3D"), ("/robot/rod ", "Transform3D"),
-                              ("/robot/medium_force", "Arrows3D"), ("/robot/surface", "Mesh3D")):
+                              ("/robot/medium_force", "Arrows3D"), ("/robot/surface", "Mesh3D"),
+                              ("/robot/rod/elements", "Points3D")):
         assert any(entity in line and archetype in line for line in printed.splitlines()), entity
 
 

@@ -178,8 +178,8 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str = (), law: str = "li
     ``law``, a surface law of `finrft.laws`: ``li2013`` (`finrft.laws.li2013`: Li 2013 in 3D as Treers, Cao &
     Stuart 2021 extend it) or ``li2013-planar`` (its planar form, which cannot swim: it warns) with
     ``coefficients`` (default: the generic medium) scaled by ``zeta`` (default 1), or instead of both a ``medium``
-    of the catalogue (`finrft.media`, e.g. ``"poppy_seeds_lp"``); or ``rft3d`` (`finrft.laws.rft3d`) with ``coefficients`` (default:
-    `rft3d.AGARWAL_2023`) and the medium's critical density ``rho_c`` (kg/m^3), internal friction ``mu_int`` and
+    of the catalogue (`finrft.media`, e.g. ``"poppy_seeds_lp"``); or ``rft3d`` (`finrft.laws.rft3d`) with
+    ``coefficients`` (default: `rft3d.AGARWAL_2023`) and the medium's critical density ``rho_c`` (kg/m^3), internal friction ``mu_int`` and
     the bodies' surface friction ``mu_surf``, all three required (a catalogued ``medium`` gives rho_c and mu_int
     when it has them); ``drft_lambda`` (dimensionless, default 0: off):
     DRFT's rate-dependent term on top of either law (`finrft.laws.drft`), with the medium's density: rft3d's

@@ -38,8 +38,8 @@ origin, force) at the positions of the step's start, summed over the elements be
 per step). Element e at arm a_e moves at v_e = A_e t, A_e = [-[a_e]x | I], and W_b = sum_e A_e^T F_e(v_e), so
 dW/dtwist = sum_e A_e^T (dF_e/dv_e) A_e, each element's 3 x 3 by differences of its own law in steps
 1e-6 (|v_e| + SURFACE_SPEED): three law calls per element (forward differences), none for an element that trails
-(n . v <= 0, where every surface law is 0) at v_e and at every probe. Both backends apply the surfaces' forces among MuJoCo's passive
-forces at v; the step takes them out there (``other``) and back at v + dv, as the segments'.
+(n . v <= 0, where every surface law is 0) at v_e and at every probe. Both backends apply the surfaces' forces
+among MuJoCo's passive forces at v; the step takes them out there (``other``) and back at v + dv, as the segments'.
 
 What is stable, and why: a rate-independent force regularised over v_reg is, on a light body of mass m, a damper
 F / v_reg, which an explicit step resolves only for dt < 2 m v_reg / F (a 0.5 kg box resting on li2013 with

@@ -96,6 +96,8 @@ class Sim:
 class Model:
     path: str = _f("", "", "the MJCF file (relative to the scene file); finrft run MODEL.xml overrides it")
     bodies: tuple[str, ...] = _f((), "", "the bodies the medium acts on (their geoms are cut into surface elements)")
+    geoms: tuple[str, ...] = _f((), "", "geoms the medium acts on, by name, beside model.bodies (their bodies' other "
+                                "geoms left out)")
 
 
 Medium = schema.section("Medium", (

@@ -91,7 +91,7 @@ def draw_model(rec: Any, run: Result, times: Any, prefix: str) -> list[Any]:
     m = built.model
     root = f"{prefix}robot"
     rec.log(root, rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-    attached = set(scene.model.bodies)
+    attached = set(run.experiment.bodies)
     count = len(run.time)
     for i, name in enumerate(run.experiment.links):
         body = f"{root}/{name}"

@@ -245,3 +245,19 @@ def test_the_error_limit_is_a_share_of_the_run_s_scale(tmp_path):
     assert s["scale_m"] == pytest.approx(0.2)  # the plate travels 200 mm, more than its size (125 mm diagonal)
     assert s["error_estimate"]["position_percent"] == pytest.approx(
         100 * s["error_estimate"]["position_mm"] / 200, rel=1e-9)
+
+
+def test_geoms_chosen_by_name_in_the_scene(tmp_path):
+    # The plate's body carries a second, heavy geom standing in the sand beside it; model.geoms takes the plate's
+    # geom alone: the drive's load is the plate's closed form (test above), as if the other geom were not there.
+    (tmp_path / "plate.xml").write_text(PLATE.replace(
+        '<geom type="box"', '<geom name="blade" type="box"').replace(
+        'mass="10"/>', 'mass="10"/><geom name="post" type="box" size="0.01 0.01 0.03" pos="0 0.1 -0.03"/>'))
+    scene = UserScene().replace(**{"model.path": str(tmp_path / "plate.xml"), "model.geoms": ["blade"],
+                                   "drive.0.joint": "drag", "drive.0.speed": 0.1, "drive.0.stroke": 0.0,
+                                   "sim.duration": 0.3, "sim.settle": 0.1, "sim.record_dt": 0.01})
+    s = finrft.run_robot(scene).summary()
+    assert s["bodies"] == ["plate"]
+    assert s["drive_load"][0] == pytest.approx(DRAG_N, rel=1e-6)
+    with pytest.raises(SceneError, match="no geom named 'wing'"):
+        finrft.run_robot(scene.replace(**{"model.geoms": ["wing"]}))

@@ -67,9 +67,10 @@ def driven_joint(spec: mujoco.MjSpec, name: str, key: str = "drive.joint") -> mu
 
 
 def build_attached(spec: mujoco.MjSpec, joints: Sequence[str], bodies: tuple[str, ...], medium: Medium,
-                   sim: Any) -> AttachedModel:
-    """Give ``spec`` the numerics, each driven joint its armature and the bodies RFT, and compile it."""
-    if not bodies:
+                   sim: Any, geoms: tuple[str, ...] = ()) -> AttachedModel:
+    """Give ``spec`` the numerics, each driven joint its armature and RFT the bodies (all their geoms) and the
+    geoms named, and compile it. The attached bodies are ``bodies``, then those of ``geoms``."""
+    if not bodies and not geoms:
         raise SceneError("model.bodies is empty: name the bodies the medium acts on")
     driven = [driven_joint(spec, name, f"drive.{i}.joint") for i, name in enumerate(joints)]
     if len(set(joints)) < len(joints):
@@ -86,7 +87,7 @@ def build_attached(spec: mujoco.MjSpec, joints: Sequence[str], bodies: tuple[str
         dof = int(plain.jnt_dofadr[plain.joint(name).id])
         joint.armature = ARMATURE_RATIO * mass[dof, dof]
     law = laws.module(medium.law, laws.SURFACE)
-    attached = attach(spec, list(bodies), law=medium.law, surface_z=medium.surface_z,
+    attached = attach(spec, list(bodies), geoms=list(geoms), law=medium.law, surface_z=medium.surface_z,
                       element_size=medium.element_size, backend=sim.backend, medium=medium.name or None,
                       drft_lambda=medium.drft_lambda, v_reg=medium.v_reg,
                       bulk_density=None if law.DENSITY else medium.bulk_density or None, **law.given(medium))
@@ -95,7 +96,7 @@ def build_attached(spec: mujoco.MjSpec, joints: Sequence[str], bodies: tuple[str
     dofs = np.array([model.jnt_dofadr[j] for j in ids], dtype=int)
     return AttachedModel(model, attached, dofs, np.array([model.jnt_qposadr[j] for j in ids], dtype=int),
                          np.array(model.dof_armature[dofs], dtype=float),
-                         np.array([model.body(b).id for b in bodies], dtype=int))
+                         np.array([model.body(s.body).id for s in attached.surfaces], dtype=int))
 
 
 def medium_forces(built: AttachedModel) -> Callable[[mujoco.MjData], np.ndarray]:

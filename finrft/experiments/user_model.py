@@ -280,6 +280,7 @@ class UserModel:
     actuators: tuple[str, ...] = ()       # every actuator, by name (or actuator<id>)
     tables: tuple = ()                    # each [[control]]'s table (times, values), or None
     control: Controller | None = None     # the Python controller, if any
+    bodies: tuple[str, ...] = ()          # the attached bodies: model.bodies, then those of model.geoms
     name = "run"
     schema = "finrft.user/2"
     sign_convention = SIGN_CONVENTION
@@ -295,6 +296,16 @@ class UserModel:
         for b in scene.model.bodies:
             if mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, b) < 0:
                 raise SceneError(f"model.bodies: the model has no body named {b!r}")
+        bodies = list(scene.model.bodies)
+        for g in scene.model.geoms:
+            if mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, g) < 0:
+                raise SceneError(f"model.geoms: the model has no geom named {g!r}")
+            body = m.body(m.geom(g).bodyid[0]).name
+            if not body:
+                raise SceneError(f"model.geoms: geom {g!r} belongs to an unnamed body: name the body")
+            bodies += [] if body in bodies else [body]
+        if not bodies:
+            raise SceneError("model.bodies and model.geoms are empty: name the bodies (or geoms) the medium acts on")
         actuators = tuple(m.actuator(i).name or f"actuator{i}" for i in range(m.nu))
         for i, c in enumerate(scene.control):
             if c.actuator not in actuators:
@@ -307,7 +318,7 @@ class UserModel:
         tables = tuple(read_table(c.table, f"control.{i}") if c.kind == "table" else None
                        for i, c in enumerate(scene.control))
         links = tuple(m.body(i).name or f"body{i}" for i in range(1, m.nbody))
-        return cls(kinds, links, actuators, tables, control)
+        return cls(kinds, links, actuators, tables, control, tuple(bodies))
 
     def unit(self, i: int) -> tuple[str, str, str]:
         """Drive i's position, velocity and load units."""
@@ -315,13 +326,13 @@ class UserModel:
 
     def build(self, scene: UserScene) -> AttachedModel:
         return build_attached(read_spec(scene.model.path), [j.joint for j in scene.drive], scene.model.bodies,
-                              scene.medium, scene.sim)
+                              scene.medium, scene.sim, scene.model.geoms)
 
     def drive_for(self, scene: UserScene) -> Schedule:
         return Schedule(*drive_timing(scene))
 
     def quantities(self, scene: UserScene) -> dict[str, Quantity]:
-        bodies, joints = ",".join(scene.model.bodies), ",".join(j.joint for j in scene.drive)
+        bodies, joints = ",".join(self.bodies), ",".join(j.joint for j in scene.drive)
         world = {"frame": "world"}
         out = {
             "com_position": Quantity("m", "the model's centre of mass", attrs=world,
@@ -420,12 +431,12 @@ def robot_summary(experiment: UserModel, run: Result) -> dict[str, Any]:
     velocity = (com[-1] - start) / (t[-1] - settle)
     body_force = window_mean(t, run.medium_force, settle)
     out: dict[str, Any] = {
-        "model": scene.model.path, "bodies": list(scene.model.bodies),
+        "model": scene.model.path, "bodies": list(experiment.bodies),
         "drives": [j.joint for j in scene.drive], "actuators": list(experiment.actuators),
         "window_s": [settle, float(t[-1])],
         "com_velocity_m_s": velocity.tolist(), "com_position_m": com[-1].tolist(),
         "medium_force_N": body_force.sum(axis=0).tolist(),
-        "body_medium_force_N": {b: body_force[i].tolist() for i, b in enumerate(scene.model.bodies)},
+        "body_medium_force_N": {b: body_force[i].tolist() for i, b in enumerate(experiment.bodies)},
         "drive_load": [], "drive_load_units": [], "actuator_power_W": 0.0}
     positive = 0.0
     if scene.drive:
@@ -518,7 +529,7 @@ class RunCommand(Command):
         run, = runs
         scene, s = run.scene, run.summary()
         mm = ", ".join
-        lines = [f"{scene.model.path}: RFT ({scene.medium.law}) on {', '.join(scene.model.bodies)} ({run.backend}; "
+        lines = [f"{scene.model.path}: RFT ({scene.medium.law}) on {', '.join(run.experiment.bodies)} ({run.backend}; "
                  f"{scene.sim.method}, dt {scene.sim.dt:g} s): {s['sim_time_s']:.4g} s simulated, "
                  f"{steps_line(s)} in {run.wall_s:.2f} s",
                  f"over {s['window_s'][0]:g}..{s['window_s'][1]:.4g} s: centre of mass velocity (mm/s) "

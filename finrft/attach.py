@@ -196,7 +196,7 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str = (), law: str = "li
     material = media.medium(medium) if medium is not None else None
     names = [bodies] if isinstance(bodies, str) else list(bodies)
     chosen = _chosen_geoms(spec, names, [geoms] if isinstance(geoms, str) else list(geoms))
-    names += [b for b in chosen if b not in names]
+    names += list(chosen)
     _check(names, law, surface_z, element_size, backend)
     if not (math.isfinite(v_reg) and v_reg >= 0):
         raise SceneError(f"attach: v_reg must be >= 0 m/s, got {v_reg!r}")
@@ -274,6 +274,12 @@ def _bind(spec: mujoco.MjSpec, attached: Attached, surface: Surface) -> None:
     body.plugin = instance
     body.plugin.name = instance.name
     body.plugin.active = True
+
+
+def attached_bodies(spec: mujoco.MjSpec, bodies: Sequence[str], geoms: Sequence[str]) -> list[str]:
+    """The bodies `attach` gives surfaces for ``bodies`` and ``geoms``: the bodies named, then those of the geoms
+    named, in order; SceneError for a geom the model lacks (the bodies are checked as `attach` runs)."""
+    return [*bodies, *_chosen_geoms(spec, list(bodies), list(geoms))]
 
 
 def _chosen_geoms(spec: mujoco.MjSpec, bodies: list[str], geoms: list[str]) -> dict[str, list[str]]:

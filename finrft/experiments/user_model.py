@@ -22,6 +22,7 @@ from typing import Any, Callable
 import mujoco
 import numpy as np
 
+from ..attach import attached_bodies
 from ..errors import SimulationFailed, UsageError
 from ..experiment import Compared, Plot, Quantity, Result, run
 from ..convergence import ErrorLimits
@@ -296,14 +297,7 @@ class UserModel:
         for b in scene.model.bodies:
             if mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, b) < 0:
                 raise SceneError(f"model.bodies: the model has no body named {b!r}")
-        bodies = list(scene.model.bodies)
-        for g in scene.model.geoms:
-            if mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, g) < 0:
-                raise SceneError(f"model.geoms: the model has no geom named {g!r}")
-            body = m.body(m.geom(g).bodyid[0]).name
-            if not body:
-                raise SceneError(f"model.geoms: geom {g!r} belongs to an unnamed body: name the body")
-            bodies += [] if body in bodies else [body]
+        bodies = attached_bodies(spec, scene.model.bodies, scene.model.geoms)
         if not bodies:
             raise SceneError("model.bodies and model.geoms are empty: name the bodies (or geoms) the medium acts on")
         actuators = tuple(m.actuator(i).name or f"actuator{i}" for i in range(m.nu))

@@ -35,22 +35,48 @@
 // Below this fraction of the speed, a velocity's horizontal part is taken as none (as VERTICAL in li2013.py).
 #define VERTICAL 1e-12
 
-// (alpha_x, alpha_z), N/m^3, for any beta and gamma: see finrft/laws/li2013.py for the signs and the folding.
-FINRFT_EXPORT void finrft_li2013_alpha(const double coef[NCOEF], double zeta, double beta, double gamma,
-                                       double out[2]) {
-  if (fabs(gamma) > mjPI) gamma = atan2(sin(gamma), cos(gamma));
-  int mirrored = fabs(gamma) > mjPI / 2;
+// (alpha_x, alpha_z), N/m^3, at the angles beta and gamma given by their cosines and sines: see
+// finrft/laws/li2013.py for the signs and the folding. The series' terms come from cos 2beta and sin 2beta by the
+// angle-sum formulas, so a call costs no trigonometric function: the laws are called several times per element per
+// Newton step, and sin, cos and atan2 were a third of a wheel's step.
+static void alpha_unit(const double coef[NCOEF], double zeta, double cb, double sb, double cg, double sg,
+                       double out[2]) {
+  // gamma beyond +-pi/2 (cos gamma < 0) is folded to pi - gamma with beta to -beta: cos gamma and sin 2beta change
+  // sign
+  int mirrored = cg < 0;
   if (mirrored) {
-    gamma = copysign(mjPI, gamma) - gamma;
-    beta = -beta;
+    cg = -cg;
+    sb = -sb;
   }
-  beta -= mjPI * nearbyint(beta / mjPI);
-  double az = coef[0] + coef[1] * cos(2 * beta) + coef[2] * sin(2 * beta + gamma) + coef[3] * sin(gamma) +
-              coef[4] * sin(-2 * beta + gamma);
-  double ax = coef[5] * cos(2 * beta + gamma) + coef[6] * cos(gamma) + coef[7] * cos(-2 * beta + gamma) +
-              coef[8] * sin(2 * beta);
+  double c2 = cb * cb - sb * sb, s2 = 2 * sb * cb;
+  double sum_sin = s2 * cg + c2 * sg, diff_sin = c2 * sg - s2 * cg;  // sin(2b + g), sin(-2b + g)
+  double sum_cos = c2 * cg - s2 * sg, diff_cos = c2 * cg + s2 * sg;  // cos(2b + g), cos(-2b + g)
+  double az = coef[0] + coef[1] * c2 + coef[2] * sum_sin + coef[3] * sg + coef[4] * diff_sin;
+  double ax = coef[5] * sum_cos + coef[6] * cg + coef[7] * diff_cos + coef[8] * s2;
   out[0] = zeta * (mirrored ? -ax : ax);
   out[1] = zeta * az;
+}
+
+// The cosine and sine of atan2(y, x) (1 and 0 at the origin, as atan2(0, 0) = 0).
+static void unit_angle(double y, double x, double* c, double* s) {
+  double size = hypot(x, y);
+  *c = size > 0 ? x / size : 1;
+  *s = size > 0 ? y / size : 0;
+}
+
+// (alpha_x, alpha_z), N/m^3, for any beta and gamma.
+FINRFT_EXPORT void finrft_li2013_alpha(const double coef[NCOEF], double zeta, double beta, double gamma,
+                                       double out[2]) {
+  alpha_unit(coef, zeta, cos(beta), sin(beta), cos(gamma), sin(gamma), out);
+}
+
+// Li's alpha at the face's angle beta = atan2(face_y, face_x) and the motion's gamma = atan2(motion_y, motion_x).
+static void li2013_alpha_at(const double coef[NCOEF], double zeta, double face_y, double face_x, double motion_y,
+                            double motion_x, double out[2]) {
+  double cb, sb, cg, sg;
+  unit_angle(face_y, face_x, &cb, &sb);
+  unit_angle(motion_y, motion_x, &cg, &sg);
+  alpha_unit(coef, zeta, cb, sb, cg, sg, out);
 }
 
 // The force on one element (world frame, z up): outward unit normal n, velocity v, depth below the surface,
@@ -75,7 +101,7 @@ FINRFT_EXPORT void finrft_li2013_planar_element_force(const double coef[NCOEF], 
   double n_r = n[0] * r[0] + n[1] * r[1];
   double v_r = v[0] * r[0] + v[1] * r[1];
   double a[2];
-  finrft_li2013_alpha(coef, zeta, atan2(-n_r, n[2]), atan2(-v[2], v_r), a);
+  li2013_alpha_at(coef, zeta, -n_r, n[2], -v[2], v_r, a);
   double scale = area * depth * hypot(n_r, n[2]);
   force[0] = -scale * a[0] * r[0];
   force[1] = -scale * a[0] * r[1];
@@ -118,8 +144,8 @@ static void li2013_stress(const double coef[NCOEF], double zeta, const double n[
   double along = u[0] * e2[0] + u[1] * e2[1];
   double f1 = weight_across(fabs(across)), f23 = weight_within(hypot(along, u[2]));
   double a[2], a1[2];
-  finrft_li2013_alpha(coef, zeta, atan2(-(n[0] * e2[0] + n[1] * e2[1]), n[2]), atan2(-u[2], along), a);
-  finrft_li2013_alpha(coef, zeta, 0, 0, a1);
+  li2013_alpha_at(coef, zeta, -(n[0] * e2[0] + n[1] * e2[1]), n[2], -u[2], along, a);
+  alpha_unit(coef, zeta, 1, 0, 1, 0, a1);
   double side = f1 * a1[0] * (across > 0 ? 1 : across < 0 ? -1 : 0);
   for (int i = 0; i < 2; i++) stress[i] = -side * e1[i] - f23 * a[0] * e2[i];
   stress[2] = f23 * a[1];
@@ -428,15 +454,29 @@ int finrft_surface_submerged(const FinrftSurface* p, const mjData* d, mjtNum* ou
   return count;
 }
 
+// The medium's wrench (torque about the body's origin, then force; world frame) on the body of instance
+// `instance` at the state of d (after mj_forward), as the passive force applies it: finrft.attach reads the forces
+// it records from here with the native backend. The body's id, or -1 when the instance is not a finrft.surface
+// one.
+FINRFT_EXPORT int finrft_surface_body_wrench(const mjModel* m, mjData* d, int instance, mjtNum wrench[6]) {
+  int slot = -1;
+  mjp_getPlugin(FINRFT_SURFACE_PLUGIN, &slot);
+  if (instance < 0 || instance >= m->nplugin || m->plugin[instance] != slot) return -1;
+  const FinrftSurface* p = finrft_surface_instance(m, d, instance);
+  if (!p) return -1;
+  mjtNum twist[6];
+  mj_objectVelocity(m, d, mjOBJ_XBODY, p->body, twist, 0);
+  finrft_surface_wrench(p, d, twist, wrench);
+  return p->body;
+}
+
 // Every element's force, summed into one force and one torque about the body's origin, applied once.
 static void surface_compute(const mjModel* m, mjData* d, int instance, int capability_bit) {
   if (!(capability_bit & mjPLUGIN_PASSIVE)) return;
-  const FinrftSurface* p = finrft_surface_instance(m, d, instance);
-  if (!p) return;
-  mjtNum twist[6], wrench[6];
-  mj_objectVelocity(m, d, mjOBJ_XBODY, p->body, twist, 0);
-  finrft_surface_wrench(p, d, twist, wrench);
-  mj_applyFT(m, d, wrench + 3, wrench, d->xpos + 3 * p->body, p->body, d->qfrc_passive);
+  mjtNum wrench[6];
+  int body = finrft_surface_body_wrench(m, d, instance, wrench);
+  if (body < 0) return;
+  mj_applyFT(m, d, wrench + 3, wrench, d->xpos + 3 * body, body, d->qfrc_passive);
 }
 
 void finrft_register_surface(void) {

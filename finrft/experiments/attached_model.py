@@ -100,11 +100,10 @@ def build_attached(spec: mujoco.MjSpec, joints: Sequence[str], bodies: tuple[str
 
 
 def medium_forces(built: AttachedModel) -> Callable[[mujoco.MjData], np.ndarray]:
-    """The resultant of the medium's force on each attached body (B, 3), world frame, recomputed from the law
-    whatever the backend (after mj_forward)."""
-    forces = built.python_forces()
-    surfaces = [(int(b), s) for b, s in zip(built.bodies, built.attached.surfaces)]
-    return lambda d: np.array([forces.element_forces(built.model, d, b, s)[0].sum(axis=0) for b, s in surfaces])
+    """The resultant of the medium's force on each attached body (B, 3), world frame, from the backend in use
+    (after mj_forward)."""
+    wrenches = built.attached.wrenches(built.model)
+    return lambda d: wrenches(d)[:, 3:]
 
 
 class JointTrial:

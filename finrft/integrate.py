@@ -16,6 +16,15 @@
   (no segments) it keeps its slope while each full step cuts the residual by SURFACE_DECREASE (fresh again when
   that stops, or when a search stalls on a kept one) and takes a step below the tolerance without a residual to
   confirm it: the same root for fewer law calls.
+- ``newton-midpoint``: the newton step with the RFT force taken at the positions half a step ahead at the
+  starting velocity, q + (dt / 2) v (the segments' and bodies' Jacobians and the elements below the surface; the
+  stops stay where they are), and taken out of MuJoCo's forces where MuJoCo applied it, at q. The positions then
+  advance with the new velocity, as in every method, so the force acts at the midpoint of the step's path: where
+  the motion is quasi-static (a robot's in sand: the velocity follows from the shape and the drives), the first
+  order error of taking it at the start cancels (the sand-swimmer's speed at 1 ms: 0.08 % from converged against
+  2.5 % with ``newton``). Where the motion is inertial against a force that grows with depth it adds a damping
+  of about k dt / 2 (k the force's stiffness in position): a box dropped onto the sand at 1 ms stops 5 % short of
+  its converged depth (``newton``: 0.1 %). Stable as ``newton`` is: the velocity is still backward Euler's.
 - ``adaptive``: implicit steps whose size follows a step-doubling error estimate: one step of h and two of h/2
   must agree to ``sim.tolerance`` (max over qpos and qvel of |difference| / (1e-3 + |value|)), never above
   ``sim.max_step``; the accepted state is extrapolated, 2 (two halves) - (one step), which cancels the implicit
@@ -117,7 +126,7 @@ def stepper(m: mujoco.MjModel, sim: Sim, backend: str, groups: Sequence[ForceGro
     if method.adaptive:
         return Adaptive(m, sim, method.stepper, iterations, backend, groups, attached)
     if method.implicit:
-        return Implicit(m, method.stepper, iterations, backend, groups, attached)
+        return Implicit(m, method.stepper, iterations, backend, groups, attached, method.midpoint)
     return Explicit(m)
 
 
@@ -151,18 +160,19 @@ class Implicit(_Counted):
     """The implicit (one Newton iteration) or newton method, native or numpy."""
 
     def __init__(self, m: mujoco.MjModel, native_stepper: str, iterations: int, backend: str,
-                 groups: Sequence[ForceGroup], attached: Attached | None = None) -> None:
+                 groups: Sequence[ForceGroup], attached: Attached | None = None, midpoint: float = 0.0) -> None:
         super().__init__()
-        self.m, self.iterations = m, iterations
+        self.m, self.iterations, self.midpoint = m, iterations, midpoint
         if backend == "native":
-            self._native = _native(native_stepper, ctypes.c_int, ctypes.c_int, ctypes.POINTER(ctypes.c_int64))
+            self._native = _native(native_stepper, ctypes.c_int, ctypes.c_int, ctypes.c_double,
+                                   ctypes.POINTER(ctypes.c_int64))
         else:
             self._native, self._python = None, PythonImplicit(m, groups, attached)
 
     def __call__(self, d: mujoco.MjData, n: int) -> int:
         if self._native is not None:
-            return self._native(self.m._address, d._address, n, self.iterations, self.counts)
-        return self._python.steps(d, n, self.m.opt.timestep, self.iterations, self.counts)
+            return self._native(self.m._address, d._address, n, self.iterations, self.midpoint, self.counts)
+        return self._python.steps(d, n, self.m.opt.timestep, self.iterations, self.counts, self.midpoint)
 
 
 class Adaptive(_Counted):
@@ -342,10 +352,25 @@ class PythonImplicit:
                 jacobian[dofs, dofs] += stiffening * ahead
         return force, jacobian
 
-    def velocity_change(self, d: mujoco.MjData, dt: float, iterations: int) -> np.ndarray | None:
+    def _segments_ahead(self, d: mujoco.MjData, seconds: float, stops: list) -> tuple[list, list, list]:
+        """`_segments` at the positions ``seconds`` ahead at the present velocity, the penalty stops as given (the
+        present ones); ``d``'s derived quantities are the present ones again afterwards."""
+        m, qpos = self.m, d.qpos.copy()
+        mujoco.mj_integratePos(m, d.qpos, d.qvel, seconds)
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_comPos(m, d)
+        segments, _, bodies = self._segments(d)
+        d.qpos[:] = qpos
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_comPos(m, d)
+        return segments, stops, bodies
+
+    def velocity_change(self, d: mujoco.MjData, dt: float, iterations: int, midpoint: float = 0.0
+                        ) -> np.ndarray | None:
         """The step's velocity change (after mj_forward): the linearly implicit step in the RFT force when
         ``iterations`` is 1; else the root of G with the penalty stops taken at the new positions too, by Newton's
-        method, or None if it does not converge."""
+        method, or None if it does not converge. With ``midpoint`` > 0 the RFT force is taken at the positions that
+        far ahead at the present velocity (as step_prepare in steppers.c)."""
         m = self.m
         mujoco.mj_mulM(m, d, self._rhs, d.qacc)
         mujoco.mj_fullM(m, d, self._mass)
@@ -353,9 +378,12 @@ class PythonImplicit:
         forces = self._segments(d)
         qvel = d.qvel.copy()
         ahead = dt if iterations > 1 else 0.0
+        # every force but F, taken out as MuJoCo applied it: at the present positions, the stops undeflected further
+        taken = self._forces(forces, qvel, 0.0, False)[0] if ahead or midpoint > 0 else None
+        if midpoint > 0:
+            forces = self._segments_ahead(d, midpoint, forces[1])
         force, slope = self._forces(forces, qvel, ahead, True, forward=iterations > 1)
-        # every force but F, taken out at the stops' present deflection
-        other = self._rhs - (self._forces(forces, qvel, 0.0, False)[0] if ahead else force)
+        other = self._rhs - (force if taken is None else taken)
 
         def residual(dv: np.ndarray) -> np.ndarray:
             return matrix @ dv - dt * (other + self._forces(forces, qvel + dv, dt, False)[0])
@@ -384,28 +412,31 @@ class PythonImplicit:
                 _, slope = self._forces(forces, qvel + dv, dt, True, forward=True)
         return None
 
-    def steps(self, d: mujoco.MjData, n: int, dt: float, iterations: int, counts: Counts | None = None) -> int:
-        """``n`` steps of ``dt``; the steps taken and rejected are added to ``counts`` when given."""
+    def steps(self, d: mujoco.MjData, n: int, dt: float, iterations: int, counts: Counts | None = None,
+              midpoint: float = 0.0) -> int:
+        """``n`` steps of ``dt``, the RFT force at the positions a fraction ``midpoint`` of a step ahead; the steps
+        taken and rejected are added to ``counts`` when given."""
         for _ in range(n):
-            failed = self.step(d, dt, iterations, 0, counts)
+            failed = self.step(d, dt, iterations, 0, counts, midpoint)
             if failed:
                 return failed
         return 0
 
-    def step(self, d: mujoco.MjData, dt: float, iterations: int, halvings: int, counts: Counts | None = None) -> int:
+    def step(self, d: mujoco.MjData, dt: float, iterations: int, halvings: int, counts: Counts | None = None,
+             midpoint: float = 0.0) -> int:
         """One step of ``dt``; where Newton's method finds no root (forces that feed energy in, such as
         f_par < 0, can leave the implicit equation without one near v) it halves the step, at most
         NEWTON_HALVINGS times (the step is rejected, its halves taken)."""
         m = self.m
         mujoco.mj_forward(m, d)
-        dv = self.velocity_change(d, dt, iterations)
+        dv = self.velocity_change(d, dt, iterations, midpoint * dt)
         if dv is None:
             if iterations == 1 or halvings == NEWTON_HALVINGS:
                 return Code.NOT_CONVERGED
             if counts is not None:
                 counts[1] += 1
-            return (self.step(d, dt / 2, iterations, halvings + 1, counts)
-                    or self.step(d, dt / 2, iterations, halvings + 1, counts))
+            return (self.step(d, dt / 2, iterations, halvings + 1, counts, midpoint)
+                    or self.step(d, dt / 2, iterations, halvings + 1, counts, midpoint))
         for a in range(m.nu):
             adr = m.actuator_actadr[a]
             if adr < 0:

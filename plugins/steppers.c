@@ -1,5 +1,5 @@
 // The time-stepping methods of finrft (the twins of finrft/integrate.py), called through ctypes:
-//   finrft_implicit_step     the "implicit" and "newton" methods
+//   finrft_implicit_step     the "implicit", "newton" and "newton-midpoint" methods
 //   finrft_adaptive_advance  the "adaptive" and "adaptive-newton" methods
 //   finrft_explicit_record   MuJoCo's own step, recording the state at given steps (finrft.batch)
 // They return 0 or a code of finrft.native.Code (FINRFT_UNSTABLE, ...). A step allocates nothing on the heap: its
@@ -20,7 +20,9 @@
 // arm a_e moves at v_e = A_e t, A_e = [-[a_e]x | I], and W_b = sum_e A_e^T F_e(v_e), so dW_b/dtwist =
 // sum_e A_e^T (dF_e/dv_e) A_e, each 3 x 3 dF_e/dv_e differenced from the element's law alone, only for the
 // elements below the surface (taken once per step) that lead the motion at v_e or at a probe. Then, as
-// MuJoCo's implicitfast: activations, qvel += dv, positions, time.
+// MuJoCo's implicitfast: activations, qvel += dv, positions, time. The newton-midpoint method takes the
+// Jacobians and elements at the positions half a step ahead at v (F there, and f - F with F as MuJoCo applied it,
+// at the start): see integrate.py for when that is second order and when it damps.
 
 #include <math.h>
 #include <stdint.h>
@@ -93,6 +95,10 @@ typedef struct {
   mjtNum *start_force, *start_slope;
   int start_ready;
   int64_t* counts;  // NULL, or where to add the steps taken and rejected (halved by the newton method)
+  // The positions the items hold: the start's (0), or `midpoint` seconds ahead of it at its velocity; then
+  // `applied` (nv) is the RFT force MuJoCo applied at the start, and qpos_start (nq), stop_start (nstop) scratch.
+  mjtNum midpoint;
+  mjtNum *applied, *qpos_start, *stop_start;
   mjtNum newton_tolerance;  // Newton's method stops when the change is below this times (1 + |qvel|)
 } Workspace;
 
@@ -135,7 +141,7 @@ static int workspace_make(const mjModel* m, mjData* d, Workspace* ws, int extra,
   int items = s->n + s->nbody;
   size_t rows = 3 * (size_t)s->n + 6 * (size_t)s->nbody;
   size_t numbers = rows * nv + 6 * (size_t)s->n + 2 * rows + (FINRFT_SUBMERGED + 3) * (size_t)nelement +
-                   2 * (size_t)s->nstop + 5 * (size_t)nv * nv + 13 * (size_t)nv + extra;
+                   2 * (size_t)s->nstop + 5 * (size_t)nv * nv + 14 * (size_t)nv + m->nq + (size_t)s->nstop + extra;
   size_t ints = (size_t)items * (nv + 1) + s->n + s->nbody + 1 + s->nstop;
   size_t pointers = s->ninst + s->n + s->nbody;
   size_t bytes = numbers * sizeof(mjtNum) + pointers * sizeof(void*) + ints * sizeof(int) + 1024;
@@ -184,6 +190,10 @@ static int workspace_make(const mjModel* m, mjData* d, Workspace* ws, int extra,
   for (int i = 0; i < 5; i++) *squares[i] = mj_stackAllocNum(d, (size_t)nv * nv + 1);
   for (int i = 0; i < 10; i++) *vectors[i] = mj_stackAllocNum(d, nv + 1);
   ws->start_ready = 0;
+  ws->midpoint = 0;
+  ws->applied = mj_stackAllocNum(d, nv + 1);
+  ws->qpos_start = mj_stackAllocNum(d, m->nq + 1);
+  ws->stop_start = mj_stackAllocNum(d, s->nstop + 1);
   if (extra_out) *extra_out = mj_stackAllocNum(d, extra);
   ws->counts = NULL;
   ws->newton_tolerance = NEWTON_TOLERANCE;
@@ -468,7 +478,7 @@ static int newton_solve(Workspace* ws, const mjtNum* qvel, mjtNum dt, int iterat
   mju_copy(w->force, ws->start_force, nv);
   mju_copy(w->slope, ws->start_slope, nv * nv);
   // other: every force but F, taken out at the stops' present deflection (w->trial is free until the search)
-  mju_copy(w->trial, w->force, nv);
+  mju_copy(w->trial, ws->midpoint > 0 ? ws->applied : w->force, nv);
   stops_add(s, qvel, 0, w->trial, NULL);
   stops_add(s, qvel, ahead, w->force, w->slope);
   for (int i = 0; i < nv; i++) w->other[i] = rhs[i] - w->trial[i];
@@ -528,13 +538,31 @@ static int newton_solve(Workspace* ws, const mjtNum* qvel, mjtNum dt, int iterat
   return FINRFT_NOT_CONVERGED;
 }
 
-// What a step needs of its start (the state in d): MuJoCo's forces, rhs = M qacc, the mass matrix, the segments.
-static void step_prepare(const mjModel* m, mjData* d, Workspace* ws) {
+// What a step needs of its start (the state in d): MuJoCo's forces, rhs = M qacc, the mass matrix, the items. With
+// midpoint > 0 the segments and bodies are taken at the positions `midpoint` seconds ahead at the start's velocity
+// (the stops stay at the start, which their deflection ahead already counts from), after `applied`, the RFT force
+// MuJoCo applied at the start, to take out of rhs; d's derived quantities are the start's again afterwards.
+static void step_prepare(const mjModel* m, mjData* d, Workspace* ws, mjtNum midpoint) {
+  Items* s = &ws->items;
   mj_forward(m, d);
   mj_mulM(m, d, ws->rhs, d->qacc);
   mj_fullM(m, d, ws->mass);
-  items_update(m, d, &ws->items);
+  items_update(m, d, s);
   ws->start_ready = 0;
+  ws->midpoint = midpoint;
+  if (midpoint > 0) {
+    rft_force(s, d->qvel, ws->applied);
+    mju_copy(ws->qpos_start, d->qpos, m->nq);
+    mju_copy(ws->stop_start, s->stop_q, s->nstop);
+    mj_integratePos(m, d->qpos, d->qvel, midpoint);
+    mj_kinematics(m, d);
+    mj_comPos(m, d);
+    items_update(m, d, s);
+    mju_copy(s->stop_q, ws->stop_start, s->nstop);
+    mju_copy(d->qpos, ws->qpos_start, m->nq);
+    mj_kinematics(m, d);
+    mj_comPos(m, d);
+  }
 }
 
 // One implicit step of size dt from the start step_prepare saw:
@@ -575,32 +603,31 @@ static int step_take(const mjModel* m, mjData* d, mjtNum dt, int iterations, Wor
   return failed;
 }
 
-// One implicit step of size dt; 0, FINRFT_UNSTABLE when the state stopped being finite, or FINRFT_NOT_CONVERGED.
-static int implicit_step(const mjModel* m, mjData* d, mjtNum dt, int iterations, Workspace* ws, int halvings) {
-  step_prepare(m, d, ws);
+// One implicit step of size dt, the RFT force taken at the positions a fraction `midpoint` of it ahead (0: the
+// start); 0, FINRFT_UNSTABLE when the state stopped being finite, or FINRFT_NOT_CONVERGED.
+static int implicit_step(const mjModel* m, mjData* d, mjtNum dt, int iterations, mjtNum midpoint, Workspace* ws,
+                         int halvings) {
+  step_prepare(m, d, ws, midpoint * dt);
   int failed = step_take(m, d, dt, iterations, ws);
   if (failed != FINRFT_NOT_CONVERGED) return failed;
   if (iterations == 1 || halvings == NEWTON_HALVINGS) return FINRFT_NOT_CONVERGED;
   if (ws->counts) ws->counts[1]++;
-  failed = implicit_step(m, d, dt / 2, iterations, ws, halvings + 1);
-  return failed ? failed : implicit_step(m, d, dt / 2, iterations, ws, halvings + 1);
+  failed = implicit_step(m, d, dt / 2, iterations, midpoint, ws, halvings + 1);
+  return failed ? failed : implicit_step(m, d, dt / 2, iterations, midpoint, ws, halvings + 1);
 }
 
-// nstep implicit steps of size dt; 0 or the first failure's code.
-static int implicit_steps(const mjModel* m, mjData* d, int nstep, mjtNum dt, int iterations, Workspace* ws) {
-  int failed = 0;
-  for (int step = 0; step < nstep && !failed; step++) failed = implicit_step(m, d, dt, iterations, ws, 0);
-  return failed;
-}
-
-// The implicit (iterations == 1) and newton methods: nstep steps of the model's time step. counts (or NULL):
-// the steps taken (a halved step counts as two) and rejected (halved) are added to counts[0] and counts[1].
-FINRFT_EXPORT int finrft_implicit_step(const mjModel* m, mjData* d, int nstep, int iterations, int64_t* counts) {
+// The implicit (iterations == 1), newton and newton-midpoint (midpoint 0.5, else 0) methods: nstep steps of the
+// model's time step. counts (or NULL): the steps taken (a halved step counts as two) and rejected (halved) are
+// added to counts[0] and counts[1].
+FINRFT_EXPORT int finrft_implicit_step(const mjModel* m, mjData* d, int nstep, int iterations, mjtNum midpoint,
+                                       int64_t* counts) {
   Workspace ws;
   mj_markStack(d);
   int failed = workspace_make(m, d, &ws, 0, NULL);
   ws.counts = counts;
-  if (!failed) failed = implicit_steps(m, d, nstep, m->opt.timestep, iterations, &ws);
+  for (int step = 0; step < nstep && !failed; step++) {
+    failed = implicit_step(m, d, m->opt.timestep, iterations, midpoint, &ws, 0);
+  }
   mj_freeStack(d);
   return failed;
 }
@@ -634,13 +661,13 @@ FINRFT_EXPORT int finrft_adaptive_advance(const mjModel* m, mjData* d, mjtNum du
     mjtNum step = mju_min(mju_min(*h, hmax), end - d->time);
     // The whole step and the first half start from the same state: one step_prepare serves both.
     mj_getState(m, d, start, spec);
-    step_prepare(m, d, &ws);
+    step_prepare(m, d, &ws, 0);
     failed = step_take(m, d, step, iterations, &ws);
     mj_getState(m, d, full, spec);
     mj_setState(m, d, start, spec);
     if (!failed) failed = step_take(m, d, step / 2, iterations, &ws);
     if (!failed) {
-      step_prepare(m, d, &ws);
+      step_prepare(m, d, &ws, 0);
       failed = step_take(m, d, step / 2, iterations, &ws);
     }
     mj_getState(m, d, halves, spec);

@@ -105,6 +105,48 @@ def _flips(z: np.ndarray) -> float:
     return float(np.mean(change[1:] != change[:-1]))
 
 
+def test_newton_midpoint_is_second_order_where_the_motion_is_quasi_static():
+    # A box on the medium under its weight, its lower face deep enough that the regularised law carries it while it
+    # creeps: m dv/dt = m g - alpha_z A d tanh(v / v_reg), dd/dt = v, solved independently by scipy (Radau). Its
+    # velocity settles within m v_reg / (alpha_z A d) = 1e-5 s, so the depth follows a quasi-static creep: newton,
+    # the force at the step's start, is first order in dt; newton-midpoint, the force half a step ahead, cancels
+    # that error and keeps only the unresolved 1e-5 s transient (6e-10 m, the same for both).
+    from scipy.integrate import solve_ivp
+    v_reg, duration = 1e-4, 0.5
+    k = _alpha_z_flat() * AREA
+    weight = MASS * 9.81
+    d0 = weight / k / 0.8
+
+    def rhs(_, y):
+        return [y[1], (weight - k * y[0] * np.tanh(max(y[1], 0.0) / v_reg)) / MASS]
+    exact = solve_ivp(rhs, (0, duration), [d0, 0.0], method="Radau", rtol=1e-12, atol=[1e-16, 1e-14]).y[0, -1]
+    assert exact - d0 == pytest.approx(5.08e-5, rel=0.01)  # it creeps 51 um
+    error = {}
+    for method in ("newton", "newton-midpoint"):
+        for dt in (4e-3, 2e-3, 1e-3):
+            m, attached = _box("native", dt, z=HALF - d0, v_reg=v_reg)
+            assert -m.opt.gravity[2] == 9.81
+            z = _steps(m, attached, "native", method, mujoco.MjData(m), round(duration / dt))[-1, 2]
+            error[method, dt] = HALF - z - exact
+    assert 0.4 < error["newton", 2e-3] / error["newton", 4e-3] < 0.6  # first order
+    assert 0.4 < error["newton", 1e-3] / error["newton", 2e-3] < 0.6
+    assert abs(error["newton-midpoint", 4e-3]) < abs(error["newton", 4e-3]) / 20
+    assert max(abs(error["newton-midpoint", dt]) for dt in (4e-3, 2e-3, 1e-3)) < abs(error["newton", 1e-3]) / 5
+
+
+def test_newton_midpoint_damps_an_inertial_drop_and_converges():
+    # The box dropped onto the medium (as above) swings down against a force that grows with depth: the midpoint
+    # positions lie ahead along the velocity, so the force is taken deeper than where the box is, a damping of about
+    # k dt / 2 that stops it short, by an amount first order in dt, towards newton's depth.
+    final = {}
+    for method, dt in (("newton", 5e-4), ("newton-midpoint", 1e-3), ("newton-midpoint", 5e-4)):
+        m, attached = _box("native", dt, v_reg=1e-5)
+        final[method, dt] = HALF - _steps(m, attached, "native", method, mujoco.MjData(m), round(0.2 / dt))[-1, 2]
+    short = {dt: 1 - final["newton-midpoint", dt] / final["newton", 5e-4] for dt in (1e-3, 5e-4)}
+    assert 0.02 < short[1e-3] < 0.08
+    assert 0.35 < short[5e-4] / short[1e-3] < 0.65
+
+
 def test_explicit_step_chatters_on_the_resting_box():
     # Same box, MuJoCo's step at 1 ms: the medium's force, stiff on the scale v_reg, overshoots every step
     # (dt >> 2 m v_reg / F, about 1e-6 s here), where newton's velocity changes keep one sign (above).

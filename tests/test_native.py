@@ -188,7 +188,7 @@ from finrft.scene import preset
 counter = ctypes.CDLL(sys.argv[1])
 counter.count_stop.restype = ctypes.c_long
 out = {}
-for method in ("implicit", "newton", "adaptive", "adaptive-newton"):
+for method in ("implicit", "newton", "newton-midpoint", "adaptive", "adaptive-newton"):
     scene = preset("physical", RobotScene).replace(**{"sim.method": method, "sim.dt": 3e-4, "sim.max_step": 1e-3})
     robot = swim.build_robot(scene)
     d = mujoco.MjData(robot.model)
@@ -203,7 +203,7 @@ for method in ("implicit", "newton", "adaptive", "adaptive-newton"):
             args = (robot.model._address, d._address, n * scene.sim.dt, advance.max_step, advance.tolerance,
                     advance.iterations, ctypes.byref(h), advance.counts)
         else:
-            args = (robot.model._address, d._address, n, advance.iterations, advance.counts)
+            args = (robot.model._address, d._address, n, advance.iterations, advance.midpoint, advance.counts)
         counter.count_start()
         code = advance._native(*args)
         out[f"{method}/{n}"] = counter.count_stop()
@@ -224,5 +224,5 @@ def test_native_steps_allocate_nothing(tmp_path):
     done = subprocess.run([sys.executable, "-c", ALLOCATION_RUN, counter], capture_output=True, text=True,
                           env={**os.environ, "LD_PRELOAD": counter}, check=True, cwd=tmp_path)
     counts = json.loads(done.stdout.splitlines()[-1])
-    for method in ("implicit", "newton", "adaptive", "adaptive-newton"):
+    for method in ("implicit", "newton", "newton-midpoint", "adaptive", "adaptive-newton"):
         assert counts[f"{method}/300"] == counts[f"{method}/1"] == 0, counts

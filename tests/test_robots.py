@@ -3,8 +3,8 @@ apart from the element code: the swimmer's wave efficiency against sand-swimming
 speed against its legs' rolling speed and its rest on the sand, the wheel's static sinkage against a quadrature of
 Li et al. 2013's law over the submerged arc; and their TOML scenes against the models they name.
 
-The robots run as `finrft run --example NAME` does, at the scenes' default numerics (newton, 1 ms); the wheel's
-static sinkage with MuJoCo's own step at 0.1 ms and a damped lift."""
+The robots run as `finrft run --example NAME` does, at the scenes' default numerics (newton-midpoint, 1 ms); the
+wheel's static sinkage with MuJoCo's own step at 0.1 ms and a damped lift."""
 
 import dataclasses
 import math
@@ -50,7 +50,7 @@ def test_scene_names_what_the_model_has(name):
     for drive in scene.get("drive", []):
         joint = model.joint(drive["joint"])
         assert int(joint.type[0]) in (mujoco.mjtJoint.mjJNT_SLIDE, mujoco.mjtJoint.mjJNT_HINGE), drive
-    assert scene["sim"]["dt"] == 0.001 and scene["sim"]["method"] == "newton"
+    assert scene["sim"]["dt"] == 0.001 and scene["sim"]["method"] == "newton-midpoint"
 
 
 MEDIA = {"sand_swimmer": ([f"link{i}" for i in range(1, 8)], 0.005, dict(law="li2013", medium="glass_beads_treers2021")),
@@ -105,7 +105,7 @@ def test_swimmer_joint_lag_makes_a_serpenoid_of_a_over_lambda_0_2():
 
 
 def robot_run(name: str, **overrides) -> dict:
-    """The example's run (finrft run --example NAME) at its default numerics (newton, 1 ms), its summary."""
+    """The example's run (finrft run --example NAME) at its default numerics (newton-midpoint, 1 ms), its summary."""
     scene = load_scene(example(name), overrides=overrides, cls=UserScene)
     return finrft.run_robot(scene, max_error=None).summary()
 
@@ -116,7 +116,11 @@ WAVELENGTH = 6 * LINK * special.j0(THETA0)
 
 @pytest.mark.parametrize("medium", [
     {},  # li2013 (3D) in Treers et al.'s glass beads, the example's own
-    {"medium.law": "rft3d", "medium.name": "sand_3d_rft_code", "medium.surface_friction": 0.4}])
+    # rft3d's fitted stress feeds energy in on grazing faces: on this swimmer its steps flip between two balances
+    # every 3-4 steps, which the chatter probe stops, with newton at 0.5 ms and newton-midpoint at 0.5 and 1 ms
+    # (newton at 1 ms and 0.25 ms, newton-midpoint at 0.25 ms and 2 ms run through): the law's, not the step's
+    {"medium.law": "rft3d", "medium.name": "sand_3d_rft_code", "medium.surface_friction": 0.4,
+     "sim.method": "newton"}])
 def test_swimmer_swims_forward_at_a_sand_swimmers_wave_efficiency(medium):
     """Undulating in the medium, the free swimmer moves towards its head at a wave efficiency eta = v / (f lambda)
     inside the range sand-swimming studies report (0.2-0.5: sandfish robot 0.34 +- 0.02, sandfish 0.5; Maladen et

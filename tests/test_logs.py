@@ -55,12 +55,13 @@ def _interrupt(argv: list[str], log: Path, sig: int, workers_too: bool = False) 
 
 
 def _contents(log: Path) -> tuple[dict, dict]:
-    """Every dataset (name -> (dtype, values)) and root attribute of a log but its creation time."""
+    """Every dataset (name -> (dtype, values)) and root attribute of a log but its creation time (and the digest,
+    which covers it)."""
     datasets = {}
     with h5py.File(log, "r") as f:
         f.visititems(lambda name, obj: datasets.__setitem__(name, (obj.dtype, obj[()], dict(obj.attrs)))
                      if isinstance(obj, h5py.Dataset) else None)
-        attrs = {k: v for k, v in f.attrs.items() if k != "created_utc"}
+        attrs = {k: v for k, v in f.attrs.items() if k not in ("created_utc", "digest")}
     return datasets, attrs
 
 
@@ -103,14 +104,14 @@ def drag_data(tmp_path_factory) -> Path:
     return path
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGKILL])
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGKILL])
 def test_optimize_resumes_after_a_real_signal_bit_for_bit(tmp_path, capsys, reference, sig, errors_only):
     reference, expected = reference
     log = tmp_path / "run.h5"
     done = _interrupt([*OPTIMIZE, "--budget", BUDGET, "--out", str(log)], log, sig)
     generations = _generations(log)
     assert 2 <= generations < expected["generations"]
-    if sig == signal.SIGINT:
+    if sig != signal.SIGKILL:  # SIGTERM as Ctrl-C
         assert done.returncode == 130
         assert errors_only(done.stderr) == (f"finrft: interrupted after {generations} generations; continue with: "
                                             f"finrft optimize --resume {log}\n")
@@ -212,10 +213,12 @@ def test_each_command_names_the_other_logs(tmp_path, capsys, drag_data):
                                            ("unit", "generation 0 asks other points than logged")])
 def test_a_log_that_does_not_replay_is_refused(tmp_path, capsys, dataset, named):
     # What a log written by another pycma would look like: the rebuilt optimiser cannot reach the logged state.
+    from finrft.studies import searchlog
     log = tmp_path / "run.h5"
     assert main([*OPTIMIZE, "--budget", "13", "--out", str(log)]) == 0
     with h5py.File(log, "a") as f:
         f[dataset][0] = -f[dataset][0]  # the best of its generation, or outside the bounds
+        f.attrs["digest"] = searchlog.digest(f)  # as the other version would have written it
     capsys.readouterr()
     assert main(["optimize", "--resume", str(log)]) == 2
     err = capsys.readouterr().err

@@ -23,6 +23,7 @@ from typing import Iterator, Sequence
 from .. import __version__
 from ..errors import SceneError, SimulationFailed
 from ..experiments import REGISTRY
+from ..files import keep_existing
 from . import info, search, studies
 from .common import Interrupted, Parser, one_line_warning
 from .run import add_experiment
@@ -106,7 +107,9 @@ def _dispatch(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> in
     """Parse and run the command; each failure one line on stderr and its exit status."""
     try:
         args = parser.parse_args(argv)
-        return args.handler(args)
+        # An output checked absent before the run may have been written by another run since: kept, unless --force.
+        with keep_existing(not getattr(args, "force", False)):
+            return args.handler(args)
     except SceneError as exc:  # a UsageError too
         _report(f"finrft: error: {exc}")
         return 2

@@ -36,6 +36,7 @@ import numpy as np
 from . import geometry, laws, methods, native
 from .convergence import ErrorLimits, SimulationUnstable
 from .drive import Drive
+from .errors import SceneError
 from .experiment import Experiment, Result, run
 from .scene import Scene
 from .experiments.plate import PlateModel, PlateTest, retune, retune_key
@@ -163,9 +164,15 @@ def _detached_resource_tracker() -> None:
         _tracker_detached = True
 
 
+# More worker processes than any machine has cores for; beyond it a pool fails deep inside multiprocessing.
+MAX_WORKERS = 1024
+
+
 def local_executor(workers: int | None = None) -> ProcessPoolExecutor:
     """A process pool for `map_jobs`; spawned workers, so nothing of the parent's MuJoCo state is inherited, that
-    leave Ctrl-C to the parent and end with it."""
+    leave Ctrl-C to the parent and end with it. SceneError for more than MAX_WORKERS workers."""
+    if workers is not None and not 1 <= workers <= MAX_WORKERS:
+        raise SceneError(f"workers: from 1 to {MAX_WORKERS} processes, got {workers}")
     _detached_resource_tracker()
     return ProcessPoolExecutor(max_workers=workers or default_workers(), mp_context=_QuietSpawn(),
                                initializer=_ignore_interrupt)

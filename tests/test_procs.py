@@ -299,7 +299,8 @@ def test_a_step_budget_bounds_every_run(capsys, override, named):
      "gait.theta1 has bounds already (gait.theta1=0:1)"),
     (["fit", "--data", str(DATA), "--params", "b", "--bounds", "b=0.1:1", "--bounds", "plate.damping=0.2:2"],
      "plate.damping has bounds already (b=0.1:1)"),
-    ([*OPTIMIZE, "--bounds", "gait.theta1=0:inf"], "bounds must be finite numbers")])
+    ([*OPTIMIZE, "--bounds", "gait.theta1=0:inf"], "bounds must be finite numbers"),
+    ([*OPTIMIZE, "--workers", "99999999999999"], "workers: from 1 to 1024 processes")])
 def test_numbers_from_the_user_are_checked_before_use(capsys, argv, named):
     assert main(argv) == 2
     err = capsys.readouterr().err

@@ -16,6 +16,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+from conftest import logged_generations
 
 import finrft
 import finrft.scene
@@ -30,15 +31,6 @@ FIT = ["fit", "--preset", "paper", "--params", "b", "--seed", "2", "--budget", "
        "--workers", "1"]
 
 
-def _generations(log: Path) -> int:
-    """Generations in a log that another process may be replacing; 0 while it has none."""
-    try:
-        with h5py.File(log, "r") as f:
-            return len(f["state/sigma"])
-    except (OSError, KeyError):
-        return 0
-
-
 def _interrupt(argv: list[str], log: Path, sig: int, workers_too: bool = False) -> subprocess.CompletedProcess:
     """Run ``finrft argv`` and send it ``sig`` once its log holds two generations (to its whole process group,
     as a terminal's Ctrl-C, with ``workers_too``)."""
@@ -46,7 +38,7 @@ def _interrupt(argv: list[str], log: Path, sig: int, workers_too: bool = False) 
     proc = subprocess.Popen([sys.executable, "-m", "finrft", *argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, start_new_session=True, cwd=log.parent)
     deadline = time.monotonic() + 60
-    while _generations(log) < 2 and proc.poll() is None and time.monotonic() < deadline:
+    while logged_generations(log) < 2 and proc.poll() is None and time.monotonic() < deadline:
         time.sleep(0.01)
     assert proc.poll() is None, "the run ended before it could be interrupted"
     (os.killpg if workers_too else os.kill)(proc.pid, sig)
@@ -109,7 +101,7 @@ def test_optimize_resumes_after_a_real_signal_bit_for_bit(tmp_path, capsys, refe
     reference, expected = reference
     log = tmp_path / "run.h5"
     done = _interrupt([*OPTIMIZE, "--budget", BUDGET, "--out", str(log)], log, sig)
-    generations = _generations(log)
+    generations = logged_generations(log)
     assert 2 <= generations < expected["generations"]
     if sig != signal.SIGKILL:  # SIGTERM as Ctrl-C
         assert done.returncode == 130
@@ -129,7 +121,7 @@ def test_fit_resumes_after_sigkill_bit_for_bit(tmp_path, capsys, drag_data):
     assert expected["params"]["plate.damping"] == pytest.approx(0.8, rel=0.02)
     log = tmp_path / "run.h5"
     done = _interrupt([*FIT, "--data", str(drag_data), "--out", str(log)], log, signal.SIGKILL)
-    assert done.returncode == -signal.SIGKILL and 2 <= _generations(log) < _generations(reference)
+    assert done.returncode == -signal.SIGKILL and 2 <= logged_generations(log) < logged_generations(reference)
     drag_data.rename(drag_data.with_suffix(".moved"))  # the log holds the data: the file is not needed
     try:
         assert main(["fit", "--resume", str(log), "--json"]) == 0
@@ -151,7 +143,7 @@ def test_ctrl_c_reaches_no_worker(tmp_path, errors_only):
     err = errors_only(done.stderr)
     assert err.startswith("finrft: interrupted after ") and len(err.splitlines()) == 1
     assert done.stderr.count("feeds energy in") == 1  # the parent's warning, once: the workers say nothing
-    assert _generations(log) >= 2
+    assert logged_generations(log) >= 2
 
 
 def test_ctrl_c_without_a_log(monkeypatch, capsys):

@@ -17,6 +17,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+from conftest import logged_generations
 
 from finrft import files
 from finrft.cli import main
@@ -45,14 +46,6 @@ def _session(sid: int) -> list[int]:
     return found
 
 
-def _generations(log: Path) -> int:
-    try:
-        with h5py.File(log, "r") as f:
-            return len(f["state/sigma"])
-    except (OSError, KeyError):
-        return 0
-
-
 def _read_to_eof(stream, timeout: float) -> bytes | None:
     """All a pipe gives until its writers close it; None when it is still open after ``timeout`` s."""
     data, deadline = b"", time.monotonic() + timeout
@@ -78,7 +71,7 @@ def _signal_mid_run(argv: list[str], log: Path, sig: int, group: bool = False) -
     that its pipes close; its stderr."""
     proc = _start([*argv, "--workers", "2", "--out", str(log)], log.parent)
     deadline = time.monotonic() + 120
-    while _generations(log) < 2 and proc.poll() is None and time.monotonic() < deadline:
+    while logged_generations(log) < 2 and proc.poll() is None and time.monotonic() < deadline:
         time.sleep(0.02)
     assert proc.poll() is None, "the run ended before it could be signalled"
     assert len(_session(proc.pid)) >= 3  # the parent, its workers (and the resource tracker)
@@ -106,7 +99,7 @@ def test_optimize_workers_end_with_their_parent(tmp_path, sig, group, errors_onl
     else:
         # as Ctrl-C: one line with the resume hint, exit status 130, and neither lock nor temporary file left
         assert proc.returncode == 130
-        assert errors_only(err) == (f"finrft: interrupted after {_generations(log)} generations; continue with: "
+        assert errors_only(err) == (f"finrft: interrupted after {logged_generations(log)} generations; continue with: "
                                     f"finrft optimize --resume {log}\n")
         assert [p.name for p in tmp_path.iterdir()] == ["run.h5"]
     searchlog.read(log, searchlog.OPTIMIZE)  # a complete log, its digest intact
@@ -126,11 +119,11 @@ def test_resume_after_sigterm_and_sighup_is_bit_identical(tmp_path, capsys, sig)
     expected = json.loads(capsys.readouterr().out.splitlines()[-1])
     log = tmp_path / "run.h5"
     proc = _start([*OPTIMIZE, *budget, "--out", str(log)], tmp_path)
-    while _generations(log) < 2 and proc.poll() is None:
+    while logged_generations(log) < 2 and proc.poll() is None:
         time.sleep(0.01)
     proc.send_signal(sig)
     assert proc.wait(timeout=60) == 130
-    assert 2 <= _generations(log) < expected["generations"]
+    assert 2 <= logged_generations(log) < expected["generations"]
     assert main(["optimize", "--resume", str(log), "--json"]) == 0
     summary = json.loads(capsys.readouterr().out.splitlines()[-1])
     for name, value in expected.items():

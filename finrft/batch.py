@@ -68,7 +68,8 @@ class _QuietProcess(multiprocessing.context.SpawnProcess):
     its workers would run on, each holding the pipe a caller reads the parent's output from, and with them
     multiprocessing's resource tracker, which ends only when every worker has. So a worker asks Linux to kill it
     when its parent dies (PR_SET_PDEATHSIG), or elsewhere watches its parent's pid, and points its standard streams
-    at the null device: the caller's pipe closes with the parent."""
+    at the null device: the caller's pipe closes with the parent. Linux sends that signal when the thread that
+    started the worker ends: a pool is used from the thread that made it, or one that outlives it."""
 
     def start(self) -> None:
         self._owner = os.getpid()

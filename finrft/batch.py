@@ -22,6 +22,9 @@ import multiprocessing
 import multiprocessing.context
 import os
 import signal
+import sys
+import threading
+import time
 import warnings
 from concurrent.futures import Executor, ProcessPoolExecutor, ThreadPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
@@ -33,6 +36,7 @@ import numpy as np
 from . import geometry, laws, methods, native
 from .convergence import ErrorLimits, SimulationUnstable
 from .drive import Drive
+from .errors import SceneError
 from .experiment import Experiment, Result, run
 from .scene import Scene
 from .experiments.plate import PlateModel, PlateTest, retune, retune_key
@@ -52,13 +56,23 @@ def default_workers() -> int:
 
 
 class _QuietProcess(multiprocessing.context.SpawnProcess):
-    """A spawned worker deaf to Ctrl-C from its first instruction. Ctrl-C reaches every process in the terminal's
-    group: the parent handles it and shuts the pool down, a worker would only print a traceback. The pool spawns
-    workers as jobs arrive, so one may be starting when Ctrl-C comes, before any initializer runs: the worker is
-    started with SIGINT blocked, which it inherits and keeps, while the parent receives a Ctrl-C of that moment as
-    soon as the worker is started."""
+    """A spawned worker deaf to Ctrl-C from its first instruction, that dies with its parent and never holds the
+    caller's streams.
+
+    Ctrl-C reaches every process in the terminal's group: the parent handles it and shuts the pool down, a worker
+    would only print a traceback. The pool spawns workers as jobs arrive, so one may be starting when Ctrl-C comes,
+    before any initializer runs: the worker is started with SIGINT blocked, which it inherits and keeps, while the
+    parent receives a Ctrl-C of that moment as soon as the worker is started.
+
+    A parent killed outright (SIGKILL: a scheduler's pre-emption, an out-of-memory kill) cannot shut its pool down:
+    its workers would run on, each holding the pipe a caller reads the parent's output from, and with them
+    multiprocessing's resource tracker, which ends only when every worker has. So a worker asks Linux to kill it
+    when its parent dies (PR_SET_PDEATHSIG), or elsewhere watches its parent's pid, and points its standard streams
+    at the null device: the caller's pipe closes with the parent. Linux sends that signal when the thread that
+    started the worker ends: a pool is used from the thread that made it, or one that outlives it."""
 
     def start(self) -> None:
+        self._owner = os.getpid()
         if not hasattr(signal, "pthread_sigmask"):  # Windows delivers Ctrl-C otherwise
             return super().start()
         signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
@@ -67,9 +81,53 @@ class _QuietProcess(multiprocessing.context.SpawnProcess):
         finally:
             signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
+    def run(self) -> None:
+        die_with_parent(self._owner)
+        detach_streams()
+        super().run()
+
 
 class _QuietSpawn(multiprocessing.context.SpawnContext):
     Process = _QuietProcess
+
+
+_PR_SET_PDEATHSIG = 1  # linux/prctl.h
+# How often a worker without PR_SET_PDEATHSIG looks for its parent (s): the delay before it notices a death.
+PARENT_POLL = 0.5
+
+
+def die_with_parent(parent: int) -> None:
+    """End this process when process ``parent`` (its parent) ends: at once on Linux (the kernel sends SIGKILL),
+    else within PARENT_POLL seconds (a thread watching the parent's pid). A parent already gone ends it now."""
+    if not _parent_death_signal() and hasattr(os, "getppid"):
+        def watch() -> None:
+            while os.getppid() == parent:
+                time.sleep(PARENT_POLL)
+            os._exit(1)
+        threading.Thread(target=watch, name="finrft-parent-watch", daemon=True).start()
+    # The signal is set from here on: a parent that died while this process started leaves it orphaned already.
+    if hasattr(os, "getppid") and os.getppid() != parent:
+        os._exit(1)
+
+
+def _parent_death_signal() -> bool:
+    """Ask Linux to send SIGKILL to this process when its parent ends; whether it was set."""
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        return libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0) == 0
+    except (OSError, AttributeError):
+        return False
+
+
+def detach_streams() -> None:
+    """Point this process's stdin, stdout and stderr at the null device. A worker reports through its pool, never
+    on the streams it inherited: those may be a pipe a caller reads to its end, which must close with the parent."""
+    null = os.open(os.devnull, os.O_RDWR)
+    for fd in (0, 1, 2):
+        os.dup2(null, fd)
+    os.close(null)
 
 
 def _ignore_interrupt() -> None:
@@ -79,9 +137,44 @@ def _ignore_interrupt() -> None:
     warnings.simplefilter("ignore", laws.FeedsEnergy)
 
 
+_tracker_lock = threading.Lock()
+_tracker_detached = False
+
+
+def _detached_resource_tracker() -> None:
+    """Start multiprocessing's resource tracker, once, with its stderr on the null device. It outlives a parent
+    killed outright until its last worker ends, and then warns of the semaphores the parent could not release: on
+    the caller's stderr, after the caller's command has ended, unless started here first."""
+    global _tracker_detached
+    if sys.platform == "win32":  # no resource tracker there
+        return
+    from multiprocessing import resource_tracker
+    with _tracker_lock:
+        if _tracker_detached:
+            return
+        saved, null = os.dup(2), os.open(os.devnull, os.O_WRONLY)
+        if sys.stderr is not None:
+            sys.stderr.flush()
+        try:
+            os.dup2(null, 2)
+            resource_tracker.ensure_running()
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            os.close(null)
+        _tracker_detached = True
+
+
+# More worker processes than any machine has cores for; beyond it a pool fails deep inside multiprocessing.
+MAX_WORKERS = 1024
+
+
 def local_executor(workers: int | None = None) -> ProcessPoolExecutor:
     """A process pool for `map_jobs`; spawned workers, so nothing of the parent's MuJoCo state is inherited, that
-    leave Ctrl-C to the parent."""
+    leave Ctrl-C to the parent and end with it. SceneError for more than MAX_WORKERS workers."""
+    if workers is not None and not 1 <= workers <= MAX_WORKERS:
+        raise SceneError(f"workers: from 1 to {MAX_WORKERS} processes, got {workers}")
+    _detached_resource_tracker()
     return ProcessPoolExecutor(max_workers=workers or default_workers(), mp_context=_QuietSpawn(),
                                initializer=_ignore_interrupt)
 

@@ -1,12 +1,20 @@
-"""What every file finrft reads or writes shares. A file it reads is read whole or not at all: a file that cannot
+"""What every file finrft reads or writes shares. A file it reads is read whole or not at all, and only a regular
+file of bounded size (a device, a pipe or a huge file would read without end or exhaust memory): a file that cannot
 be read, is not UTF-8 text or (TOML) is malformed raises SceneError naming it, never a traceback of the reader. A
 file it writes replaces its target in one step (a failed or interrupted write never leaves a truncated file where a
-complete one is expected), and it names the versions that made it."""
+complete one is expected), or with ``exclusive`` appears only where nothing is (of two concurrent writers, one
+refuses); the temporary files of writers that were killed are removed by the next write to the same target. A file
+a run keeps rewriting (a search's log) is `locked` while the run owns it. Every file names the versions that made
+it."""
 
 from __future__ import annotations
 
 import contextlib
+import contextvars
+import errno
 import os
+import re
+import stat
 import tomllib
 import uuid
 from datetime import datetime, timezone
@@ -17,18 +25,47 @@ from typing import Any, Iterator
 import mujoco
 import numpy as np
 
-from .errors import SceneError
+from .errors import SceneError, UsageError
+
+# The largest text file finrft reads (scenes, tables, data): far above any it ships or writes.
+MAX_TEXT_BYTES = 64 * 2**20
 
 
-def read_text(path: str | Path, what: str) -> str:
-    """A text file's contents; SceneError naming the file (as ``what``) when it cannot be read or is not UTF-8
-    text."""
+def read_text(path: str | Path, what: str, limit: int = MAX_TEXT_BYTES) -> str:
+    """A text file's contents; SceneError naming the file (as ``what``) when it cannot be read, is no regular file,
+    holds more than ``limit`` bytes or is not UTF-8 text."""
     try:
-        return Path(path).read_text(encoding="utf-8")
-    except OSError as exc:
-        raise SceneError(f"cannot read {what} {path}: {exc.strerror or exc}") from None
+        return read_bytes(path, what, limit).decode("utf-8")
     except UnicodeDecodeError:
         raise SceneError(f"{what} {path} is not a text file (UTF-8)") from None
+
+
+def read_bytes(path: str | Path, what: str, limit: int) -> bytes:
+    """A regular file's contents, at most ``limit`` bytes; SceneError naming the file otherwise."""
+    try:
+        # Non-blocking: opening a FIFO would otherwise wait for a writer that may never come.
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
+    except OSError as exc:
+        raise SceneError(f"cannot read {what} {path}: {exc.strerror or exc}") from None
+    try:
+        check_regular(os.fstat(fd), path, what, limit)
+        with os.fdopen(fd, "rb", closefd=False) as handle:
+            data = handle.read(limit + 1)
+    except OSError as exc:
+        raise SceneError(f"cannot read {what} {path}: {exc.strerror or exc}") from None
+    finally:
+        os.close(fd)
+    if len(data) > limit:
+        raise SceneError(f"{what} {path} holds more than {limit} bytes: it is not one finrft reads")
+    return data
+
+
+def check_regular(info: os.stat_result, path: str | Path, what: str, limit: int) -> None:
+    """SceneError unless ``info`` (os.stat) is a regular file of at most ``limit`` bytes."""
+    if not stat.S_ISREG(info.st_mode):
+        raise SceneError(f"{what} {path} is not a regular file (a device, a pipe or a folder cannot be read)")
+    if info.st_size > limit:
+        raise SceneError(f"{what} {path} holds {info.st_size} bytes, more than the {limit} finrft reads")
 
 
 def read_toml(text: str, origin: str) -> dict[str, Any]:
@@ -39,19 +76,130 @@ def read_toml(text: str, origin: str) -> dict[str, Any]:
         raise SceneError(f"{origin}: malformed TOML: {exc}") from None
 
 
+# Whether `atomic_path` may replace a file that exists, where its caller does not say: the command line's writers
+# may not without --force (`keep_existing`).
+_exclusive: contextvars.ContextVar[bool] = contextvars.ContextVar("finrft_exclusive_writes", default=False)
+
+
 @contextlib.contextmanager
-def atomic_path(path: str | Path) -> Iterator[Path]:
+def keep_existing(keep: bool = True) -> Iterator[None]:
+    """Within the block, `atomic_path` (without ``exclusive``) never replaces a file: the command line's outputs
+    without --force, whose absence was checked before the run, may have been written by another run since."""
+    token = _exclusive.set(keep)
+    try:
+        yield
+    finally:
+        _exclusive.reset(token)
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | Path, *, exclusive: bool | None = None) -> Iterator[Path]:
     """A temporary path next to ``path`` that replaces it when the block succeeds and is removed when it fails.
-    It keeps the target's suffix, for writers that choose the format by it (matplotlib)."""
+    It keeps the target's suffix, for writers that choose the format by it (matplotlib). ``exclusive`` (default:
+    as `keep_existing` says): the file appears only where nothing is, else UsageError and nothing is written."""
     target = Path(path)
+    remove_stale_temporaries(target)
     # Not tempfile.mkstemp: its 0600 mode would carry over to the result; the writers create the file themselves.
-    tmp = target.with_name(f".{target.stem}.{uuid.uuid4().hex[:12]}.tmp{target.suffix}")
+    # The writer's pid in the name tells the next writer whether it still runs.
+    tmp = target.with_name(f".{target.stem}.{os.getpid()}-{uuid.uuid4().hex[:12]}.tmp{target.suffix}")
     try:
         yield tmp
-        os.replace(tmp, target)
+        if _exclusive.get() if exclusive is None else exclusive:
+            _publish_new(tmp, target)
+        else:
+            os.replace(tmp, target)
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def _publish_new(tmp: Path, target: Path) -> None:
+    """Move ``tmp`` onto ``target`` where nothing is there (a link fails atomically on an existing name); else
+    UsageError."""
+    taken = UsageError(f"{target} appeared while this ran (another process wrote it): it is kept, and nothing was "
+                       f"written")
+    try:
+        os.link(tmp, target)
+    except FileExistsError:
+        raise taken from None
+    except OSError:  # a file system without hard links: claim the name, then replace the empty claim
+        try:
+            os.close(os.open(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
+        except FileExistsError:
+            raise taken from None
+        os.replace(tmp, target)
+        return
+    tmp.unlink()
+
+
+def remove_stale_temporaries(target: Path) -> None:
+    """Remove the temporary files `atomic_path` left beside ``target`` in processes that have ended (killed while
+    writing); those of running ones stay."""
+    if os.name != "posix":  # no harmless test of another process's life there
+        return
+    pattern = re.compile(re.escape(f".{target.stem}.") + r"(\d+)-[0-9a-f]{12}" + re.escape(f".tmp{target.suffix}"))
+    try:
+        names = os.listdir(target.parent)
+    except OSError:
+        return
+    for name in names:
+        found = pattern.fullmatch(name)
+        if found and not _alive(int(found.group(1))):
+            with contextlib.suppress(OSError):
+                os.unlink(target.parent / name)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError):
+        return True
+    return True
+
+
+@contextlib.contextmanager
+def locked(path: str | Path, what: str) -> Iterator[None]:
+    """Own ``path`` for the block: an advisory lock (flock) on a hidden file beside it, ``.NAME.lock``, that holds
+    the owner's pid; UsageError when another process owns it. The lock file, not the file itself, which its writer
+    replaces whole (`atomic_path`) and whose readers (HDF5) take locks of their own. A killed owner's lock ends with
+    it; its lock file is taken over and removed by the next owner."""
+    try:
+        import fcntl
+    except ImportError:  # no flock (Windows): unlocked
+        yield
+        return
+    target = Path(path)
+    lock = target.with_name(f".{target.name}.lock")
+    while True:
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT | getattr(os, "O_CLOEXEC", 0), 0o666)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError as exc:
+            owner = os.read(fd, 32).decode(errors="replace").strip()
+            os.close(fd)
+            if exc.errno not in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+                raise SceneError(f"cannot lock {what} {path}: {exc.strerror or exc}") from None
+            raise UsageError(f"{what} {path} is in use by another run{f' (process {owner})' if owner else ''}: "
+                             f"wait for it to end, or choose another file") from None
+        # A former owner may have removed the lock file between our open and our lock: then ours is no lock.
+        try:
+            here = os.stat(lock)
+        except FileNotFoundError:
+            here = None
+        mine = os.fstat(fd)
+        if here is not None and (here.st_ino, here.st_dev) == (mine.st_ino, mine.st_dev):
+            break
+        os.close(fd)
+    try:
+        os.ftruncate(fd, 0)
+        os.write(fd, f"{os.getpid()}\n".encode())
+        yield
+    finally:
+        with contextlib.suppress(OSError):
+            os.unlink(lock)
+        os.close(fd)
 
 
 def package_version(name: str) -> str:

@@ -10,9 +10,9 @@ import mujoco
 import numpy as np
 
 from . import methods
-from .convergence import check_resolution, check_size, record_every
+from .convergence import MAX_STEPS, check_resolution, check_size, record_every
 from .drive import Drive
-from .errors import Chatter, NotConverged, SimulationFailed, SimulationUnstable, StepUnderflow
+from .errors import Chatter, NotConverged, SceneError, SimulationFailed, SimulationUnstable, StepUnderflow
 from .attach import Attached
 from .integrate import SURFACE_SPEED, Stepper
 from .models import ARMATURE_RATIO, ForceGroup
@@ -143,7 +143,8 @@ def chatter(scene: Any, t: float) -> Chatter:
 
 def schedule(drive: Drive, dt: float, record_dt: float) -> tuple[int, np.ndarray, np.ndarray]:
     """Step count, the steps at which each stroke starts, and the steps recorded (always the first and last);
-    SceneError when dt cannot resolve a stroke."""
+    SceneError when dt cannot resolve a stroke, or the run would take too many steps."""
+    check_size(drive.duration / dt, 0, dt, drive.duration)  # first: a tiny dt overflows a count of whole steps
     check_resolution(drive.stroke_time, dt)
     steps = max(1, round(drive.duration / dt))
     every = record_every(dt, record_dt)
@@ -210,6 +211,14 @@ def chatter_speeds(m: mujoco.MjModel, d: mujoco.MjData, groups: Sequence[ForceGr
     return np.where(np.isfinite(speeds), speeds, CHATTER_DV)
 
 
+def check_adaptive_budget(sim: Any, duration: float) -> None:
+    """SceneError when an adaptive method would take more than MAX_STEPS steps of at most ``sim.max_step`` over a
+    run of ``duration`` s: the steps it must take at least, which its loop has no other bound on."""
+    if duration / sim.max_step > MAX_STEPS:
+        raise SceneError(f"sim.max_step = {sim.max_step:g} s would take at least {duration / sim.max_step:.3g} "
+                         f"steps over the run's {duration:.4g} s, more than {MAX_STEPS:.0e}: raise sim.max_step")
+
+
 def step_through(m: mujoco.MjModel, d: mujoco.MjData, scene: Any, advance: Stepper, steps: int,
                  starts: np.ndarray, samples: np.ndarray, on_stroke: Callable[[int], None],
                  on_sample: Callable[[int], None], progress: Callable[[float], None] | None = None,
@@ -223,6 +232,8 @@ def step_through(m: mujoco.MjModel, d: mujoco.MjData, scene: Any, advance: Stepp
     An adaptive method steps to each event's `instants` (the drive's strokes last ``stroke_time``) and restarts its
     step size at each reversal."""
     adaptive = methods.get(scene.sim.method).adaptive
+    if adaptive:
+        check_adaptive_budget(scene.sim, steps * scene.sim.dt)
     probe = len(watch) > 0 and not adaptive
     # velocity[i, j]: the watched velocities 3 - j steps before sample i (j = 3: at the sample)
     velocity = np.full((len(samples), 4, len(watch)), np.nan)

@@ -53,3 +53,13 @@ def law_cases(name: str):
         raise AssertionError(f"segment law {name!r} has no tests/test_law_{name}.py defining twin, DISSIPATIVE "
                              f"and FEEDING") from None
 
+
+
+def logged_generations(log) -> int:
+    """Generations in a search log that another process may be replacing; 0 while it has none."""
+    import h5py
+    try:
+        with h5py.File(log, "r") as f:
+            return len(f["state/sigma"])
+    except (OSError, KeyError):
+        return 0

@@ -16,6 +16,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+from conftest import logged_generations
 
 import finrft
 import finrft.scene
@@ -30,15 +31,6 @@ FIT = ["fit", "--preset", "paper", "--params", "b", "--seed", "2", "--budget", "
        "--workers", "1"]
 
 
-def _generations(log: Path) -> int:
-    """Generations in a log that another process may be replacing; 0 while it has none."""
-    try:
-        with h5py.File(log, "r") as f:
-            return len(f["state/sigma"])
-    except (OSError, KeyError):
-        return 0
-
-
 def _interrupt(argv: list[str], log: Path, sig: int, workers_too: bool = False) -> subprocess.CompletedProcess:
     """Run ``finrft argv`` and send it ``sig`` once its log holds two generations (to its whole process group,
     as a terminal's Ctrl-C, with ``workers_too``)."""
@@ -46,7 +38,7 @@ def _interrupt(argv: list[str], log: Path, sig: int, workers_too: bool = False) 
     proc = subprocess.Popen([sys.executable, "-m", "finrft", *argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, start_new_session=True, cwd=log.parent)
     deadline = time.monotonic() + 60
-    while _generations(log) < 2 and proc.poll() is None and time.monotonic() < deadline:
+    while logged_generations(log) < 2 and proc.poll() is None and time.monotonic() < deadline:
         time.sleep(0.01)
     assert proc.poll() is None, "the run ended before it could be interrupted"
     (os.killpg if workers_too else os.kill)(proc.pid, sig)
@@ -55,12 +47,13 @@ def _interrupt(argv: list[str], log: Path, sig: int, workers_too: bool = False) 
 
 
 def _contents(log: Path) -> tuple[dict, dict]:
-    """Every dataset (name -> (dtype, values)) and root attribute of a log but its creation time."""
+    """Every dataset (name -> (dtype, values)) and root attribute of a log but its creation time (and the digest,
+    which covers it)."""
     datasets = {}
     with h5py.File(log, "r") as f:
         f.visititems(lambda name, obj: datasets.__setitem__(name, (obj.dtype, obj[()], dict(obj.attrs)))
                      if isinstance(obj, h5py.Dataset) else None)
-        attrs = {k: v for k, v in f.attrs.items() if k != "created_utc"}
+        attrs = {k: v for k, v in f.attrs.items() if k not in ("created_utc", "digest")}
     return datasets, attrs
 
 
@@ -103,14 +96,14 @@ def drag_data(tmp_path_factory) -> Path:
     return path
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGKILL])
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGKILL])
 def test_optimize_resumes_after_a_real_signal_bit_for_bit(tmp_path, capsys, reference, sig, errors_only):
     reference, expected = reference
     log = tmp_path / "run.h5"
     done = _interrupt([*OPTIMIZE, "--budget", BUDGET, "--out", str(log)], log, sig)
-    generations = _generations(log)
+    generations = logged_generations(log)
     assert 2 <= generations < expected["generations"]
-    if sig == signal.SIGINT:
+    if sig != signal.SIGKILL:  # SIGTERM as Ctrl-C
         assert done.returncode == 130
         assert errors_only(done.stderr) == (f"finrft: interrupted after {generations} generations; continue with: "
                                             f"finrft optimize --resume {log}\n")
@@ -128,7 +121,7 @@ def test_fit_resumes_after_sigkill_bit_for_bit(tmp_path, capsys, drag_data):
     assert expected["params"]["plate.damping"] == pytest.approx(0.8, rel=0.02)
     log = tmp_path / "run.h5"
     done = _interrupt([*FIT, "--data", str(drag_data), "--out", str(log)], log, signal.SIGKILL)
-    assert done.returncode == -signal.SIGKILL and 2 <= _generations(log) < _generations(reference)
+    assert done.returncode == -signal.SIGKILL and 2 <= logged_generations(log) < logged_generations(reference)
     drag_data.rename(drag_data.with_suffix(".moved"))  # the log holds the data: the file is not needed
     try:
         assert main(["fit", "--resume", str(log), "--json"]) == 0
@@ -150,7 +143,7 @@ def test_ctrl_c_reaches_no_worker(tmp_path, errors_only):
     err = errors_only(done.stderr)
     assert err.startswith("finrft: interrupted after ") and len(err.splitlines()) == 1
     assert done.stderr.count("feeds energy in") == 1  # the parent's warning, once: the workers say nothing
-    assert _generations(log) >= 2
+    assert logged_generations(log) >= 2
 
 
 def test_ctrl_c_without_a_log(monkeypatch, capsys):
@@ -212,10 +205,12 @@ def test_each_command_names_the_other_logs(tmp_path, capsys, drag_data):
                                            ("unit", "generation 0 asks other points than logged")])
 def test_a_log_that_does_not_replay_is_refused(tmp_path, capsys, dataset, named):
     # What a log written by another pycma would look like: the rebuilt optimiser cannot reach the logged state.
+    from finrft.studies import searchlog
     log = tmp_path / "run.h5"
     assert main([*OPTIMIZE, "--budget", "13", "--out", str(log)]) == 0
     with h5py.File(log, "a") as f:
         f[dataset][0] = -f[dataset][0]  # the best of its generation, or outside the bounds
+        f.attrs["digest"] = searchlog.digest(f)  # as the other version would have written it
     capsys.readouterr()
     assert main(["optimize", "--resume", str(log)]) == 2
     err = capsys.readouterr().err

@@ -5,21 +5,25 @@ other commands describe (`info`), search (`search`) or regenerate the paper's re
 
 Exit status: 0 success, 1 the simulation went unstable or its estimated discretisation error exceeds --max-error,
 2 bad input or a file that cannot be read or written (one line on stderr, nothing written), 130 interrupted
-(Ctrl-C), 141 stdout closed early (as Unix tools on SIGPIPE). Output paths are checked before anything runs;
+(Ctrl-C, SIGTERM or SIGHUP), 141 stdout closed early (as Unix tools on SIGPIPE). Output paths are checked before anything runs;
 every command takes --quiet, every writer --force.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
+import signal
 import sys
+import threading
 import warnings
-from typing import Sequence
+from typing import Iterator, Sequence
 
 from .. import __version__
 from ..errors import SceneError, SimulationFailed
 from ..experiments import REGISTRY
+from ..files import keep_existing
 from . import info, search, studies
 from .common import Interrupted, Parser, one_line_warning
 from .run import add_experiment
@@ -48,7 +52,15 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
-    with warnings.catch_warnings():
+    if sys.stderr is None:  # started with stderr closed: its one-line reports go nowhere rather than to stdout
+        sys.stderr = open(os.devnull, "w")
+    if sys.stdout is None:
+        # Started with stdout closed (finrft drag --json >&-): a file opened later would take its descriptor and
+        # receive what is meant for stdout, so refuse before anything opens one.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), 1)
+        _report("finrft: error: standard output is closed: redirect it to a file or to /dev/null")
+        return 2
+    with warnings.catch_warnings(), _terminations_interrupt():
         warnings.showwarning = one_line_warning
         try:
             status = _dispatch(parser, argv)
@@ -59,29 +71,59 @@ def main(argv: Sequence[str] | None = None) -> int:
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
             return 141
         except KeyboardInterrupt:
-            print("finrft: interrupted", file=sys.stderr)
+            _report("finrft: interrupted")
             return 130
+
+
+# What a job scheduler's pre-emption (SIGTERM) or a lost terminal (SIGHUP) sends: treated as Ctrl-C is, so that a
+# search leaves a valid log, says how to continue it and shuts its workers down.
+TERMINATIONS = tuple(getattr(signal, name) for name in ("SIGTERM", "SIGHUP") if hasattr(signal, name))
+
+
+@contextlib.contextmanager
+def _terminations_interrupt() -> Iterator[None]:
+    """SIGTERM and SIGHUP raise KeyboardInterrupt in the block (in the main thread; elsewhere Python allows no
+    handler), and their former handlers are restored after it."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    before = {number: signal.signal(number, signal.default_int_handler) for number in TERMINATIONS}
+    try:
+        yield
+    finally:
+        for number, handler in before.items():
+            signal.signal(number, handler)
+
+
+def _report(text: str) -> None:
+    """One line on stderr, which may be gone (a hung-up terminal): the exit status still tells."""
+    try:
+        print(text, file=sys.stderr, flush=True)
+    except (OSError, ValueError):
+        pass
 
 
 def _dispatch(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> int:
     """Parse and run the command; each failure one line on stderr and its exit status."""
     try:
         args = parser.parse_args(argv)
-        return args.handler(args)
+        # An output checked absent before the run may have been written by another run since: kept, unless --force.
+        with keep_existing(not getattr(args, "force", False)):
+            return args.handler(args)
     except SceneError as exc:  # a UsageError too
-        print(f"finrft: error: {exc}", file=sys.stderr)
+        _report(f"finrft: error: {exc}")
         return 2
     except SimulationFailed as exc:
-        print(f"finrft: error: {exc}", file=sys.stderr)
+        _report(f"finrft: error: {exc}")
         return 1
     except Interrupted as exc:
-        print(f"finrft: {exc}", file=sys.stderr)
+        _report(f"finrft: {exc}")
         return 130
     except BrokenPipeError:
         raise
     except OSError as exc:  # a file that could not be read or written after the checks (disk full, removed)
         where = f"{exc.filename}: " if exc.filename else ""
-        print(f"finrft: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        _report(f"finrft: error: {where}{exc.strerror or exc}")
         return 2
 
 

@@ -38,7 +38,7 @@ def check_output(path: str | None, suffix: str, flag: str, force: bool, *, appen
     _check_writable(target.parent, flag, path)
     if target.is_dir():
         raise UsageError(f"{flag} {path} is a directory: give a file name")
-    if target.exists() and not (force or append):
+    if os.path.lexists(target) and not (force or append):  # a symbolic link too, even one to nothing
         raise UsageError(f"{flag} {path} exists: choose a new file, or pass --force to replace it")
 
 

@@ -8,6 +8,7 @@ from typing import Any
 from ..experiment import Result, run as run_experiment
 from ..experiments.command import Command
 from ..experiments.flags import limits
+from ..files import keep_existing
 from .common import check_output, print_json, progress, said_written, say
 
 
@@ -27,7 +28,8 @@ def run_command(command: Command, args: argparse.Namespace) -> int:
     runs = _run_all(args, command.name, command.jobs(args, scene))
     for output in outputs:
         if output.path:
-            output.write(runs, output.path)
+            with keep_existing(not (args.force or output.append)):  # a file added to is replaced by design
+                output.write(runs, output.path)
     say(args, command.describe(args, runs))
     said_written(args, [(output.what, output.path) for output in outputs])
     print_json(args, command.to_json(runs))

@@ -4,6 +4,7 @@ from rigid-plate forces), and their logs (--out, --resume, Ctrl-C)."""
 from __future__ import annotations
 
 import argparse
+import os
 import shlex
 from pathlib import Path
 from typing import Any
@@ -13,7 +14,7 @@ import numpy as np
 from .. import geometry
 from .. import scene as scenes
 from ..experiments.swim import RobotScene
-from ..errors import UsageError
+from ..errors import SceneError, UsageError
 from ..experiments.flags import add_force, add_json, add_max_error, add_quiet, add_workers, limits, number
 from ..experiments.plate import add_plate_scene, resolve_plate
 from ..experiments.swim import add_robot, resolve_robot
@@ -25,13 +26,21 @@ def _add_search(p: argparse.ArgumentParser, command: str) -> None:
     p.add_argument("--budget", type=number("evaluations", minimum=1, inclusive=True, integer=True),
                    metavar="EVALS", help="evaluations in all (default: 300, or the log's with --resume; CMA-ES "
                    "finishes the generation it is in)")
-    p.add_argument("--seed", type=number("", minimum=1, inclusive=True, integer=True), metavar="S",
-                   help="random seed, >= 1; the same seed gives the same result (default: 1, or the log's with "
-                   "--resume)")
+    p.add_argument("--seed", type=_seed, metavar="S",
+                   help="random seed, 1 to 4294967295 (2**32 - 1); the same seed gives the same result (default: 1, "
+                   "or the log's with --resume)")
     p.add_argument("--out", metavar="LOG.h5", help="new HDF5 log of every evaluation and of the optimiser's state, "
                    "rewritten after each generation (an existing file only with --force)")
     p.add_argument("--resume", metavar="LOG.h5", help=f"continue the run logged in LOG.h5 (a finrft {command} log) "
                    "exactly as if it had not stopped, and go on logging to it")
+
+
+def _seed(text: str) -> int:
+    from ..studies.optimize import MAX_SEED
+    seed = number("", minimum=1, inclusive=True, integer=True)(text)
+    if seed > MAX_SEED:
+        raise argparse.ArgumentTypeError(f"must be <= {MAX_SEED} (2**32 - 1), got {text}")
+    return seed
 
 
 def search_log(args: argparse.Namespace, fixed: dict[str, str]) -> str | None:
@@ -40,11 +49,11 @@ def search_log(args: argparse.Namespace, fixed: dict[str, str]) -> str | None:
     if args.out and args.resume:
         raise UsageError("give either --out (a new log) or --resume (an existing one), not both")
     check_output(args.out, ".h5", "--out", True)
-    if args.out and Path(args.out).exists() and not args.force:
+    if args.out and os.path.lexists(args.out) and not args.force:
         raise UsageError(f"--out {args.out} exists: continue it with --resume {args.out}, choose a new file, or "
                          f"pass --force to replace it")
     if args.resume:
-        if not Path(args.resume).is_file():
+        if not os.path.exists(args.resume):  # anything else there, the log's reader refuses in its words
             raise UsageError(f"--resume {args.resume}: no such file")
         for name, flag in fixed.items():
             if getattr(args, name, None):
@@ -57,9 +66,10 @@ def interrupted(command: str, log: str | None, schema: str) -> Interrupted:
     from ..studies.optimize import read_log
     if log is None:
         return Interrupted("interrupted; nothing was logged (--out LOG.h5 makes a run resumable)")
-    if not Path(log).is_file():
-        return Interrupted("interrupted before the first generation ended; nothing was logged")
-    done = len(read_log(log, schema)["state/sigma"])
+    try:
+        done = len(read_log(log, schema)["state/sigma"])
+    except SceneError:  # stopped before the log was first written (or a --force run, while it was replaced)
+        return Interrupted("interrupted before anything was logged")
     return Interrupted(f"interrupted after {done} generation{'s' * (done != 1)}; continue with: finrft {command} "
                        f"--resume {shlex.quote(log)}")
 
@@ -122,8 +132,8 @@ def optimize(args: argparse.Namespace) -> int:
 
         try:
             result = optimize(scene, variables=list(variables.values()), budget=args.budget, seed=args.seed,
-                              log=log, resume=bool(args.resume), executor=executor, workers=args.workers,
-                              max_error=limits(args), on_generation=on_generation)
+                              log=log, resume=bool(args.resume), replace=args.force, executor=executor,
+                              workers=args.workers, max_error=limits(args), on_generation=on_generation)
         except KeyboardInterrupt:
             raise interrupted("optimize", log, searchlog.OPTIMIZE) from None
     best, summary = best_gait(scene, result, limits(args))
@@ -193,7 +203,7 @@ def _fit_problem(args: argparse.Namespace) -> tuple[scenes.Scene, list, list]:
         return logged_problem(args.resume)
     if not args.data:
         raise UsageError("--data is required (or --resume LOG.h5)")
-    names = [n.strip() for n in (args.params or "b").split(",") if n.strip()]
+    names = ["b"] if args.params is None else [n.strip() for n in args.params.split(",")]
     return (resolve_plate(args), [read_drag(p) for p in args.data],
             resolve_params(names, parse_bounds(args.bounds, scenes.Scene, ALIASES)))
 
@@ -215,7 +225,7 @@ def fit(args: argparse.Namespace) -> int:
 
         try:
             result = fit(scene, data, variables, budget=args.budget, seed=args.seed, validate=validate, log=log,
-                         resume=bool(args.resume), workers=args.workers, max_error=limits(args),
+                         resume=bool(args.resume), replace=args.force, workers=args.workers, max_error=limits(args),
                          on_generation=on_generation)
         except KeyboardInterrupt:
             raise interrupted("fit", log, searchlog.FIT) from None

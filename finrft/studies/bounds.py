@@ -43,10 +43,18 @@ def parse_bounds(items: list[str], cls: type,
                     raise SceneError(f"--bounds {item}: {suffix} is no unit of {key.strip()}, whose unit is "
                                      f"{unit or 'none'}: give its bounds in {unit or 'plain numbers'}{other}")
                 scale, low, high = factor, low.strip().removesuffix(suffix), high.strip().removesuffix(suffix)
+        name = (aliases or {}).get(key.strip(), key.strip())
+        twice = next((k for k in bounds if (aliases or {}).get(k, k) == name), None)
+        if twice is not None:
+            raise SceneError(f"--bounds {item}: {key.strip()} has bounds already ({twice}="
+                             f"{bounds[twice][0]:g}:{bounds[twice][1]:g}): give each key's once")
         try:
-            bounds[key.strip()] = (float(low) * scale, float(high) * scale)
+            span = (float(low) * scale, float(high) * scale)
         except ValueError:
             raise SceneError(f"--bounds {item}: bounds must be numbers") from None
+        if not all(map(math.isfinite, span)):
+            raise SceneError(f"--bounds {item}: bounds must be finite numbers")
+        bounds[key.strip()] = span
     return bounds
 
 

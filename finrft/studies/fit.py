@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import csv
 import math
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Sequence
@@ -27,6 +26,7 @@ from ..experiment import Result
 from ..laws.table import ForceTable
 from ..scene import RFT, Scene, SceneError, field_of, read_text, scene_from_dict, split_key, to_toml
 from ..experiments.plate import FORCE_COLUMNS, simulate
+from ..files import read_toml
 
 # Short names for the paper's parameters, and default bounds (SI).
 ALIASES = {"b": "plate.damping", "k": "plate.stiffness", "f_perp": "rft.f_perp", "f_par": "rft.f_par"}
@@ -135,6 +135,8 @@ def resolve_params(names: Sequence[str], bounds: dict[str, tuple[float, float]] 
     """Fitted parameters from names (aliases b, k, f_perp, f_par, or any numeric plate-scene key) and bounds
     (keyed by either); SceneError for bounds of a parameter that is not fitted."""
     keys = [ALIASES.get(name, name) for name in names]
+    if not keys or not all(keys):
+        raise SceneError(f"the fitted parameters must be named, one or more, none empty: got {', '.join(names)!r}")
     twice = sorted({k for k in keys if keys.count(k) > 1})
     if twice:
         raise SceneError(f"{', '.join(twice)} listed twice in the fitted parameters")
@@ -195,10 +197,10 @@ class Fit:
 
 def fit(scene: Scene, data: Sequence[DragData], variables: Sequence[Variable], *, budget: int | None = None,
         seed: int | None = None, validate: Sequence[DragData] = (), log: str | Path | None = None,
-        resume: bool = False, workers: int | None = None, max_error: ErrorLimits = ErrorLimits(),
-        on_generation: Callable[..., None] | None = None) -> Fit:
+        resume: bool = False, replace: bool = False, workers: int | None = None,
+        max_error: ErrorLimits = ErrorLimits(), on_generation: Callable[..., None] | None = None) -> Fit:
     """Fit ``variables`` of a plate scene to drag data with CMA-ES, starting from the scene's own values. Budget,
-    seed, log and resume as `finrft.optimize.cmaes`; the log holds the data too, and `logged_problem` gives the
+    seed, log, resume and replace as `finrft.optimize.cmaes`; the log holds the data too, and `logged_problem` gives the
     scene, data and variables to resume it with. Scenes whose estimated discretisation error exceeds
     ``max_error`` score as failed; the fitted scene must meet it on every file (else InaccurateResult)."""
     if scene.plate.segments != data[0].angles.shape[1]:
@@ -221,7 +223,7 @@ def fit(scene: Scene, data: Sequence[DragData], variables: Sequence[Variable], *
 
     with batch.pool_for(workers=workers) as pool:
         search = cmaes(population, variables, budget=budget, seed=seed, start=start, log=log, resume=resume,
-                       schema=searchlog.FIT, units=si_units(Scene, variables),
+                       replace=replace, schema=searchlog.FIT, units=si_units(Scene, variables),
                        problem={"scene_toml": to_toml(scene), "objective": "mean over files of the mean squared "
                                 "segment-angle error (failed or above the error limit: 1e6)", "objective_units": "deg^2",
                                 "error_limit_deg": max_error.angle_deg},
@@ -254,10 +256,15 @@ def _data_tables(data: Sequence[DragData]) -> dict[str, searchlog.Dataset]:
 def logged_problem(path: str | Path) -> tuple[Scene, list[DragData], list[Variable]]:
     """The scene, data and variables of a fit log, to continue it."""
     log = read_log(path, searchlog.FIT)
-    files = sorted({int(name.split("/")[1]) for name in log if name.startswith("data/")})
-    data = [DragData(log["dataset_attrs"][f"data/{i}/time"]["path"], log[f"data/{i}/time"],
-                     float(log[f"data/{i}/speed"]), log[f"data/{i}/angles"]) for i in files]
-    return scene_from_dict(tomllib.loads(log["attrs"]["scene_toml"]), Scene), data, log["variables"]
+    try:
+        files = sorted({int(name.split("/")[1]) for name in log if name.startswith("data/")})
+        data = [DragData(str(log["dataset_attrs"][f"data/{i}/time"]["path"]), log[f"data/{i}/time"],
+                         float(log[f"data/{i}/speed"]), log[f"data/{i}/angles"]) for i in files]
+    except (KeyError, IndexError, TypeError, ValueError):
+        raise SceneError(f"{path}: its fitted data (data/<i>/time, angles, speed) are incomplete") from None
+    if not data:
+        raise SceneError(f"{path}: it holds no fitted data")
+    return scene_from_dict(read_toml(log["attrs"]["scene_toml"], f"{path}: its scene"), Scene), data, log["variables"]
 
 
 def plot(fitted: Scene, files: Sequence[tuple[DragData, str]], path: str | Path) -> None:

@@ -14,9 +14,10 @@ random generator is the only randomness.
 
 from __future__ import annotations
 
+import contextlib
 import math
+import os
 import time
-import tomllib
 import warnings
 from concurrent.futures import Executor
 from dataclasses import dataclass
@@ -25,15 +26,20 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from .. import batch
+from .. import batch, files
 from . import bounds, searchlog
 from ..convergence import ErrorLimits, SimulationFailed
-from ..files import provenance
+from ..files import provenance, read_toml
 from ..experiments.swim import RobotScene
+from ..errors import UsageError
 from ..scene import SceneError, field_of, scene_from_dict, to_toml
 from ..experiments.swim import swim
 
 FAILED = 2.0
+# numpy's legacy generator, which pycma's sampling follows, takes seeds below 2**32.
+MAX_SEED = 2**32 - 1
+# More evaluations than any search runs (days of them at a million a day); a log's counts stay in int64.
+MAX_BUDGET = 10**9
 # eta = (D1 - D2) / D1 grows without bound as D1 -> 0: a power stroke that moves the body forward by less than
 # this scores as a failed gait, so the search cannot chase a vanishing denominator.
 MIN_FORWARD_MM = 1.0
@@ -169,6 +175,30 @@ def _options(dimension: int, budget: int, rng: np.random.RandomState) -> dict[st
     return options
 
 
+def _values(variables: Sequence[Variable], unit: np.ndarray) -> np.ndarray:
+    """Points in normalised coordinates (population x variables) as the variables' values."""
+    return np.array([[v.from_unit(float(u)) for v, u in zip(variables, x)] for x in unit])
+
+
+# A log's root attributes a search reads, and what each must be.
+_ATTRIBUTES = {"seed": ("a whole number from 1 to 2**32 - 1", lambda v: isinstance(v, int) and 1 <= v <= MAX_SEED),
+               "budget": (f"a whole number from 1 to {MAX_BUDGET}", lambda v: isinstance(v, int)
+                          and 1 <= v <= MAX_BUDGET),
+               "sigma0": ("a positive number", lambda v: isinstance(v, float) and 0 < v < math.inf),
+               "variables": ("a list of scene keys", lambda v: isinstance(v, list) and v
+                             and all(isinstance(k, str) for k in v)),
+               "cma_version": ("a version", lambda v: isinstance(v, str)),
+               "scene_toml": ("a scene (TOML)", lambda v: isinstance(v, str))}
+
+
+def _check_attributes(path: str | Path, attrs: dict[str, Any]) -> None:
+    """SceneError naming the first attribute a search reads that a log lacks or holds damaged."""
+    for name, (what, ok) in _ATTRIBUTES.items():
+        if name not in attrs or isinstance(attrs[name], bool) or not ok(attrs[name]):
+            raise SceneError(f"{path}: its attribute {name} is {'missing' if name not in attrs else 'damaged'} "
+                             f"(it must be {what})")
+
+
 def _state(es: Any, rng: np.random.RandomState) -> dict[str, np.ndarray]:
     _, key, pos, has_gauss, cached = rng.get_state()
     return {"mean": np.array(es.mean, dtype=float), "sigma": np.float64(es.sigma), "C": np.array(es.sm.C),
@@ -184,6 +214,7 @@ def si_units(cls: type, variables: Sequence[Variable]) -> list[str]:
 
 def cmaes(evaluate: Evaluate, variables: Sequence[Variable], *, budget: int | None = None, seed: int | None = None,
           start: dict[str, float] | None = None, log: str | Path | None = None, resume: bool = False,
+          replace: bool = False,
           schema: str = searchlog.OPTIMIZE, units: Sequence[str] | None = None, problem: dict[str, Any] | None = None,
           tables: dict[str, searchlog.Dataset] | None = None,
           columns: dict[str, tuple[str, int, str]] | None = None,
@@ -191,12 +222,36 @@ def cmaes(evaluate: Evaluate, variables: Sequence[Variable], *, budget: int | No
     """Minimise a population cost over ``variables`` with CMA-ES (normalised to [0, 1], sigma0 = 0.25, from
     ``start`` where it lies within the bounds, else the middle of the bounds).
 
-    ``log`` (HDF5, schema ``schema``) is rewritten after each generation with every evaluation, its ``columns``
+    ``log`` (HDF5, schema ``schema``), a new file (an existing one only with ``replace``), owned by this run
+    (`finrft.files.locked`: another run on it refuses), is rewritten after each generation with every evaluation, its ``columns``
     (name -> (unit, width (0 for one value), description)) and the optimiser's state, next to the variables (SI
     ``units``), ``problem`` (root attributes: the scene, the objective and its units) and ``tables`` (datasets:
     what was fitted). ``resume`` continues it: the problem must be the logged one, the seed is the log's (None, or the
     same), ``budget`` is the new total (None: the log's; CMA-ES finishes the generation that reaches it, so a log may
-    hold more evaluations than its budget). Without a log, budget and seed default to 300 and 1."""
+    hold more evaluations than its budget). Without a log, budget and seed default to 300 and 1. The seed is a whole
+    number from 1 to 2**32 - 1 (numpy's and pycma's generators take no other)."""
+    check_seed(seed)
+    if budget is not None and (isinstance(budget, bool) or not isinstance(budget, (int, np.integer))
+                               or not 1 <= budget <= MAX_BUDGET):
+        raise SceneError(f"the budget must be a whole number of evaluations from 1 to {MAX_BUDGET}, got {budget!r}")
+    with (files.locked(log, "search log") if log is not None else contextlib.nullcontext()):
+        return _cmaes(evaluate, variables, budget, seed, start, log, resume, replace, schema, units, problem, tables,
+                      columns, on_generation)
+
+
+def check_seed(seed: Any) -> None:
+    """SceneError unless ``seed`` is None or a whole number from 1 to MAX_SEED."""
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, (int, np.integer))
+                             or not 1 <= seed <= MAX_SEED):
+        raise SceneError(f"the seed must be a whole number from 1 to {MAX_SEED} (2**32 - 1), got {seed!r}")
+
+
+def _cmaes(evaluate: Evaluate, variables: Sequence[Variable], budget: int | None, seed: int | None,
+           start: dict[str, float] | None, log: str | Path | None, resume: bool, replace: bool, schema: str,
+           units: Sequence[str] | None, problem: dict[str, Any] | None, tables: dict[str, searchlog.Dataset] | None,
+           columns: dict[str, tuple[str, int, str]] | None,
+           on_generation: Callable[[int, np.ndarray, dict[str, np.ndarray], Any], None] | None) -> Search:
+    """`cmaes` in a run that owns its log."""
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message=".*matplotlib.*")
         import cma
@@ -217,6 +272,9 @@ def cmaes(evaluate: Evaluate, variables: Sequence[Variable], *, budget: int | No
         budget = attrs["budget"] if budget is None else budget
         attrs["budget"] = budget
     else:
+        if path is not None and os.path.lexists(path) and not replace:
+            raise UsageError(f"search log {path} exists: continue it (--resume, resume=True), or replace it "
+                             f"(--force, replace=True)")
         budget = 300 if budget is None else budget
         seed = 1 if seed is None else seed
         # a start outside its variable's bounds (the paper's, under narrower --bounds) gives way to their middle
@@ -229,7 +287,7 @@ def cmaes(evaluate: Evaluate, variables: Sequence[Variable], *, budget: int | No
     rng = np.random.RandomState(attrs["seed"])
     es = cma.CMAEvolutionStrategy(list(x0), attrs["sigma0"], _options(n, budget, rng))
     generations = len(states["sigma"].blocks)
-    _replay(es, rng, rows, states, f"{path}: ", attrs["cma_version"])
+    _replay(es, rng, variables, rows, states, f"{path}: ", attrs["cma_version"])
 
     def write() -> None:
         if path is not None:
@@ -241,7 +299,7 @@ def cmaes(evaluate: Evaluate, variables: Sequence[Variable], *, budget: int | No
     while not es.stop():
         asked = es.ask()
         unit = np.array(asked)
-        values = np.array([[v.from_unit(u) for v, u in zip(variables, x)] for x in unit])
+        values = _values(variables, unit)
         costs, extras = evaluate(values)
         es.tell(asked, list(costs))
         block = {"generation": np.full(len(unit), generations), "unit": unit, "x": values,
@@ -267,6 +325,10 @@ def _load(path: Path, schema: str, variables: Sequence[Variable], problem: dict[
     """Fill ``rows`` and ``states`` from a log of this very problem, one block per generation; its attributes and
     start point."""
     attrs, datasets = searchlog.read(path, schema)
+    if "digest" not in attrs:
+        raise SceneError(f"{path} carries no digest of its contents (a log of an older finrft, or edited): it "
+                         f"cannot be checked, so it is not continued")
+    _check_attributes(path, attrs)
     if attrs.get("variables") != [v.key for v in variables] or not np.array_equal(datasets["bounds"].data,
                                                                                   fixed["bounds"].data):
         raise SceneError(f"{path} searched other variables or bounds: "
@@ -293,10 +355,11 @@ def _load(path: Path, schema: str, variables: Sequence[Variable], problem: dict[
     return attrs, datasets["x0"].data
 
 
-def _replay(es: Any, rng: np.random.RandomState, rows: dict[str, searchlog.Series],
+def _replay(es: Any, rng: np.random.RandomState, variables: Sequence[Variable], rows: dict[str, searchlog.Series],
             states: dict[str, searchlog.Series], where: str, logged_version: str) -> None:
     """Bring a new optimiser of the logged seed to the logged state: ask and tell every logged generation again,
-    checking that it asks the logged points and ends each generation in the logged state."""
+    checking that it asks the logged points, that they are the logged values of the variables, and that it ends
+    each generation in the logged state."""
     import cma
     for g, (unit, cost) in enumerate(zip(rows["unit"].blocks, rows["cost"].blocks)):
         es.stop()  # as the logged run called it, in case it keeps state
@@ -304,6 +367,9 @@ def _replay(es: Any, rng: np.random.RandomState, rows: dict[str, searchlog.Serie
         if not np.array_equal(np.array(asked), unit):
             raise SceneError(f"{where}generation {g} asks other points than logged: pycma {cma.__version__} cannot "
                              f"continue a log of pycma {logged_version}")
+        if not np.array_equal(_values(variables, unit), rows["x"].blocks[g]):
+            raise SceneError(f"{where}generation {g} logs other values of the variables than its points give: the "
+                             f"log was edited")
         es.tell(asked, list(cost))
         if any(not np.array_equal(value, states[name].blocks[g][0]) for name, value in _state(es, rng).items()):
             raise SceneError(f"{where}the optimiser rebuilt from the log differs from its logged state after "
@@ -315,6 +381,12 @@ def read_log(path: str | Path, schema: str = searchlog.OPTIMIZE) -> dict[str, An
     description ("dataset_attrs") and its variables; SceneError when the file is not a finrft log of this
     ``schema``."""
     attrs, datasets = searchlog.read(path, schema)
+    _check_attributes(path, attrs)
+    missing = sorted({"bounds", "x", "generation", "state/sigma"} - set(datasets))
+    if missing:
+        raise SceneError(f"{path} is not a complete finrft log: it lacks {', '.join(missing)}")
+    if datasets["bounds"].data.shape != (len(attrs["variables"]), 2):
+        raise SceneError(f"{path}: its bounds do not match its variables")
     out: dict[str, Any] = {name: d.data for name, d in datasets.items()}
     out["attrs"] = attrs
     out["dataset_attrs"] = {name: d.attrs for name, d in datasets.items()}
@@ -326,16 +398,16 @@ def read_log(path: str | Path, schema: str = searchlog.OPTIMIZE) -> dict[str, An
 def logged_problem(path: str | Path) -> tuple[RobotScene, list[Variable]]:
     """The scene and variables of an optimisation log, to continue it."""
     log = read_log(path)
-    return scene_from_dict(tomllib.loads(log["attrs"]["scene_toml"]), RobotScene), log["variables"]
+    return scene_from_dict(read_toml(log["attrs"]["scene_toml"], f"{path}: its scene"), RobotScene), log["variables"]
 
 
 def optimize(scene: RobotScene, *, variables: Sequence[Variable] = DEFAULT_VARIABLES, budget: int | None = None,
-             seed: int | None = None, log: str | Path | None = None, resume: bool = False,
+             seed: int | None = None, log: str | Path | None = None, resume: bool = False, replace: bool = False,
              executor: Executor | None = None, workers: int | None = None, max_error: ErrorLimits = ErrorLimits(),
              on_generation: Callable[[int, np.ndarray, dict[str, np.ndarray], Any], None] | None = None) -> Search:
     """Maximise the robot's eta over ``variables`` with CMA-ES, minimising 1 - eta (failed gaits, gaits whose
     estimated error exceeds ``max_error``, and power strokes that move the body forward by less than
-    MIN_FORWARD_MM: 2). Budget, seed, log and resume as `cmaes`; `logged_problem` gives the scene and variables
+    MIN_FORWARD_MM: 2). Budget, seed, log, resume and replace as `cmaes`; `logged_problem` gives the scene and variables
     to resume a log with."""
     check_variables(scene, variables)
 
@@ -352,7 +424,7 @@ def optimize(scene: RobotScene, *, variables: Sequence[Variable] = DEFAULT_VARIA
 
     with batch.pool_for(executor, workers) as pool:
         search = cmaes(population, variables, budget=budget, seed=seed, start=PAPER_START, log=log, resume=resume,
-                       units=si_units(RobotScene, variables),
+                       replace=replace, units=si_units(RobotScene, variables),
                        problem={"scene_toml": to_toml(scene), "objective": "1 - eta over one flap cycle from rest "
                                 f"(failed gaits, estimated errors above the limit and power strokes under "
                                 f"{MIN_FORWARD_MM} mm: 2)", "objective_units": "1",

@@ -2,24 +2,31 @@
 attributes, nothing pickled, so opening a log runs no code and a log outlives the pycma version that wrote it.
 
 A log is small and is rewritten whole through a temporary file after each generation: a process killed at any
-moment leaves the previous complete log.
+moment leaves the previous complete log. Its root attribute ``digest`` (SHA-256 of every other attribute and every
+dataset with its attributes) is checked whenever it is read: a log edited or damaged since is refused, not
+continued or reported.
 """
 
 from __future__ import annotations
 
+import hashlib
+import json
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ..files import atomic_path
+from ..files import atomic_path, check_regular
 from ..errors import SceneError
 
 OPTIMIZE = "finrft.optimize/2"
 FIT = "finrft.fit/1"
 # schema -> (what the log is called, the command that continues it)
 _KINDS = {OPTIMIZE: ("optimisation", "optimize"), FIT: ("fit", "fit")}
+# The largest log read, and the most its datasets may hold: far above a search of a million evaluations.
+MAX_LOG_BYTES = 2**30
 
 
 @dataclass
@@ -46,13 +53,16 @@ class Series:
 
 
 def write(path: str | Path, attrs: dict[str, Any], datasets: dict[str, Dataset]) -> None:
-    """Replace ``path`` with a log of root ``attrs`` and ``datasets`` (each with its units and description)."""
+    """Replace ``path`` with a log of root ``attrs`` and ``datasets`` (each with its units and description), and
+    their digest. It replaces the log it continues: a run owns its log (`finrft.files.locked`)."""
     import h5py  # here, not at the top: `import finrft` stays light
-    with atomic_path(path) as tmp, h5py.File(tmp, "w", track_order=True) as f:
+    with atomic_path(path, exclusive=False) as tmp, h5py.File(tmp, "w", track_order=True) as f:
         f.attrs.update(attrs)
         for name, d in datasets.items():
             ds = f.create_dataset(name, data=d.data)
             ds.attrs.update(units=d.units, description=d.description, **d.attrs)
+        # of what the file holds, read back: the reader computes it from the same values
+        f.attrs["digest"] = digest(f)
 
 
 def _plain(value: Any) -> Any:
@@ -61,27 +71,60 @@ def _plain(value: Any) -> Any:
     return value.item() if isinstance(value, np.generic) else value
 
 
+def _canonical(attrs: Any) -> bytes:
+    return json.dumps({k: _plain(v) for k, v in attrs.items() if k != "digest"}, sort_keys=True,
+                      default=repr).encode()
+
+
+def digest(f: Any) -> str:
+    """SHA-256 of an open log's root attributes but ``digest`` and of every dataset: name, type, shape, values and
+    attributes."""
+    import h5py
+    h = hashlib.sha256(_canonical(f.attrs))
+    names: list[str] = []
+    f.visititems(lambda name, obj: names.append(name) if isinstance(obj, h5py.Dataset) else None)
+    for name in sorted(names):
+        data = np.ascontiguousarray(f[name][()])
+        h.update(json.dumps([name, data.dtype.str, list(data.shape)]).encode())
+        h.update(data.tobytes() if data.dtype.kind != "O" else json.dumps(_plain(data), default=repr).encode())
+        h.update(_canonical(f[name].attrs))
+    return h.hexdigest()
+
+
 def read(path: str | Path, schema: str) -> tuple[dict[str, Any], dict[str, Dataset]]:
-    """A log's root attributes and datasets; SceneError naming the command to use when it is another kind."""
+    """A log's root attributes and datasets; SceneError naming the command to use when it is another kind, and
+    when it is no regular file, too large, incomplete, or its contents do not match its digest."""
     import h5py
     noun, _ = _KINDS[schema]
     datasets: dict[str, Dataset] = {}
+    found: list[Any] = []
 
     def visit(name: str, obj: Any) -> None:
         if isinstance(obj, h5py.Dataset):
-            extra = {k: _plain(v) for k, v in obj.attrs.items() if k not in ("units", "description")}
-            datasets[name] = Dataset(obj[()], obj.attrs["units"], obj.attrs["description"], extra)
+            found.append(obj)
 
     try:
+        check_regular(os.stat(path), path, f"finrft {noun} log", MAX_LOG_BYTES)
         with h5py.File(path, "r") as f:
-            found = f.attrs.get("schema")
-            if found != schema:
-                raise SceneError(_mismatch(path, found, schema))
-            attrs = {k: _plain(v) for k, v in f.attrs.items()}
+            kind = f.attrs.get("schema")
+            if kind != schema:
+                raise SceneError(_mismatch(path, kind, schema))
             f.visititems(visit)
+            if sum(obj.size * obj.dtype.itemsize for obj in found) > MAX_LOG_BYTES:
+                raise SceneError(f"{path}: its datasets hold more than {MAX_LOG_BYTES} bytes: not a finrft {noun} "
+                                 f"log")
+            if "digest" in f.attrs and f.attrs["digest"] != digest(f):
+                raise SceneError(f"{path}: its contents do not match the digest written with them: the log was "
+                                 f"edited or damaged since, and cannot be trusted")
+            attrs = {k: _plain(v) for k, v in f.attrs.items()}
+            for obj in found:
+                extra = {k: _plain(v) for k, v in obj.attrs.items() if k not in ("units", "description")}
+                datasets[obj.name.lstrip("/")] = Dataset(obj[()], obj.attrs["units"], obj.attrs["description"], extra)
     except OSError as exc:
         raise SceneError(f"cannot read {path} as a finrft {noun} log: {exc}") from None
-    except KeyError as exc:
+    except (KeyError, TypeError, ValueError) as exc:
+        if isinstance(exc, SceneError):
+            raise
         raise SceneError(f"{path} is not a complete finrft {noun} log: {exc}") from None
     return attrs, datasets
 

@@ -178,9 +178,15 @@ class PlateTest:
 
     drive: Drive
     schema = "finrft.run/1"
+    scene_type = Scene
     sign_convention = SIGN_CONVENTION
     shape = "segment_angle"  # the series whose angles give the plate's shape
     load = "drive_force"     # the series of the drive's load, whatever the test
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.drive, Drive):
+            raise SceneError(f"a plate test's drive must be a finrft.Drive, got {type(self.drive).__name__} "
+                             f"{self.drive!r:.60}")
 
     @property
     def name(self) -> str:

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import numbers
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
@@ -278,10 +279,16 @@ class Swim:
 
     cycles: int = 1
     name = "swim"
+    scene_type = RobotScene
     schema = "finrft.swim/1"
     sign_convention = SIGN_CONVENTION
     shape = "hinge_angle"  # the series whose angles give the fin's shape
     load = "servo_torque"  # the series of the drive's load
+
+    def __post_init__(self) -> None:
+        if isinstance(self.cycles, bool) or not isinstance(self.cycles, numbers.Integral) or self.cycles < 1:
+            raise SceneError(f"swim cycles must be a whole number >= 1, got {self.cycles!r}")
+        object.__setattr__(self, "cycles", int(self.cycles))
 
     def build(self, scene: RobotScene) -> RobotModel:
         return build_robot(scene)

@@ -11,6 +11,8 @@ import math
 import numbers
 from dataclasses import dataclass
 
+import numpy as np
+
 from .errors import SceneError
 
 KINDS = ("drag", "rotate")
@@ -74,6 +76,10 @@ class Drive:
 
     def velocity(self, t: float) -> float:
         return self.stroke_velocity(self.stroke_index(t))
+
+    def positions(self, times: np.ndarray) -> np.ndarray:
+        """`position` at each of ``times``."""
+        return np.array([self.position(float(t)) for t in times])
 
     def position(self, t: float) -> float:
         k = self.stroke_index(t)

@@ -110,7 +110,7 @@ class Attached:
         text = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_TEXT, callbacks.PYTHON_MARK)
         start = model.text_adr[text] if text >= 0 else 0
         marked = set() if text < 0 else set(bytes(model.text_data[start:start + model.text_size[text] - 1]).decode()
-                                            .split())
+                                            .split()[1:])
         for surface in self.surfaces:
             body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, surface.body)
             if body < 0 or not (model.body_plugin[body] >= 0 if self.backend == "native" else surface.body in marked):
@@ -229,8 +229,11 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str = (), law: str = "li
     elif not isinstance(coefficients, module.Coefficients):
         raise SceneError(f"attach: law {law!r} takes finrft.laws.{law}.Coefficients")
     backend = native.resolve_backend(backend)
+    # The mark's first word is the spec's address: a spec read back from its XML (or a copy) holds no callback's
+    # surfaces, and may take them anew.
     mark = spec.text(callbacks.PYTHON_MARK)
-    python_bodies = [] if mark is None else mark.data.split()
+    marked = [] if mark is None else mark.data.split()
+    python_bodies = marked[1:] if marked and marked[0] == str(spec._address) else []
     with callbacks.compiling():
         model = spec.copy().compile()
     data = mujoco.MjData(model)
@@ -259,7 +262,7 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str = (), law: str = "li
         # second attach of one of them.
         if mark is None:
             mark = spec.add_text(name=callbacks.PYTHON_MARK)
-        mark.data = " ".join([*python_bodies, *names])
+        mark.data = " ".join([str(spec._address), *python_bodies, *names])
     laws.warn_feeds_energy(law, module.FEEDS_ENERGY, "kept as published")
     laws.warn_caveat(law)
     return attached

@@ -34,7 +34,9 @@ def test_rigid_rotation_torque_closed_form(paper):
     p, r = scene.plate, scene.rft
     radius = p.rod_length + (np.arange(p.segments) + 0.5) * p.segment_length
     expected = np.sum(face(scene) * r.f_perp * np.tanh(drive.speed * radius / r.v_reg) * radius)
-    np.testing.assert_allclose(run.drive_force, expected, rtol=1e-9)
+    # The drive slows under the load by load / armature, which the plate's inertia feels: 1.6e-8 of the load here,
+    # where the armature is what resolves the load in each step (plate.drive_armature)
+    np.testing.assert_allclose(run.drive_force, expected, rtol=1e-7)
     np.testing.assert_allclose(run.segment_angle[:, 0], run.displacement, atol=1e-12)
 
 

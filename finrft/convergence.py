@@ -181,7 +181,8 @@ def checked(build: Callable[[Any], M], run_once: Callable[[Any, M, Callable[[flo
         over = [] if limits is None else limits.exceeded(estimate)
         if n == len(ratios):
             break
-        if not over and adaptive and limits is not None and limits.scaled(CONFIRM).exceeded(estimate):
+        # without limits (report only), the default ones say which estimate needs confirming: it is reported alike
+        if not over and adaptive and (limits or ErrorLimits()).scaled(CONFIRM).exceeded(estimate):
             kept = (estimate, label)
             continue
         if not over:

@@ -30,7 +30,7 @@ from typing import Callable, Iterator, Sequence
 import mujoco
 import numpy as np
 
-from . import coupling, laws, media, native
+from . import callbacks, laws, media, native
 from .errors import SceneError
 from .laws import drft, li2013, rft3d
 
@@ -130,6 +130,18 @@ class Attached:
                                  surface.area.copy())
         return out
 
+    def check_compiled(self, model: mujoco.MjModel) -> None:
+        """SceneError unless ``model`` was compiled from the spec after `attach`: one compiled before has no RFT."""
+        text = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_TEXT, callbacks.PYTHON_MARK)
+        start = model.text_adr[text] if text >= 0 else 0
+        marked = set() if text < 0 else set(bytes(model.text_data[start:start + model.text_size[text] - 1]).decode()
+                                            .split()[1:])
+        for surface in self.surfaces:
+            body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, surface.body)
+            if body < 0 or not (model.body_plugin[body] >= 0 if self.backend == "native" else surface.body in marked):
+                raise SceneError(f"attach: the model has no RFT on body {surface.body!r}: it was compiled before "
+                                 f"attach (or from another spec); compile the spec after attach")
+
     def callback(self, model: mujoco.MjModel) -> "SurfaceForces":
         """The Python backend's passive-force callback for the compiled model."""
         return SurfaceForces(self, model)
@@ -138,11 +150,12 @@ class Attached:
     def installed(self, model: mujoco.MjModel) -> Iterator[None]:
         """A block in which MuJoCo applies the forces: with the Python backend, the callback is installed for
         the block (compile every model first: MuJoCo's compiler cannot run Python callbacks); with the native
-        plugin, nothing needs installing."""
+        plugin, nothing needs installing. SceneError for a model compiled before `attach` (it has no RFT)."""
+        self.check_compiled(model)
         if self.backend == "native":
             yield
             return
-        with coupling.installed(self.callback(model)):
+        with callbacks.installed(model, self.callback(model)):
             yield
 
 
@@ -241,7 +254,13 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str = (), law: str = "li
     elif not isinstance(coefficients, module.Coefficients):
         raise SceneError(f"attach: law {law!r} takes finrft.laws.{law}.Coefficients")
     backend = native.resolve_backend(backend)
-    model = spec.copy().compile()
+    # The mark's first word is the spec's address: a spec read back from its XML (or a copy) holds no callback's
+    # surfaces, and may take them anew.
+    mark = spec.text(callbacks.PYTHON_MARK)
+    marked = [] if mark is None else mark.data.split()
+    python_bodies = marked[1:] if marked and marked[0] == str(spec._address) else []
+    with callbacks.compiling():
+        model = spec.copy().compile()
     data = mujoco.MjData(model)
     mujoco.mj_kinematics(model, data)
     surfaces = []
@@ -249,8 +268,9 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str = (), law: str = "li
         if spec.body(name) is None:
             raise SceneError(f"attach: the model has no body named {name!r}")
         body = model.body(name).id
-        if backend == "native" and model.body_plugin[body] >= 0:
-            raise SceneError(f"attach: body {name!r} already has a plugin (a body takes one)")
+        if model.body_plugin[body] >= 0 or name in python_bodies:
+            raise SceneError(f"attach: body {name!r} already has a plugin (a body takes one)" if model.body_plugin[
+                body] >= 0 else f"attach: body {name!r} has RFT attached already (a body takes it once)")
         surfaces.append(_surface(model, data, name, body, element_size, chosen.get(name), cull))
     total = sum(len(s.area) for s in surfaces)
     if total > MAX_ELEMENTS:
@@ -262,6 +282,12 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str = (), law: str = "li
         spec.activate_plugin(PLUGIN)
         for surface in surfaces:
             _bind(spec, attached, surface)
+    else:
+        # The compiled model carries the bodies, so that stepping it without its callback is refused, as is a
+        # second attach of one of them.
+        if mark is None:
+            mark = spec.add_text(name=callbacks.PYTHON_MARK)
+        mark.data = " ".join([str(spec._address), *python_bodies, *names])
     laws.warn_feeds_energy(law, module.FEEDS_ENERGY, "kept as published")
     laws.warn_caveat(law)
     return attached

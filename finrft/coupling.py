@@ -6,22 +6,18 @@ backend: a passive-force callback that adds those forces and the penalty stop to
 ``qfrc_passive`` each time MuJoCo evaluates passive forces (once per step, four times under RK4). The ``native``
 backend does the same in the C plugin (plugins/finrft_rft.c), bound to the model in `finrft.models`.
 
-MuJoCo's callback is process-global; `installed` sets it for the duration of a run and restores the previous one.
+MuJoCo's callbacks are process-global: `finrft.callbacks.installed` gives the callback to one model for a run.
 """
 
 from __future__ import annotations
 
-import contextlib
-from typing import Callable, Iterator, Sequence
+from typing import Sequence
 
 import mujoco
 import numpy as np
 
 from . import laws
 from .models import ForceGroup
-
-Callback = Callable[[mujoco.MjModel, mujoco.MjData], None]
-
 
 class SegmentForces:
     """The RFT force on each segment of a force group (N, 3), world frame, for MuJoCo's current kinematics."""
@@ -93,29 +89,3 @@ class PythonCoupling:
             if group.stop_stiffness > 0 and len(group.hinge_dof):
                 deflection = d.qpos[group.hinge_qpos] - m.qpos_spring[group.hinge_qpos]
                 d.qfrc_passive[group.hinge_dof] += penalty_stop(deflection, group.stop_stiffness)[0]
-
-
-@contextlib.contextmanager
-def _swapped(get: Callable[[], Callback | None], put: Callable[[Callback | None], None],
-             callback: Callback | None) -> Iterator[None]:
-    """One of MuJoCo's process-global callbacks set to ``callback`` for a block, then restored."""
-    previous = get()
-    put(callback)
-    try:
-        yield
-    finally:
-        put(previous)
-
-
-def installed(callback: Callback | None) -> contextlib.AbstractContextManager[None]:
-    """Install a passive-force callback (None: none at all) for a block, then restore whatever was there."""
-    return _swapped(mujoco.get_mjcb_passive, mujoco.set_mjcb_passive, callback)
-
-
-def controlled(callback: Callback | None) -> contextlib.AbstractContextManager[None]:
-    """Install a control callback (MuJoCo calls it in every step and mj_forward, after the velocities and before
-    the actuation: the place to set ``ctrl`` and ``qfrc_applied`` from the time and state) for a block, then
-    restore whatever was there; None leaves the callback as it is."""
-    if callback is None:
-        return contextlib.nullcontext()
-    return _swapped(mujoco.get_mjcb_control, mujoco.set_mjcb_control, callback)

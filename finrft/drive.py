@@ -8,7 +8,12 @@ direction of an origami plate. With ``cycles`` the motion is a triangle wave: ou
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import SceneError
 
 KINDS = ("drag", "rotate")
 
@@ -26,15 +31,25 @@ class Drive:
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
-            raise ValueError(f"drive kind must be one of {', '.join(KINDS)}, got {self.kind!r}")
+            raise SceneError(f"drive kind must be one of {', '.join(KINDS)}, got {self.kind!r}")
+        linear = self.kind == "drag"
+        units = {"speed": "m/s" if linear else "rad/s", "stroke": "m" if linear else "rad", "attack_deg": "degrees",
+                 "start": "m" if linear else "rad"}
+        for name, unit in units.items():
+            # numpy's scalars are numbers too; stored as floats, so that the drive is written out as JSON
+            object.__setattr__(self, name, real(f"drive {name}", getattr(self, name), unit))
         for name in ("speed", "stroke"):
             value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"drive {name} must be > 0, got {value!r}")
-        if self.cycles is not None and self.cycles < 1:
-            raise ValueError(f"cycles must be >= 1, got {self.cycles}")
+            if not value > 0:
+                raise SceneError(f"drive {name} must be > 0 {units[name]}, got {value!r}")
+        if self.cycles is not None:
+            if isinstance(self.cycles, bool) or not isinstance(self.cycles, numbers.Integral):
+                raise SceneError(f"drive cycles must be a whole number (or None: one stroke), got {self.cycles!r}")
+            if self.cycles < 1:
+                raise SceneError(f"drive cycles must be >= 1, got {self.cycles}")
+            object.__setattr__(self, "cycles", int(self.cycles))
         if not 0.0 <= self.attack_deg <= 180.0:
-            raise ValueError(f"angle of attack must be within 0..180 degrees, got {self.attack_deg}")
+            raise SceneError(f"angle of attack must be within 0..180 degrees, got {self.attack_deg}")
 
     @property
     def stroke_time(self) -> float:
@@ -62,6 +77,19 @@ class Drive:
     def velocity(self, t: float) -> float:
         return self.stroke_velocity(self.stroke_index(t))
 
+    def positions(self, times: np.ndarray) -> np.ndarray:
+        """`position` at each of ``times``."""
+        return np.array([self.position(float(t)) for t in times])
+
     def position(self, t: float) -> float:
         k = self.stroke_index(t)
         return self.stroke_start(k) + self.stroke_velocity(k) * (t - k * self.stroke_time)
+
+
+def real(what: str, value: object, unit: str) -> float:
+    """``value`` as a float: SceneError unless it is a finite real number (a bool is not one; numpy's are)."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise SceneError(f"{what} must be a number ({unit}), got {value!r}")
+    if not math.isfinite(value):
+        raise SceneError(f"{what} must be finite ({unit}), got {value!r}")
+    return float(value)

@@ -19,9 +19,12 @@ import numpy as np
 
 from . import geometry, laws, native
 from .convergence import ErrorLimits, Estimated, checked, max_difference, paired, require_finite
-from .coupling import PythonCoupling, controlled, installed
+from .callbacks import controlled, installed
+from .coupling import PythonCoupling
 from .drive import Drive
+from .errors import SceneError
 from .integrate import stepper
+from .scene import Sections
 from .stepping import chatter_speeds, instants, schedule, step_through
 
 
@@ -188,6 +191,10 @@ def run(experiment: Experiment, scene: Any, *, progress: Callable[[float], None]
     and InaccurateResult when the estimate exceeds ``max_error`` (None: report it only). ``estimate_error=False``
     skips the estimate, for studies that measure the error themselves. A scene whose law can feed energy in (the
     paper's model) runs, with a warning once per process (`laws.FeedsEnergy`)."""
+    expected = getattr(experiment, "scene_type", Sections)
+    if not isinstance(scene, expected):
+        raise SceneError(f"{experiment.name}: the scene must be a finrft.{expected.__name__} (from finrft.preset or "
+                         f"finrft.load_scene), got {type(scene).__name__} {scene!r:.60}")
     laws.warn_if_feeds_energy(geometry.segment_law(scene))
     # A companion on the run's model (the adaptive methods') steps the run's MjData again, reset: a new one costs
     # a tenth of a physical gait's companion (the bindings' wrappers).
@@ -232,8 +239,8 @@ def _once(experiment: Experiment, scene: Any, built: Any, d: mujoco.MjData, prog
     advance = stepper(m, scene.sim, built.backend, built.groups, attached)
     watch = [] if companion else trial.watch
     speeds = chatter_speeds(m, d, built.groups, attached, watch)
-    with installed(python_forces(built) if built.backend == "python" else None), native.untimed(), \
-            controlled(getattr(trial, "control", None)):
+    with installed(m, python_forces(built) if built.backend == "python" else None), native.untimed(), \
+            controlled(m, getattr(trial, "control", None)):
         step_through(m, d, scene, advance, steps, starts, samples, trial.on_stroke, on_sample, progress, watch,
                      forward=not companion, stroke_time=drive.stroke_time, speeds=speeds)
     series, values = trial.finish(d, readings)

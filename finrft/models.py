@@ -16,7 +16,7 @@ from importlib import resources
 import mujoco
 import numpy as np
 
-from . import laws, native
+from . import callbacks, laws, native
 from .laws import SegmentLaw
 from .scene import Chain, SceneError, Sim
 
@@ -166,7 +166,7 @@ def new_spec(file: str, sim: Sim) -> mujoco.MjSpec:
 def compile_spec(spec: mujoco.MjSpec) -> mujoco.MjModel:
     """The compiled model; SceneError quoting MuJoCo's reason when it refuses the spec."""
     try:
-        with native.captured_warnings([]):
+        with callbacks.compiling(), native.captured_warnings([]):
             return spec.compile()
     except ValueError as exc:  # e.g. the plugin's init rejecting its config: quote its line, which names the key
         lines = str(exc).strip().splitlines()

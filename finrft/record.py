@@ -8,6 +8,7 @@ interrupted or failed write never leaves a truncated file where a complete one i
 from __future__ import annotations
 
 import json
+import os
 import uuid
 from pathlib import Path
 from typing import Any
@@ -18,6 +19,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from . import geometry, laws
+from .errors import SceneError
 from .experiment import DISPLAY, Result
 from .files import atomic_path, provenance
 from .scene import to_toml
@@ -37,15 +39,32 @@ def _provenance(scene: Any, summary: dict[str, Any]) -> dict[str, Any]:
             "summary_json": json.dumps(summary), **provenance(), **estimate}
 
 
-def write_h5(run: Result, path: str | Path, *, extra_attrs: dict[str, Any] | None = None) -> None:
+def check_new(path: str | Path, force: bool) -> None:
+    """SceneError when ``path`` exists (a dangling link too) and ``force`` is not given: a writer replaces a file
+    only when asked to, as the command line does with --force."""
+    if not force and os.path.lexists(path):
+        raise SceneError(f"{path} exists: choose a new file, or pass force=True to replace it")
+
+
+def _check_result(run: Any) -> None:
+    if not isinstance(run, Result):
+        raise SceneError(f"a file is written from a finrft.Result (finrft.run, simulate, swim), got "
+                         f"{type(run).__name__}")
+
+
+def write_h5(run: Result, path: str | Path, *, extra_attrs: dict[str, Any] | None = None,
+             force: bool = False) -> None:
     """Write any experiment's result to HDF5, atomically: its series at the root with SI ``units`` and a
     ``description`` (the per-sample ones on the dimension scale ``time``), the scene, the experiment's parameters
     and the summary as root attributes, with ``law_feeds_energy``: why the scene's segment law can feed energy in,
-    or "" (also for a scene without one). ``extra_attrs`` are added to the root attributes."""
+    or "" (also for a scene without one). ``extra_attrs`` are added to the root attributes. SceneError when the
+    file exists, unless ``force``."""
+    _check_result(run)
     extra = dict(extra_attrs or {})
     clash = sorted(set(extra) & set(_ROOT_ATTRS))
     if clash:
-        raise ValueError(f"extra_attrs may not replace {', '.join(clash)}")
+        raise SceneError(f"extra_attrs may not replace {', '.join(clash)}")
+    check_new(path, force)
     experiment = run.experiment
     with atomic_path(path) as tmp, h5py.File(tmp, "w", track_order=True) as f:
         t = f.create_dataset("time", data=run.time)
@@ -100,10 +119,12 @@ def _log(rec: rr.RecordingStream, run: Result, prefix: str = "") -> tuple[list[A
     return spatial, plots
 
 
-def write_rrd(run: Result, path: str | Path) -> None:
+def write_rrd(run: Result, path: str | Path, *, force: bool = False) -> None:
     """Write any experiment's result as a rerun recording with a ready-made layout: the experiment's 3D view (the
     plate and its RFT forces, the robot from above) beside the scene, and time series of its plotted series, on
-    the timeline ``sim_time``."""
+    the timeline ``sim_time``. SceneError when the file exists, unless ``force``."""
+    _check_result(run)
+    check_new(path, force)
     with atomic_path(path) as tmp:
         rec = _stream(tmp)
         try:

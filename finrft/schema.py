@@ -16,6 +16,7 @@ import dataclasses
 import functools
 import json
 import math
+import numbers
 import tomllib
 import typing
 from typing import Any, Callable, Iterable, Mapping
@@ -108,14 +109,15 @@ def check(section_name: str, f: dataclasses.Field, value: Any) -> Any:
     choices (the canonical spelling returned) and bounds; SceneError naming ``section_name.f.name`` otherwise."""
     key, meta = f"{section_name}.{f.name}", f.metadata
     if f.type in ("float", float):
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
+        if isinstance(value, bool) or not isinstance(value, numbers.Real):  # numpy's scalars are numbers too
             raise SceneError(f"{key} must be a number ({meta['unit'] or 'dimensionless'}), got {value!r}")
         value = float(value)
         if not math.isfinite(value):
             raise SceneError(f"{key} must be finite, got {value!r}")
     elif f.type in ("int", int):
-        if isinstance(value, bool) or not isinstance(value, int):
+        if isinstance(value, bool) or not isinstance(value, numbers.Integral):
             raise SceneError(f"{key} must be a whole number, got {value!r}")
+        value = int(value)
     elif f.type == "tuple[str, ...]":
         if isinstance(value, str):
             value = [value]

@@ -87,3 +87,70 @@ def test_load_scene_defaults_to_what_every_command_runs():
         assert finrft.load_scene(cls=cls) != finrft.load_scene(preset_name="paper", cls=cls)
     # a scene without presets takes its schema's defaults, as `finrft intrude` without --scene does
     assert finrft.load_scene(cls=finrft.IntrusionScene) == finrft.scene.scene_from_dict({}, finrft.IntrusionScene)
+
+
+# One contract: the API checks what it is given as the command line does, and raises the documented family.
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"start": float("nan")}, "drive start must be finite"), ({"start": float("inf")}, "drive start must be finite"),
+    ({"speed": "3"}, r"drive speed must be a number \(m/s\), got '3'"), ({"speed": True}, "must be a number"),
+    ({"stroke": -1.0}, "drive stroke must be > 0"), ({"cycles": 1.5}, "drive cycles must be a whole number"),
+    ({"cycles": 0}, "drive cycles must be >= 1"), ({"attack_deg": float("nan")}, "attack_deg must be finite"),
+    ({"kind": "spin"}, "drive kind must be one of drag, rotate")])
+def test_a_drive_refuses_what_the_cli_would(kwargs, message):
+    with pytest.raises(finrft.SceneError, match=message):
+        finrft.Drive(**kwargs)
+
+
+def test_numpy_scalars_are_numbers_to_the_drive_and_the_scene():
+    import numpy as np
+    drive = finrft.Drive(speed=np.float32(0.05), stroke=np.float64(0.1), cycles=np.int64(2))
+    assert type(drive.speed) is float and type(drive.cycles) is int and drive.duration == pytest.approx(8.0)
+    json.dumps(vars(drive))  # written out with every result file
+    scene = finrft.Scene().replace(**{"sim.dt": np.float64(2e-4), "plate.segments": np.int64(4)})
+    assert (scene.sim.dt, scene.plate.segments) == (2e-4, 4) and type(scene.plate.segments) is int
+    with pytest.raises(finrft.SceneError, match="plate.segments must be a whole number"):
+        finrft.Scene().replace(**{"plate.segments": np.float64(4.0)})
+
+
+def test_experiments_refuse_the_wrong_scene_or_arguments_before_running():
+    with pytest.raises(finrft.SceneError, match=r"the scene must be a finrft.Scene .*got str 'paper'"):
+        finrft.simulate("paper", finrft.Drive())
+    with pytest.raises(finrft.SceneError, match="the scene must be a finrft.RobotScene"):
+        finrft.swim(finrft.Scene())
+    with pytest.raises(finrft.SceneError, match="swim cycles must be a whole number >= 1, got 1.5"):
+        finrft.swim(finrft.RobotScene(), 1.5)
+    with pytest.raises(finrft.SceneError, match="drive must be a finrft.Drive"):
+        finrft.simulate(finrft.Scene(), "drag")
+
+
+def test_write_h5_refuses_an_existing_file_as_the_cli_does(tmp_path):
+    run = finrft.simulate(finrft.preset("physical"), finrft.Drive(stroke=0.01), estimate_error=False)
+    path = tmp_path / "run.h5"
+    path.write_text("keep")
+    (tmp_path / "link.h5").symlink_to(tmp_path / "missing.h5")
+    for target in (path, tmp_path / "link.h5"):
+        with pytest.raises(finrft.SceneError, match="exists: choose a new file, or pass force=True"):
+            finrft.write_h5(run, target)
+    assert path.read_text() == "keep" and not (tmp_path / "missing.h5").exists()
+    finrft.write_h5(run, path, force=True)
+    assert path.read_bytes()[:4] == b"\x89HDF"
+    with pytest.raises(finrft.SceneError, match="written from a finrft.Result"):
+        finrft.write_h5("run", tmp_path / "new.h5")
+
+
+def test_python_backend_runs_in_threads_as_they_run_alone():
+    """Each run's callback is served for its own model: runs in threads give, bit for bit, what they give one after
+    another, and MuJoCo's callbacks are back as they were afterwards."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    import mujoco
+    import numpy as np
+    base = finrft.preset("physical").replace(**{"sim.backend": "python"})
+    jobs = [(base.replace(**{"plate.stiffness": 0.3 + 0.2 * i}), finrft.Drive(stroke=0.01)) for i in range(6)]
+    alone = [finrft.simulate(s, d, estimate_error=False).segment_angle for s, d in jobs]
+    with ThreadPoolExecutor(3) as pool:
+        threaded = list(pool.map(lambda job: finrft.simulate(*job, estimate_error=False).segment_angle, jobs))
+    assert all(np.array_equal(a, b) for a, b in zip(alone, threaded))
+    assert len({a[-1, -1] for a in alone}) == len(jobs)  # the stiffness shows: each run had its own forces
+    assert mujoco.get_mjcb_passive() is None and mujoco.get_mjcb_control() is None

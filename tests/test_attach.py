@@ -276,3 +276,42 @@ def test_geoms_chosen_by_name():
     assert attached.elements["link2"] == whole.elements["link2"] - 8 == 2 * (8 * 4 + 8 * 1 + 1 * 4) - 8
     with pytest.raises(SceneError, match="no geom named 'wing'"):
         attach(mujoco.MjSpec.from_string(CHAIN), geoms=["wing"])
+
+
+def _boxes():
+    import mujoco
+    return mujoco.MjSpec.from_string(
+        '<mujoco><worldbody><body name="b" pos="0 0 0.04"><freejoint/><geom type="box" size=".05 .05 .05" '
+        'mass="1"/></body><body name="c" pos=".3 0 .04"><freejoint/><geom type="box" size=".05 .05 .05" mass="1"/>'
+        '</body></worldbody></mujoco>')
+
+
+@pytest.mark.parametrize("backend", ["native", "python"])
+def test_attach_refuses_what_cannot_work(backend):
+    """A body attached twice, a model compiled before attach, and (Python backend) a model stepped outside its
+    own block while another's is installed: each refused, where each gave no force or double force silently."""
+    import mujoco
+    spec = _boxes()
+    early = spec.compile()
+    attached = attach(spec, "b", backend=backend)
+    for again in ("native", "python"):
+        with pytest.raises(SceneError, match="'b' (already has a plugin|has RFT attached already)"):
+            attach(spec, "b", backend=again)
+    with pytest.raises(SceneError, match="compiled before attach"):
+        with attached.installed(early):
+            pass
+    model = spec.compile()
+    data = mujoco.MjData(model)
+    data.qvel[2] = -0.1
+    with attached.installed(model):
+        mujoco.mj_step(model, data)
+    assert data.qfrc_passive[2] > 0  # the box, 1 cm deep and sinking: the medium holds it up
+    if backend == "python":
+        other = _boxes()
+        other_attached = attach(other, "c", backend="python")
+        other_model = other.compile()
+        with attached.installed(model), pytest.raises(SceneError, match="outside its own Attached.installed"):
+            mujoco.mj_step(other_model, mujoco.MjData(other_model))
+        with other_attached.installed(other_model):
+            mujoco.mj_step(other_model, mujoco.MjData(other_model))
+    assert mujoco.get_mjcb_passive() is None

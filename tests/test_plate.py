@@ -34,8 +34,27 @@ def test_rigid_rotation_torque_closed_form(paper):
     p, r = scene.plate, scene.rft
     radius = p.rod_length + (np.arange(p.segments) + 0.5) * p.segment_length
     expected = np.sum(face(scene) * r.f_perp * np.tanh(drive.speed * radius / r.v_reg) * radius)
-    np.testing.assert_allclose(run.drive_force, expected, rtol=1e-9)
+    # The drive slows under the load by load / armature, which the plate's inertia feels: 1.6e-8 of the load here,
+    # where the armature is what resolves the load in each step (plate.drive_armature)
+    np.testing.assert_allclose(run.drive_force, expected, rtol=1e-7)
     np.testing.assert_allclose(run.segment_angle[:, 0], run.displacement, atol=1e-12)
+
+
+@pytest.mark.parametrize("dt", [1e-3, 1e-5])
+def test_rigid_rotation_per_stroke_means_are_the_closed_form(paper, dt):
+    # The per-stroke mean torque is the drive's impulse over the stroke, read from its speed: the authors' plate
+    # (segments of 1 kg m^2) made the drive so heavy that at dt = 1e-5 s its 0.2 N m changed the speed by less
+    # than the speed's rounding each step, and both means came out -0.0 with an error estimate of 0.
+    scene = paper.replace(**{"plate.kind": "rigid", "sim.dt": dt})
+    drive = Drive(kind="rotate", speed=np.radians(60), stroke=np.radians(120), cycles=1)
+    run = simulate(scene, drive)
+    p, r = scene.plate, scene.rft
+    radius = p.rod_length + (np.arange(p.segments) + 0.5) * p.segment_length
+    expected = np.sum(face(scene) * r.f_perp * np.tanh(drive.speed * radius / r.v_reg) * radius)
+    row, = run.cycle_table()
+    assert row["mean_recovery_torque_Nm"] == pytest.approx(expected, rel=1e-4)
+    assert row["mean_power_torque_Nm"] == pytest.approx(-expected, rel=1e-4)
+    assert run.summary()["peak_sampled_every_s"] == pytest.approx(scene.sim.record_dt)
 
 
 @pytest.mark.parametrize("kind", ["origami", "soft"])

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from finrft import laws
-from finrft.coupling import PythonCoupling, installed
+from finrft.callbacks import installed
+from finrft.coupling import PythonCoupling
 from finrft.experiments.plate import build_plate
 from finrft.laws import paper, sandswim, table
 from finrft.scene import SceneError, preset
@@ -195,7 +196,7 @@ def test_every_law_has_a_c_twin_giving_the_same_forces(tmp_path):
             for m, d in ((m_native, d_native), (m_python, d_python)):
                 d.qpos[:], d.qvel[:] = qpos, qvel
             mujoco.mj_forward(m_native, d_native)
-            with installed(PythonCoupling(python.groups)):
+            with installed(m_python, PythonCoupling(python.groups)):
                 mujoco.mj_forward(m_python, d_python)
             scale = np.abs(d_python.qfrc_passive).max()
             np.testing.assert_allclose(d_native.qfrc_passive, d_python.qfrc_passive, rtol=0, atol=1e-12 * scale,

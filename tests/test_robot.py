@@ -192,3 +192,28 @@ def test_bounds_take_each_keys_unit_from_the_schema():
     variables = resolve_params(["b", "plate.segment_length"], {k: found[k] for k in ("b", "plate.segment_length")})
     assert [(v.key, v.low, v.high) for v in variables] == [("plate.damping", 0.001, 1.0),
                                                            ("plate.segment_length", 0.02, 0.05)]
+
+
+def test_a_servo_that_does_not_follow_its_gait_stops_the_run(capsys):
+    # A servo of no stiffness leaves the arm where it starts (it missed the gait by the whole 150 deg stroke):
+    # eta came out +355 % from a forward distance of 2e-12 mm; now the run stops with exit status 1.
+    argv = ["swim", "--preset", "physical", "--set", "robot.servo=position", "--set", "robot.servo_kp=1e-9"]
+    assert main(argv) == 1
+    assert "the position servo missed its gait by 150 deg" in capsys.readouterr().err
+
+
+def test_eta_is_undefined_when_the_body_barely_moves_forward():
+    from finrft.errors import UndefinedResult
+    from finrft.experiments.swim import Swim
+    scene = preset("physical", RobotScene)
+    run = swim(scene, 1, estimate_error=False)
+    # The fin tip's sweep, written out: arm 65 mm and fin 3 x 20 mm turned through 60 - (-90) = 150 deg.
+    sweep_mm = (65 + 3 * 20) * np.radians(150)
+    y0, y1 = run.stroke_y[:2]
+    for forward_mm, refused in ((0.9e-3 * sweep_mm, True), (1.1e-3 * sweep_mm, False)):
+        run.series["stroke_y"] = np.array([y0, y1, y1 + forward_mm / 1e3])
+        if refused:
+            with pytest.raises(UndefinedResult, match="not forward by more than 0.1 % of the fin tip's sweep"):
+                Swim(1).check(run)
+        else:
+            Swim(1).check(run)

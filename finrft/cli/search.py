@@ -253,7 +253,7 @@ def _fit_files(args: argparse.Namespace, result: Any, data: list, validate: list
             plot(result.scene, [(d, "fitted") for d in data] + [(d, "validation") for d in validate], tmp)
     if args.rrd:
         from .. import record
-        record.write_rrd(simulate(result.scene, drag_for(data[0])), args.rrd)
+        record.write_rrd(simulate(result.scene, drag_for(data[0])), args.rrd, force=True)
 
 
 def add_fit_rft(sub: Any) -> None:

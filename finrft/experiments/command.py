@@ -31,12 +31,12 @@ class Output:
 
 def _write_h5(runs: list[Result], path: str) -> None:
     from ..record import write_h5  # h5py and rerun load only when a file is asked for
-    write_h5(runs[0], path)
+    write_h5(runs[0], path, force=True)  # the command checked --force
 
 
 def _write_rrd(runs: list[Result], path: str) -> None:
     from ..record import write_rrd
-    write_rrd(runs[0], path)
+    write_rrd(runs[0], path, force=True)
 
 
 def result_files(args: argparse.Namespace) -> list[Output]:

@@ -20,8 +20,8 @@ from typing import Any, Callable
 import mujoco
 import numpy as np
 
-from .. import geometry, native
-from ..convergence import ErrorLimits
+from .. import geometry, laws, native
+from ..convergence import ErrorLimits, record_every
 from ..coupling import SegmentForces
 from ..drive import Drive
 from ..errors import UsageError
@@ -75,7 +75,46 @@ class _Plate:
     chain: AttachedChain
 
 
-def _plate(scene: Scene, drive: str, attack_deg: float, backend: str, resolved: Resolved) -> _Plate:
+# The drive's speed changes by load x dt / armature in a step, which the step's rounding of the speed (half its
+# spacing) must resolve: ARMATURE_RATIO x the inertia moved made the authors' rotated plate (segments of 1 kg m^2)
+# so heavy that its 0.2 N m load changed the speed by 7e-17 rad/s a step at dt = 1e-5 s, below the rounding of
+# 1.05 rad/s, and its per-stroke mean torques came out 0. The armature is at most what keeps that rounding below
+# DRIVE_RESOLUTION of the load's scale (the RFT force of every segment moving at the drive's speed); the drive's lag
+# then stays below about steps per stroke x 6e-13 of the stroke (3e-7 at 4e5 steps).
+DRIVE_RESOLUTION = 1e-4
+
+
+def load_scale(scene: Scene, resolved: Resolved, drive: str, speed: float) -> float:
+    """The drive's load when every segment moves at its speed on the drive, normal to its face: the sum of the
+    segments' largest RFT force (times their radius from the base, for a rotation): N or N m."""
+    force = laws.bind(resolved.chain)
+    p = scene.plate
+    radii = p.rod_length + (np.arange(p.segments) + 0.5) * p.segment_length
+    angles = np.radians(np.arange(0.0, 181.0, 15.0))
+    axes = np.broadcast_to([1.0, 0.0, 0.0], (len(angles), 3))
+    normals = np.broadcast_to([0.0, 1.0, 0.0], (len(angles), 3))
+    total = 0.0
+    for r in radii:
+        v = speed * (r if drive == "rotate" else 1.0)
+        largest = np.linalg.norm(force(v * np.column_stack([np.cos(angles), np.sin(angles), 0 * angles]), axes,
+                                       normals), axis=1).max()
+        total += largest * (r if drive == "rotate" else 1.0)
+    return float(total)
+
+
+def drive_armature(moved: float, scene: Scene, resolved: Resolved, drive: str, speed: float | None) -> float:
+    """The drive's armature: ARMATURE_RATIO x what it moves, at most what resolves the load (DRIVE_RESOLUTION) at
+    ``speed`` (None: not capped)."""
+    armature = ARMATURE_RATIO * moved
+    if speed is None:
+        return armature
+    scale = load_scale(scene, resolved, drive, speed)
+    resolving = 2 * DRIVE_RESOLUTION * scale * scene.sim.dt / np.spacing(speed)
+    return float(min(armature, resolving)) if resolving > 0 else armature
+
+
+def _plate(scene: Scene, drive: str, attack_deg: float, backend: str, resolved: Resolved,
+           speed: float | None = None) -> _Plate:
     if drive not in DRIVES:
         raise ValueError(f"drive must be one of {DRIVES}, got {drive!r}")
     p = scene.plate
@@ -104,7 +143,7 @@ def _plate(scene: Scene, drive: str, attack_deg: float, backend: str, resolved: 
     lumps = [(p.rod_mass, p.rod_inertia, p.rod_length / 2)] + [
         (p.segment_mass, p.segment_inertia, p.rod_length + (i + 0.5) * p.segment_length) for i in range(p.segments)]
     moved = sum(m for m, _, _ in lumps) if drive == "drag" else sum(i + m * r * r for m, i, r in lumps)
-    joint.armature = ARMATURE_RATIO * moved
+    joint.armature = drive_armature(moved, scene, resolved, drive, speed)
     spec.modelname = f"finrft {p.kind} plate ({drive})"
     return _Plate(spec, joint, chain)
 
@@ -117,11 +156,13 @@ def plate_spec(scene: Scene, drive: str = "drag", attack_deg: float = 90.0,
     return _plate(scene, drive, attack_deg, backend, resolve(scene)).spec
 
 
-def build_plate(scene: Scene, drive: str = "drag", attack_deg: float = 90.0) -> PlateModel:
-    """Compile the plate model for a scene and collect its indices."""
+def build_plate(scene: Scene, drive: str = "drag", attack_deg: float = 90.0,
+                speed: float | None = None) -> PlateModel:
+    """Compile the plate model for a scene and collect its indices; given the drive's ``speed``, its armature is
+    one whose speed resolves the load (`drive_armature`)."""
     backend = native.resolve_backend(scene.sim.backend)
     resolved = resolve(scene)
-    plate = _plate(scene, drive, attack_deg, backend, resolved)
+    plate = _plate(scene, drive, attack_deg, backend, resolved, speed)
     model = compile_spec(plate.spec)
     group = force_group(model, "sand", resolved.chain, penalty_stiffness(scene.plate), plate.chain.bodies)
     (drive_qpos,), (drive_dof,) = addresses(model, [plate.drive])
@@ -178,9 +219,15 @@ class PlateTest:
 
     drive: Drive
     schema = "finrft.run/1"
+    scene_type = Scene
     sign_convention = SIGN_CONVENTION
     shape = "segment_angle"  # the series whose angles give the plate's shape
     load = "drive_force"     # the series of the drive's load, whatever the test
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.drive, Drive):
+            raise SceneError(f"a plate test's drive must be a finrft.Drive, got {type(self.drive).__name__} "
+                             f"{self.drive!r:.60}")
 
     @property
     def name(self) -> str:
@@ -195,7 +242,7 @@ class PlateTest:
         return "N" if self.drive.kind == "drag" else "Nm"
 
     def build(self, scene: Scene) -> PlateModel:
-        return build_plate(scene, self.drive.kind, self.drive.attack_deg)
+        return build_plate(scene, self.drive.kind, self.drive.attack_deg, self.drive.speed)
 
     def drive_for(self, scene: Scene) -> Drive:
         return self.drive
@@ -264,6 +311,9 @@ class PlateTest:
             "final_segment_angle_deg": np.degrees(run.segment_angle[-1]).tolist(),
             "final_hinge_angle_deg": np.degrees(run.hinge_angle[-1]).tolist(),
             f"peak_drive_{q}_{u}": float(run.peak_drive_force),
+            # the peak is the largest of the recorded samples, not of every step: a short spike between samples is
+            # missed, so it depends on sim.record_dt (the per-stroke means are the steps')
+            "peak_sampled_every_s": record_every(run.scene.sim.dt, run.scene.sim.record_dt) * run.scene.sim.dt,
             **geometry.resolve(run.scene).figures(),
         }
         cycles = self.cycle_table(run)
@@ -486,7 +536,8 @@ class _PlateCommand(Command):
                  f"{sim.integrator}, {run.backend}): {steps_line(summary)} in {run.wall_s:.2f} s",
                  "final segment angles (deg): " + ", ".join(f"{a:.2f}" for a in summary["final_segment_angle_deg"]),
                  "final hinge angles (deg):   " + ", ".join(f"{a:.2f}" for a in summary["final_hinge_angle_deg"]),
-                 f"peak drive {q}: {summary[f'peak_drive_{q}_{u}']:.4g} {u.replace('Nm', 'N m')}"]
+                 f"peak drive {q}: {summary[f'peak_drive_{q}_{u}']:.4g} {u.replace('Nm', 'N m')} (the largest of the "
+                 f"samples, every {1e3 * summary['peak_sampled_every_s']:g} ms: sim.record_dt)"]
         for i, row in enumerate(run.cycle_table(), start=1):
             lines.append(f"cycle {i}: mean {q} recovery {row[f'mean_recovery_{q}_{u}']:+.4g}, "
                          f"power {row[f'mean_power_{q}_{u}']:+.4g}; net impulse {row[f'net_impulse_{u}s']:+.4g} {u}s")

@@ -71,7 +71,7 @@ def forces(out: Path, quick: bool, workers: int | None) -> str:
               "rotate": Drive(kind="rotate", speed=math.radians(60), stroke=math.radians(120), cycles=cycles)}
     jobs = [(scene.replace(**{"plate.kind": k}), d) for d in drives.values() for k in KINDS]
     runs = dict(zip([(t, k) for t in drives for k in KINDS], batch.run_many(jobs, workers=workers)))
-    record.write_rrd(runs[("drag", "origami")], out / "drag_origami.rrd")
+    record.write_rrd(runs[("drag", "origami")], out / "drag_origami.rrd", force=True)
     plt = _pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.5))
     for ax, test in zip(axes, drives):
@@ -229,7 +229,7 @@ def robot(out: Path, quick: bool, workers: int | None) -> str:
                       on_generation=lambda g, values, extras, es: generations.append((values, extras["eta"])))
     best = swim(scene.replace(**search.best), 1)
     error = best.error_estimate["eta_points"]
-    record.write_rrd(best, out / "robot_optimum.rrd")
+    record.write_rrd(best, out / "robot_optimum.rrd", force=True)
     record.write_optimization_rrd(out / "optimization.rrd",
                                   [(np.c_[np.degrees(v[:, :2]), 1e3 * v[:, 2:]], e) for v, e in generations],
                                   [v.key for v in search.variables], best)

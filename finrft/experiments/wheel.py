@@ -21,6 +21,7 @@ import argparse
 import csv
 import dataclasses
 import math
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable
@@ -30,13 +31,13 @@ import numpy as np
 
 from .. import laws
 from ..convergence import ErrorLimits
-from ..errors import SceneError, UsageError
+from ..errors import SceneError, SimulationFailed, UsageError
 from ..experiment import Compared, Quantity, Result, run
 from ..models import compile_spec, mjcf_path
 from ..scene import (JointDrive, Medium, Model, RobotSim, Sections, UserScene, check_medium, check_sim, drive_timing,
                      load_scene, parse_override, register_scene)
 from ..schema import field as _f
-from .attached_model import AttachedModel, build_attached, read_spec
+from .attached_model import AttachedModel, build_attached, medium_forces, read_spec
 from .command import Command, Output, register, result_files, steps_line
 from .flags import add_force, add_json, add_max_error, add_quiet, add_scene_flags, number
 from .user_model import RobotTrial, Schedule, UserModel, window_mean
@@ -71,6 +72,10 @@ class WheelRig:
                         exclusive=False)
     load: float = _f(21.0, "N", "the weight the free vertical axis carries, wheel included (the experiments': "
                      "about 21 N)", minimum=0.0)
+    start: str = _f("equilibrium", "", "where the free wheel starts: equilibrium, at the sinkage where the sand "
+                    "carries the load with the wheel moving as driven and no vertical motion (its steady state); "
+                    "surface, its lowest point at the free surface (it then settles over about its contact length)",
+                    choices=("equilibrium", "surface"))
 
 
 @dataclass(frozen=True)
@@ -91,10 +96,18 @@ class WheelScene(Sections):
 register_scene(WheelScene, title="A wheel on a single-wheel rig: `finrft wheel`; `finrft.WheelScene`")
 
 
+# A wheel's run: held, its forces are steady from the start (the law has no memory; the smooth wheel's elements
+# turning with it leave a ripple); free, it starts at its equilibrium and stays (it drifts 0.06 mm in 3 s at slip
+# angle 45 deg; docs/results/wheel.md). From the surface it would take about 20 s (200 mm of travel) to settle.
+DURATION, SETTLE = 3.0, 1.0  # s
+
+
 def default_scene(**overrides: Any) -> WheelScene:
-    """The wheel rig's own scene (mjcf/wheel_rig.toml): its [medium] and [sim], with dotted-key overrides."""
+    """The wheel rig's own scene (mjcf/wheel_rig.toml): its [medium] and its [sim]'s numerics, run for DURATION
+    averaged from SETTLE, with dotted-key overrides."""
     rig = load_scene(mjcf_path(f"{RIG}.toml"), cls=UserScene)
-    return WheelScene(medium=rig.medium, sim=rig.sim).replace(**overrides)
+    sim = dataclasses.replace(rig.sim, duration=DURATION, settle=SETTLE)
+    return WheelScene(medium=rig.medium, sim=sim).replace(**overrides)
 
 
 def rim_speed(slip: float, speed: float) -> float:
@@ -252,7 +265,10 @@ def user_wheel(rig: WheelRig) -> mujoco.MjSpec:
                          f"moves it)")
     spec = mujoco.MjSpec.from_string(rig_xml(rig, wheel=False))
     body.pos = [0, 0, 0]
-    spec.body("fork").add_frame().attach_body(body, "", "")
+    with warnings.catch_warnings():
+        # Without a prefix the names stay 'wheel' and 'axle', which the rig drives; the spec is never saved.
+        warnings.filterwarnings("ignore", "Attaching a spec with an empty prefix")
+        spec.body("fork").add_frame().attach_body(body, "", "")
     return spec
 
 
@@ -347,7 +363,10 @@ class Wheel:
         return Schedule(*drive_timing(self.robot_scene(scene)))
 
     def start(self, scene: WheelScene, built: AttachedModel, d: mujoco.MjData, companion: bool) -> RobotTrial:
-        return RobotTrial(self.robot, self.robot_scene(scene), built, d, companion)
+        trial = RobotTrial(self.robot, self.robot_scene(scene), built, d, companion)
+        if scene.wheel.sinkage == 0 and scene.wheel.start == "equilibrium":
+            d.qpos[built.model.joint("lift").qposadr[0]] = -equilibrium_sinkage(scene, built, self)
+        return trial
 
     def quantities(self, scene: WheelScene) -> dict[str, Quantity]:
         return self.robot.quantities(self.robot_scene(scene))
@@ -374,6 +393,33 @@ class Wheel:
     def draw(self, rec: Any, run: Result, times: Any, prefix: str) -> list[Any]:
         from ..views import draw_model
         return draw_model(rec, run, times, prefix)
+
+
+def equilibrium_sinkage(scene: WheelScene, built: AttachedModel, wheel: Wheel) -> float:
+    """The sinkage (m) at which the sand's vertical force on the wheel, moving as driven with no vertical motion,
+    equals the load: the free wheel's steady state, by bisection to 1 um of the held wheel's force (which grows with
+    depth). SimulationFailed when the sand cannot carry the load within twice the outer radius."""
+    m = built.model
+    d = mujoco.MjData(m)
+    rs = wheel.robot_scene(scene)
+    for j, qpos, dof in zip(rs.drive, built.drive_qpos, built.drive_dofs):
+        d.qpos[qpos], d.qvel[dof] = j.start, j.speed
+    lift = m.joint("lift").qposadr[0]
+    force = medium_forces(built)
+
+    def excess(sinkage: float) -> float:
+        d.qpos[lift] = -sinkage
+        mujoco.mj_forward(m, d)
+        return float(force(d)[0, 2]) - scene.wheel.load
+
+    low, high = 0.0, 2 * wheel.outer
+    if excess(high) < 0:
+        raise SimulationFailed(f"the sand cannot carry {scene.wheel.load:g} N: the wheel would sink beyond "
+                               f"{1e3 * high:.3g} mm")
+    while high - low > 1e-6:
+        middle = (low + high) / 2
+        low, high = (middle, high) if excess(middle) < 0 else (low, middle)
+    return (low + high) / 2
 
 
 def wheel_frame(beta: float) -> np.ndarray:

@@ -21,7 +21,6 @@ import argparse
 import csv
 import dataclasses
 import math
-import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable
@@ -100,6 +99,7 @@ register_scene(WheelScene, title="A wheel on a single-wheel rig: `finrft wheel`;
 # turning with it leave a ripple); free, it starts at its equilibrium and stays (it drifts 0.06 mm in 3 s at slip
 # angle 45 deg; docs/results/wheel.md). From the surface it would take about 20 s (200 mm of travel) to settle.
 DURATION, SETTLE = 3.0, 1.0  # s
+MAX_SINKAGE = 1.0  # m: deeper, a free wheel has no equilibrium worth reporting
 
 
 def default_scene(**overrides: Any) -> WheelScene:
@@ -265,10 +265,9 @@ def user_wheel(rig: WheelRig) -> mujoco.MjSpec:
                          f"moves it)")
     spec = mujoco.MjSpec.from_string(rig_xml(rig, wheel=False))
     body.pos = [0, 0, 0]
-    with warnings.catch_warnings():
-        # Without a prefix the names stay 'wheel' and 'axle', which the rig drives; the spec is never saved.
-        warnings.filterwarnings("ignore", "Attaching a spec with an empty prefix")
-        spec.body("fork").add_frame().attach_body(body, "", "")
+    spec.body("fork").add_frame().attach_body(body, "user:", "")
+    # The rig drives them by these names.
+    spec.body("user:wheel").name, spec.joint("user:axle").name = "wheel", "axle"
     return spec
 
 
@@ -398,7 +397,8 @@ class Wheel:
 def equilibrium_sinkage(scene: WheelScene, built: AttachedModel, wheel: Wheel) -> float:
     """The sinkage (m) at which the sand's vertical force on the wheel, moving as driven with no vertical motion,
     equals the load: the free wheel's steady state, by bisection to 1 um of the held wheel's force (which grows with
-    depth). SimulationFailed when the sand cannot carry the load within twice the outer radius."""
+    depth). A wheel the sand cannot carry within its diameter (one that trenches: the data's at slip angle 90 deg)
+    is looked for deeper, to MAX_SINKAGE; SimulationFailed beyond."""
     m = built.model
     d = mujoco.MjData(m)
     rs = wheel.robot_scene(scene)
@@ -413,9 +413,11 @@ def equilibrium_sinkage(scene: WheelScene, built: AttachedModel, wheel: Wheel) -
         return float(force(d)[0, 2]) - scene.wheel.load
 
     low, high = 0.0, 2 * wheel.outer
-    if excess(high) < 0:
-        raise SimulationFailed(f"the sand cannot carry {scene.wheel.load:g} N: the wheel would sink beyond "
-                               f"{1e3 * high:.3g} mm")
+    while excess(high) < 0:
+        if high >= MAX_SINKAGE:
+            raise SimulationFailed(f"the sand cannot carry {scene.wheel.load:g} N: the wheel would sink beyond "
+                                   f"{1e3 * MAX_SINKAGE:.3g} mm")
+        low, high = high, 2 * high
     while high - low > 1e-6:
         middle = (low + high) / 2
         low, high = (middle, high) if excess(middle) < 0 else (low, middle)

@@ -187,9 +187,12 @@ def _last_json(out: str):
     return json.loads(out.strip().splitlines()[-1])
 
 
-def test_command_json_keys(capsys):
-    assert main(["wheel", "--slip", "0.5", "--slip-angle", "15", "--sinkage", "20", "--json", "--quiet", *SHORT]) == 0
+def test_command_json_keys_and_files(tmp_path, capsys):
+    h5, rrd = tmp_path / "wheel.h5", tmp_path / "wheel.rrd"
+    assert main(["wheel", "--slip", "0.5", "--slip-angle", "15", "--sinkage", "20", "--json", "--quiet", "--out",
+                 str(h5), "--rrd", str(rrd), *SHORT]) == 0
     s = _last_json(capsys.readouterr().out)
+    assert h5.stat().st_size > 0 and rrd.stat().st_size > 0
     for key in ("Fx_N", "Fy_N", "Fz_N", "sinkage_mm", "slip", "slip_angle_deg", "error_estimate"):
         assert key in s
     assert s["slip"] == 0.5 and s["slip_angle_deg"] == pytest.approx(15) and s["sinkage_mm"] == pytest.approx(20)

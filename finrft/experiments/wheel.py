@@ -350,6 +350,14 @@ class Wheel:
         links = tuple(m.body(i).name or f"body{i}" for i in range(1, m.nbody))
         return cls(UserModel(kinds, links, (), (), None, ("wheel",)), w.radius, w.outer, w.spin_sign)
 
+    @property
+    def bodies(self) -> tuple[str, ...]:
+        return self.robot.bodies
+
+    @property
+    def links(self) -> tuple[str, ...]:
+        return self.robot.links
+
     def robot_scene(self, scene: WheelScene) -> UserScene:
         return robot_scene(scene, self.radius, self.spin_sign)
 

@@ -15,7 +15,7 @@ from finrft.cli import main
 from finrft.data import wheel_dir
 from finrft.experiment import run
 from finrft.experiments.wheel import (WheelRig, Wheel, compare, default_scene, outer_radius, read_conditions,
-                                      rig_xml, rim_speed, run_wheel, slip_of, wheel_model)
+                                      rig_xml, rim_speed, slip_of, wheel_model)
 from finrft.laws import li2013
 from finrft.media import medium
 from finrft.models import mjcf_path

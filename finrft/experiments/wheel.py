@@ -23,7 +23,7 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterable
+from typing import Any, Callable
 
 import mujoco
 import numpy as np
@@ -38,7 +38,7 @@ from ..scene import (JointDrive, Medium, Model, RobotSim, Sections, UserScene, c
 from ..schema import field as _f
 from .attached_model import AttachedModel, build_attached, medium_forces, read_spec
 from .command import Command, Output, register, result_files, steps_line
-from .flags import add_force, add_json, add_max_error, add_quiet, add_scene_flags, number
+from .flags import add_max_error, add_result_files, add_scene_flags, number
 from .user_model import RobotTrial, Schedule, UserModel, window_mean
 
 GRAVITY = 9.81  # m/s^2, MuJoCo's default, which the rig keeps
@@ -307,10 +307,11 @@ def robot_scene(scene: WheelScene, radius: float, spin_sign: float) -> UserScene
     minus the sinkage or free), its medium and numerics; the model is the experiment's own, not a file."""
     w = scene.wheel
     omega = spin_sign * rim_speed(w.slip, w.speed) / radius
-    drives = [JointDrive(joint="carriage", speed=w.speed, stroke=0.0), JointDrive(joint="axle", speed=omega, stroke=0.0),
+    drives = [JointDrive(joint="carriage", speed=w.speed, stroke=0.0),
+              JointDrive(joint="axle", speed=omega, stroke=0.0),
               JointDrive(joint="slip_angle", speed=0.0, stroke=0.0, start=w.slip_angle)]
-    if w.sinkage > 0:
-        drives.append(JointDrive(joint="lift", speed=0.0, stroke=0.0, start=-w.sinkage))  # lift 0: the lowest point at the surface
+    if w.sinkage > 0:  # at lift 0 the wheel's lowest point is at the surface
+        drives.append(JointDrive(joint="lift", speed=0.0, stroke=0.0, start=-w.sinkage))
     return UserScene(model=Model(bodies=("wheel",)), medium=scene.medium, drive=tuple(drives), sim=scene.sim)
 
 
@@ -643,12 +644,7 @@ class WheelCommand(Command):
         s.add_argument("--medium", metavar="NAME", help="a catalogued medium (finrft medium --list); sets "
                        "medium.name")
         add_max_error(p)
-        p.add_argument("--out", metavar="FILE.h5", help="write the time series and the resolved scene to HDF5 "
-                       "(SI units; one run, not --data)")
-        p.add_argument("--rrd", metavar="FILE.rrd", help="write a rerun recording (one run, not --data)")
-        add_force(p)
-        add_json(p, "the summary (--data: the comparison and every row)")
-        add_quiet(p)
+        add_result_files(p)  # --out and --rrd: one run, not --data
 
     def scene(self, args: argparse.Namespace) -> WheelScene:
         if args.data:

@@ -24,11 +24,12 @@ R, WIDTH, SPEED = 0.0625, 0.06, 0.01
 ZETA = 0.6  # the example rig's medium, wheel_sand_cmu
 
 
-def quadrature_force(slip: float, beta: float, sinkage: float, n: int = 1500) -> np.ndarray:
+def quadrature_force(slip: float, beta: float, sinkage: float, n: int = 1500, zeta=ZETA) -> np.ndarray:
     """The sand's force on the exact cylinder (radius R, width WIDTH) in the data's frame (X heading, Y along the
     axle to the left, Z up): Li 2013's law in 3D integrated by the midpoint rule over the rim's submerged band
     (angle theta from the bottom, y across) and the two flat ends' submerged segments (polar cells), each point
-    moving at the hub's velocity v (cos beta, sin beta, 0) plus omega x r."""
+    moving at the hub's velocity v (cos beta, sin beta, 0) plus omega x r. ``zeta``: a number (N/cm^3), or a
+    function of the depth (m) for a depth-dependent scale (scripts/wheel_depth_law.py). Sinkage below 2 R."""
     rim = rim_speed(slip, SPEED)
     omega = np.array([0.0, rim / R, 0.0])  # about the axle (+Y): omega > 0 rolls the wheel forward (+X)
     hub = SPEED * np.array([math.cos(beta), math.sin(beta), 0.0])
@@ -52,8 +53,9 @@ def quadrature_force(slip: float, beta: float, sinkage: float, n: int = 1500) ->
     for normal, points, area in parts:
         velocity = hub + np.cross(omega, points)
         depth = sinkage - R - points[..., 2]
-        total += li2013.element_forces(normal.reshape(-1, 3), velocity.reshape(-1, 3), depth.ravel(),
-                                       area.ravel(), ZETA).sum(axis=0)
+        scale = zeta(np.maximum(depth.ravel(), 0.0)) if callable(zeta) else zeta
+        total += (scale * li2013.element_forces(normal.reshape(-1, 3), velocity.reshape(-1, 3), depth.ravel(),
+                                                area.ravel(), 1.0).T).sum(axis=1)
     return total
 
 

@@ -5,17 +5,21 @@ the figures docs/results/wheel-NAME.png, the table printed as markdown. DRFT's t
     python scripts/wheel_study.py [VARIANT ...]    # all: about 25 minutes on one idle core
 
 Each variant is one command line (printed as it runs), the JSON of its last line kept whole; naming variants runs
-only those and merges them into docs/results/wheel.json.
+only those and merges them into docs/results/wheel.json; --plots draws the figures again from that file.
 """
 
 from __future__ import annotations
 
 import json
+import math
 import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from finrft.data import wheel_dir
+from finrft.experiments.wheel import Condition, plot_conditions
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "docs" / "results"
@@ -64,8 +68,20 @@ def table(results: dict[str, dict]) -> str:
     return "\n".join(lines)
 
 
+def plot(name: str, out: dict) -> None:
+    """The figure `finrft wheel --data ... --plot` draws, from a variant's JSON rows."""
+    conditions = [Condition(math.radians(r["slip_angle_deg"]), r["slip"], 1e-3 * r["measured"]["sinkage_mm"],
+                            np.array([r["measured"][k] for k in ("Fx_N", "Fy_N", "Fz_N")])) for r in out["rows"]]
+    plot_conditions(conditions, out["rows"], OUT / f"wheel-{name}.png", f"{name}: {out['command']}")
+
+
 def main(names: list[str]) -> None:
-    unknown = set(names) - set(VARIANTS) - {"drft_check"}
+    unknown = set(names) - set(VARIANTS) - {"drft_check", "--plots"}
+    if names == ["--plots"]:  # the figures again from docs/results/wheel.json
+        for name, out in json.loads((OUT / "wheel.json").read_text()).items():
+            if "rows" in out:
+                plot(name, out)
+        return
     if unknown:
         raise SystemExit(f"no variant {', '.join(sorted(unknown))} (the variants: {', '.join(VARIANTS)}, drft_check)")
     path = OUT / "wheel.json"
@@ -73,9 +89,10 @@ def main(names: list[str]) -> None:
     for name, args in VARIANTS.items():
         if names and name not in names:
             continue
-        out = finrft(["--data", DATA, *args, "--plot", str(OUT / f"wheel-{name}.png"), "--force"])
+        out = finrft(["--data", DATA, *args])
         results[name] = {"command": "finrft wheel --data smooth_wheel_by_condition.csv " + " ".join(args),
                          **out}
+        plot(name, results[name])
         path.write_text(json.dumps(results, indent=1) + "\n")
     if not names or "drft_check" in names:
         plain, drft = finrft(DRFT), finrft([*DRFT, "--set", "medium.drft_lambda=1"])

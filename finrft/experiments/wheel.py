@@ -560,8 +560,8 @@ def plot_conditions(conditions: list[Condition], summaries: list[dict[str, Any]]
     import matplotlib.pyplot as plt
 
     betas = sorted({round(math.degrees(c.slip_angle), 6) for c in conditions})
-    fig, axes = plt.subplots(3, len(betas), figsize=(2.4 * len(betas) + 1, 7), sharex=True, sharey="row",
-                             squeeze=False)
+    # Each panel its own scale: at 90 deg the forces and sinkage are several times those at small angles.
+    fig, axes = plt.subplots(3, len(betas), figsize=(2.4 * len(betas) + 1, 7), sharex=True, squeeze=False)
     rows = (("Fx_N", 0, "Fx (N)"), ("Fy_N", 1, "Fy (N)"), ("sinkage_mm", None, "sinkage (mm)"))
     for j, beta in enumerate(betas):
         chosen = sorted((c.slip, c, s) for c, s in zip(conditions, summaries)

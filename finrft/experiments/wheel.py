@@ -59,7 +59,7 @@ class WheelRig:
     grouser_height: float = _f(0.0, "m", "their height above the rim (they are 4 mm thick)", minimum=0.0,
                                exclusive=False)
     model: str = _f("", "", "a user's MJCF holding a body 'wheel' on a hinge 'axle' (instead of the generated "
-                    "wheel); relative to the scene file")
+                    "wheel)")
     slip: float = _f(0.5, "", "slip s: driving 1 - v/(omega R), braking omega R/v - 1; -1 locked, 0 rolling",
                      minimum=-1.0, exclusive=False, maximum=0.999, why_maximum="s = 1 spins the wheel infinitely fast")
     slip_angle: float = _f(0.0, "rad", "beta, from the wheel's heading to the hub's velocity (the wheel then heads "

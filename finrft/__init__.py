@@ -18,7 +18,8 @@ The API, by topic:
 - experiments: `run(experiment, scene)` -> `Result` runs any `Experiment` (finrft.experiment); the built-in ones,
   each in its module of finrft.experiments with its command (`finrft.experiments.REGISTRY`): `PlateTest`,
   `Swim`, `UserModel` (a user's MJCF model as a robot, `UserScene`; `run_robot(scene, control=...)`), `Intrusion` (a plate pushed into the medium,
-  `IntrusionScene`); `SimulationUnstable` when a run blows up or chatters
+  `IntrusionScene`), `Wheel` (a wheel on a single-wheel rig, `WheelScene`; `run_wheel(scene)`); `SimulationUnstable`
+  when a run blows up or chatters
 - plate tests: `Drive`, `simulate` (`run` of a `PlateTest`)
 - the robot: `swim` (`run` of a `Swim`); the paper's Table I with `table_scenes` and `table_rows`
 - many runs on all cores: `run_experiments` (any experiment), `run_many` (plate tests), `map_jobs` (any
@@ -55,6 +56,7 @@ from .experiments.intrusion import Intrusion, IntrusionScene
 from .experiments.plate import PlateTest, simulate
 from .experiments.swim import RobotScene, Swim, swim
 from .experiments.user_model import UserModel, run_robot
+from .experiments.wheel import Wheel, WheelScene, run_wheel
 from .media import medium
 from .scene import Scene, UserScene, load_scene, preset, to_toml
 from .studies.fit import Fit, fit, read_drag, resolve_params
@@ -67,7 +69,8 @@ __all__ = ["Drive", "Error", "Experiment", "Fit", "Intrusion", "IntrusionScene",
            "Result", "RobotScene", "Scene", "SceneError", "SimulationFailed", "SimulationUnstable", "Swim",
            "UserModel", "UserScene", "Variable", "attach", "fit", "load_scene", "local_executor", "map_jobs", "medium",
            "optimize", "preset", "read_drag", "resolve_params", "rollout_plates", "run", "run_experiments",
-           "run_many", "run_robot", "simulate", "swim", "table_rows", "table_scenes", "to_toml", *_RECORDING]
+           "run_many", "run_robot", "run_wheel", "simulate", "swim", "table_rows", "table_scenes", "to_toml", "Wheel",
+           "WheelScene", *_RECORDING]
 
 
 def __getattr__(name: str) -> Any:

@@ -21,7 +21,7 @@ def _subcommands(parser: argparse.ArgumentParser) -> dict[str, argparse.Argument
 
 def test_every_registered_experiment_is_a_subcommand():
     commands = _subcommands(build_parser())
-    assert {"drag", "rotate", "swim", "run", "intrude"} <= set(REGISTRY)
+    assert {"drag", "rotate", "swim", "run", "intrude", "wheel"} <= set(REGISTRY)
     for name, command in REGISTRY.items():
         assert name in commands and command.help and command.description
         assert commands[name].description == command.description

@@ -17,7 +17,7 @@ FILES = sorted(f.name for f in resources.files("finrft.mjcf").iterdir() if f.nam
 # The example robots (docs/guide/robots.md) carry their own values, no preset's: tests/test_robots.py checks them.
 EXAMPLES = ("sand_swimmer", "hexapod", "wheel_rig")
 # Bodies heavier than a fin's kilogram, and why.
-HEAVY = {("wheel_rig.xml", "axle"): "the rig's load: 21 N with the wheel, as the wheel experiments measured"}
+HEAVY = {("wheel_rig.xml", "load"): "the rig's load: 21 N with the wheel, as the wheel experiments measured"}
 
 
 def test_the_package_holds_every_model_and_its_scene():

@@ -200,8 +200,8 @@ def test_wheel_at_rest_sinks_until_the_sand_holds_its_weight():
     model = spec.compile()
     data = mujoco.MjData(model)
     lift = model.joint("lift").dofadr[0]
-    held = [model.joint(j).dofadr[0] for j in ("carriage", "slip_angle", "spin")]
-    weight = model.body_subtreemass[model.body("axle").id] * -model.opt.gravity[2]
+    held = [model.joint(j).dofadr[0] for j in ("carriage", "slip_angle", "axle")]
+    weight = model.body_subtreemass[model.body("load").id] * -model.opt.gravity[2]
     assert weight == pytest.approx(21.0, rel=0.01)             # the experiments' measured load
     model.dof_damping[lift] = 200.0                            # N s/m: settles in about c / (dF/dz) = 0.1 s
     advance = stepper(model, Sim(method="newton", dt=1e-3), attached.backend, [], attached)

@@ -4,6 +4,7 @@
 - `swim`: the two-fin robot swimming (`Swim`, `swim`)
 - `user_model`: a user's MJCF model, one joint driven through the medium (`UserModel`; finrft run)
 - `intrusion`: a plate pushed down into the medium (`Intrusion`, `intrude`)
+- `wheel`: a wheel on a single-wheel rig, its sinkage held or free under a load (`Wheel`, `run_wheel`; finrft wheel)
 
 `REGISTRY` maps each command name to its `Command`; the CLI gives every entry a subcommand and the tests iterate
 it. Every module of this package is imported here, and registers its commands as it is (``@register``): a new

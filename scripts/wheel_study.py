@@ -1,0 +1,108 @@
+"""The wheel in sand against the smooth-wheel experiments (docs/results/wheel.md): every condition of finrft's
+wheel data run by `finrft wheel --data` for each law, medium and mode, the statistics in docs/results/wheel.json,
+the figures docs/results/wheel-NAME.png, the table printed as markdown. DRFT's term checked on one condition.
+
+    python scripts/wheel_study.py [VARIANT ...]    # all: about 25 minutes on one idle core
+
+Each variant is one command line (printed as it runs), the JSON of its last line kept whole; naming variants runs
+only those and merges them into docs/results/wheel.json; --plots draws the figures again from that file.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from finrft.data import wheel_dir
+from finrft.experiments.wheel import Condition, plot_conditions
+
+ROOT = Path(__file__).resolve().parents[1]
+OUT = ROOT / "docs" / "results"
+DATA = str(wheel_dir() / "smooth_wheel_by_condition.csv")
+# Held at the measured sinkage, the forces are steady from the start: 1 s, averaged from 0.5 s. Free, the wheel
+# starts at its equilibrium under the measured load and stays there (it drifts 0.06 mm in 3 s): 1.5 s, averaged
+# from 0.5 s.
+HELD = ["--sinkage-from-data", "--set", "sim.duration=1", "--set", "sim.settle=0.5"]
+FREE = ["--load-from-data", "--set", "sim.duration=1.5", "--set", "sim.settle=0.5"]
+RFT3D = ["--medium", "sand_3d_rft_code", "--set", "medium.law=rft3d", "--set", "medium.surface_friction=0.1806"]
+VARIANTS = {
+    "li2013-cmu-held": ["--medium", "wheel_sand_cmu", *HELD],
+    "li2013-plate-held": ["--medium", "wheel_sand_plate", *HELD],
+    "li2013-plate-free": ["--medium", "wheel_sand_plate", *FREE],
+    "rft3d-held": [*RFT3D, *HELD],
+    "li2013-cmu-free": ["--medium", "wheel_sand_cmu", *FREE],
+    "rft3d-free": [*RFT3D, *FREE],
+}
+# DRFT's term at the experiments' 10 mm/s: lambda = 1 on an assumed bulk density of 1600 kg/m^3 (the sand's is not
+# known), on the locked wheel at 60 deg (its largest leading normal speeds, 10 mm/s).
+DRFT = ["--slip", "-1", "--slip-angle", "60", "--sinkage", "30", "--medium", "wheel_sand_plate", "--set",
+        "medium.bulk_density=1600"]
+
+
+def finrft(args: list[str]) -> dict:
+    command = [sys.executable, "-m", "finrft", "wheel", *args, "--json", "--quiet"]
+    print("finrft wheel " + " ".join(args), file=sys.stderr, flush=True)
+    done = subprocess.run(command, capture_output=True, text=True, cwd="/")
+    if done.returncode != 0:
+        raise SystemExit(f"failed ({done.returncode}): {done.stderr.strip()}")
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def table(results: dict[str, dict]) -> str:
+    lines = ["| variant | subset | Fx RMSE / bias / r (N) | Fy RMSE / bias / r (N) | Fz RMSE / bias / r (N) | "
+             "sinkage RMSE / bias / r (mm) |", "|---|---|---|---|---|---|"]
+    for name, out in results.items():
+        for subset, label in (("beta_le_60", "β ≤ 60°"), ("all", "all β")):
+            part = out["compared"][subset]
+            cells = []
+            for key in ("Fx_N", "Fy_N", "Fz_N", "sinkage_mm"):
+                v = part[key]
+                r = "–" if v["r"] is None else f"{v['r']:.2f}"
+                cells.append(f"{v['rmse']:.2f} / {v['bias']:+.2f} / {r}")
+            lines.append(f"| {name} | {label} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def plot(name: str, out: dict) -> None:
+    """The figure `finrft wheel --data ... --plot` draws, from a variant's JSON rows."""
+    conditions = [Condition(math.radians(r["slip_angle_deg"]), r["slip"], 1e-3 * r["measured"]["sinkage_mm"],
+                            np.array([r["measured"][k] for k in ("Fx_N", "Fy_N", "Fz_N")])) for r in out["rows"]]
+    plot_conditions(conditions, out["rows"], OUT / f"wheel-{name}.png", f"{name}: {out['command']}")
+
+
+def main(names: list[str]) -> None:
+    unknown = set(names) - set(VARIANTS) - {"drft_check", "--plots"}
+    if names == ["--plots"]:  # the figures again from docs/results/wheel.json
+        for name, out in json.loads((OUT / "wheel.json").read_text()).items():
+            if "rows" in out:
+                plot(name, out)
+        return
+    if unknown:
+        raise SystemExit(f"no variant {', '.join(sorted(unknown))} (the variants: {', '.join(VARIANTS)}, drft_check)")
+    path = OUT / "wheel.json"
+    results = json.loads(path.read_text()) if names and path.exists() else {}
+    for name, args in VARIANTS.items():
+        if names and name not in names:
+            continue
+        out = finrft(["--data", DATA, *args])
+        results[name] = {"command": "finrft wheel --data smooth_wheel_by_condition.csv " + " ".join(args),
+                         **out}
+        plot(name, results[name])
+        path.write_text(json.dumps(results, indent=1) + "\n")
+    if not names or "drft_check" in names:
+        plain, drft = finrft(DRFT), finrft([*DRFT, "--set", "medium.drft_lambda=1"])
+        results["drft_check"] = {"command": "finrft wheel " + " ".join(DRFT) + " [--set medium.drft_lambda=1]",
+                                 "without": {k: plain[k] for k in ("Fx_N", "Fy_N", "Fz_N")},
+                                 "with": {k: drft[k] for k in ("Fx_N", "Fy_N", "Fz_N")}}
+        path.write_text(json.dumps(results, indent=1) + "\n")
+    print(table({k: v for k, v in results.items() if "compared" in v}))
+    print("DRFT (lambda 1):", results.get("drft_check"))
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from finrft.cli import main
-from finrft.convergence import ErrorLimits, InaccurateResult, SimulationFailed, paired
+from finrft.convergence import ErrorLimits, InaccurateResult, paired
 from finrft.errors import UndefinedResult
 from finrft.drive import Drive
 from finrft.experiments.swim import RobotScene

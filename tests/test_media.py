@@ -4,7 +4,6 @@ scenes."""
 
 import json
 import math
-import tomllib
 
 import h5py
 import mujoco

@@ -6,7 +6,7 @@ from scipy.optimize import brentq
 
 from conftest import face
 from finrft.drive import Drive
-from finrft.convergence import InaccurateResult, SimulationUnstable
+from finrft.convergence import SimulationUnstable
 from finrft.scene import preset
 from finrft.experiments.plate import build_plate, simulate
 

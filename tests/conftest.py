@@ -63,3 +63,10 @@ def logged_generations(log) -> int:
             return len(f["state/sigma"])
     except (OSError, KeyError):
         return 0
+
+
+def default_ctrl_c() -> None:
+    """A child's preexec_fn where a test sends it SIGINT: the signal's default disposition, which a shell that runs
+    the tests in the background leaves ignored (Python then raises no KeyboardInterrupt, and Ctrl-C does nothing)."""
+    import signal
+    signal.signal(signal.SIGINT, signal.SIG_DFL)

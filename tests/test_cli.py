@@ -15,6 +15,7 @@ import mujoco
 import numpy as np
 import pytest
 
+from conftest import default_ctrl_c
 from finrft.laws.table import paper_table, write_table
 from finrft.cli import build_parser, main
 from finrft.experiments.swim import RobotScene
@@ -293,7 +294,7 @@ def test_interrupt_is_one_line_and_exit_130(errors_only):
     code = ("import sys; from finrft.cli import main; print('ready', flush=True); "
             "sys.exit(main(sys.argv[1:]))")
     run = subprocess.Popen([sys.executable, "-c", code, "drag", "--distance", "100000"], cwd=OUTSIDE,
-                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=default_ctrl_c)
     assert run.stdout.readline() == "ready\n"
     time.sleep(0.5)
     run.send_signal(signal.SIGINT)

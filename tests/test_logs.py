@@ -16,7 +16,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
-from conftest import logged_generations
+from conftest import default_ctrl_c, logged_generations
 
 import finrft
 import finrft.scene
@@ -36,7 +36,7 @@ def _interrupt(argv: list[str], log: Path, sig: int, workers_too: bool = False) 
     as a terminal's Ctrl-C, with ``workers_too``)."""
     # Outside the repository: from its root `python -m finrft` would import the source tree, not the installed package.
     proc = subprocess.Popen([sys.executable, "-m", "finrft", *argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, start_new_session=True, cwd=log.parent)
+                            text=True, start_new_session=True, cwd=log.parent, preexec_fn=default_ctrl_c)
     deadline = time.monotonic() + 60
     while logged_generations(log) < 2 and proc.poll() is None and time.monotonic() < deadline:
         time.sleep(0.01)

@@ -454,14 +454,9 @@ int finrft_surface_submerged(const FinrftSurface* p, const mjData* d, mjtNum* ou
   return count;
 }
 
-// The medium's wrench (torque about the body's origin, then force; world frame) on the body of instance
-// `instance` at the state of d (after mj_forward), as the passive force applies it: finrft.attach reads the forces
-// it records from here with the native backend. The body's id, or -1 when the instance is not a finrft.surface
-// one.
-FINRFT_EXPORT int finrft_surface_body_wrench(const mjModel* m, mjData* d, int instance, mjtNum wrench[6]) {
-  int slot = -1;
-  mjp_getPlugin(FINRFT_SURFACE_PLUGIN, &slot);
-  if (instance < 0 || instance >= m->nplugin || m->plugin[instance] != slot) return -1;
+// The wrench of finrft.surface instance `instance` on its body at the state of d, and the body's id (-1: the
+// instance could not be made); the passive force's and the exported reader's one sum.
+static int body_wrench(const mjModel* m, mjData* d, int instance, mjtNum wrench[6]) {
   const FinrftSurface* p = finrft_surface_instance(m, d, instance);
   if (!p) return -1;
   mjtNum twist[6];
@@ -470,11 +465,22 @@ FINRFT_EXPORT int finrft_surface_body_wrench(const mjModel* m, mjData* d, int in
   return p->body;
 }
 
+// The medium's wrench (torque about the body's origin, then force; world frame) on the body of instance
+// `instance` at the state of d (after mj_forward), as the passive force applies it: finrft.attach reads the forces
+// it records from here with the native backend. The body's id, or -1 when the instance is not a finrft.surface
+// one.
+FINRFT_EXPORT int finrft_surface_body_wrench(const mjModel* m, mjData* d, int instance, mjtNum wrench[6]) {
+  int slot = -1;
+  mjp_getPlugin(FINRFT_SURFACE_PLUGIN, &slot);
+  if (instance < 0 || instance >= m->nplugin || m->plugin[instance] != slot) return -1;
+  return body_wrench(m, d, instance, wrench);
+}
+
 // Every element's force, summed into one force and one torque about the body's origin, applied once.
 static void surface_compute(const mjModel* m, mjData* d, int instance, int capability_bit) {
   if (!(capability_bit & mjPLUGIN_PASSIVE)) return;
   mjtNum wrench[6];
-  int body = finrft_surface_body_wrench(m, d, instance, wrench);
+  int body = body_wrench(m, d, instance, wrench);
   if (body < 0) return;
   mj_applyFT(m, d, wrench + 3, wrench, d->xpos + 3 * body, body, d->qfrc_passive);
 }

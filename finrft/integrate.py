@@ -407,6 +407,8 @@ class PythonImplicit:
             if (np.abs(alpha * step).max() <= self.tolerance * (1 + np.abs(qvel + dv).max())
                     and (fresh or alpha >= 1e-6)):
                 return dv
+            if lean and fresh and np.linalg.norm(trial) > (1 - 1e-4 * alpha) * norm:  # a kink: halve (steppers.c)
+                return None
             fresh = not (lean and alpha == 1 and np.linalg.norm(trial) <= SURFACE_DECREASE * norm)
             if fresh:
                 _, slope = self._forces(forces, qvel + dv, dt, True, forward=True)

@@ -35,6 +35,10 @@
 // Below this fraction of the speed, a velocity's horizontal part is taken as none (as VERTICAL in li2013.py).
 #define VERTICAL 1e-12
 
+// |(x, y)|: the law's vectors are unit or physical sizes, far from hypot's overflow, and hypot was a tenth of a
+// robot's step.
+static inline double norm2(double x, double y) { return sqrt(x * x + y * y); }
+
 // (alpha_x, alpha_z), N/m^3, at the angles beta and gamma given by their cosines and sines: see
 // finrft/laws/li2013.py for the signs and the folding. The series' terms come from cos 2beta and sin 2beta by the
 // angle-sum formulas, so a call costs no trigonometric function: the laws are called several times per element per
@@ -59,7 +63,7 @@ static void alpha_unit(const double coef[NCOEF], double zeta, double cb, double 
 
 // The cosine and sine of atan2(y, x) (1 and 0 at the origin, as atan2(0, 0) = 0).
 static void unit_angle(double y, double x, double* c, double* s) {
-  double size = hypot(x, y);
+  double size = norm2(x, y);
   *c = size > 0 ? x / size : 1;
   *s = size > 0 ? y / size : 0;
 }
@@ -86,13 +90,13 @@ FINRFT_EXPORT void finrft_li2013_planar_element_force(const double coef[NCOEF], 
                                                double force[3]) {
   force[0] = force[1] = force[2] = 0;
   if (!(depth > 0) || !(n[0] * v[0] + n[1] * v[1] + n[2] * v[2] > 0)) return;
-  double horizontal = hypot(v[0], v[1]);
+  double horizontal = norm2(v[0], v[1]);
   double r[2] = {1, 0};
   if (horizontal > VERTICAL * sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])) {
     r[0] = v[0] / horizontal;
     r[1] = v[1] / horizontal;
   } else {
-    double sideways = hypot(n[0], n[1]);
+    double sideways = norm2(n[0], n[1]);
     if (sideways > 0) {
       r[0] = n[0] / sideways;
       r[1] = n[1] / sideways;
@@ -102,7 +106,7 @@ FINRFT_EXPORT void finrft_li2013_planar_element_force(const double coef[NCOEF], 
   double v_r = v[0] * r[0] + v[1] * r[1];
   double a[2];
   li2013_alpha_at(coef, zeta, -n_r, n[2], -v[2], v_r, a);
-  double scale = area * depth * hypot(n_r, n[2]);
+  double scale = area * depth * norm2(n_r, n[2]);
   force[0] = -scale * a[0] * r[0];
   force[1] = -scale * a[0] * r[1];
   force[2] = scale * a[1];
@@ -121,10 +125,10 @@ static double weight_within(double size) {
 
 // The unit horizontal direction of a, else of b, else x (as _horizontal_unit in li2013.py).
 static void horizontal_unit(const double a[3], const double b[3], double e[2]) {
-  double size = hypot(a[0], a[1]);
+  double size = norm2(a[0], a[1]);
   const double* pick = a;
   if (!(size > 0)) {
-    size = hypot(b[0], b[1]);
+    size = norm2(b[0], b[1]);
     pick = b;
   }
   e[0] = 1;
@@ -142,7 +146,7 @@ static void li2013_stress(const double coef[NCOEF], double zeta, const double n[
   double e1[2] = {e2[1], -e2[0]};
   double across = u[0] * e1[0] + u[1] * e1[1];
   double along = u[0] * e2[0] + u[1] * e2[1];
-  double f1 = weight_across(fabs(across)), f23 = weight_within(hypot(along, u[2]));
+  double f1 = weight_across(fabs(across)), f23 = weight_within(norm2(along, u[2]));
   double a[2], a1[2];
   li2013_alpha_at(coef, zeta, -(n[0] * e2[0] + n[1] * e2[1]), n[2], -u[2], along, a);
   alpha_unit(coef, zeta, 1, 0, 1, 0, a1);
@@ -161,12 +165,14 @@ FINRFT_EXPORT void finrft_li2013_element_force(const double coef[NCOEF], double 
   if (!(depth > 0) || !(n[0] * v[0] + n[1] * v[1] + n[2] * v[2] > 0)) return;
   double speed = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
   double u[3] = {v[0] / speed, v[1] / speed, v[2] / speed};
-  double tilt = hypot(n[0], n[1]) / sqrt(1 - (1 - 1e-3) * (1 - 1e-3));
+  double tilt = norm2(n[0], n[1]) / sqrt(1 - (1 - 1e-3) * (1 - 1e-3));
   if (tilt > 1) tilt = 1;
   double w = tilt * tilt * (3 - 2 * tilt);
-  double e2[2], stress[3];
-  horizontal_unit(n, v, e2);
-  li2013_stress(coef, zeta, n, u, e2, stress);
+  double e2[2], stress[3] = {0, 0, 0};
+  if (w > 0) {
+    horizontal_unit(n, v, e2);
+    li2013_stress(coef, zeta, n, u, e2, stress);
+  }
   if (w < 1) {
     double own[3];
     horizontal_unit(v, n, e2);
@@ -414,7 +420,11 @@ void finrft_surface_element_force(const FinrftSurface* p, const mjtNum normal[3]
     finrft_drft_element_force(p->drft_lambda, p->bulk_density, normal, v, depth, area, inertial);
     mju_addTo3(f, inertial);
   }
-  if (p->v_reg > 0) mju_scl3(f, f, tanh(fmax(mju_dot3(normal, v), 0) / p->v_reg));
+  if (p->v_reg > 0) {
+    // tanh is 1 in double from 19.1 on: the same number without the call, for an element well above v_reg
+    mjtNum ratio = fmax(mju_dot3(normal, v), 0) / p->v_reg;
+    if (ratio < 20) mju_scl3(f, f, tanh(ratio));
+  }
 }
 
 void finrft_surface_wrench(const FinrftSurface* p, const mjData* d, const mjtNum twist[6], mjtNum wrench[6]) {

@@ -529,6 +529,10 @@ static int newton_solve(Workspace* ws, const mjtNum* qvel, mjtNum dt, int iterat
     mjtNum before = norm;
     norm = trial_norm;
     if (change <= tolerance * (1 + scale) && (fresh || alpha >= 1e-6)) return 0;
+    // On attached surfaces, a search that fails on a fresh slope has met a kink of a law (an element switching
+    // on) with no descent left: iterating on creeps across it by 1e-6 of a step per iteration, at 20 residuals
+    // each, so the step is halved at once instead (the sand-swimmer's steps: half the calls of the law).
+    if (lean && fresh && trial_norm > (1 - 1e-4 * alpha) * before) return FINRFT_NOT_CONVERGED;
     fresh = !(lean && alpha == 1 && trial_norm <= SURFACE_DECREASE * before);
     if (!fresh) continue;
     // the search's last residual was taken at the accepted iterate: rft_force's segments are there

@@ -137,7 +137,7 @@ class RobotTrial:
             mujoco.mj_forward(m, d)
             self._checked(self.controller(0.0, d))
         self.watch = [i for i in range(m.nv) if i not in self.dofs]
-        force = medium_forces(built)
+        force = medium_forces(built, scene.sim.method)
         bodies = np.arange(1, m.nbody)
 
         def state(d: mujoco.MjData) -> dict[str, np.ndarray]:

@@ -120,9 +120,9 @@ def _add_robots(kinds: Any) -> argparse.ArgumentParser:
                          "(the same method at 1/8 of the step): the mean speed of the centre of mass (swimmer, "
                          "hexapod) or the mean force of the medium (wheel), in percent; the cost against bare mj_step "
                          "of the model without the medium at the same step, and per element per step; and the "
-                         "speed-up over MuJoCo's explicit step at the largest step (1/2 to 1/256 of the default) "
-                         "within 2 % of the converged run, as the default must be (a lower bound where none is). "
-                         "A few minutes.")
+                         "speed-up over MuJoCo's explicit step at the largest step (1/2 to 1/256 of the default, "
+                         "refined to 2^(1/4)) within 2 % of the converged run, as the default must be (a lower bound "
+                         "where none is). The explicit runs of the light robots take most of its 10 to 20 minutes.")
     p.add_argument("--robot", action="append", choices=EXAMPLES, help="only this example (repeatable; default: all)")
     p.add_argument("--duration", type=number("s", minimum=0.0, inclusive=False), default=0.0, metavar="S",
                    help="simulate S seconds instead of each example's duration (its settle scaled alike)")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import math
 import platform
 import time
 from datetime import date
@@ -362,6 +363,8 @@ ROBOT_ACCURACY = 0.02
 # default, as the light robots' explicit steps still chatter at 16 µs (a 10 g link's force changes with its velocity
 # on the scale of v_reg = 0.1 mm/s). A chattering run stops early, so the fine steps cost little unless they hold.
 EXPLICIT_FRACTIONS = (1 / 2, 1 / 4, 1 / 8, 1 / 16, 1 / 32, 1 / 64, 1 / 128, 1 / 256)
+# Bisections (in the logarithm of the step) between the first explicit step that holds and the one twice as long.
+EXPLICIT_REFINE = 2
 
 
 def _robot_figure(name: str, result: Any) -> np.ndarray:
@@ -388,10 +391,10 @@ def robots(names: tuple[str, ...] | None = None, *, duration: float = 0.0, log: 
     instead, with the settle scaled alike): simulated seconds per wall second, its error against a converged run
     (the same method at 1/8 of the step), the cost against bare ``mj_step`` of the same model without the medium at
     the same step, the cost per element per step, and the speed-up over MuJoCo's explicit step at the largest step
-    (1/2 ... 1/256 of the default) whose run is within `ROBOT_ACCURACY` of the converged one, as the default's must
-    be. Where none is (each chatters or misses), the speed-up is at least the cost of the finest explicit run, its
-    steps (duration over that step) times one explicit step of the model with the medium (timed in C), over the
-    default's. Errors are relative: the mean speed of the centre of mass over the window (swimmer, hexapod), the mean
+    (1/2 ... 1/256 of the default, then bisected twice towards the one twice as long) whose run is within
+    `ROBOT_ACCURACY` of the converged one, as the default's must be. Where none is (each chatters or misses), the
+    speed-up is at least the cost of the finest explicit run, its steps (duration over that step) times one explicit
+    step of the model with the medium (timed in C), over the default's. Errors are relative: the mean speed of the centre of mass over the window (swimmer, hexapod), the mean
     force of the medium (wheel)."""
     from ..experiment import run
     from ..experiments.user_model import EXAMPLES, UserModel, example
@@ -428,20 +431,29 @@ def robots(names: tuple[str, ...] | None = None, *, duration: float = 0.0, log: 
             "us_per_step": 1e6 * wall / default.steps, "bare_us_per_step": 1e6 * bare,
             "cost_over_bare": wall / default.steps / bare, "elements": elements,
             "ns_per_element_step": 1e9 * (wall / default.steps - bare) / elements}
-        for fraction in EXPLICIT_FRACTIONS:
-            explicit = scene.replace(**{"sim.method": "explicit", "sim.dt": dt * fraction})
+        def explicit_run(step: float) -> float | None:
+            """The explicit run's wall seconds at ``step``; None where it fails or misses `ROBOT_ACCURACY`."""
             try:
-                result, explicit_wall = timed(explicit)
+                result, explicit_wall = timed(scene.replace(**{"sim.method": "explicit", "sim.dt": step}))
             except SimulationFailed as exc:
-                row.setdefault("explicit", []).append({"dt": dt * fraction, "failed": type(exc).__name__})
-                continue
+                row.setdefault("explicit", []).append({"dt": step, "failed": type(exc).__name__})
+                return None
             explicit_error = _relative(_robot_figure(name, result), reference)
-            row.setdefault("explicit", []).append({"dt": dt * fraction, "error": explicit_error,
-                                                   "wall_s": explicit_wall})
-            if explicit_error <= ROBOT_ACCURACY:
-                row.update(explicit_dt=dt * fraction, explicit_wall_s=explicit_wall,
-                           speedup_over_explicit=explicit_wall / wall)
-                break
+            row.setdefault("explicit", []).append({"dt": step, "error": explicit_error, "wall_s": explicit_wall})
+            return explicit_wall if explicit_error <= ROBOT_ACCURACY else None
+
+        passing = next(((dt * f, w) for f in EXPLICIT_FRACTIONS if (w := explicit_run(dt * f)) is not None), None)
+        if passing is not None:
+            # the largest explicit step that holds, to within 2^(1/4): the halving grid alone can leave it almost
+            # twice too small (the wheel rig's holds at 0.5 ms, between the grid's 0.3125 and 0.625 ms)
+            low, high = passing[0], 2 * passing[0]
+            for _ in range(EXPLICIT_REFINE):
+                middle = math.sqrt(low * high)
+                if (w := explicit_run(middle)) is not None:
+                    low, passing = middle, (middle, w)
+                else:
+                    high = middle
+            row.update(explicit_dt=passing[0], explicit_wall_s=passing[1], speedup_over_explicit=passing[1] / wall)
         else:
             finest = dt * EXPLICIT_FRACTIONS[-1]
             step = _explicit_step_s(scene, finest)

@@ -36,6 +36,10 @@ from .laws import drft, li2013, rft3d
 
 BACKENDS = ("native", "python")
 PLUGIN = "finrft.surface"
+# The Python backend's forces come from a callback installed for a block: a model given them carries an instance of
+# the native plugin finrft.guard (plugins/finrft_guard.c), which MuJoCo runs right after the callback in every
+# mj_passive and which raises unless the callback stamped its state, as `SurfaceForces` does.
+GUARD, GUARD_PLUGIN = "finrft_guard", "finrft.guard"
 # More elements than this make the plugin's config and every passive-force evaluation needlessly large.
 MAX_ELEMENTS = 100_000
 
@@ -167,6 +171,8 @@ class SurfaceForces:
         self.attached = attached
         self.bodies = [(model.body(s.body).id, s) for s in attached.surfaces]
         self._twist = np.zeros(6)
+        guard = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_PLUGIN, GUARD)
+        self._stamp = int(model.plugin_stateadr[guard]) if guard >= 0 else -1
 
     def element_forces(self, m: mujoco.MjModel, d: mujoco.MjData, body: int, surface: Surface
                        ) -> tuple[np.ndarray, np.ndarray]:
@@ -202,6 +208,8 @@ class SurfaceForces:
             force, arm = self.element_forces(m, d, body, surface)
             mujoco.mj_applyFT(m, d, force.sum(axis=0), np.cross(arm, force).sum(axis=0), d.xpos[body], body,
                               d.qfrc_passive)
+        if self._stamp >= 0:
+            d.plugin_state[self._stamp] = 1.0
 
 
 def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str = (), law: str = "li2013", zeta: float | None = None,
@@ -227,7 +235,8 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str = (), law: str = "li
     (`finrft.laws.regularised`);
     ``surface_z``: height of the free surface, m; ``element_size``: the elements' size, m; ``backend``:
     ``native`` (falls back to ``python``, with a warning, when the plugin cannot be loaded) or ``python`` (then run
-    the model inside ``Attached.installed``); ``cull``: leave out the elements that face another geom of the same
+    the model inside ``Attached.installed``: a model stepped outside it stops with an exception at its second step,
+    from the native guard the compiled model carries while the plugin library loads); ``cull``: leave out the elements that face another geom of the same
     kinematic tree closely (`TOUCHING`), such as the end faces of neighbouring links of a chain, which the grains
     cannot reach. Raises `SceneError` on bad input.
     """
@@ -288,6 +297,10 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str = (), law: str = "li
         if mark is None:
             mark = spec.add_text(name=callbacks.PYTHON_MARK)
         mark.data = " ".join([str(spec._address), *python_bodies, *names])
+        # Stepped where no callback is installed at all, only a native guard can stop it (`GUARD`).
+        if native.available() and not any(p.name == GUARD for p in spec.plugins):
+            spec.activate_plugin(GUARD_PLUGIN)
+            spec.add_plugin(name=GUARD, plugin_name=GUARD_PLUGIN, active=True)
     laws.warn_feeds_energy(law, module.FEEDS_ENERGY, "kept as published")
     laws.warn_caveat(law)
     return attached

@@ -16,7 +16,8 @@ estimate is within a limit but above CONFIRM of it is compared with the fine com
 larger of the two estimates: its error can fall much slower than its largest step.
 
 A result reports ``error_estimate``: the largest estimated error of each quantity it reports, named with its
-unit (``angle_deg``; ``force_N`` or ``torque_Nm``, the per-stroke mean drive load; ``eta_points``, ``body_mm``;
+unit (``angle_deg``; ``force_N`` or ``torque_Nm``, the per-stroke mean drive load, and ``peak_force_N`` or
+``peak_torque_Nm``, its peak, at least the run's own `resolution` of it; ``eta_points``, ``body_mm``;
 ``position_mm`` and ``velocity_mm_s``, a user's model's bodies and centre of mass, and ``position_percent``, the
 same positions as a share of the run's scale). `ErrorLimits` bounds the angles, eta and that share; the loads and
 the absolute positions are reported, not bounded, as their scale is the scene's.
@@ -106,6 +107,8 @@ class Checked(Protocol):
 
     def differences(self, other: Any) -> dict[str, float]: ...
 
+    def resolution(self) -> dict[str, float]: ...
+
 
 R = TypeVar("R", bound=Checked)
 M = TypeVar("M")
@@ -174,6 +177,8 @@ def checked(build: Callable[[Any], M], run_once: Callable[[Any, M, Callable[[flo
                 continue
             raise
         estimate = {key: float(SAFETY * value / abs(ratio - 1)) for key, value in run.differences(other).items()}
+        for key, floor in run.resolution().items():
+            estimate[key] = max(estimate.get(key, 0.0), floor)
         if kept is not None:
             estimate = {key: max(value, kept[0].get(key, 0.0)) for key, value in estimate.items()}
             label = f"{kept[1]} and {label}"

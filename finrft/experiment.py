@@ -74,7 +74,8 @@ class Trial(Protocol):
 
     reads: dict[str, Callable[[mujoco.MjData], Any]]  # readings at every recorded instant (after mj_forward)
     watch: list[int]                                  # dofs the chatter probe watches
-    # Optional: ``control(m, d)``, MuJoCo's control callback for the run (ctrl and qfrc_applied at every step).
+    # Optional: ``control(m, d)``, MuJoCo's control callback for the run (ctrl and qfrc_applied at every step);
+    # ``after_step(d)``, called after every step (peaks taken from every step, not the recorded samples).
 
     def on_stroke(self, k: int) -> None: ...
 
@@ -170,6 +171,11 @@ class Result(Estimated):
         relative = getattr(self.experiment, "relative_differences", None)
         return out if relative is None else {**out, **relative(self, out)}
 
+    def resolution(self) -> dict[str, float]:
+        """Errors the run knows without a companion (the experiment's ``resolution(result)``, if it has one)."""
+        own = getattr(self.experiment, "resolution", None)
+        return {} if own is None else own(self)
+
     def cycle_table(self) -> list[dict[str, float]]:
         return self.experiment.cycle_table(self)
 
@@ -239,10 +245,12 @@ def _once(experiment: Experiment, scene: Any, built: Any, d: mujoco.MjData, prog
     advance = stepper(m, scene.sim, built.backend, built.groups, attached)
     watch = [] if companion else trial.watch
     speeds = chatter_speeds(m, d, built.groups, attached, watch)
+    after_step = getattr(trial, "after_step", None)
     with installed(m, python_forces(built) if built.backend == "python" else None), native.untimed(), \
             controlled(m, getattr(trial, "control", None)):
         step_through(m, d, scene, advance, steps, starts, samples, trial.on_stroke, on_sample, progress, watch,
-                     forward=not companion, stroke_time=drive.stroke_time, speeds=speeds)
+                     forward=not companion, stroke_time=drive.stroke_time, speeds=speeds,
+                     on_step=None if after_step is None else lambda: after_step(d))
     series, values = trial.finish(d, readings)
     result = Result(experiment=experiment, scene=scene,
                     time=instants(samples, steps, starts, scene.sim, drive.stroke_time), series=series, values=values,

@@ -228,9 +228,11 @@ static void add_attribute(const char* key) {
 }
 
 void finrft_register_surface(void);  // plugins/finrft_surface.c
+void finrft_register_guard(void);    // plugins/finrft_guard.c
 
 mjPLUGIN_LIB_INIT(finrft_rft) {
   finrft_register_surface();
+  finrft_register_guard();
   add_attribute("law");
   add_attribute("v_reg");
   add_attribute("stop_stiffness");

@@ -315,3 +315,35 @@ def test_attach_refuses_what_cannot_work(backend):
         with other_attached.installed(other_model):
             mujoco.mj_step(other_model, mujoco.MjData(other_model))
     assert mujoco.get_mjcb_passive() is None
+
+
+def test_python_backend_stepped_without_its_callback_stops_at_the_step():
+    """With no callback installed anywhere, a Python-backend model's steps had no medium force and nothing said so:
+    its native guard (plugins/finrft_guard.c) stops the step itself. MuJoCo's compiler steps a model once on its own
+    data, so a data's first evaluation passes; the second stops. Installed for model A, stepping model B with its own
+    attachment is refused by the dispatcher (test above): both cases are loud, and neither adds a force."""
+    spec, other = _boxes(), _boxes()
+    attached = attach(spec, "b", backend="python")
+    attach(other, "c", backend="python")
+    model, other_model = spec.compile(), other.compile()
+    data = mujoco.MjData(model)
+    data.qvel[2] = -0.1
+    with pytest.raises(mujoco.FatalError, match=r"step inside `with attached.installed\(model\):`"):
+        mujoco.mj_step(model, data, 2)
+    with attached.installed(model), pytest.raises(SceneError, match="outside its own Attached.installed"):
+        mujoco.mj_step(other_model, mujoco.MjData(other_model), 2)
+    # installed, every step is stamped, and the force is the native plugin's (the guard adds none)
+    native_spec = _boxes()
+    native = attach(native_spec, "b", backend="native")
+    native_model = native_spec.compile()
+    datas = []
+    for m, a in ((model, attached), (native_model, native)):
+        d = mujoco.MjData(m)
+        d.qvel[2] = -0.1
+        with a.installed(m):
+            mujoco.mj_step(m, d)
+            assert d.qfrc_passive[2] > 0  # the box, 1 cm deep and sinking: the medium holds it up
+            mujoco.mj_step(m, d, 4)
+        datas.append(d)
+    np.testing.assert_allclose(datas[0].qpos, datas[1].qpos, rtol=1e-9, atol=1e-12)
+    assert mujoco.get_mjcb_passive() is None

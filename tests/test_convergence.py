@@ -107,7 +107,7 @@ def test_estimate_is_reported_with_units(tmp_path, capsys):
     out = tmp_path / "drag.h5"
     assert main(["drag", "--distance", "30", "--json", "--out", str(out)]) == 0
     summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
-    assert set(summary["error_estimate"]) == {"angle_deg", "force_N"}
+    assert set(summary["error_estimate"]) == {"angle_deg", "force_N", "peak_force_N"}
     assert 0 < summary["error_estimate"]["angle_deg"] < 0.5 and summary["error_companion"] == "dt 0.005 s"
     with h5py.File(out) as f:
         assert f.attrs["error_estimate_angle_deg"] == summary["error_estimate"]["angle_deg"]

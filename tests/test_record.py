@@ -74,6 +74,7 @@ def test_h5_holds_the_run(runs, name, tmp_path):
         "drive_force" if drag else "drive_torque": (run.drive_force, "N" if drag else "N m"),
         "rft_force": (run.rft_force, "N"),
         "stroke_impulse": (run.stroke_impulse, "N s" if drag else "N m s"),
+        "stroke_peak": (run.stroke_peak, "N" if drag else "N m"),
     }
     with h5py.File(path, "r") as f:
         assert set(f) == set(expected)
@@ -81,7 +82,7 @@ def test_h5_holds_the_run(runs, name, tmp_path):
             np.testing.assert_array_equal(f[key][()], data, err_msg=key)
             assert f[key].attrs["units"] == unit
             assert f[key].attrs["description"]
-            if key not in ("time", "stroke_impulse"):
+            if key not in ("time", "stroke_impulse", "stroke_peak"):
                 assert f[key].dims[0][0] == f["time"]
         assert f["rft_force"].attrs["frame"] == "world"
         attrs = dict(f.attrs)

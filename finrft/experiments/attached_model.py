@@ -154,5 +154,4 @@ class JointTrial:
         self.prescribed.finish(d)
         bodies, drive = readings["bodies"], readings["drive"]
         return ({"drive_position": drive[:, 0], "drive_load": drive[:, 1], "body_position": bodies[..., :3],
-                 "rft_force": bodies[..., 3:], "stroke_impulse": self.prescribed.impulse},
-                {"peak_drive_load": float(np.max(np.abs(drive[:, 1])))})
+                 "rft_force": bodies[..., 3:], "stroke_impulse": self.prescribed.impulse}, {})

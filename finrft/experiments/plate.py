@@ -20,8 +20,8 @@ from typing import Any, Callable
 import mujoco
 import numpy as np
 
-from .. import geometry, laws, native
-from ..convergence import ErrorLimits, record_every
+from .. import geometry, laws, methods, native
+from ..convergence import ErrorLimits
 from ..coupling import SegmentForces
 from ..drive import Drive
 from ..errors import UsageError
@@ -267,12 +267,19 @@ class PlateTest:
                                   attrs={"frame": "world"}),
             "stroke_impulse": Quantity("N s" if drag else "N m s", "integral of the drive load over each stroke",
                                        per="stroke"),
+            "stroke_peak": Quantity("N" if drag else "N m", "largest magnitude of the drive load at any step (the "
+                                    "adaptive methods: every sim.max_step) in each stroke", per="stroke"),
         }
 
     def compared(self, scene: Scene) -> tuple[Compared, ...]:
-        """Segment and hinge angles (deg) and the per-stroke mean drive load (N or N m)."""
+        """Segment and hinge angles (deg), the per-stroke mean drive load and each stroke's peak (N or N m)."""
         return (Compared("angle_deg", ("segment_angle", "hinge_angle"), float(np.degrees(1.0))),
-                Compared(f"{self.quantity}_{self.unit}", ("stroke_impulse",), 1 / self.drive.stroke_time))
+                Compared(f"{self.quantity}_{self.unit}", ("stroke_impulse",), 1 / self.drive.stroke_time),
+                Compared(f"peak_{self.quantity}_{self.unit}", ("stroke_peak",)))
+
+    def resolution(self, run: Result) -> dict[str, float]:
+        """The peak's own error, whatever a companion says: its change to the neighbouring steps (`Prescribed`)."""
+        return {f"peak_{self.quantity}_{self.unit}": run.peak_resolution}
 
     def start(self, scene: Scene, plate: PlateModel, d: mujoco.MjData, companion: bool) -> _PlateTrial:
         return _PlateTrial(self, scene, plate, d, companion)
@@ -310,10 +317,8 @@ class PlateTest:
             "plate": run.scene.plate.kind,
             "final_segment_angle_deg": np.degrees(run.segment_angle[-1]).tolist(),
             "final_hinge_angle_deg": np.degrees(run.hinge_angle[-1]).tolist(),
+            # the largest load at every step's state: whatever sim.record_dt, in the error estimate
             f"peak_drive_{q}_{u}": float(run.peak_drive_force),
-            # the peak is the largest of the recorded samples, not of every step: a short spike between samples is
-            # missed, so it depends on sim.record_dt (the per-stroke means are the steps')
-            "peak_sampled_every_s": record_every(run.scene.sim.dt, run.scene.sim.record_dt) * run.scene.sim.dt,
             **geometry.resolve(run.scene).figures(),
         }
         cycles = self.cycle_table(run)
@@ -383,6 +388,7 @@ class _PlateTrial:
         self.base = Prescribed([plate.drive_dof], [plate.drive_qpos], plate.armature, test.drive)
         self.forces = SegmentForces(plate.groups[0])
         self.on_stroke = lambda k: self.base.start_stroke(m, d, k)
+        self.after_step = lambda d: self.base.track(m, d)
         self.watch = list(plate.hinge_dof)
         n, hinges = scene.plate.segments, plate.hinge_qpos
 
@@ -414,8 +420,10 @@ class _PlateTrial:
         names = list(self.test.quantities(self.scene))
         # displacement and drive_force name the rotation and the torque too: the names callers use for any test
         series = {names[0]: x, "segment_angle": segment_angle, "hinge_angle": q, names[3]: load, "rft_force": rft,
-                  "stroke_impulse": self.base.impulse, "displacement": x, "drive_force": load}
-        return series, {"peak_drive_force": float(np.max(np.abs(load)))}
+                  "stroke_impulse": self.base.impulse, "stroke_peak": self.base.peak, "displacement": x,
+                  "drive_force": load}
+        return series, {"peak_drive_force": float(np.max(self.base.peak)),
+                        "peak_resolution": float(np.max(self.base.peak_change))}
 
 
 def simulate(scene: Scene, drive: Drive, *, progress: Callable[[float], None] | None = None,
@@ -536,8 +544,8 @@ class _PlateCommand(Command):
                  f"{sim.integrator}, {run.backend}): {steps_line(summary)} in {run.wall_s:.2f} s",
                  "final segment angles (deg): " + ", ".join(f"{a:.2f}" for a in summary["final_segment_angle_deg"]),
                  "final hinge angles (deg):   " + ", ".join(f"{a:.2f}" for a in summary["final_hinge_angle_deg"]),
-                 f"peak drive {q}: {summary[f'peak_drive_{q}_{u}']:.4g} {u.replace('Nm', 'N m')} (the largest of the "
-                 f"samples, every {1e3 * summary['peak_sampled_every_s']:g} ms: sim.record_dt)"]
+                 f"peak drive {q}: {summary[f'peak_drive_{q}_{u}']:.4g} {u.replace('Nm', 'N m')} (the largest at "
+                 f"{f'every {1e3 * sim.max_step:g} ms' if methods.get(sim.method).adaptive else 'every step'})"]
         for i, row in enumerate(run.cycle_table(), start=1):
             lines.append(f"cycle {i}: mean {q} recovery {row[f'mean_recovery_{q}_{u}']:+.4g}, "
                          f"power {row[f'mean_power_{q}_{u}']:+.4g}; net impulse {row[f'net_impulse_{u}s']:+.4g} {u}s")

@@ -418,7 +418,8 @@ def equilibrium_sinkage(scene: WheelScene, built: AttachedModel, wheel: Wheel) -
 
     def excess(sinkage: float) -> float:
         d.qpos[lift] = -sinkage
-        mujoco.mj_forward(m, d)
+        with built.attached.installed(m):  # the Python backend's model refuses a forward without its callback
+            mujoco.mj_forward(m, d)
         return float(force(d)[0, 2]) - scene.wheel.load
 
     low, high = 0.0, 2 * wheel.outer

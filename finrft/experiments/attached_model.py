@@ -99,31 +99,36 @@ def build_attached(spec: mujoco.MjSpec, joints: Sequence[str], bodies: tuple[str
                          np.array([model.body(s.body).id for s in attached.surfaces], dtype=int))
 
 
-def medium_forces(built: AttachedModel, method: str = "explicit") -> Callable[[mujoco.MjData], np.ndarray]:
+def medium_forces(built: AttachedModel) -> Callable[[mujoco.MjData], np.ndarray]:
     """The resultant of the medium's force on each attached body (B, 3), world frame, from the backend in use
-    (after mj_forward). After a step of a fixed-step implicit ``method``: the force that step applied, at its new
-    velocity v and at the positions the method took the force at, the step's start or half a step ahead
-    (newton-midpoint): q - (1 - midpoint) dt v from the positions q after it (exact for newton; newton-midpoint's
-    own is dt/2 times the step's velocity change away). Read at q itself instead, a force that ripples as elements
-    enter the medium, correlated with the velocity it drives, averages to other than the impulse the steps applied,
-    by an amount first order in dt (the wheel rig free under its 21 N load: 0.12 N short at 20 ms). Elsewhere, and
-    for the explicit and adaptive methods, the force at the state itself (the one MuJoCo's next step applies)."""
+    (after mj_forward)."""
+    wrenches = built.attached.wrenches(built.model)
+    return lambda d: wrenches(d)[:, 3:]
+
+
+def applied_state(built: AttachedModel, method: str) -> Callable[[mujoco.MjData], mujoco.MjData]:
+    """Where the forces of the step that led to an MjData's state were taken, as an MjData after mj_forward: with a
+    fixed-step implicit ``method``, its new velocity v at the positions the method took the medium's force at, the
+    step's start or half a step ahead (newton-midpoint): q - (1 - midpoint) dt v from the positions q after it,
+    at that time (exact for newton; newton-midpoint's own midpoint is dt/2 times the step's velocity change away),
+    with the state's ctrl, applied forces and activations (a scratch MjData: MuJoCo's control callback must leave
+    it alone); else the MjData itself. A force read at the state itself instead (one that ripples as elements enter
+    the medium, correlated with the velocity it drives) averages to other than the impulse the steps applied, by an
+    amount first order in dt: the wheel rig free under its 21 N load came out 0.12 N short at 20 ms."""
     m = built.model
-    wrenches = built.attached.wrenches(m)
     chosen = methods.get(method)
     lag = (1 - chosen.midpoint) * m.opt.timestep if chosen.implicit and not chosen.adaptive else 0.0
     if lag == 0:
-        return lambda d: wrenches(d)[:, 3:]
+        return lambda d: d
     where = mujoco.MjData(m)
 
-    def applied(d: mujoco.MjData) -> np.ndarray:
-        where.qpos[:], where.qvel[:] = d.qpos, d.qvel
-        where.mocap_pos[:], where.mocap_quat[:] = d.mocap_pos, d.mocap_quat
+    def applied(d: mujoco.MjData) -> mujoco.MjData:
+        where.time = d.time - lag
+        for name in ("qpos", "qvel", "act", "ctrl", "qfrc_applied", "xfrc_applied", "mocap_pos", "mocap_quat"):
+            getattr(where, name)[:] = getattr(d, name)
         mujoco.mj_integratePos(m, where.qpos, where.qvel, -lag)
-        mujoco.mj_kinematics(m, where)
-        mujoco.mj_comPos(m, where)
-        mujoco.mj_comVel(m, where)
-        return wrenches(where)[:, 3:]
+        mujoco.mj_forward(m, where)
+        return where
     return applied
 
 

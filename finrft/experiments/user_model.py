@@ -29,7 +29,8 @@ from ..convergence import ErrorLimits
 from ..models import ARMATURE_RATIO, compile_spec, mjcf_path
 from ..scene import Control, JointDrive, SceneError, UserScene, drive_timing, load_scene, parse_override
 from ..stepping import DRIVE_LAG, jump_velocities
-from .attached_model import DRIVEN, AttachedModel, build_attached, driven_joint, medium_forces, read_spec
+from .attached_model import (DRIVEN, AttachedModel, applied_state, build_attached, driven_joint, medium_forces,
+                             read_spec)
 from .command import Command, register, steps_line
 from .flags import add_max_error, add_result_files, add_scene_flags
 
@@ -137,7 +138,8 @@ class RobotTrial:
             mujoco.mj_forward(m, d)
             self._checked(self.controller(0.0, d))
         self.watch = [i for i in range(m.nv) if i not in self.dofs]
-        force = medium_forces(built, scene.sim.method)
+        force = medium_forces(built)
+        self._applied = applied_state(built, scene.sim.method)
         bodies = np.arange(1, m.nbody)
 
         def state(d: mujoco.MjData) -> dict[str, np.ndarray]:
@@ -145,12 +147,14 @@ class RobotTrial:
                 mujoco.mj_forward(m, d)
             mujoco.mj_subtreeVel(m, d)
             self._lag(d)
+            # the medium's force and the drives' loads as the last step applied them (`applied_state`)
+            at = self._applied(d)
             return {"com_position": d.subtree_com[0].copy(), "com_velocity": d.subtree_linvel[0].copy(),
-                    "body_position": d.xpos[built.bodies].copy(), "medium_force": force(d),
+                    "body_position": d.xpos[built.bodies].copy(), "medium_force": force(at),
                     "link_position": d.xpos[bodies].copy(), "link_quat": d.xquat[bodies].copy(),
                     "drive_position": d.qpos[qpos].copy(), "drive_velocity": d.qvel[self.dofs].copy(),
                     # What each drive applies: the feed-forward force, less what its armature takes.
-                    "drive_load": d.qfrc_applied[self.dofs] - self.armature * d.qacc[self.dofs],
+                    "drive_load": at.qfrc_applied[self.dofs] - self.armature * at.qacc[self.dofs],
                     "actuator_force": d.actuator_force.copy(), "actuator_velocity": d.actuator_velocity.copy(),
                     "ctrl": d.ctrl.copy()}
 
@@ -165,7 +169,10 @@ class RobotTrial:
         return values
 
     def control(self, m: mujoco.MjModel, d: mujoco.MjData) -> None:
-        """MuJoCo's control callback: the actuators' ctrl, and each sine drive's feed-forward force."""
+        """MuJoCo's control callback: the actuators' ctrl, and each sine drive's feed-forward force; nothing on
+        another MjData of the model (`applied_state`'s, which holds the run's own)."""
+        if d._address != self.d._address:
+            return
         t = d.time
         if self.controller is not None:
             d.ctrl[:] = self._checked(self.controller(t, d))

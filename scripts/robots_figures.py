@@ -1,5 +1,5 @@
 """The figures of docs/guide/robots.md: the example robots of mjcf/ run as `finrft run --example NAME` runs them
-(`finrft.run_robot` on their TOML scenes, at the scenes' numerics: newton, 1 ms steps).
+(`finrft.run_robot` on their TOML scenes, at the scenes' numerics).
 
     python scripts/robots_figures.py [--out docs/guide]
 

@@ -86,6 +86,7 @@ class WheelScene(Sections):
     sim: RobotSim = field(default_factory=RobotSim)
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         check_sim(self.sim)
         check_medium(self.medium)
         if self.wheel.grouser_height > 0 and self.wheel.grousers == 0:

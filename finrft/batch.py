@@ -173,7 +173,7 @@ def check_workers(workers: Any, what: str = "processes") -> None:
     """SceneError unless ``workers`` is None (all cores) or a whole number from 1 to MAX_WORKERS."""
     if workers is not None and (isinstance(workers, bool) or not isinstance(workers, (int, np.integer))
                                 or not 1 <= workers <= MAX_WORKERS):
-        raise SceneError(f"workers: a whole number from 1 to {MAX_WORKERS} {what} (or None: all cores), got "
+        raise SceneError(f"workers: from 1 to {MAX_WORKERS} {what} (a whole number, or None: all cores), got "
                          f"{workers!r}")
 
 

@@ -217,3 +217,15 @@ def test_a_model_naming_a_pipe_or_a_device_is_refused_before_mujoco_reads_it(tmp
         assert main(["run", "--scene", str(tmp_path / f"{name}.toml"), "--quiet"]) == 2
         err = capsys.readouterr().err
         assert re.search(message, err) and len(err.strip().splitlines()) == 1, err
+
+
+def test_a_control_table_is_read_as_every_file_is(tmp_path):
+    # read with open() once: a binary table ended in a raw UnicodeDecodeError, a huge one was read whole
+    from finrft.experiments.user_model import read_table
+    binary = tmp_path / "ctrl.csv"
+    binary.write_bytes(bytes(range(128, 256)) * 4)
+    for path, message in ((binary, "control.0.table .*is not a text file"),
+                          ("/dev/zero", "control.0.table /dev/zero is not a regular file"),
+                          (tmp_path / "none.csv", "cannot read control.0.table .*none.csv")):
+        with pytest.raises(finrft.SceneError, match=message):
+            read_table(str(path), "control.0")

@@ -194,6 +194,7 @@ def map_jobs(fn: Callable[[T], R], jobs: Sequence[T], *, workers: int | None = N
     generations of an optimisation, or a Dask client's executor); without it a local pool of ``workers``
     processes (default: all cores) is made for this call, or the jobs run in this process when ``workers`` is 1.
     """
+    check_workers(workers)  # also where the jobs are too few to need a pool
     jobs = list(jobs)
     results: list[R] = []
     with pool_for(executor, 1 if len(jobs) <= 1 else workers) as pool:

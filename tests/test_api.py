@@ -164,6 +164,7 @@ def test_python_backend_runs_in_threads_as_they_run_alone():
     (lambda: finrft.run_experiments([finrft.PlateTest(finrft.Drive())]), "every job is an .experiment, scene. pair"),
     (lambda: finrft.map_jobs(abs, [1, 2], workers="2"), "workers: from 1 to 1024 processes"),
     (lambda: finrft.map_jobs(abs, [1, 2], workers=2.5), "workers: from 1 to 1024"),
+    (lambda: finrft.map_jobs(abs, [1], workers=-1), "workers: from 1 to 1024"),
     (lambda: finrft.simulate(finrft.Scene(), finrft.Drive(stroke=0.01), max_error=0.5),
      "max_error must be a finrft.convergence.ErrorLimits"),
     (lambda: finrft.convergence.ErrorLimits(angle_deg=float("nan")), "max_error angle_deg must be finite"),

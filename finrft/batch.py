@@ -34,7 +34,7 @@ import mujoco
 import numpy as np
 
 from . import geometry, laws, methods, native
-from .convergence import ErrorLimits, SimulationUnstable
+from .convergence import ErrorLimits, SimulationUnstable, check_limits
 from .drive import Drive
 from .errors import SceneError
 from .experiment import Experiment, Result, run
@@ -169,11 +169,18 @@ def _detached_resource_tracker() -> None:
 MAX_WORKERS = 1024
 
 
+def check_workers(workers: Any, what: str = "processes") -> None:
+    """SceneError unless ``workers`` is None (all cores) or a whole number from 1 to MAX_WORKERS."""
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, (int, np.integer))
+                                or not 1 <= workers <= MAX_WORKERS):
+        raise SceneError(f"workers: from 1 to {MAX_WORKERS} {what} (a whole number, or None: all cores), got "
+                         f"{workers!r}")
+
+
 def local_executor(workers: int | None = None) -> ProcessPoolExecutor:
     """A process pool for `map_jobs`; spawned workers, so nothing of the parent's MuJoCo state is inherited, that
     leave Ctrl-C to the parent and end with it. SceneError for more than MAX_WORKERS workers."""
-    if workers is not None and not 1 <= workers <= MAX_WORKERS:
-        raise SceneError(f"workers: from 1 to {MAX_WORKERS} processes, got {workers}")
+    check_workers(workers)
     _detached_resource_tracker()
     return ProcessPoolExecutor(max_workers=workers or default_workers(), mp_context=_QuietSpawn(),
                                initializer=_ignore_interrupt)
@@ -187,6 +194,7 @@ def map_jobs(fn: Callable[[T], R], jobs: Sequence[T], *, workers: int | None = N
     generations of an optimisation, or a Dask client's executor); without it a local pool of ``workers``
     processes (default: all cores) is made for this call, or the jobs run in this process when ``workers`` is 1.
     """
+    check_workers(workers)  # also where the jobs are too few to need a pool
     jobs = list(jobs)
     results: list[R] = []
     with pool_for(executor, 1 if len(jobs) <= 1 else workers) as pool:
@@ -211,6 +219,7 @@ def map_jobs(fn: Callable[[T], R], jobs: Sequence[T], *, workers: int | None = N
 def pool_for(executor: Executor | None = None, workers: int | None = None) -> Iterator[Executor | None]:
     """The executor a block should use: the given one; None (run in this process) when ``workers`` is 1; else a
     local pool of ``workers`` processes that the block owns and shuts down."""
+    check_workers(workers)
     if executor is not None or workers == 1:
         yield executor
         return
@@ -236,11 +245,16 @@ def run_experiments(jobs: Sequence[tuple[Experiment, Any]], *, max_error: ErrorL
                     **options) -> list[Result]:
     """`experiment.run` of every (experiment, scene) job with ``max_error``; the runs in order (options as
     `map_jobs`)."""
+    check_limits(max_error)
+    if isinstance(jobs, (str, bytes)) or not all(isinstance(job, tuple) and len(job) == 2 for job in jobs):
+        raise SceneError(f"run_experiments: every job is an (experiment, scene) pair, got {jobs!r:.60}")
     return map_jobs(_run, [(experiment, scene, max_error) for experiment, scene in jobs], **options)
 
 
 def run_many(jobs: Sequence[tuple[Scene, Drive]], **options) -> list[Result]:
     """Simulate every (scene, drive) plate test and return the runs in order (options as `run_experiments`)."""
+    if isinstance(jobs, (str, bytes)) or not all(isinstance(job, tuple) and len(job) == 2 for job in jobs):
+        raise SceneError(f"run_many: every job is a (finrft.Scene, finrft.Drive) pair, got {jobs!r:.60}")
     return run_experiments([(PlateTest(drive), scene) for scene, drive in jobs], **options)
 
 
@@ -263,7 +277,7 @@ class PlateRollouts:
     but copies every step's state out, which cost it 5 % of a plate's steps.)
 
     Every job of a batch must share its drive, ``sim.dt`` and ``sim.record_dt``, and step explicitly with the native
-    backend (a Python force callback would hold the GIL); ValueError otherwise. Jobs may differ in anything else:
+    backend (a Python force callback would hold the GIL); SceneError otherwise. Jobs may differ in anything else:
     a thread steps jobs of any law on one MjData per size, as the plugin takes each job's law from its model. A job
     that differs from one of the last batch's only in the hinges' stiffness and damping (`RETUNABLE` of
     finrft.experiments.plate) reuses its compiled model. A run that goes unstable raises SimulationUnstable.
@@ -272,6 +286,7 @@ class PlateRollouts:
     """
 
     def __init__(self, workers: int | None = None) -> None:
+        check_workers(workers, "threads")
         self.threads = workers or default_workers()
         self._pool = ThreadPoolExecutor(self.threads)
         self._plates: dict[tuple, list[PlateModel]] = {}  # the last batch's models, by retune key
@@ -294,12 +309,16 @@ class PlateRollouts:
         jobs = list(jobs)
         if not jobs:
             return []
+        for job in jobs:
+            if not (isinstance(job, tuple) and len(job) == 2 and isinstance(job[0], Scene)
+                    and isinstance(job[1], Drive)):
+                raise SceneError(f"rollout_plates: every job is a (finrft.Scene, finrft.Drive) pair, got {job!r:.60}")
         scene0, drive = jobs[0]
         for scene, other in jobs:
             if other != drive or (scene.sim.dt, scene.sim.record_dt) != (scene0.sim.dt, scene0.sim.record_dt):
-                raise ValueError("rollout_plates: every job needs the same drive, sim.dt and sim.record_dt")
+                raise SceneError("rollout_plates: every job needs the same drive, sim.dt and sim.record_dt")
             if methods.get(scene.sim.method).stepper or scene.sim.backend != "native":
-                raise ValueError("rollout_plates: every job needs sim.method 'explicit' and sim.backend 'native'")
+                raise SceneError("rollout_plates: every job needs sim.method 'explicit' and sim.backend 'native'")
         test = PlateTest(drive)
         plates = self._models(test, [scene for scene, _ in jobs])
         steps, starts, samples = schedule(drive, scene0.sim.dt, scene0.sim.record_dt)

@@ -25,6 +25,7 @@ the absolute positions are reported, not bounded, as their scale is the scene's.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 import time
@@ -36,6 +37,7 @@ import numpy as np
 from . import methods
 # The run's failures, importable from here as before (their home is finrft.errors).
 from .errors import InaccurateResult, SceneError, SimulationFailed, SimulationUnstable
+from .drive import real
 from .scene import ExplicitSim
 
 COARSER = 5
@@ -68,6 +70,14 @@ class ErrorLimits:
     # times: the example swimmer at 1 ms is estimated at 2.4 % and its mean speed is 1.1 % from a run at 1/8 of the
     # step (`finrft bench robots` measures each example's); 5 % keeps the true error near the 2 % robots need.
     position_percent: float = 5.0
+
+    def __post_init__(self) -> None:
+        units = {"angle_deg": "degrees", "eta_points": "points", "position_percent": "percent"}
+        for name, unit in units.items():
+            value = real(f"max_error {name}", getattr(self, name), unit)
+            if not value > 0:
+                raise SceneError(f"max_error {name} must be > 0 {unit}, got {value!r}")
+            object.__setattr__(self, name, value)
 
     @classmethod
     def uniform(cls, value: float) -> ErrorLimits:
@@ -124,10 +134,21 @@ def _companion(scene: Any, ratio: float, record_interval: float) -> tuple[Any, s
     else:
         updates = {"sim.dt": sim.dt * ratio}
         label = f"dt {sim.dt * ratio:g} s"
-    # Not scene.replace, which validates: a tolerance above the users' limit is the coarse companion's purpose.
-    sim = dataclasses.replace(scene.sim, **{k.split(".")[1]: v for k, v in updates.items()},
-                              record_dt=record_interval)
-    return dataclasses.replace(scene, sim=sim), label
+    # Not scene.replace, nor dataclasses.replace of the scene, which validate: a tolerance above the users' limit is
+    # the coarse companion's purpose.
+    companion = copy.copy(scene)
+    object.__setattr__(companion, "sim", dataclasses.replace(scene.sim, **{k.split(".")[1]: v
+                                                                           for k, v in updates.items()},
+                                                             record_dt=record_interval))
+    return companion, label
+
+
+def check_limits(limits: Any, optional: bool = True) -> None:
+    """SceneError unless ``limits`` is an `ErrorLimits` (or, where ``optional``, None: the estimate reported only)."""
+    if not isinstance(limits, ErrorLimits) and not (optional and limits is None):
+        raise SceneError(f"max_error must be a finrft.convergence.ErrorLimits (ErrorLimits.uniform(x): one number "
+                         f"for all, as --max-error x){' or None' if optional else ''}, got {type(limits).__name__} "
+                         f"{limits!r:.40}")
 
 
 def record_every(dt: float, record_dt: float) -> int:
@@ -146,6 +167,7 @@ def checked(build: Callable[[Any], M], run_once: Callable[[Any, M, Callable[[flo
     the adaptive method's companion (another tolerance on the same step) reuses the run's. A coarse companion can
     leave the range where the error falls with the step (an explicit feedback that needs the run's step, a stroke
     barely resolved): an estimate above the limit is confirmed by the fine companion before the run is refused."""
+    check_limits(limits)
     models: dict[float, M] = {}
 
     def once(scene: Any, progress: Callable[[float], None] | None, companion: bool) -> R:

@@ -197,6 +197,9 @@ def run(experiment: Experiment, scene: Any, *, progress: Callable[[float], None]
     and InaccurateResult when the estimate exceeds ``max_error`` (None: report it only). ``estimate_error=False``
     skips the estimate, for studies that measure the error themselves. A scene whose law can feed energy in (the
     paper's model) runs, with a warning once per process (`laws.FeedsEnergy`)."""
+    if not callable(getattr(experiment, "build", None)) or not callable(getattr(experiment, "drive_for", None)):
+        raise SceneError(f"run: the experiment must be a finrft.Experiment (PlateTest, Swim, UserModel, Intrusion, "
+                         f"Wheel), got {type(experiment).__name__} {experiment!r:.60}")
     expected = getattr(experiment, "scene_type", Sections)
     if not isinstance(scene, expected):
         raise SceneError(f"{experiment.name}: the scene must be a finrft.{expected.__name__} (from finrft.preset or "

@@ -15,6 +15,7 @@ import errno
 import os
 import re
 import stat
+import tempfile
 import tomllib
 import uuid
 from datetime import datetime, timezone
@@ -74,6 +75,32 @@ def read_toml(text: str, origin: str) -> dict[str, Any]:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise SceneError(f"{origin}: malformed TOML: {exc}") from None
+
+
+def check_target(path: Any, what: str = "", error: type[SceneError] = SceneError) -> Path:
+    """``path`` as a Path where a file can be written: ``error`` (naming it, after ``what``: the flag) when it is
+    no path, a directory, or in a folder that is missing or cannot be written. Whether a file is there already is
+    the caller's to decide."""
+    if not isinstance(path, (str, os.PathLike)):
+        raise error(f"{what or 'an output file'} must be a path, got {type(path).__name__} {path!r:.60}")
+    name = f"{what} {path}" if what else str(path)
+    target = Path(path)
+    check_folder(target.parent, name, error)
+    if target.is_dir():
+        raise error(f"{name} is a directory: give a file name")
+    return target
+
+
+def check_folder(folder: Path, name: str, error: type[SceneError] = SceneError) -> None:
+    """``error`` starting with ``name`` unless files can be written in ``folder``."""
+    if not folder.is_dir():
+        raise error(f"{name}: {folder} is not a directory" if folder.exists() else
+                    f"{name}: directory {folder} does not exist")
+    try:  # a file made and removed, not os.access: that says yes to root, and to read-only file systems
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as exc:
+        raise error(f"{name}: cannot write in {folder}: {exc.strerror}") from None
 
 
 # Whether `atomic_path` may replace a file that exists, where its caller does not say: the command line's writers
@@ -173,7 +200,10 @@ def locked(path: str | Path, what: str) -> Iterator[None]:
     target = Path(path)
     lock = target.with_name(f".{target.name}.lock")
     while True:
-        fd = os.open(lock, os.O_RDWR | os.O_CREAT | getattr(os, "O_CLOEXEC", 0), 0o666)
+        try:
+            fd = os.open(lock, os.O_RDWR | os.O_CREAT | getattr(os, "O_CLOEXEC", 0), 0o666)
+        except OSError as exc:  # a missing or read-only folder: the file itself could not be written either
+            raise SceneError(f"cannot lock {what} {path}: {exc.strerror or exc}") from None
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError as exc:

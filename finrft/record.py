@@ -11,7 +11,7 @@ import json
 import os
 import uuid
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 import h5py
 import numpy as np
@@ -21,7 +21,7 @@ import rerun.blueprint as rrb
 from . import geometry, laws
 from .errors import SceneError
 from .experiment import DISPLAY, Result
-from .files import atomic_path, provenance
+from .files import atomic_path, check_target, provenance
 from .scene import to_toml
 
 # Written by write_h5 itself; extra_attrs may not replace them, or a file could contradict its own data.
@@ -42,6 +42,7 @@ def _provenance(scene: Any, summary: dict[str, Any]) -> dict[str, Any]:
 def check_new(path: str | Path, force: bool) -> None:
     """SceneError when ``path`` exists (a dangling link too) and ``force`` is not given: a writer replaces a file
     only when asked to, as the command line does with --force."""
+    check_target(path)
     if not force and os.path.lexists(path):
         raise SceneError(f"{path} exists: choose a new file, or pass force=True to replace it")
 
@@ -60,13 +61,20 @@ def write_h5(run: Result, path: str | Path, *, extra_attrs: dict[str, Any] | Non
     or "" (also for a scene without one). ``extra_attrs`` are added to the root attributes. SceneError when the
     file exists, unless ``force``."""
     _check_result(run)
+    if extra_attrs is not None and not isinstance(extra_attrs, Mapping):
+        raise SceneError(f"extra_attrs must be a mapping of names to values, got {type(extra_attrs).__name__}")
     extra = dict(extra_attrs or {})
+    for key, value in extra.items():
+        if not isinstance(key, str) or np.asarray(value).dtype.kind not in "biufUS":
+            raise SceneError(f"extra_attrs[{key!r}] must be named by a string and hold a string, a number or an "
+                             f"array of them (an HDF5 attribute), got {type(value).__name__}")
     clash = sorted(set(extra) & set(_ROOT_ATTRS))
     if clash:
         raise SceneError(f"extra_attrs may not replace {', '.join(clash)}")
     check_new(path, force)
     experiment = run.experiment
-    with atomic_path(path) as tmp, h5py.File(tmp, "w", track_order=True) as f:
+    # Without force, a file that another process wrote since the check is kept: one of two writers refuses.
+    with atomic_path(path, exclusive=None if force else True) as tmp, h5py.File(tmp, "w", track_order=True) as f:
         t = f.create_dataset("time", data=run.time)
         t.attrs.update(units="s", description="simulated time of each sample")
         t.make_scale("time")
@@ -125,7 +133,7 @@ def write_rrd(run: Result, path: str | Path, *, force: bool = False) -> None:
     the timeline ``sim_time``. SceneError when the file exists, unless ``force``."""
     _check_result(run)
     check_new(path, force)
-    with atomic_path(path) as tmp:
+    with atomic_path(path, exclusive=None if force else True) as tmp:
         rec = _stream(tmp)
         try:
             rec.log("scene", rr.TextDocument(to_toml(run.scene), media_type=rr.MediaType.TEXT), static=True)

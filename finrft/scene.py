@@ -200,6 +200,9 @@ EXPLICIT_ONLY = methods.explicit()
 
 
 class Sections:
+    def __post_init__(self) -> None:
+        schema.check_sections(self)
+
     def to_dict(self) -> dict[str, dict[str, Any]]:
         return dataclasses.asdict(self)
 
@@ -225,6 +228,7 @@ class Scene(Sections):
     sim: Sim = field(default_factory=Sim)
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         check_chain_law(self)
         check_sim(self.sim)
 
@@ -256,6 +260,7 @@ class UserScene(Sections):
     sim: RobotSim = field(default_factory=RobotSim)
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         check_sim(self.sim)
         check_medium(self.medium)
 
@@ -386,6 +391,9 @@ def load_scene(path: str | Path | None = None, *, preset_name: str = "physical",
                 if isinstance(given, str) and given and not Path(given).is_absolute():
                     table[name] = str(path.parent / given)
         scene = scene_from_dict(data, cls)
+    if overrides is not None and not isinstance(overrides, Mapping):
+        raise SceneError(f"overrides must map dotted keys to values, e.g. {{\"sim.dt\": 1e-4}}, got "
+                         f"{type(overrides).__name__} {overrides!r:.60}")
     return scene.replace(**dict(overrides or {}))
 
 

@@ -144,6 +144,37 @@ def check(section_name: str, f: dataclasses.Field, value: Any) -> Any:
     return value
 
 
+def check_sections(scene: Any) -> None:
+    """Check a scene however it was made (``Scene(sim=Sim(dt=-1.0))`` as well as `from_dict`): each section of its
+    declared class, each entry of its type, choices and bounds; the canonical values (a float for an int, a
+    choice's spelling) are set in place. SceneError naming the key otherwise."""
+    cls = type(scene)
+    for section_name, section_cls in sections(cls).items():
+        value = getattr(scene, section_name)
+        if section_name in arrays(cls):
+            if not isinstance(value, (tuple, list)):
+                raise SceneError(f"[[{section_name}]] must be a tuple of {section_cls.__name__} entries, got "
+                                 f"{type(value).__name__} {value!r:.60}")
+            value = tuple(_checked(f"{section_name}.{i}", section_cls, entry) for i, entry in enumerate(value))
+        else:
+            value = _checked(section_name, section_cls, value)
+        object.__setattr__(scene, section_name, value)
+
+
+def _checked(where: str, section_cls: type, value: Any) -> Any:
+    """One section of a scene (or entry of an array of tables), its entries checked (`check`)."""
+    if type(value) is not section_cls:  # a subclass would carry keys the scene does not have
+        raise SceneError(f"[{where}] must be a {section_cls.__name__} section, got {type(value).__name__} "
+                         f"{value!r:.60}")
+    changes = {}
+    for f in dataclasses.fields(section_cls):
+        given = getattr(value, f.name)
+        canonical = check(where, f, given)
+        if type(canonical) is not type(given) or canonical != given:
+            changes[f.name] = canonical
+    return dataclasses.replace(value, **changes) if changes else value
+
+
 def from_dict(data: Mapping[str, Any], cls: type) -> Any:
     """Validate a nested mapping (as read from TOML) into a scene of class ``cls``; missing keys take the
     schema's defaults."""
@@ -226,6 +257,10 @@ def parse_override(text: str, cls: type) -> tuple[str, Any]:
 
 def to_toml(scene: Any) -> str:
     """The full resolved scene as TOML, with units as comments, so a user can copy and edit it."""
+    if not dataclasses.is_dataclass(scene) or isinstance(scene, type) or not all(
+            dataclasses.is_dataclass(section) for section in sections(type(scene)).values()):
+        raise SceneError(f"to_toml: a scene is written (finrft.Scene, RobotScene, ...), got {type(scene).__name__} "
+                         f"{scene!r:.60}")
     lines = ["# finrft scene: SI units throughout"]
     many = arrays(type(scene))
     for section_name, cls in sections(type(scene)).items():

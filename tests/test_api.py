@@ -154,3 +154,52 @@ def test_python_backend_runs_in_threads_as_they_run_alone():
     assert all(np.array_equal(a, b) for a, b in zip(alone, threaded))
     assert len({a[-1, -1] for a in alone}) == len(jobs)  # the stiffness shows: each run had its own forces
     assert mujoco.get_mjcb_passive() is None and mujoco.get_mjcb_control() is None
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda: finrft.run(None, finrft.Scene()), "the experiment must be a finrft.Experiment"),
+    (lambda: finrft.load_scene(overrides="sim.dt=1"), "overrides must map dotted keys to values"),
+    (lambda: finrft.to_toml(3), "to_toml: a scene is written"),
+    (lambda: finrft.run_many("abc"), r"every job is a \(finrft.Scene, finrft.Drive\) pair"),
+    (lambda: finrft.run_experiments([finrft.PlateTest(finrft.Drive())]), "every job is an .experiment, scene. pair"),
+    (lambda: finrft.map_jobs(abs, [1, 2], workers="2"), "workers: from 1 to 1024 processes"),
+    (lambda: finrft.map_jobs(abs, [1, 2], workers=2.5), "workers: from 1 to 1024"),
+    (lambda: finrft.map_jobs(abs, [1], workers=-1), "workers: from 1 to 1024"),
+    (lambda: finrft.simulate(finrft.Scene(), finrft.Drive(stroke=0.01), max_error=0.5),
+     "max_error must be a finrft.convergence.ErrorLimits"),
+    (lambda: finrft.convergence.ErrorLimits(angle_deg=float("nan")), "max_error angle_deg must be finite"),
+    (lambda: finrft.convergence.ErrorLimits.uniform(0), "max_error angle_deg must be > 0 degrees"),
+    (lambda: finrft.convergence.ErrorLimits(eta_points="1"), "max_error eta_points must be a number"),
+    (lambda: finrft.optimize(None), "the scene must be a finrft.RobotScene"),
+    (lambda: finrft.optimize(finrft.RobotScene(), variables="gait.theta1"), "a list of finrft.Variable"),
+    (lambda: finrft.optimize(finrft.RobotScene(), max_error=None), "max_error must be"),
+    (lambda: finrft.optimize(finrft.RobotScene(), variables=[finrft.Variable("gait.theta1", "0", 1.0)]),
+     "bounds of gait.theta1 must be numbers"),
+    (lambda: finrft.resolve_params("b,k"), "the fitted parameters must be a list of names"),
+])
+def test_the_api_refuses_wrong_kinds_of_argument_in_the_family(call, message):
+    # each of these once ended in a raw AttributeError, TypeError or ValueError from deep inside
+    with pytest.raises(finrft.SceneError, match=message):
+        call()
+
+
+def test_fit_checks_its_data_and_variables_as_optimize_does(tmp_path):
+    from finrft.studies.fit import simulated_drag
+    scene = finrft.preset("physical")
+    drag = simulated_drag(scene, 0.03, 0.005)
+    four = simulated_drag(scene.replace(**{"plate.segments": 4}), 0.03, 0.005)
+    damping = finrft.Variable("plate.damping", 0.01, 0.1)
+    for data, variables, message in (
+            ([], [damping], "at least one drag to fit"), (drag, [damping], "a list of drags"),
+            ([drag, four], [damping], "has 4 segments, the scene 3"),
+            ([drag], [finrft.Variable("plate.damping", 0.1, 0.01)], r"lower \(0.1\) must be below upper \(0.01\)"),
+            ([drag], [finrft.Variable("plate.damping", 0.1, 0.1)], "must be below upper"),
+            ([drag], [damping, damping], "plate.damping is listed twice"), ([drag], [], "at least one variable")):
+        # the inverted bounds and the twice-listed key once ran a search to the end, exit 0
+        with pytest.raises(finrft.SceneError, match=message):
+            finrft.fit(scene, data, variables, budget=2, workers=1)
+    with pytest.raises(finrft.SceneError, match="the scene must be a finrft.Scene"):
+        finrft.fit(finrft.RobotScene(), [drag], [damping], budget=2, workers=1)
+    with pytest.raises(finrft.SceneError, match="cannot lock search log .*No such file"):
+        finrft.fit(scene, [drag], [damping], budget=2, workers=1, log=tmp_path / "none" / "fit.h5")
+    assert not any(tmp_path.iterdir())

@@ -79,6 +79,7 @@ BAD = [
     (["drag", "--set", "sim.integrator=verlet"], "sim.integrator"),
     (["drag", "--set", "novalue"], "KEY=VALUE"),
     (["rotate", "--omega", "abc"], "--omega"),
+    (["drag", "--speed", "inf"], "--speed: must be a finite number (mm/s), got inf"),
     (["drag", "--scene", "missing.toml"], "missing.toml"),
     (["drag", "--scene", "missing.toml", "--preset", "physical"], "--preset"),
     (["swim", "--scene", "missing.toml", "--preset", "paper"], "--preset"),

@@ -11,6 +11,7 @@ import rerun as rr
 from rerun.chunk import RrdReader
 
 from finrft import record
+from finrft.errors import SceneError
 from finrft.drive import Drive
 from finrft.scene import preset, to_toml
 from finrft.experiment import Result
@@ -102,6 +103,35 @@ def test_extra_attrs_cannot_replace_the_schema(runs, tmp_path):
     with pytest.raises(ValueError, match="schema"):
         record.write_h5(runs["drag"], tmp_path / "run.h5", extra_attrs={"schema": "other"})
     assert not any(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("write", [record.write_h5, record.write_rrd])
+def test_a_file_that_cannot_be_written_is_refused_before_writing(runs, write, tmp_path):
+    # as the command line's check_output: once raw FileNotFoundError, IsADirectoryError or RuntimeError (rerun)
+    for target, message in ((tmp_path / "none" / "run.x", "directory .*none does not exist"),
+                            (tmp_path, "is a directory: give a file name"), (3, "must be a path, got int 3")):
+        with pytest.raises(SceneError, match=message):
+            write(runs["drag"], target, force=True)
+    assert not any(tmp_path.iterdir())
+
+
+def test_extra_attrs_are_what_hdf5_holds(runs, tmp_path):
+    for extra, message in (([1], "extra_attrs must be a mapping"), ({"x": object()}, r"extra_attrs\['x'\] must be"),
+                           ({1: "a"}, "named by a string")):
+        with pytest.raises(SceneError, match=message):
+            record.write_h5(runs["drag"], tmp_path / "run.h5", extra_attrs=extra)
+    assert not any(tmp_path.iterdir())
+
+
+def test_of_two_writers_without_force_one_refuses(runs, tmp_path, monkeypatch):
+    # the check that the file is absent passes for both; the second to finish must not replace the first's file
+    path = tmp_path / "run.h5"
+    monkeypatch.setattr(record, "check_new", lambda *args: None)
+    record.write_h5(runs["drag"], path)
+    first = path.read_bytes()
+    with pytest.raises(SceneError, match="appeared while this ran"):
+        record.write_h5(runs["rotate"], path)
+    assert path.read_bytes() == first and [p.name for p in tmp_path.iterdir()] == ["run.h5"]
 
 
 @pytest.mark.parametrize("name", ["drag", "rotate"])

@@ -6,6 +6,8 @@ import mujoco
 import numpy as np
 import pytest
 
+from finrft.errors import SceneError
+
 from finrft import batch, native
 from finrft.convergence import SimulationUnstable
 from finrft.drive import Drive
@@ -102,10 +104,16 @@ def test_untimed_turns_mujocos_timer_off_and_back():
 
 def test_rollout_refuses_what_it_cannot_step():
     scene, drive = preset("paper"), Drive(speed=0.03, stroke=0.2)
-    with pytest.raises(ValueError, match="same drive"):
+    with pytest.raises(SceneError, match="same drive"):
         batch.rollout_plates([(scene, drive), (scene, Drive(speed=0.01, stroke=0.2))])
-    with pytest.raises(ValueError, match="native"):
+    with pytest.raises(SceneError, match="native"):
         batch.rollout_plates([(scene.replace(**{"sim.backend": "python"}), drive)])
+    # the family of every bad argument: a job that is no (scene, drive) pair, threads that cannot be
+    with pytest.raises(SceneError, match=r"every job is a \(finrft.Scene, finrft.Drive\) pair, got \('x'"):
+        batch.rollout_plates([("x", drive)], workers=1)
+    for workers in (0, -1, "2", 2.5, True):
+        with pytest.raises(SceneError, match="workers: from 1 to 1024 threads"):
+            batch.rollout_plates([(scene, drive)], workers=workers)
 
 
 def test_rollout_jobs_with_other_laws_step_with_their_own():

@@ -93,3 +93,24 @@ def test_bad_input_is_one_error_family():
     with pytest.raises(UsageError, match="give --scene s.toml or --preset paper, not both") as caught:
         preset_name(argparse.Namespace(scene="s.toml", preset="paper"))
     assert isinstance(caught.value, SceneError)
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda: Scene(sim=dataclasses.replace(Scene().sim, dt=-1.0)), r"sim.dt must be > 0 s, got -1.0"),
+    (lambda: Scene(sim=dataclasses.replace(Scene().sim, dt=float("nan"))), "sim.dt must be finite"),
+    (lambda: Scene(plate=dataclasses.replace(Scene().plate, segments=0)), "plate.segments must be >= 1"),
+    (lambda: Scene(plate="x"), r"\[plate\] must be a Plate section, got str 'x'"),
+    (lambda: UserScene(sim=Scene().sim), r"\[sim\] must be a RobotSim section, got Sim"),
+    (lambda: UserScene(drive="x"), r"\[\[drive\]\] must be a tuple of JointDrive entries"),
+    (lambda: RobotScene(sim=dataclasses.replace(RobotScene().sim, method="nope")), "sim.method = 'nope' is not"),
+    (lambda: IntrusionScene(sim=dataclasses.replace(IntrusionScene().sim, record_dt=0.0)), "sim.record_dt must be >")])
+def test_a_scene_built_directly_is_checked_as_one_read_from_toml(make, message):
+    # The sections are plain dataclasses: Scene(sim=Sim(dt=-1.0)) once ran (a plate of 0 segments ran to exit 0)
+    with pytest.raises(SceneError, match=message):
+        make()
+
+
+def test_a_scene_built_directly_takes_the_canonical_values():
+    scene = Scene(sim=dataclasses.replace(Scene().sim, dt=1, integrator="Euler", method="explicit"))
+    assert type(scene.sim.dt) is float and scene.sim.integrator == "euler"
+    assert scene == scene_from_dict({"sim": {"dt": 1, "integrator": "Euler", "method": "explicit"}})

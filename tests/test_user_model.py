@@ -195,3 +195,37 @@ def test_failures_advise_only_what_the_scene_allows(scene):
         for method in re.findall(r"sim\.method = '([\w-]+)'", text):
             scene.replace(**{"sim.method": method})  # raises SceneError for a method the scene refuses
         assert "rft." not in text  # no [rft] section here
+
+
+def test_a_model_naming_a_pipe_or_a_device_is_refused_before_mujoco_reads_it(tmp_path, capsys):
+    # MuJoCo reads an MJCF's includes and meshes itself: a mesh that is a named pipe once hung `finrft run` for ever
+    import os
+    box = '<worldbody><body name="b"><freejoint/><geom type="box" size=".01 .01 .01"/></body></worldbody>'
+    os.mkfifo(tmp_path / "pipe.stl")
+    (tmp_path / "meshes").mkdir()
+    os.mkfifo(tmp_path / "meshes" / "deep.stl")
+    (tmp_path / "part.xml").write_text('<mujoco><asset><mesh name="d" file="deep.stl"/></asset></mujoco>')
+    cases = {"pipe.xml": ('<mujoco><asset><mesh name="m" file="pipe.stl"/></asset>' + box + '</mujoco>',
+                          r"model asset \(mesh\) .*pipe.stl is not a regular file"),
+             "device.xml": ('<mujoco><include file="/dev/zero"/>' + box + '</mujoco>',
+                            "model file /dev/zero is not a regular file"),
+             "nested.xml": ('<mujoco><compiler meshdir="meshes"/><include file="part.xml"/>' + box + '</mujoco>',
+                            r"model asset \(mesh\) .*deep.stl is not a regular file")}
+    for name, (xml, message) in cases.items():
+        (tmp_path / name).write_text(xml)
+        (tmp_path / f"{name}.toml").write_text(f'[model]\npath = "{name}"\nbodies = ["b"]\n[sim]\nduration = 0.01\n')
+        assert main(["run", "--scene", str(tmp_path / f"{name}.toml"), "--quiet"]) == 2
+        err = capsys.readouterr().err
+        assert re.search(message, err) and len(err.strip().splitlines()) == 1, err
+
+
+def test_a_control_table_is_read_as_every_file_is(tmp_path):
+    # read with open() once: a binary table ended in a raw UnicodeDecodeError, a huge one was read whole
+    from finrft.experiments.user_model import read_table
+    binary = tmp_path / "ctrl.csv"
+    binary.write_bytes(bytes(range(128, 256)) * 4)
+    for path, message in ((binary, "control.0.table .*is not a text file"),
+                          ("/dev/zero", "control.0.table /dev/zero is not a regular file"),
+                          (tmp_path / "none.csv", "cannot read control.0.table .*none.csv")):
+        with pytest.raises(finrft.SceneError, match=message):
+            read_table(str(path), "control.0")

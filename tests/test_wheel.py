@@ -279,3 +279,13 @@ def test_compare_counts_the_beta_subsets():
     stats = compare(conditions, fake)
     assert stats["beta_le_60"]["Fx_N"]["n"] == 45 and stats["all"]["Fx_N"]["n"] == 63
     assert stats["all"]["Fz_N"]["rmse"] == 0 and stats["all"]["Fz_N"]["r"] == pytest.approx(1)
+
+
+def test_a_conditions_file_that_is_no_text_is_refused_in_one_line(tmp_path, capsys):
+    # read with open() once: a binary file ended in a UnicodeDecodeError traceback (exit 1), a device read on
+    binary = tmp_path / "binary.csv"
+    binary.write_bytes(bytes(range(128, 256)) * 4)
+    for path, message in ((binary, "is not a text file"), ("/dev/zero", "is not a regular file")):
+        assert main(["wheel", "--data", str(path), "--quiet"]) == 2
+        err = capsys.readouterr().err
+        assert message in err and len(err.strip().splitlines()) == 1, err

@@ -8,14 +8,13 @@ import contextlib
 import json
 import os
 import sys
-import tempfile
 from pathlib import Path
 from typing import Any, Callable, Iterator, Sequence
 
 import numpy as np
 
 from ..errors import SimulationFailed, UsageError
-from ..files import atomic_path
+from ..files import atomic_path, check_folder, check_target
 
 
 class Interrupted(Exception):
@@ -35,9 +34,7 @@ def check_output(path: str | None, suffix: str, flag: str, force: bool, *, appen
     target = Path(path)
     if target.suffix != suffix:
         raise UsageError(f"{flag} {path}: the file name must end in {suffix}")
-    _check_writable(target.parent, flag, path)
-    if target.is_dir():
-        raise UsageError(f"{flag} {path} is a directory: give a file name")
+    check_target(target, flag, UsageError)
     if os.path.lexists(target) and not (force or append):  # a symbolic link too, even one to nothing
         raise UsageError(f"{flag} {path} exists: choose a new file, or pass --force to replace it")
 
@@ -56,14 +53,7 @@ def check_output_dir(path: str, flag: str, force: bool) -> None:
 
 
 def _check_writable(folder: Path, flag: str, path: str) -> None:
-    if not folder.is_dir():
-        raise UsageError(f"{flag} {path}: {folder} is not a directory" if folder.exists() else
-                         f"{flag} {path}: directory {folder} does not exist")
-    try:  # a file made and removed, not os.access: that says yes to root, and to read-only file systems
-        with tempfile.TemporaryFile(dir=folder):
-            pass
-    except OSError as exc:
-        raise UsageError(f"{flag} {path}: cannot write in {folder}: {exc.strerror}") from None
+    check_folder(folder, f"{flag} {path}", UsageError)
 
 
 def write_text(path: str, text: str) -> None:

@@ -4,9 +4,11 @@ armature and the named bodies (and geoms) the medium; `JointTrial` runs one join
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Sequence
+from xml.etree import ElementTree
 
 import mujoco
 import numpy as np
@@ -14,6 +16,7 @@ import numpy as np
 from .. import laws, methods
 from ..attach import Attached, SurfaceForces, attach
 from ..drive import Drive
+from ..files import check_regular, read_text
 from ..models import ARMATURE_RATIO, INTEGRATORS, compile_spec
 from ..scene import Medium, SceneError
 from ..stepping import Prescribed
@@ -48,10 +51,48 @@ def read_spec(path: str) -> mujoco.MjSpec:
         raise SceneError("no model: give the MJCF file (finrft run MODEL.xml, or model.path in the scene)")
     if not Path(path).is_file():
         raise SceneError(f"cannot read model file {path}: no such file")
+    check_model_files(Path(path))
     try:
         return mujoco.MjSpec.from_file(str(path))
     except ValueError as exc:
         raise SceneError(f"model file {path}: {' '.join(str(exc).split())}") from None
+
+
+# The largest file a model may name (a mesh, a texture): far above a detailed robot's meshes.
+MAX_ASSET_BYTES = 2**30
+
+
+def check_model_files(path: Path) -> None:
+    """SceneError unless the MJCF file and every file it names (its includes, recursively, and their meshes,
+    textures, height fields and skins) that exists is a regular file of bounded size, as every file finrft reads:
+    MuJoCo reads them itself, and would wait forever on a named pipe or read a device without end. Where a named
+    file is looked for depends on the compiler's asset folders, so each place it may be is checked."""
+    folder, seen, todo = path.parent, set(), [path]
+    dirs: set[str] = {""}
+    while todo:
+        xml = todo.pop()
+        if xml in seen:
+            continue
+        seen.add(xml)
+        try:
+            root = ElementTree.fromstring(read_text(xml, "model file"))
+        except ElementTree.ParseError:
+            return  # MuJoCo's parser says what is wrong, in its words
+        for compiler in root.iter("compiler"):
+            dirs.update(compiler.get(key) for key in ("meshdir", "texturedir", "assetdir") if compiler.get(key))
+        for element in root.iter():
+            named = element.get("file")
+            if not named:
+                continue
+            if element.tag == "include":
+                todo.append(folder / named)
+                continue
+            for place in {folder / d / named for d in dirs}:
+                try:
+                    info = os.stat(place)
+                except OSError:
+                    continue
+                check_regular(info, place, f"model asset ({element.tag})", MAX_ASSET_BYTES)
 
 
 def driven_joint(spec: mujoco.MjSpec, name: str, key: str = "drive.joint") -> mujoco.MjsJoint:

@@ -19,7 +19,9 @@ def number(unit: str, *, minimum: float = 0.0, inclusive: bool = False, integer:
         except ValueError:
             raise argparse.ArgumentTypeError(f"expected a {'whole ' if integer else ''}number ({unit}), got "
                                              f"'{text}'") from None
-        if not math.isfinite(value) or (value < minimum if inclusive else value <= minimum):
+        if not math.isfinite(value):  # "must be > 0" would not say what is wrong with inf
+            raise argparse.ArgumentTypeError(f"must be a finite number ({unit}), got {text}")
+        if value < minimum if inclusive else value <= minimum:
             raise argparse.ArgumentTypeError(f"must be {'>=' if inclusive else '>'} {minimum:g}{' ' if unit else ''}"
                                              f"{unit}, got {text}")
         return value

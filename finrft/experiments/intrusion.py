@@ -63,6 +63,7 @@ class IntrusionScene(Sections):
     sim: ExplicitSim = field(default_factory=lambda: ExplicitSim(dt=1e-3, record_dt=0.01))
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         check_sim(self.sim)
         check_medium(self.medium)
 

@@ -118,6 +118,7 @@ class RobotScene(Sections):
     sim: Sim = field(default_factory=Sim)
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         check_chain_law(self)
         check_sim(self.sim)
         g = self.gait

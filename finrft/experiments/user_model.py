@@ -16,7 +16,6 @@ import argparse
 import csv
 import math
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any, Callable
 
 import mujoco
@@ -25,6 +24,7 @@ import numpy as np
 from ..attach import attached_bodies
 from ..errors import SimulationFailed, UsageError
 from ..experiment import Compared, Plot, Quantity, Result, run
+from ..files import read_text
 from ..convergence import ErrorLimits
 from ..models import ARMATURE_RATIO, compile_spec, mjcf_path
 from ..scene import Control, JointDrive, SceneError, UserScene, drive_timing, load_scene, parse_override
@@ -85,10 +85,8 @@ def read_table(path: str, where: str) -> tuple[np.ndarray, np.ndarray]:
     """A control table's times (s, increasing) and values; SceneError in one line when missing or ill-formed."""
     if not path:
         raise SceneError(f"{where}.table: give the CSV file (columns time_s,ctrl) of kind = 'table'")
-    if not Path(path).is_file():
-        raise SceneError(f"{where}.table: cannot read {path}: no such file")
-    with open(path, newline="") as f:
-        rows = [row for row in csv.reader(f) if row and any(cell.strip() for cell in row)]
+    text = read_text(path, f"{where}.table")  # whole and bounded: a device or a huge file is refused
+    rows = [row for row in csv.reader(text.splitlines()) if row and any(cell.strip() for cell in row)]
     if not rows or [c.strip() for c in rows[0]] != ["time_s", "ctrl"]:
         raise SceneError(f"{where}.table {path}: the first line must be the header time_s,ctrl")
     try:

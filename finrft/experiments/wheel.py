@@ -32,6 +32,7 @@ from .. import laws
 from ..convergence import ErrorLimits
 from ..errors import SceneError, SimulationFailed, UsageError
 from ..experiment import Compared, Quantity, Result, run
+from ..files import read_text
 from ..models import compile_spec, mjcf_path
 from ..scene import (JointDrive, Medium, Model, RobotSim, Sections, UserScene, check_medium, check_sim, drive_timing,
                      load_scene, parse_override, register_scene)
@@ -86,6 +87,7 @@ class WheelScene(Sections):
     sim: RobotSim = field(default_factory=RobotSim)
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         check_sim(self.sim)
         check_medium(self.medium)
         if self.wheel.grouser_height > 0 and self.wheel.grousers == 0:
@@ -484,29 +486,28 @@ DATA_COLUMNS = ("beta_deg", "sinkage_mm", "Fx_meas_N", "Fy_meas_N", "Fz_meas_N")
 
 def read_conditions(path: str) -> list[Condition]:
     """The rows of a conditions file; SceneError in one line when it is missing or ill-formed."""
-    if not Path(path).is_file():
-        raise SceneError(f"--data {path}: no such file")
-    with open(path, newline="") as f:
-        reader = csv.DictReader(f)
-        columns = set(reader.fieldnames or ())
-        missing = [c for c in DATA_COLUMNS if c not in columns]
-        slip = next((c for c in ("slip_meas_mean", "slip_model") if c in columns), None)
-        if missing or slip is None:
-            raise SceneError(f"--data {path}: needs the columns {', '.join(DATA_COLUMNS)} and slip_meas_mean or "
-                             f"slip_model (missing: {', '.join(missing + ([] if slip else ['slip']))})")
-        rows = []
-        for i, row in enumerate(reader, start=2):
-            try:
-                values = {c: float(row[c]) for c in (*DATA_COLUMNS, slip)}
-            except (TypeError, ValueError):
-                raise SceneError(f"--data {path} line {i}: every one of {', '.join(DATA_COLUMNS)}, {slip} must be "
-                                 f"a number") from None
-            if not all(map(math.isfinite, values.values())) or not -1 <= values[slip] < 1 \
-                    or not 0 <= values["beta_deg"] <= 90 or values["sinkage_mm"] < 0:
-                raise SceneError(f"--data {path} line {i}: needs finite numbers, -1 <= slip < 1, 0 <= beta_deg <= 90, "
-                                 f"sinkage_mm >= 0")
-            rows.append(Condition(math.radians(values["beta_deg"]), values[slip], 1e-3 * values["sinkage_mm"],
-                                  np.array([values["Fx_meas_N"], values["Fy_meas_N"], values["Fz_meas_N"]])))
+    # read whole and bounded, as every file finrft reads: a device, a huge or a binary file is refused in one line
+    text = read_text(path, "--data")
+    reader = csv.DictReader(text.splitlines())
+    columns = set(reader.fieldnames or ())
+    missing = [c for c in DATA_COLUMNS if c not in columns]
+    slip = next((c for c in ("slip_meas_mean", "slip_model") if c in columns), None)
+    if missing or slip is None:
+        raise SceneError(f"--data {path}: needs the columns {', '.join(DATA_COLUMNS)} and slip_meas_mean or "
+                         f"slip_model (missing: {', '.join(missing + ([] if slip else ['slip']))})")
+    rows = []
+    for i, row in enumerate(reader, start=2):
+        try:
+            values = {c: float(row[c]) for c in (*DATA_COLUMNS, slip)}
+        except (TypeError, ValueError):
+            raise SceneError(f"--data {path} line {i}: every one of {', '.join(DATA_COLUMNS)}, {slip} must be "
+                             f"a number") from None
+        if not all(map(math.isfinite, values.values())) or not -1 <= values[slip] < 1 \
+                or not 0 <= values["beta_deg"] <= 90 or values["sinkage_mm"] < 0:
+            raise SceneError(f"--data {path} line {i}: needs finite numbers, -1 <= slip < 1, 0 <= beta_deg <= 90, "
+                             f"sinkage_mm >= 0")
+        rows.append(Condition(math.radians(values["beta_deg"]), values[slip], 1e-3 * values["sinkage_mm"],
+                              np.array([values["Fx_meas_N"], values["Fy_meas_N"], values["Fz_meas_N"]])))
     if not rows:
         raise SceneError(f"--data {path}: no rows")
     return rows

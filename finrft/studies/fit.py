@@ -19,9 +19,9 @@ import numpy as np
 
 from .. import batch
 from . import searchlog
-from ..convergence import ErrorLimits, SimulationFailed
+from ..convergence import ErrorLimits, SimulationFailed, check_limits
 from ..drive import Drive
-from .optimize import Search, Variable, cmaes, read_log, si_units
+from .optimize import Search, Variable, check_variables, cmaes, read_log, si_units
 from ..experiment import Result
 from ..laws.table import ForceTable
 from ..scene import RFT, Scene, SceneError, field_of, read_text, scene_from_dict, split_key, to_toml
@@ -134,6 +134,9 @@ def simulated_drag(scene: Scene, speed: float, distance: float, rate: float = 30
 def resolve_params(names: Sequence[str], bounds: dict[str, tuple[float, float]] | None = None) -> list[Variable]:
     """Fitted parameters from names (aliases b, k, f_perp, f_par, or any numeric plate-scene key) and bounds
     (keyed by either); SceneError for bounds of a parameter that is not fitted."""
+    if isinstance(names, str) or not all(isinstance(name, str) for name in names):
+        raise SceneError(f"the fitted parameters must be a list of names (b, k, f_perp, f_par or plate-scene keys), "
+                         f"got {names!r:.60}")
     keys = [ALIASES.get(name, name) for name in names]
     if not keys or not all(keys):
         raise SceneError(f"the fitted parameters must be named, one or more, none empty: got {', '.join(names)!r}")
@@ -203,12 +206,16 @@ def fit(scene: Scene, data: Sequence[DragData], variables: Sequence[Variable], *
     seed, log, resume and replace as `finrft.optimize.cmaes`; the log holds the data too, and `logged_problem` gives the
     scene, data and variables to resume it with. Scenes whose estimated discretisation error exceeds
     ``max_error`` score as failed; the fitted scene must meet it on every file (else InaccurateResult)."""
-    if scene.plate.segments != data[0].angles.shape[1]:
-        raise SceneError(f"{data[0].path} has {data[0].angles.shape[1]} segments, the scene "
-                         f"{scene.plate.segments}")
-    for v in variables:
-        scene.replace(**{v.key: v.low})
-        scene.replace(**{v.key: v.high})
+    check_variables(scene, variables, Scene)
+    check_limits(max_error, optional=False)
+    for what, files in (("data", data), ("validate", validate)):
+        if isinstance(files, DragData) or not all(isinstance(d, DragData) for d in files):
+            raise SceneError(f"fit {what}: a list of drags read by finrft.read_drag, got {files!r:.60}")
+        for d in files:
+            if scene.plate.segments != d.angles.shape[1]:
+                raise SceneError(f"{d.path} has {d.angles.shape[1]} segments, the scene {scene.plate.segments}")
+    if not data:
+        raise SceneError("fit data: at least one drag to fit")
     start = {}
     for v in variables:
         section, name = split_key(Scene, v.key)

@@ -28,7 +28,7 @@ import numpy as np
 
 from .. import batch, files
 from . import bounds, searchlog
-from ..convergence import ErrorLimits, SimulationFailed
+from ..convergence import ErrorLimits, SimulationFailed, check_limits
 from ..files import provenance, read_toml
 from ..experiments.swim import RobotScene
 from ..errors import UsageError
@@ -75,18 +75,27 @@ DEFAULT_VARIABLES = (Variable("gait.theta1", 0.0, math.pi / 2), Variable("gait.t
 PAPER_START = {"gait.theta1": math.radians(50), "gait.theta2": math.radians(-50), "arm.length": 0.075}
 
 
-def check_variables(scene: RobotScene, variables: Sequence[Variable]) -> None:
-    """Bounds must be ordered and inside the schema's limits; keys must be numeric scene keys."""
+def check_variables(scene: Any, variables: Sequence[Variable], cls: type = RobotScene) -> None:
+    """``scene`` must be a ``cls``; ``variables`` Variables, of numeric scene keys, each once, with bounds ordered
+    and inside the schema's limits."""
+    if not isinstance(scene, cls):
+        raise SceneError(f"the scene must be a finrft.{cls.__name__} (from finrft.preset or finrft.load_scene), got "
+                         f"{type(scene).__name__} {scene!r:.60}")
+    if isinstance(variables, (str, Variable)) or not all(isinstance(v, Variable) for v in variables):
+        raise SceneError(f"the searched variables must be a list of finrft.Variable, got {variables!r:.60}")
     if not variables:
         raise SceneError("at least one variable must be searched")
     seen = set()
     for v in variables:
-        f = field_of(RobotScene, v.key)
+        f = field_of(cls, v.key)
         if f.type not in ("float", float):
             raise SceneError(f"{v.key} is not a real-valued key (a whole number or a choice) and cannot be searched")
         if v.key in seen:
             raise SceneError(f"{v.key} is listed twice")
         seen.add(v.key)
+        if not all(isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, bool)
+                   for x in (v.low, v.high)):
+            raise SceneError(f"bounds of {v.key} must be numbers, got {v.low!r} and {v.high!r}")
         if not (math.isfinite(v.low) and math.isfinite(v.high)) or v.low >= v.high:
             raise SceneError(f"bounds of {v.key}: lower ({v.low:g}) must be below upper ({v.high:g})")
         scene.replace(**{v.key: v.low})
@@ -410,6 +419,7 @@ def optimize(scene: RobotScene, *, variables: Sequence[Variable] = DEFAULT_VARIA
     MIN_FORWARD_MM: 2). Budget, seed, log, resume and replace as `cmaes`; `logged_problem` gives the scene and variables
     to resume a log with."""
     check_variables(scene, variables)
+    check_limits(max_error, optional=False)
 
     def population(values: np.ndarray) -> tuple[list[float], dict[str, np.ndarray]]:
         scenes = [scene.replace(**{v.key: float(x) for v, x in zip(variables, row)}) for row in values]

@@ -29,7 +29,8 @@
   must agree to ``sim.tolerance`` (max over qpos and qvel of |difference| / (1e-3 + |value|)), never above
   ``sim.max_step``; the accepted state is extrapolated, 2 (two halves) - (one step), which cancels the implicit
   step's first-order error. ``sim.dt`` is then only the time grid of reversals and recorded samples.
-  A step cut short to land on a sample or a reversal leaves the next step's size as it was; after a reversal
+  A step cut short to land on a sample or a reversal (short by more than TIME_ROUNDING, which the time's own
+  rounding is not) leaves the next step's size as it was; after a reversal
   (`Adaptive.restart`) the steps start again from at most ``sim.max_step * sqrt(sim.tolerance)``: the drive's
   velocity jumps there, and the size the sweep before allowed says nothing of the transient after it.
 - ``adaptive-newton``: the same control on newton steps, the error measured on qpos only: the stiff RFT force

@@ -37,11 +37,12 @@
 #define NEWTON_HALVINGS 10
 // The adaptive newton method stops Newton's method at NEWTON_SHARE of the step's tolerance.
 #define NEWTON_SHARE 1e-2
-// Spans of time (s) shorter than this are the rounding of d->time, which drifts off the grid of `end`s by a few of
-// its last bits at each landing: the adaptive steps stop this short of `end`, and a step this close to the step size
-// was not cut short to land on `end`. Where the largest step fills the grid of `end`s (sim.max_step a whole number of
-// grid steps), every step ends on `end` at the step size give or take those bits: a test on their sign made the
-// twins, whose times round apart, carry over different step sizes and take different steps (9e-5 rad apart).
+// Spans of time (s) shorter than this are the rounding of d->time, which the sum of the steps leaves a few of its last
+// bits off `end`: the adaptive steps stop this short of `end`, and a step this close to the step size was not cut
+// short to land on `end`. Where the `end`s (the samples) are a whole number of largest steps apart, a stretch at the
+// largest step ends on each at the step size give or take those bits: decided by their sign, the twins, whose times
+// round apart, carried over different step sizes and took different steps (up to 6e-4 rad apart on the light plate
+// closing onto a limit stop).
 #define TIME_ROUNDING 1e-12
 // The speed (m/s) on whose scale an element's force is differenced besides its own: the surface laws are
 // rate-independent, so any step small against the element's speed would do but for an element at rest.

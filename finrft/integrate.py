@@ -29,7 +29,8 @@
   must agree to ``sim.tolerance`` (max over qpos and qvel of |difference| / (1e-3 + |value|)), never above
   ``sim.max_step``; the accepted state is extrapolated, 2 (two halves) - (one step), which cancels the implicit
   step's first-order error. ``sim.dt`` is then only the time grid of reversals and recorded samples.
-  A step cut short to land on a sample or a reversal leaves the next step's size as it was; after a reversal
+  A step cut short to land on a sample or a reversal (short by more than TIME_ROUNDING, which the time's own
+  rounding is not) leaves the next step's size as it was; after a reversal
   (`Adaptive.restart`) the steps start again from at most ``sim.max_step * sqrt(sim.tolerance)``: the drive's
   velocity jumps there, and the size the sweep before allowed says nothing of the transient after it.
 - ``adaptive-newton``: the same control on newton steps, the error measured on qpos only: the stiff RFT force
@@ -89,6 +90,9 @@ NEWTON_ITERATIONS = 50
 NEWTON_TOLERANCE = 1e-10
 NEWTON_HALVINGS = 10
 NEWTON_SHARE = 1e-2  # the adaptive newton method stops Newton's method at this share of the step's tolerance
+# Spans of time (s) shorter than this are the rounding of d.time (TIME_ROUNDING in steppers.c): the adaptive steps
+# stop this short of their end, and a step this close to the step size was not cut short to land there.
+TIME_ROUNDING = 1e-12
 # The speed (m/s) on whose scale an element's force is differenced besides its own (SURFACE_SPEED in steppers.c):
 # the surface laws are rate-independent, so any step small against the element's speed would do but for one at rest.
 SURFACE_SPEED = 1e-3
@@ -222,7 +226,7 @@ class Adaptive(_Counted):
         m, spec, end = self.m, self._spec, d.time + duration
         span = slice(1, 1 + m.nq + m.nv)  # qpos and qvel in the integration state, after time
         measured = slice(1, 1 + m.nq) if self.iterations > 1 else span
-        while d.time < end - 1e-12:
+        while d.time < end - TIME_ROUNDING:
             step = min(self.h, self.max_step, end - d.time)
             mujoco.mj_getState(m, d, self._start, spec)
             failed = self._implicit.step(d, step, self.iterations, NEWTON_HALVINGS)
@@ -246,7 +250,7 @@ class Adaptive(_Counted):
                 self._halves[span] += self._halves[span] - self._full[span]
                 mujoco.mj_setState(m, d, self._halves, spec)
                 proposal = min(self.max_step, step * min(2.0, 0.9 * np.sqrt(self.tolerance / max(error, 1e-300))))
-                self.h = max(self.h, proposal) if step < self.h else proposal
+                self.h = max(self.h, proposal) if step < self.h - TIME_ROUNDING else proposal
                 self.counts[0] += 1
             else:
                 mujoco.mj_setState(m, d, self._start, spec)

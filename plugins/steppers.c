@@ -37,6 +37,13 @@
 #define NEWTON_HALVINGS 10
 // The adaptive newton method stops Newton's method at NEWTON_SHARE of the step's tolerance.
 #define NEWTON_SHARE 1e-2
+// Spans of time (s) shorter than this are the rounding of d->time, which the sum of the steps leaves a few of its last
+// bits off `end`: the adaptive steps stop this short of `end`, and a step this close to the step size was not cut
+// short to land on `end`. Where the `end`s (the samples) are a whole number of largest steps apart, a stretch at the
+// largest step ends on each at the step size give or take those bits: decided by their sign, the twins, whose times
+// round apart, carried over different step sizes and took different steps (up to 6e-4 rad apart on the light plate
+// closing onto a limit stop).
+#define TIME_ROUNDING 1e-12
 // The speed (m/s) on whose scale an element's force is differenced besides its own: the surface laws are
 // rate-independent, so any step small against the element's speed would do but for an element at rest.
 #define SURFACE_SPEED 1e-3
@@ -661,7 +668,7 @@ FINRFT_EXPORT int finrft_adaptive_advance(const mjModel* m, mjData* d, mjtNum du
   // the slice of the integration state holding qpos and qvel (after time)
   int first = 1, count = m->nq + m->nv;
   int measured = iterations > 1 ? m->nq : count;
-  while (!failed && d->time < end - 1e-12) {
+  while (!failed && d->time < end - TIME_ROUNDING) {
     mjtNum step = mju_min(mju_min(*h, hmax), end - d->time);
     // The whole step and the first half start from the same state: one step_prepare serves both.
     mj_getState(m, d, start, spec);
@@ -694,7 +701,7 @@ FINRFT_EXPORT int finrft_adaptive_advance(const mjModel* m, mjData* d, mjtNum du
       mj_setState(m, d, halves, spec);
       mjtNum proposal = mju_min(hmax, step * mju_min(2.0, 0.9 * sqrt(tol / mju_max(error, 1e-300))));
       // a step cut short to land on `end` (a sample, a reversal) is no reason to shorten the steps after it
-      *h = step < *h ? mju_max(*h, proposal) : proposal;
+      *h = step < *h - TIME_ROUNDING ? mju_max(*h, proposal) : proposal;
       if (counts) counts[0]++;
     } else {
       mj_setState(m, d, start, spec);

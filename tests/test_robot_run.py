@@ -136,6 +136,10 @@ def test_a_python_controller_is_the_scene_control_it_computes(tmp_path):
         run_robot(scene, control=lambda t, d: [0.0])
     with pytest.raises(SceneError, match="returned 2 values"):
         run_robot(base, control=lambda t, d: [0.0, 1.0])
+    with pytest.raises(SceneError, match="returned str"):
+        run_robot(base, control=lambda t, d: "abc")
+    with pytest.raises(SceneError, match="not finite at t = 0.2"):
+        run_robot(base, control=lambda t, d: [math.nan if t >= 0.2 else 0.0])
 
 
 def test_a_table_control_interpolates_its_csv_relative_to_the_scene(tmp_path):

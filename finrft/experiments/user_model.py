@@ -160,7 +160,14 @@ class RobotTrial:
         self._unpack = lambda flat: _unpack(flat, m, len(built.bodies), len(self.dofs))
 
     def _checked(self, ctrl: Any) -> np.ndarray:
-        values = np.asarray(ctrl, dtype=float).ravel()
+        try:
+            values = np.asarray(ctrl, dtype=float).ravel()
+        except (TypeError, ValueError):
+            raise SceneError(f"control(t, data) returned {type(ctrl).__name__} {str(ctrl)[:40]!r}: give one number "
+                             f"per actuator ({self.m.nu})") from None
+        if not np.all(np.isfinite(values)):
+            raise SceneError(f"control(t, data) returned a value that is not finite at t = {self.d.time:g} s: "
+                             f"{values}")
         if values.shape != (self.m.nu,):
             raise SceneError(f"control(t, data) returned {values.size} values: give one ctrl per actuator "
                              f"({self.m.nu})")

@@ -236,9 +236,9 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str = (), law: str = "li
     ``surface_z``: height of the free surface, m; ``element_size``: the elements' size, m; ``backend``:
     ``native`` (falls back to ``python``, with a warning, when the plugin cannot be loaded) or ``python`` (then run
     the model inside ``Attached.installed``: a model stepped outside it stops with an exception at its second step,
-    from the native guard the compiled model carries while the plugin library loads); ``cull``: leave out the elements that face another geom of the same
-    kinematic tree closely (`TOUCHING`), such as the end faces of neighbouring links of a chain, which the grains
-    cannot reach. Raises `SceneError` on bad input.
+    from the native guard the compiled model carries while the plugin library loads); ``cull``: leave out the
+    elements that face another geom of the same kinematic tree closely (`TOUCHING`), such as the end faces of
+    neighbouring links of a chain, which the grains cannot reach. Raises `SceneError` on bad input.
     """
     material = media.medium(medium) if medium is not None else None
     names = [bodies] if isinstance(bodies, str) else list(bodies)

@@ -394,8 +394,8 @@ def robots(names: tuple[str, ...] | None = None, *, duration: float = 0.0, log: 
     (1/2 ... 1/256 of the default, then bisected twice towards the one twice as long) whose run is within
     `ROBOT_ACCURACY` of the converged one, as the default's must be. Where none is (each chatters or misses), the
     speed-up is at least the cost of the finest explicit run, its steps (duration over that step) times one explicit
-    step of the model with the medium (timed in C), over the default's. Errors are relative: the mean speed of the centre of mass over the window (swimmer, hexapod), the mean
-    force of the medium (wheel)."""
+    step of the model with the medium (timed in C), over the default's. Errors are relative: the mean speed of the
+    centre of mass over the window (swimmer, hexapod), the mean force of the medium (wheel)."""
     from ..experiment import run
     from ..experiments.user_model import EXAMPLES, UserModel, example
     from ..scene import UserScene, load_scene

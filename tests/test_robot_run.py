@@ -170,6 +170,22 @@ def test_a_free_body_resting_on_the_sand_runs_and_does_not_move(tmp_path):
     assert s["cost_of_transport"] is None and "does not move" in s["cost_of_transport_note"]
 
 
+def test_a_run_starts_from_the_keyframe_the_scene_names(tmp_path):
+    # The free body of FREE falls freely for 0.1 s from the keyframe's height h and upward speed v, the medium far
+    # below: each step v -= g dt, then z += v dt, so z = h + v t - g (t^2 + t dt) / 2. A drive still starts where
+    # its [[drive]] says.
+    (tmp_path / "m.xml").write_text(FREE.replace("</mujoco>", '<keyframe><key name="up" qpos="0 0 0.3 1 0 0 0 '
+                                                 '0.02" qvel="0 0 0.5 0 0 0 0"/></keyframe></mujoco>'))
+    scene = UserScene().replace(**{"model.path": str(tmp_path / "m.xml"), "model.bodies": ["b"],
+                                   "model.keyframe": "up", "sim.duration": 0.1, "sim.record_dt": 0.01,
+                                   "drive.0.joint": "slide", "drive.0.speed": 0.0, "drive.0.stroke": 0.0,
+                                   "drive.0.start": -0.01})
+    run = finrft.run_robot(scene)
+    t, dt = run.time, scene.sim.dt
+    assert run.body_position[:, 0, 2] == pytest.approx(0.3 + 0.5 * t - 9.81 * (t ** 2 + t * dt) / 2, abs=1e-9)
+    assert run.drive_position[:, 0] == pytest.approx(-0.01, abs=1e-9)
+
+
 def test_window_mean_is_the_time_average_from_the_settle():
     t = np.linspace(0, 1, 11)
     assert window_mean(t, 3 * t, 0.25) == pytest.approx(3 * (1 + 0.25) / 2)  # linear: its midpoint value
@@ -229,6 +245,7 @@ FREE = """<mujoco><worldbody><body name="b" pos="0 0 0.05"><freejoint name="free
     (["control.0.actuator=m", "control.0.kind=table", "control.0.table=none.csv"], "cannot read"),
     (["control.0.actuator=m", "control.0.kind=table", "control.0.table={tmp}/bad.csv"], "two numbers"),
     (["drive.0.joint=slide", "drive.0.stroke=0.07", "drive.0.speed=0.3"], "not a whole number of the drives' strokes"),
+    (["model.keyframe=home"], "model.keyframe: the model has no keyframe named 'home' (its keyframes: none)"),
 ])
 def test_bad_robot_input_is_one_line_and_exit_2_before_running(tmp_path, capsys, sets, named):
     (tmp_path / "m.xml").write_text(FREE)

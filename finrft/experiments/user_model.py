@@ -127,6 +127,9 @@ class RobotTrial:
         self.dofs, qpos, self.armature = list(built.drive_dofs), list(built.drive_qpos), built.armature
         self.sines = [i for i, j in enumerate(scene.drive) if j.profile == "sine"]
         self.scales = [drive_scale(j, duration) for j in scene.drive]
+        if scene.model.keyframe:
+            key = m.key(scene.model.keyframe)
+            d.qpos[:], d.qvel[:], d.act[:] = key.qpos, key.qvel, key.act
         for i, j in enumerate(scene.drive):
             d.qpos[qpos[i]] = drive_position(j, stroke_time, 0.0)
         self.actuators = [m.actuator(c.actuator).id for c in scene.control]
@@ -321,6 +324,10 @@ class UserModel:
             raise SceneError("an actuator has two [[control]] entries: give each one entry")
         if control is not None and scene.control:
             raise SceneError("give the actuators' ctrl by [[control]] or by a controller, not both")
+        keys = tuple(m.key(i).name for i in range(m.nkey))
+        if scene.model.keyframe and scene.model.keyframe not in keys:
+            raise SceneError(f"model.keyframe: the model has no keyframe named {scene.model.keyframe!r} (its "
+                             f"keyframes: {', '.join(repr(k) for k in keys if k) or 'none'})")
         tables = tuple(read_table(c.table, f"control.{i}") if c.kind == "table" else None
                        for i, c in enumerate(scene.control))
         links = tuple(m.body(i).name or f"body{i}" for i in range(1, m.nbody))

@@ -99,7 +99,7 @@ class Model:
     geoms: tuple[str, ...] = _f((), "", "geoms the medium acts on, by name, beside model.bodies (their bodies' other "
                                 "geoms left out)")
     keyframe: str = _f("", "", "a keyframe of the model (its <key name=...>) the run starts from: its joint "
-                       "positions, velocities and activations, then each [[drive]] at its start; empty: the "
+                       "positions, velocities and activations, then each drive at its start; empty: the "
                        "model's own qpos0 at rest")
 
 

@@ -86,6 +86,7 @@ typedef struct {
   int nhinge;
   int* hinge_qpos;
   int* hinge_dof;
+  int paused;  // set by the steppers around the forward pass at a step's start: they take the force themselves
 } FinrftInstance;
 
 
@@ -120,6 +121,7 @@ typedef struct {
   int body;
   int n;
   double* element;  // n x 7: centre, normal (body frame), area
+  int paused;       // as FinrftInstance's
 } FinrftSurface;
 
 // The instance of finrft.surface with index `instance` for the model `m` that `d` is stepped with (made again for

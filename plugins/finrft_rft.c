@@ -194,7 +194,7 @@ static void rft_reset(const mjModel* m, mjtNum* plugin_state, void* plugin_data,
 static void rft_compute(const mjModel* m, mjData* d, int instance, int capability_bit) {
   if (!(capability_bit & mjPLUGIN_PASSIVE)) return;
   const FinrftInstance* p = finrft_instance(m, d, instance);
-  if (!p) return;
+  if (!p || p->paused) return;
   mjtNum offset[3], v[3], x[3], y[3], force[3], moment[3];
   for (int i = 0; i < p->nseg; i++) {
     int s = p->site[i], b = p->body[i];

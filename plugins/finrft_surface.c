@@ -489,6 +489,8 @@ FINRFT_EXPORT int finrft_surface_body_wrench(const mjModel* m, mjData* d, int in
 // Every element's force, summed into one force and one torque about the body's origin, applied once.
 static void surface_compute(const mjModel* m, mjData* d, int instance, int capability_bit) {
   if (!(capability_bit & mjPLUGIN_PASSIVE)) return;
+  const FinrftSurface* p = finrft_surface_instance(m, d, instance);
+  if (!p || p->paused) return;
   mjtNum wrench[6];
   int body = body_wrench(m, d, instance, wrench);
   if (body < 0) return;

@@ -8,8 +8,10 @@
 // The implicit and newton methods. MuJoCo's implicitfast step treats the joint damping D (and the velocity
 // derivative of affine actuator bias) implicitly; on top of that the RFT force is taken at the new velocity: the
 // velocity change dv solves
-//     G(dv) = (M - dt D) dv - dt (f(v) - F(v) + F(v + dv)) = 0,
-// f every force MuJoCo computed at v, F the RFT force summed over every segment of every finrft.rft instance and
+//     G(dv) = (M - dt D) dv - dt (f(v) + F(v + dv)) = 0,
+// f every other force MuJoCo computes at v (the finrft plugins paused, unless a constraint is active: see
+// step_prepare; the numpy twin subtracts what its callback applied instead, the same numbers), F the RFT force
+// summed over every segment of every finrft.rft instance and
 // every body of a finrft.surface instance, F(u) = sum_i J_i^T F_i(J_i u) + sum_b J_b^T W_b(J_b u), J_b the Jacobian
 // of body b's origin (angular rows, then linear) and W_b its wrench (finrft_surface_wrench) at that twist. A
 // rate-independent law is a near-discontinuity in velocity, so a linearisation at v (the first Newton iterate: the
@@ -21,8 +23,8 @@
 // sum_e A_e^T (dF_e/dv_e) A_e, each 3 x 3 dF_e/dv_e differenced from the element's law alone, only for the
 // elements below the surface (taken once per step) that lead the motion at v_e or at a probe. Then, as
 // MuJoCo's implicitfast: activations, qvel += dv, positions, time. The newton-midpoint method takes the
-// Jacobians and elements at the positions half a step ahead at v (F there, and f - F with F as MuJoCo applied it,
-// at the start): see integrate.py for when that is second order and when it damps.
+// Jacobians and elements at the positions half a step ahead at v (F there, f at the start): see integrate.py for
+// when that is second order and when it damps.
 
 #include <math.h>
 #include <stdint.h>
@@ -103,9 +105,13 @@ typedef struct {
   int start_ready;
   int64_t* counts;  // NULL, or where to add the steps taken and rejected (halved by the newton method)
   // The positions the items hold: the start's (0), or `midpoint` seconds ahead of it at its velocity; then
-  // `applied` (nv) is the RFT force MuJoCo applied at the start, and qpos_start (nq), stop_start (nstop) scratch.
+  // qpos_start (nq) and stop_start (nstop) are scratch.
   mjtNum midpoint;
-  mjtNum *applied, *qpos_start, *stop_start;
+  mjtNum *qpos_start, *stop_start;
+  // 1 when rhs holds the RFT force MuJoCo applied at the start, `applied` (nv), the stops' not included (see
+  // step_prepare)
+  int has_applied;
+  mjtNum* applied;
   mjtNum newton_tolerance;  // Newton's method stops when the change is below this times (1 + |qvel|)
 } Workspace;
 
@@ -199,6 +205,7 @@ static int workspace_make(const mjModel* m, mjData* d, Workspace* ws, int extra,
   ws->start_ready = 0;
   ws->midpoint = 0;
   ws->applied = mj_stackAllocNum(d, nv + 1);
+  ws->has_applied = 0;
   ws->qpos_start = mj_stackAllocNum(d, m->nq + 1);
   ws->stop_start = mj_stackAllocNum(d, s->nstop + 1);
   if (extra_out) *extra_out = mj_stackAllocNum(d, extra);
@@ -484,11 +491,14 @@ static int newton_solve(Workspace* ws, const mjtNum* qvel, mjtNum dt, int iterat
   }
   mju_copy(w->force, ws->start_force, nv);
   mju_copy(w->slope, ws->start_slope, nv * nv);
-  // other: every force but F, taken out at the stops' present deflection (w->trial is free until the search)
-  mju_copy(w->trial, ws->midpoint > 0 ? ws->applied : w->force, nv);
-  stops_add(s, qvel, 0, w->trial, NULL);
+  // other: every force but F and the stops', taken out where step_prepare's forward pass applied them
+  mju_copy(w->other, rhs, nv);
+  if (ws->has_applied) {
+    mju_copy(w->trial, ws->applied, nv);  // w->trial is free until the search
+    stops_add(s, qvel, 0, w->trial, NULL);
+    for (int i = 0; i < nv; i++) w->other[i] -= w->trial[i];
+  }
   stops_add(s, qvel, ahead, w->force, w->slope);
-  for (int i = 0; i < nv; i++) w->other[i] = rhs[i] - w->trial[i];
   for (int i = 0; i < nv; i++) {
     w->dv[i] = 0;
     w->g[i] = -dt * (w->other[i] + w->force[i]);
@@ -549,20 +559,33 @@ static int newton_solve(Workspace* ws, const mjtNum* qvel, mjtNum dt, int iterat
   return FINRFT_NOT_CONVERGED;
 }
 
-// What a step needs of its start (the state in d): MuJoCo's forces, rhs = M qacc, the mass matrix, the items. With
-// midpoint > 0 the segments and bodies are taken at the positions `midpoint` seconds ahead at the start's velocity
-// (the stops stay at the start, which their deflection ahead already counts from), after `applied`, the RFT force
-// MuJoCo applied at the start, to take out of rhs; d's derived quantities are the start's again afterwards.
+// Pause (1) or resume (0) the passive force of every finrft plugin instance of the items.
+static void plugins_pause(const Items* s, int paused) {
+  for (int j = 0; j < s->ninst; j++) ((FinrftInstance*)s->inst[j])->paused = paused;
+  for (int j = 0; j < s->nbody; j++) ((FinrftSurface*)s->surface[j])->paused = paused;
+}
+
+// What a step needs of its start (the state in d): MuJoCo's forces but the RFT force and the stops' (the plugins
+// paused: the step takes those itself, and computing them in the forward pass as well cost a tenth of a wheel's
+// step), rhs = M qacc, the mass matrix, the items. A constraint's force (a limit, a contact, friction loss) answers
+// every other force, those too: with any constraint active the forward pass is taken again with them, and they
+// are taken out of rhs (has_applied). With midpoint > 0 the segments and bodies are taken at the positions
+// `midpoint` seconds ahead at the start's velocity (the stops stay at the start, which their deflection ahead
+// already counts from); d's derived quantities are the start's again afterwards.
 static void step_prepare(const mjModel* m, mjData* d, Workspace* ws, mjtNum midpoint) {
   Items* s = &ws->items;
+  plugins_pause(s, 1);
   mj_forward(m, d);
+  plugins_pause(s, 0);
+  ws->has_applied = d->nefc > 0;
+  if (ws->has_applied) mj_forward(m, d);
   mj_mulM(m, d, ws->rhs, d->qacc);
   mj_fullM(m, d, ws->mass);
   items_update(m, d, s);
   ws->start_ready = 0;
   ws->midpoint = midpoint;
+  if (ws->has_applied) rft_force(s, d->qvel, ws->applied);
   if (midpoint > 0) {
-    rft_force(s, d->qvel, ws->applied);
     mju_copy(ws->qpos_start, d->qpos, m->nq);
     mju_copy(ws->stop_start, s->stop_q, s->nstop);
     mj_integratePos(m, d->qpos, d->qvel, midpoint);
@@ -578,8 +601,8 @@ static void step_prepare(const mjModel* m, mjData* d, Workspace* ws, mjtNum midp
 
 // One implicit step of size dt from the start step_prepare saw:
 // 0, FINRFT_UNSTABLE when the state stopped being finite, or FINRFT_NOT_CONVERGED (the state untouched). It leaves
-// MuJoCo's derived quantities in d as they were at the start, so another step from the same start needs no
-// step_prepare once the state is restored.
+// MuJoCo's derived quantities in d as they were at the start (without the RFT force and the stops': mj_forward
+// brings them up to date), so another step from the same start needs no step_prepare once the state is restored.
 static int step_take(const mjModel* m, mjData* d, mjtNum dt, int iterations, Workspace* ws) {
   int nv = m->nv;
   Newton* w = &ws->w;

@@ -94,20 +94,25 @@ class Attached:
         wrench = self.wrenches(model)(data)
         return {s.body: (w[3:], w[:3]) for s, w in zip(self.surfaces, wrench)}
 
-    def wrenches(self, model: mujoco.MjModel) -> Callable[[mujoco.MjData], np.ndarray]:
+    def wrenches(self, model: mujoco.MjModel, applied: bool = False) -> Callable[[mujoco.MjData], np.ndarray]:
         """A reader of the medium's wrench on each attached body at the state of an MjData of ``model`` (after
         mj_forward): (B, 6), the torque about the body's origin (N m), then the force (N), world frame, in the order
         of ``surfaces``; from the native plugin's own sum with the native backend (a call per body, no law in
-        Python), else from the Python backend's."""
+        Python), else from the Python backend's. With ``applied``, the native plugin's sum as its last forward pass
+        of the MjData applied it, where it applied one (no element summed again: a recording after mj_forward)."""
         if self.backend == "native":
-            wrench = native.function("finrft_surface_body_wrench", ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p,
-                                     ctypes.c_int, ctypes.c_void_p)
+            signature = (ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int, ctypes.c_void_p)
+            wrench = native.function("finrft_surface_body_wrench", *signature)
+            last = native.function("finrft_surface_applied_wrench", *signature) if applied else None
             instances = [int(model.body_plugin[model.body(s.body).id]) for s in self.surfaces]
 
             def native_read(data: mujoco.MjData) -> np.ndarray:
                 out = np.zeros((len(instances), 6))
                 for row, instance in zip(out, instances):
-                    if wrench(model._address, data._address, instance, row.ctypes.data) < 0:
+                    found = -2 if last is None else last(model._address, data._address, instance, row.ctypes.data)
+                    if found == -2:
+                        found = wrench(model._address, data._address, instance, row.ctypes.data)
+                    if found < 0:
                         raise SceneError("the model holds no finrft.surface instance for an attached body: "
                                          "compile the spec attach() was given")
                 return out

@@ -267,10 +267,12 @@ def _walk(advance: Stepper, d: mujoco.MjData, step: int, end: int, end_time: flo
 def step_through(m: mujoco.MjModel, d: mujoco.MjData, scene: Any, advance: Stepper, steps: int,
                  starts: np.ndarray, samples: np.ndarray, on_stroke: Callable[[int], None],
                  on_sample: Callable[[int], None], progress: Callable[[float], None] | None = None,
-                 watch: Sequence[int] = (), forward: bool = True, stroke_time: float = 0.0,
+                 watch: Sequence[int] = (),
+                 forward: Callable[[mujoco.MjModel, mujoco.MjData], None] | None = mujoco.mj_forward,
+                 stroke_time: float = 0.0,
                  speeds: np.ndarray | None = None, on_step: Callable[[], None] | None = None) -> None:
-    """Step a model through a run: ``on_stroke(k)`` as stroke k starts, ``on_sample(i)`` (after mj_forward, unless
-    ``forward`` is False: then only the state is current) at recorded step ``samples[i]``; ``advance`` steps in
+    """Step a model through a run: ``on_stroke(k)`` as stroke k starts, ``on_sample(i)`` (after ``forward(m, d)``,
+    mj_forward or the trial's own; None: only the state is current) at recorded step ``samples[i]``; ``advance`` steps in
     chunks in between. Stops loudly if the state blows up, or if the ``watch`` dofs chatter (fixed-step methods:
     the three steps before every PROBE_EVERY-th sample are taken one by one and checked when the run ends), each
     by more than its chatter speed in ``speeds`` (`chatter_speeds`; None: CHATTER_DV).
@@ -304,8 +306,8 @@ def step_through(m: mujoco.MjModel, d: mujoco.MjData, scene: Any, advance: Stepp
             for at in slot.get(step, ()):
                 velocity[at] = d.qvel[watch]
             if sample < len(samples) and step == samples[sample]:
-                if forward:
-                    mujoco.mj_forward(m, d)
+                if forward is not None:
+                    forward(m, d)
                 on_sample(sample)
                 sample += 1
                 if progress is not None:

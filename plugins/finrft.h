@@ -122,6 +122,8 @@ typedef struct {
   int n;
   double* element;  // n x 7: centre, normal (body frame), area
   int paused;       // as FinrftInstance's
+  int has_applied;  // 1 when the last passive force computation on this mjData applied `applied` (not paused)
+  double applied[6];
 } FinrftSurface;
 
 // The instance of finrft.surface with index `instance` for the model `m` that `d` is stepped with (made again for
@@ -135,6 +137,12 @@ void finrft_surface_wrench(const FinrftSurface* p, const mjData* d, const mjtNum
 
 // One element's force (world frame) under the instance's law, DRFT term and ramp: outward unit normal, velocity,
 // depth below the surface (m), area (m^2).
+//
+// With the ramp on, an element whose n . v is at most FINRFT_RAMP_FLOOR v_reg has no force (the ramp would leave
+// less than that share of it) and costs no call of its law: a face moving along itself, which rounding puts on
+// either side of n . v = 0, as the sides of a rolling wheel, a third of its submerged elements (RAMP_FLOOR in
+// finrft/laws/__init__.py).
+#define FINRFT_RAMP_FLOOR 1e-12
 void finrft_surface_element_force(const FinrftSurface* p, const mjtNum normal[3], const mjtNum v[3], mjtNum depth,
                                   mjtNum area, mjtNum f[3]);
 

@@ -410,10 +410,14 @@ const FinrftSurface* finrft_surface_instance(const mjModel* m, mjData* d, int in
   return (const FinrftSurface*)d->plugin_data[instance];
 }
 
-// One element's force (world frame): the law's, plus DRFT's term, times the ramp tanh(max(n . v, 0) / v_reg) (as
-// Attached.element_forces in attach.py and `regularised` in finrft/laws/__init__.py).
+// One element's force (world frame): the law's, plus DRFT's term, times the ramp tanh(max(n . v, 0) / v_reg), 0
+// below FINRFT_RAMP_FLOOR (as Attached.element_forces in attach.py and `regularised` in finrft/laws/__init__.py).
 void finrft_surface_element_force(const FinrftSurface* p, const mjtNum normal[3], const mjtNum v[3], mjtNum depth,
                                   mjtNum area, mjtNum f[3]) {
+  if (p->v_reg > 0 && !(mju_dot3(normal, v) > FINRFT_RAMP_FLOOR * p->v_reg)) {
+    f[0] = f[1] = f[2] = 0;
+    return;
+  }
   kLaws[p->law].force(p, normal, v, depth, area, f);
   if (p->drft_lambda > 0) {
     mjtNum inertial[3];
@@ -476,9 +480,9 @@ static int body_wrench(const mjModel* m, mjData* d, int instance, mjtNum wrench[
 }
 
 // The medium's wrench (torque about the body's origin, then force; world frame) on the body of instance
-// `instance` at the state of d (after mj_forward), as the passive force applies it: finrft.attach reads the forces
-// it records from here with the native backend. The body's id, or -1 when the instance is not a finrft.surface
-// one.
+// `instance` at the state of d (after mj_forward), as the passive force applies it: finrft.attach's reader of the
+// forces with the native backend (the recordings read finrft_surface_applied_wrench). The body's id, or -1 when the
+// instance is not a finrft.surface one.
 FINRFT_EXPORT int finrft_surface_body_wrench(const mjModel* m, mjData* d, int instance, mjtNum wrench[6]) {
   int slot = -1;
   mjp_getPlugin(FINRFT_SURFACE_PLUGIN, &slot);
@@ -486,15 +490,33 @@ FINRFT_EXPORT int finrft_surface_body_wrench(const mjModel* m, mjData* d, int in
   return body_wrench(m, d, instance, wrench);
 }
 
+// The wrench (as finrft_surface_body_wrench) the passive force of instance `instance` applied in the last forward
+// pass of d: what a recording after mj_forward reads, without summing the elements again. The body's id; -1 when
+// the instance is not a finrft.surface one, -2 when that pass applied none (a stepper had it paused, or none ran).
+FINRFT_EXPORT int finrft_surface_applied_wrench(const mjModel* m, mjData* d, int instance, mjtNum wrench[6]) {
+  int slot = -1;
+  mjp_getPlugin(FINRFT_SURFACE_PLUGIN, &slot);
+  if (instance < 0 || instance >= m->nplugin || m->plugin[instance] != slot) return -1;
+  const FinrftSurface* p = finrft_surface_instance(m, d, instance);
+  if (!p) return -1;
+  // with springs and dampers both disabled MuJoCo skips the passive forces, plugins' too, and `applied` is old
+  int passive_off = (m->opt.disableflags & mjDSBL_SPRING) && (m->opt.disableflags & mjDSBL_DAMPER);
+  if (!p->has_applied || passive_off) return -2;
+  mju_copy(wrench, p->applied, 6);
+  return p->body;
+}
+
 // Every element's force, summed into one force and one torque about the body's origin, applied once.
 static void surface_compute(const mjModel* m, mjData* d, int instance, int capability_bit) {
   if (!(capability_bit & mjPLUGIN_PASSIVE)) return;
-  const FinrftSurface* p = finrft_surface_instance(m, d, instance);
-  if (!p || p->paused) return;
-  mjtNum wrench[6];
-  int body = body_wrench(m, d, instance, wrench);
+  FinrftSurface* p = (FinrftSurface*)finrft_surface_instance(m, d, instance);
+  if (!p) return;
+  p->has_applied = 0;
+  if (p->paused) return;
+  int body = body_wrench(m, d, instance, p->applied);
   if (body < 0) return;
-  mj_applyFT(m, d, wrench + 3, wrench, d->xpos + 3 * body, body, d->qfrc_passive);
+  mj_applyFT(m, d, p->applied + 3, p->applied, d->xpos + 3 * body, body, d->qfrc_passive);
+  p->has_applied = 1;
 }
 
 void finrft_register_surface(void) {

@@ -559,10 +559,25 @@ static int newton_solve(Workspace* ws, const mjtNum* qvel, mjtNum dt, int iterat
   return FINRFT_NOT_CONVERGED;
 }
 
-// Pause (1) or resume (0) the passive force of every finrft plugin instance of the items.
-static void plugins_pause(const Items* s, int paused) {
-  for (int j = 0; j < s->ninst; j++) ((FinrftInstance*)s->inst[j])->paused = paused;
-  for (int j = 0; j < s->nbody; j++) ((FinrftSurface*)s->surface[j])->paused = paused;
+// Pause (1) or resume (0) the passive force of every finrft.rft and finrft.surface instance of d.
+static void plugins_pause(const mjModel* m, mjData* d, int paused) {
+  int slot = -1, surface_slot = -1;
+  mjp_getPlugin(FINRFT_PLUGIN, &slot);
+  mjp_getPlugin(FINRFT_SURFACE_PLUGIN, &surface_slot);
+  for (int i = 0; i < m->nplugin; i++) {
+    FinrftInstance* p = m->plugin[i] == slot ? (FinrftInstance*)finrft_instance(m, d, i) : NULL;
+    FinrftSurface* q = m->plugin[i] == surface_slot ? (FinrftSurface*)finrft_surface_instance(m, d, i) : NULL;
+    if (p) p->paused = paused;
+    if (q) q->paused = paused;
+  }
+}
+
+// Pause (1) or resume (0) the medium's force on d: a forward pass between them computes the kinematics,
+// velocities, actuators and every other force of a state whose medium force is read elsewhere, as a recording of
+// an implicit step reads it where the step took it (finrft.experiments.attached_model.record_forward, which
+// calls mj_forward itself: MuJoCo's Python callbacks may raise, which must not unwind through this library).
+FINRFT_EXPORT void finrft_pause_medium(const mjModel* m, mjData* d, int paused) {
+  plugins_pause(m, d, paused);
 }
 
 // What a step needs of its start (the state in d): MuJoCo's forces but the RFT force and the stops' (the plugins
@@ -574,9 +589,9 @@ static void plugins_pause(const Items* s, int paused) {
 // already counts from); d's derived quantities are the start's again afterwards.
 static void step_prepare(const mjModel* m, mjData* d, Workspace* ws, mjtNum midpoint) {
   Items* s = &ws->items;
-  plugins_pause(s, 1);
+  plugins_pause(m, d, 1);
   mj_forward(m, d);
-  plugins_pause(s, 0);
+  plugins_pause(m, d, 0);
   ws->has_applied = d->nefc > 0;
   if (ws->has_applied) mj_forward(m, d);
   mj_mulM(m, d, ws->rhs, d->qacc);

@@ -147,6 +147,25 @@ def test_native_equals_python_on_a_multi_geom_body():
         np.testing.assert_allclose(native, python, rtol=1e-9, atol=1e-9 * np.abs(python).max())
 
 
+def test_recordings_read_the_wrench_the_forward_pass_applied():
+    # What a recording reads after mj_forward, the plugin's own sum as that pass applied it, is the sum at the
+    # state; after a native implicit step, whose forward pass took the medium's force itself (the plugin paused),
+    # there is none applied and the reader sums the elements at the state again.
+    spec = mujoco.MjSpec.from_string(body_xml(MIXED, '<joint type="free"/>'))
+    attached = attach(spec, ["probe"], element_size=0.003)
+    model = spec.compile()
+    data = mujoco.MjData(model)
+    data.qpos[:], data.qvel[:] = random_state(RNG)
+    recorded, summed = attached.wrenches(model, applied=True), attached.wrenches(model)
+    mujoco.mj_forward(model, data)
+    assert np.abs(summed(data)).max() > 0.1
+    np.testing.assert_array_equal(recorded(data), summed(data))
+    model.opt.timestep = 1e-4
+    assert finrft.integrate.stepper(model, finrft.scene.Sim(method="newton", dt=1e-4), "native", [],
+                                    attached)(data, 1) == 0
+    np.testing.assert_array_equal(recorded(data), summed(data))
+
+
 def test_total_force_on_closed_bodies_dissipates():
     # The power of the RFT force, qfrc_passive . qvel = sum of F_i . v_i, for random poses and twists
     xml = body_xml(MIXED, '<joint type="free"/>')

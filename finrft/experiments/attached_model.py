@@ -4,6 +4,7 @@ armature and the named bodies (and geoms) the medium; `JointTrial` runs one join
 
 from __future__ import annotations
 
+import ctypes
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -13,7 +14,7 @@ from xml.etree import ElementTree
 import mujoco
 import numpy as np
 
-from .. import laws, methods
+from .. import laws, methods, native
 from ..attach import Attached, SurfaceForces, attach
 from ..drive import Drive
 from ..files import check_regular, read_text
@@ -142,8 +143,8 @@ def build_attached(spec: mujoco.MjSpec, joints: Sequence[str], bodies: tuple[str
 
 def medium_forces(built: AttachedModel) -> Callable[[mujoco.MjData], np.ndarray]:
     """The resultant of the medium's force on each attached body (B, 3), world frame, from the backend in use
-    (after mj_forward)."""
-    wrenches = built.attached.wrenches(built.model)
+    (after mj_forward: as that pass applied it)."""
+    wrenches = built.attached.wrenches(built.model, applied=True)
     return lambda d: wrenches(d)[:, 3:]
 
 
@@ -171,6 +172,24 @@ def applied_state(built: AttachedModel, method: str) -> Callable[[mujoco.MjData]
         mujoco.mj_forward(m, where)
         return where
     return applied
+
+
+def record_forward(built: AttachedModel, method: str) -> Callable[[mujoco.MjModel, mujoco.MjData], None]:
+    """The forward pass before a recording of a run that reads the medium's force and the drives' loads at
+    `applied_state`: with the native backend and a fixed-step implicit ``method``, without the medium's force,
+    which the recording does not read there (a tenth of a wheel's step saved); else mj_forward."""
+    chosen = methods.get(method)
+    if not (built.backend == "native" and chosen.implicit and not chosen.adaptive):
+        return mujoco.mj_forward
+    pause = native.function("finrft_pause_medium", None, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int)
+
+    def forward(m: mujoco.MjModel, d: mujoco.MjData) -> None:
+        pause(m._address, d._address, 1)
+        try:
+            mujoco.mj_forward(m, d)
+        finally:
+            pause(m._address, d._address, 0)
+    return forward
 
 
 class JointTrial:

@@ -30,7 +30,7 @@ from ..models import ARMATURE_RATIO, compile_spec, mjcf_path
 from ..scene import Control, JointDrive, SceneError, UserScene, drive_timing, load_scene, parse_override
 from ..stepping import DRIVE_LAG, jump_velocities
 from .attached_model import (DRIVEN, AttachedModel, applied_state, build_attached, driven_joint, medium_forces,
-                             read_spec)
+                             read_spec, record_forward)
 from .command import Command, register, steps_line
 from .flags import add_max_error, add_result_files, add_scene_flags
 
@@ -141,6 +141,7 @@ class RobotTrial:
         self.watch = [i for i in range(m.nv) if i not in self.dofs]
         force = medium_forces(built)
         self._applied = applied_state(built, scene.sim.method)
+        self.forward = record_forward(built, scene.sim.method)
         bodies = np.arange(1, m.nbody)
 
         def state(d: mujoco.MjData) -> dict[str, np.ndarray]:

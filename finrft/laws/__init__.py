@@ -217,9 +217,16 @@ def warn_if_feeds_energy(law: SegmentLaw | None) -> None:
 SURFACE_V_REG = 1e-4
 
 
+# An element moving into the medium at most this share of v_reg has no force: the ramp would leave it less than
+# that share (FINRFT_RAMP_FLOOR in plugins/finrft.h). Rounding puts a face moving along itself on either side of
+# n . v = 0 (the sides of a rolling wheel, a third of its submerged elements); the native plugin then skips its law.
+RAMP_FLOOR = 1e-12
+
+
 def regularised(force: np.ndarray, normal: np.ndarray, velocity: np.ndarray, v_reg: float) -> np.ndarray:
-    """Surface elements' forces (N, 3) times tanh(max(n . v, 0) / v_reg): the one regularisation of every surface
-    law, the analogue of the segment laws' v_reg (m/s; 0: none, the laws' step as published).
+    """Surface elements' forces (N, 3) times tanh(max(n . v, 0) / v_reg), none up to n . v = RAMP_FLOOR v_reg: the
+    one regularisation of every surface law, the analogue of the segment laws' v_reg (m/s; 0: none, the laws' step
+    as published).
 
     A rate-independent surface law switches its full stress on at n . v = 0+ (the leading-face test) and flips it
     with the velocity; the ramp makes the force continuous there, and at v = 0, over the speed v_reg. DRFT's term
@@ -233,7 +240,8 @@ def regularised(force: np.ndarray, normal: np.ndarray, velocity: np.ndarray, v_r
     if v_reg == 0:
         return force
     v_n = np.einsum("...i,...i", np.asarray(normal, dtype=float), np.asarray(velocity, dtype=float))
-    return force * np.tanh(np.maximum(v_n, 0.0) / v_reg)[..., None]
+    # below RAMP_FLOOR v_reg, none at all: as the C twin, which skips the law there
+    return force * np.where(v_n > RAMP_FLOOR * v_reg, np.tanh(np.maximum(v_n, 0.0) / v_reg), 0.0)[..., None]
 
 
 _cautioned: set[str] = set()  # the laws whose CAVEAT this process has warned of

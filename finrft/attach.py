@@ -73,11 +73,17 @@ class Attached:
     bulk_density: float = 0.0  # kg/m^3, DRFT's rho_c (0: none known)
     v_reg: float = laws.SURFACE_V_REG  # m/s, the ramp of `finrft.laws.regularised` (0: none)
 
+    def law_forces(self, normal: np.ndarray, velocity: np.ndarray, depth: np.ndarray, area: np.ndarray
+                   ) -> np.ndarray:
+        """The law's own force on each element (world frame): no DRFT term, no ramp. Every surface law is
+        rate-independent, a function of the direction of the velocity alone."""
+        return laws.module(self.law, laws.SURFACE).element_forces(normal, velocity, depth, area,
+                                                                  coefficients=self.coefficients, **self.parameters)
+
     def element_forces(self, normal: np.ndarray, velocity: np.ndarray, depth: np.ndarray, area: np.ndarray
                        ) -> np.ndarray:
         """The law's force on each element (world frame), regularised, as the native plugin computes it."""
-        force = laws.module(self.law, laws.SURFACE).element_forces(normal, velocity, depth, area,
-                                                                   coefficients=self.coefficients, **self.parameters)
+        force = self.law_forces(normal, velocity, depth, area)
         if self.drft_lambda > 0:
             force = force + drft.element_forces(normal, velocity, depth, area, self.drft_lambda, self.bulk_density)
         return laws.regularised(force, normal, velocity, self.v_reg)

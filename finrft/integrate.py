@@ -48,8 +48,11 @@ origin, force) at the positions of the step's start, summed over the elements be
 per step). Element e at arm a_e moves at v_e = A_e t, A_e = [-[a_e]x | I], and W_b = sum_e A_e^T F_e(v_e), so
 dW/dtwist = sum_e A_e^T (dF_e/dv_e) A_e, each element's 3 x 3 by differences of its own law in steps
 1e-6 (|v_e| + SURFACE_SPEED): three law calls per element (forward differences), none for an element that trails
-(n . v <= 0, where every surface law is 0) at v_e and at every probe. Both backends apply the surfaces' forces
-among MuJoCo's passive forces at v; the step takes them out there (``other``) and back at v + dv, as the segments'.
+(n . v <= 0, where every surface law is 0) at v_e and at every probe; two for one that leads, whose law depends on
+the direction of v_e alone, so that only the directions across v_e need probing (`_leading_slope`; not with DRFT's
+term, which grows with the speed). Both backends apply the surfaces' forces among MuJoCo's passive forces at v;
+the step takes them out there (``other``; the native stepper leaves them out of its forward pass) and back at
+v + dv, as the segments'.
 
 What is stable, and why: a rate-independent force regularised over v_reg is, on a light body of mass m, a damper
 F / v_reg, which an explicit step resolves only for dt < 2 m v_reg / F (a 0.5 kg box resting on li2013 with
@@ -269,6 +272,34 @@ def _cross_matrices(a: np.ndarray) -> np.ndarray:
     return out
 
 
+def _across(v: np.ndarray) -> np.ndarray:
+    """Two unit vectors across each nonzero row of ``v`` (E, 3): (E, 2, 3), p1 = v x e / |v x e| (e the axis
+    along v's smallest component, the first of equals) and p2 = v^ x p1, as `across` in steppers.c."""
+    e = np.eye(3)[np.argmin(np.abs(v), axis=1)]
+    p1 = np.cross(v, e)
+    p1 /= np.linalg.norm(p1, axis=1, keepdims=True)
+    return np.stack([p1, np.cross(v / np.linalg.norm(v, axis=1, keepdims=True), p1)], axis=1)
+
+
+def _leading_slope(attached: Attached, normal: np.ndarray, v: np.ndarray, f0: np.ndarray, depth: np.ndarray,
+                   area: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """dF/dv (E, 3, 3) of elements leading at ``v`` with forces ``f0`` = r L, by forward differences (as
+    leading_slope in steppers.c): the law L is rate-independent (dL/dv v = 0), so dF/dv = r'(n . v) L n^T
+    + r (dL/dv p1 p1^T + dL/dv p2 p2^T), p1, p2 `_across` v: two probes of the law rather than three."""
+    if attached.v_reg > 0:
+        ratio = np.einsum("ei,ei->e", normal, v) / attached.v_reg
+        ramp = np.where(ratio < 20, np.tanh(np.minimum(ratio, 20.0)), 1.0)
+        rate = np.where(ratio < 20, (1 - ramp ** 2) / attached.v_reg, 0.0)
+    else:
+        ramp, rate = np.ones(len(v)), np.zeros(len(v))
+    law = f0 / ramp[:, None]
+    across = _across(v)
+    dl = np.stack([(attached.law_forces(normal, v + h[:, None] * across[:, c], depth, area) - law) / h[:, None]
+                   for c in range(2)], axis=1)
+    return (rate[:, None, None] * law[:, :, None] * normal[:, None, :]
+            + ramp[:, None, None] * np.einsum("ecr,ecj->erj", dl, across))
+
+
 class PythonImplicit:
     """The implicit method in numpy: the twin of finrft_implicit_step, used with the python backend."""
 
@@ -291,13 +322,13 @@ class PythonImplicit:
     def _segments(self, d: mujoco.MjData) -> tuple[list, list, list]:
         """Per force group: its law, v_reg, the site Jacobians (k, 3, nv) and the segments' axes and normals; per
         penalty stop: its stiffness, hinge dofs and their deflections from the rest angle now; per attached body:
-        the law's element forces, the Jacobian of its origin (6, nv: angular rows, then linear, the twist's order)
+        its `Attached` (the law), the Jacobian of its origin (6, nv: angular rows, then linear, the twist's order)
         and its elements below the surface now (arms, normals, depths, areas)."""
         segments, stops, bodies = [], [], []
         for body, surface in self.bodies:
             jac = np.zeros((6, self.m.nv))
             mujoco.mj_jacBody(self.m, d, jac[3:], jac[:3], body)
-            bodies.append((self._surfaces.attached.element_forces, jac, self._surfaces.submerged(d, body, surface)))
+            bodies.append((self._surfaces.attached, jac, self._surfaces.submerged(d, body, surface)))
         for law, group in self.laws:
             jacp = np.zeros((len(group.sites), 3, self.m.nv))
             for row, site in zip(jacp, group.sites):
@@ -330,20 +361,27 @@ class PythonImplicit:
                 step = h.sum(axis=2, keepdims=True) * (1 if forward else 2)
                 dfdv = np.swapaxes((up - down) / step, 1, 2)  # (k, force, v)
                 jacobian += np.einsum("kin,kij,kjm->nm", jacp, dfdv, jacp)
-        for law, jac, (arm, normal, depth, area) in bodies:
+        for attached, jac, (arm, normal, depth, area) in bodies:
+            law = attached.element_forces
             twist = jac @ u
             v = twist[3:] + np.cross(twist[:3], arm)
             f = law(normal, v, depth, area)
             force += jac.T @ np.concatenate([np.cross(arm, f).sum(axis=0), f.sum(axis=0)])
             if slope and len(area):
-                # each element's dF/dv (as body_slope): probes (element, probe, 3), the law on all of them at once
+                # each element's dF/dv (as body_slope): forward, those leading with no DRFT term by
+                # `_leading_slope`; the others by probes (element, probe, 3), the law on all of them at once
                 h = 1e-6 * (np.linalg.norm(v, axis=1) + SURFACE_SPEED)
-                probe = h[:, None, None] * np.eye(3)
-                each = [np.repeat(x, 3, axis=0) for x in (normal, depth, area)]
-                up = law(each[0], (v[:, None] + probe).reshape(-1, 3), *each[1:]).reshape(-1, 3, 3)
-                down = f[:, None] if forward else law(each[0], (v[:, None] - probe).reshape(-1, 3),
-                                                      *each[1:]).reshape(-1, 3, 3)
-                dfdv = np.swapaxes((up - down) / (h * (1 if forward else 2))[:, None, None], 1, 2)
+                rated = np.any(f != 0, axis=1) & (forward and attached.drft_lambda == 0)
+                dfdv = np.zeros((len(area), 3, 3))
+                dfdv[rated] = _leading_slope(attached, normal[rated], v[rated], f[rated], depth[rated],
+                                             area[rated], h[rated])
+                rest = ~rated
+                probe = h[rest, None, None] * np.eye(3)
+                each = [np.repeat(x[rest], 3, axis=0) for x in (normal, depth, area)]
+                up = law(each[0], (v[rest, None] + probe).reshape(-1, 3), *each[1:]).reshape(-1, 3, 3)
+                down = f[rest, None] if forward else law(each[0], (v[rest, None] - probe).reshape(-1, 3),
+                                                         *each[1:]).reshape(-1, 3, 3)
+                dfdv[rest] = np.swapaxes((up - down) / (h[rest] * (1 if forward else 2))[:, None, None], 1, 2)
                 # A_e = [-[arm]x | I]: v_e = A_e twist, and the wrench is sum_e A_e^T F_e
                 a = np.zeros((len(area), 3, 6))
                 a[:, :, :3] = -_cross_matrices(arm)

@@ -146,6 +146,11 @@ void finrft_surface_wrench(const FinrftSurface* p, const mjData* d, const mjtNum
 void finrft_surface_element_force(const FinrftSurface* p, const mjtNum normal[3], const mjtNum v[3], mjtNum depth,
                                   mjtNum area, mjtNum f[3]);
 
+// The instance's law alone on one element (no DRFT term, no ramp), as finrft_surface_element_force's arguments:
+// every surface law is rate-independent, a function of the direction of v alone.
+void finrft_surface_law_force(const FinrftSurface* p, const mjtNum normal[3], const mjtNum v[3], mjtNum depth,
+                              mjtNum area, mjtNum f[3]);
+
 // The instance's elements below the free surface at the positions of d (after mj_kinematics), world frame, into
 // out (FINRFT_SUBMERGED numbers each: arm from the body's origin, outward normal, depth, area; room for all p->n);
 // returns their count. Positions are fixed within a step, so the implicit steps take them once per step and loop

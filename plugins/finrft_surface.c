@@ -410,6 +410,11 @@ const FinrftSurface* finrft_surface_instance(const mjModel* m, mjData* d, int in
   return (const FinrftSurface*)d->plugin_data[instance];
 }
 
+void finrft_surface_law_force(const FinrftSurface* p, const mjtNum normal[3], const mjtNum v[3], mjtNum depth,
+                              mjtNum area, mjtNum f[3]) {
+  kLaws[p->law].force(p, normal, v, depth, area, f);
+}
+
 // One element's force (world frame): the law's, plus DRFT's term, times the ramp tanh(max(n . v, 0) / v_reg), 0
 // below FINRFT_RAMP_FLOOR (as Attached.element_forces in attach.py and `regularised` in finrft/laws/__init__.py).
 void finrft_surface_element_force(const FinrftSurface* p, const mjtNum normal[3], const mjtNum v[3], mjtNum depth,

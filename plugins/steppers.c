@@ -20,8 +20,9 @@
 // dF_i/dv comes from central differences of the same law (forward ones in Newton's method, whose root does not
 // depend on it), so no law needs a derivative of its own. dW_b/dtwist is assembled from its elements: element e at
 // arm a_e moves at v_e = A_e t, A_e = [-[a_e]x | I], and W_b = sum_e A_e^T F_e(v_e), so dW_b/dtwist =
-// sum_e A_e^T (dF_e/dv_e) A_e, each 3 x 3 dF_e/dv_e differenced from the element's law alone, only for the
-// elements below the surface (taken once per step) that lead the motion at v_e or at a probe. Then, as
+// sum_e A_e^T (dF_e/dv_e) A_e, each 3 x 3 dF_e/dv_e differenced from the element's law alone (across v_e only
+// where it leads: leading_slope), only for the elements below the surface (taken once per step) that lead the
+// motion at v_e or at a probe. Then, as
 // MuJoCo's implicitfast: activations, qvel += dv, positions, time. The newton-midpoint method takes the
 // Jacobians and elements at the positions half a step ahead at v (F there, f at the start): see integrate.py for
 // when that is second order and when it damps.
@@ -308,10 +309,56 @@ static void body_wrench(const Items* s, int j, const mjtNum t[6], mjtNum w[6]) {
   }
 }
 
+// Two unit vectors across a nonzero v, p1 = v x e / |v x e| (e the axis along v's smallest component, the first
+// of equals) and p2 = v^ x p1, as _across in integrate.py.
+static void across(const mjtNum v[3], mjtNum p[2][3]) {
+  int axis = 0;
+  for (int i = 1; i < 3; i++) if (fabs(v[i]) < fabs(v[axis])) axis = i;
+  mjtNum e[3] = {0, 0, 0}, unit[3], size = sqrt(finrft_dot3(v, v));
+  e[axis] = 1;
+  finrft_cross(p[0], v, e);
+  mjtNum norm = sqrt(finrft_dot3(p[0], p[0]));
+  for (int i = 0; i < 3; i++) {
+    p[0][i] /= norm;
+    unit[i] = v[i] / size;
+  }
+  finrft_cross(p[1], unit, p[0]);
+}
+
+// dF/dv (3 x 3, row-major) of an element leading at v (n . v above the ramp's floor), given its force f0 = r L
+// there, for forward differences: F = r(n . v) L(v), r the ramp, L the law, which is rate-independent (L(c v) =
+// L(v), c > 0: dL/dv v = 0), so dF/dv = r'(n . v) L n^T + r (dL/dv p1 p1^T + dL/dv p2 p2^T), p1, p2 across v: two
+// probes of the law where the plain differences take three (a wheel's step: a sixth fewer calls of the law).
+static void leading_slope(const FinrftSurface* p, const mjtNum* element, const mjtNum v[3], const mjtNum f0[3],
+                          mjtNum h, mjtNum k[9]) {
+  const mjtNum* n = element + 3;
+  mjtNum ramp = 1, rate = 0;
+  if (p->v_reg > 0) {
+    mjtNum ratio = finrft_dot3(n, v) / p->v_reg;
+    ramp = ratio < 20 ? tanh(ratio) : 1;
+    rate = ratio < 20 ? (1 - ramp * ramp) / p->v_reg : 0;
+  }
+  mjtNum law[3], cross[2][3], dl[2][3];
+  for (int r = 0; r < 3; r++) law[r] = f0[r] / ramp;
+  across(v, cross);
+  for (int c = 0; c < 2; c++) {
+    mjtNum u[3], fu[3];
+    for (int r = 0; r < 3; r++) u[r] = v[r] + h * cross[c][r];
+    finrft_surface_law_force(p, n, u, element[6], element[7], fu);
+    for (int r = 0; r < 3; r++) dl[c][r] = (fu[r] - law[r]) / h;
+  }
+  for (int r = 0; r < 3; r++) {
+    for (int c = 0; c < 3; c++) {
+      k[3 * r + c] = rate * law[r] * n[c] + ramp * (dl[0][r] * cross[0][c] + dl[1][r] * cross[1][c]);
+    }
+  }
+}
+
 // dW/dtwist (6 x 6, row-major) of body j at twist t, sum_e A_e^T (dF_e/dv_e) A_e: each element's 3 x 3 by forward
 // differences from its force at t (kept by body_wrench at t) when `forward`, else central ones, in steps
-// h = 1e-6 (|v_e| + SURFACE_SPEED). An element trailing at v_e and at every probe (n . v <= 0: every surface law
-// and the ramp are exactly 0 there) adds nothing and costs no call of its law.
+// h = 1e-6 (|v_e| + SURFACE_SPEED); forward, an element leading at v_e (its force not 0) with no DRFT term by
+// leading_slope's two probes. An element trailing at v_e and at every probe (n . v <= 0: every surface law and the
+// ramp are exactly 0 there) adds nothing and costs no call of its law.
 static void body_slope(const Items* s, int j, const mjtNum t[6], int forward, mjtNum dw[36]) {
   const FinrftSurface* p = s->surface[j];
   mju_zero(dw, 36);
@@ -320,8 +367,10 @@ static void body_slope(const Items* s, int j, const mjtNum t[6], int forward, mj
     mjtNum v[3], probe[2][3][3], k[9], a[18], ka[18];
     element_velocity(t, element, v);
     mjtNum h = 1e-6 * (sqrt(finrft_dot3(v, v)) + SURFACE_SPEED);
+    const mjtNum* f0 = s->element_force + 3 * (size_t)e;
+    int rated = forward && p->drft_lambda == 0 && (f0[0] != 0 || f0[1] != 0 || f0[2] != 0);
     int sides = forward ? 1 : 2, leads = finrft_dot3(n, v) > 0;
-    for (int side = 0; side < sides; side++) {
+    for (int side = 0; side < sides && !rated; side++) {
       for (int c = 0; c < 3; c++) {
         mjtNum* u = probe[side][c];
         for (int r = 0; r < 3; r++) u[r] = v[r];
@@ -329,12 +378,15 @@ static void body_slope(const Items* s, int j, const mjtNum t[6], int forward, mj
         leads |= finrft_dot3(n, u) > 0;
       }
     }
-    if (!leads) continue;
-    for (int c = 0; c < 3; c++) {
+    if (rated) {
+      leading_slope(p, element, v, f0, h, k);
+    } else if (!leads) {
+      continue;
+    }
+    for (int c = 0; c < 3 && !rated; c++) {
       mjtNum fu[3], fd[3];
       element_force(p, element, probe[0][c], fu);
       if (forward) {
-        const mjtNum* f0 = s->element_force + 3 * (size_t)e;
         for (int r = 0; r < 3; r++) k[3 * r + c] = (fu[r] - f0[r]) / h;
       } else {
         element_force(p, element, probe[1][c], fd);

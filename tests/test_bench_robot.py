@@ -1,5 +1,6 @@
 """The robot benchmark: one gait's eta against a converged run of the same scene, computed in the same call."""
 
+import numpy as np
 import pytest
 
 from finrft.studies import bench
@@ -16,3 +17,12 @@ def test_physical_gait_is_measured_against_a_converged_run():
     # a fixed step's reference is the same method at a tenth of the step
     fixed = bench._converged(scene.replace(**{"sim.method": "newton", "sim.dt": 3e-4}))
     assert fixed[0].sim.dt == pytest.approx(3e-5) and fixed[1] == "newton, dt 3e-05 s"
+
+
+def test_a_robots_force_is_held_to_its_worst_component():
+    # The wheel's force is mostly its load, which any stable run carries: its drawbar pull 2 % off is 0.05 % of the
+    # norm. A component below 1 % of the whole (Fy at no slip angle) is not held; a speed is relative alone.
+    reference = np.array([0.5, 1e-24, 21.0])
+    assert bench._relative(np.array([0.49, 3e-24, 21.0]), reference) == pytest.approx(0.02)
+    assert bench._relative(np.array([0.5, 0.0, 21.21]), reference) == pytest.approx(0.01)
+    assert bench._relative(np.array([0.0463]), np.array([0.0462])) == pytest.approx(0.1 / 46.2)

@@ -73,6 +73,36 @@ def test_native_and_python_steppers_agree_on_a_free_body(law, method):
     assert abs(runs["native"][-1, 0] - 0.05 * n * 1e-3) > 1e-4
 
 
+@pytest.mark.parametrize("law", [*MEDIA, "li2013-planar"])
+def test_the_surface_laws_are_rate_independent_and_their_leading_slope_is_the_derivative(law):
+    # Newton's slope on an element leading at v takes the law to depend on v's direction alone (L(c v) = L(v),
+    # c > 0, so dL/dv v = 0) and probes it across v only: it is the derivative of the ramped force, as central
+    # differences along every axis give it, on leading elements of every orientation, on the ramp and off it.
+    medium = dict(MEDIA.get(law, dict(law=law, v_reg=1e-3)))
+    _, attached = _box("python", 1e-3, **medium)
+    rng = np.random.default_rng(23)
+    normal = rng.normal(size=(400, 3))
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    v = rng.normal(scale=0.02, size=(400, 3))
+    v *= np.where(np.einsum("ei,ei->e", normal, v) < 0, -1, 1)[:, None]   # leading
+    v[:100] -= (np.einsum("ei,ei->e", normal[:100], v[:100]) - 3e-4)[:, None] * normal[:100]  # on the ramp
+    depth, area = np.full(400, 0.02), np.full(400, 1e-4)
+    bare = attached.law_forces(normal, v, depth, area)
+    for c in (1e-3, 0.7, 40.0):
+        np.testing.assert_allclose(attached.law_forces(normal, c * v, depth, area), bare, rtol=1e-9, atol=1e-12)
+    f = attached.element_forces(normal, v, depth, area)
+    h = 1e-6 * (np.linalg.norm(v, axis=1) + integrate.SURFACE_SPEED)
+    slope = integrate._leading_slope(attached, normal, v, f, depth, area, h)
+    step = 1e-8
+    central = np.stack([(attached.element_forces(normal, v + step * e, depth, area)
+                         - attached.element_forces(normal, v - step * e, depth, area)) / (2 * step)
+                        for e in np.eye(3)], axis=2)
+    smooth = np.all(np.abs(central) < 1e6, axis=(1, 2))  # not across a kink of the law (a face's edge-on switch)
+    assert smooth.sum() > 300
+    scale = np.abs(central[smooth]).max(axis=(1, 2))[:, None, None]
+    assert np.all(np.abs(slope[smooth] - central[smooth]) <= 1e-3 * scale)
+
+
 def _alpha_z_flat() -> float:
     """li2013's alpha_z of a horizontal plate pushed straight down: alpha_z(beta = 0, gamma = pi/2), N/m^3."""
     return float(li2013.alpha(np.array(0.0), np.array(np.pi / 2), 1.0, li2013.GENERIC)[1])

@@ -272,10 +272,10 @@ def step_through(m: mujoco.MjModel, d: mujoco.MjData, scene: Any, advance: Stepp
                  stroke_time: float = 0.0,
                  speeds: np.ndarray | None = None, on_step: Callable[[], None] | None = None) -> None:
     """Step a model through a run: ``on_stroke(k)`` as stroke k starts, ``on_sample(i)`` (after ``forward(m, d)``,
-    mj_forward or the trial's own; None: only the state is current) at recorded step ``samples[i]``; ``advance`` steps in
-    chunks in between. Stops loudly if the state blows up, or if the ``watch`` dofs chatter (fixed-step methods:
-    the three steps before every PROBE_EVERY-th sample are taken one by one and checked when the run ends), each
-    by more than its chatter speed in ``speeds`` (`chatter_speeds`; None: CHATTER_DV).
+    mj_forward or the trial's own; None: only the state is current) at recorded step ``samples[i]``; ``advance``
+    steps in chunks in between. Stops loudly if the state blows up, or if the ``watch`` dofs chatter (fixed-step
+    methods: the three steps before every PROBE_EVERY-th sample are taken one by one and checked when the run ends),
+    each by more than its chatter speed in ``speeds`` (`chatter_speeds`; None: CHATTER_DV).
     An adaptive method steps to each event's `instants` (the drive's strokes last ``stroke_time``) and restarts its
     step size at each reversal. ``on_step()``, when given, is called after every step (the fixed-step methods
     then step one at a time; an adaptive method at every instant of a grid of its largest step: `_walk`)."""

@@ -4,7 +4,7 @@ speed against its legs' rolling speed and its rest on the sand, the wheel's stat
 Li et al. 2013's law over the submerged arc; and their TOML scenes against the models they name.
 
 The robots run as `finrft run --example NAME` does, at the scenes' default numerics (newton-midpoint at 1 ms, the
-wheel rig newton at 50 ms); the wheel's static sinkage with MuJoCo's own step at 0.1 ms and a damped lift."""
+wheel rig newton at 62.5 ms); the wheel's static sinkage with MuJoCo's own step at 0.1 ms and a damped lift."""
 
 import dataclasses
 import math
@@ -18,10 +18,12 @@ from scipy import integrate, optimize, special
 
 import finrft
 from finrft import laws
+from finrft.errors import Chatter
 from finrft.integrate import stepper
 from finrft.laws import li2013
 from finrft.models import mjcf_path
 from finrft.experiments import wheel
+from finrft.experiments.attached_model import medium_forces
 from finrft.experiments.user_model import example
 from finrft.scene import Medium, Sim, UserScene, load_scene
 
@@ -235,6 +237,37 @@ def test_wheel_rig_starts_at_the_depth_where_the_sand_carries_it_as_it_drives():
     assert -model.key("steady").qpos[model.joint("lift").qposadr[0]] == pytest.approx(sinkage, abs=1e-6)
     summary = finrft.run_robot(load_scene(example("wheel_rig"), cls=UserScene)).summary()
     assert abs(summary["com_velocity_m_s"][2]) < 1e-5
+
+
+def test_wheel_rigs_newton_step_holds_below_its_load_axis_period():
+    """Newton's step takes the positions at its start: the load axis (2.14 kg) on the sand's vertical stiffness k
+    (dFz/dz of the wheel driven at its steady depth, by differences) is a spring the step resolves only below
+    dt = 2 sqrt(m / k), 86 ms: at 0.9 of that it runs (the rig's scene steps at 0.72), at 1.15 it stops as
+    chattering."""
+    scene = wheel.default_scene()
+    rig = wheel.Wheel.of(scene)
+    built = rig.build(scene)
+    model, data = built.model, mujoco.MjData(built.model)
+    for j, qpos, dof in zip(rig.robot_scene(scene).drive, built.drive_qpos, built.drive_dofs):
+        data.qpos[qpos], data.qvel[dof] = j.start, j.speed
+    lift, force = model.joint("lift").qposadr[0], medium_forces(built)
+    depth = wheel.equilibrium_sinkage(scene, built, rig)
+
+    def vertical(sinkage: float) -> float:
+        data.qpos[lift] = -sinkage
+        mujoco.mj_forward(model, data)
+        return float(force(data)[0, 2])
+    k = (vertical(depth + 5e-4) - vertical(depth - 5e-4)) / 1e-3
+    limit = 2 * math.sqrt(model.body_subtreemass[model.body("load").id] / k)
+    assert limit == pytest.approx(0.086, abs=0.002)
+    rig_scene = load_scene(example("wheel_rig"), cls=UserScene).replace(**{"sim.duration": 4.0, "sim.settle": 2.0})
+    for dt in (0.9 * limit, 1.15 * limit):
+        s = rig_scene.replace(**{"sim.dt": dt, "sim.record_dt": dt})
+        if dt < limit:
+            finrft.run_robot(s)
+        else:
+            with pytest.raises(Chatter):
+                finrft.run_robot(s)
 
 
 def test_wheel_rigs_carriage_load_balances_the_sands_drawbar_pull():

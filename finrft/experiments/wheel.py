@@ -2,14 +2,15 @@
 finrft's wheel data): the hub moved at speed v along a direction at slip angle beta to the wheel's heading, the
 wheel spun at the rate its slip s asks, and its vertical axis either held at a sinkage or free under a load.
 
-The rig is the example wheel rig (mjcf/wheel_rig.xml is `rig_xml` of the default wheel, and mjcf/wheel_rig.toml
-its robot-runner scene, whose [medium] and [sim] method this experiment starts from, at its own step `DT`). From the world to the wheel:
-``carriage`` slides along +x (the hub's velocity, prescribed); ``lift`` slides along +z (prescribed at minus the
-sinkage, or free with the load); ``slip_angle`` turns about -z (prescribed at beta, so a wheel at beta > 0 heads
-to the right of its travel); ``axle`` spins the body ``wheel`` about its y axis (prescribed at omega). The wheel
-is generated (radius, width, straight grousers) or is the body ``wheel`` of a user's MJCF, turned by its hinge
-``axle`` through the body's origin along its y axis. It runs as a robot (`user_model.RobotTrial`: the drives, the
-stepping, the error estimate); `wheel_summary` turns the medium's mean force into the data's frame.
+The rig is the example wheel rig (mjcf/wheel_rig.xml is `rig_xml` of the default wheel, and mjcf/wheel_rig.toml its
+robot-runner scene, whose [medium] and [sim] method this experiment starts from, at its own step `DT`). From the
+world to the wheel: ``carriage`` slides along +x (the hub's velocity, prescribed); ``lift`` slides along +z
+(prescribed at minus the sinkage, or free with the load); ``slip_angle`` turns about -z (prescribed at beta, so a
+wheel at beta > 0 heads to the right of its travel); ``axle`` spins the body ``wheel`` about its y axis (prescribed
+at omega). The wheel is generated (radius, width, straight grousers) or is the body ``wheel`` of a user's MJCF,
+turned by its hinge ``axle`` through the body's origin along its y axis. It runs as a robot
+(`user_model.RobotTrial`: the drives, the stepping, the error estimate); `wheel_summary` turns the medium's mean
+force into the data's frame.
 
 Slip, as the data defines it (v the hub's total speed, R the rim's radius): driving s = 1 - v / (omega R), braking
 s = omega R / v - 1; s = -1 a locked wheel dragged, 0 pure rolling.

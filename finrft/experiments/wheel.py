@@ -102,7 +102,7 @@ register_scene(WheelScene, title="A wheel on a single-wheel rig: `finrft wheel`;
 # turning with it leave a ripple); free, it starts at its equilibrium and stays (it drifts 0.06 mm in 3 s at slip
 # angle 45 deg; docs/results/wheel.md). From the surface it would take about 20 s (200 mm of travel) to settle.
 DURATION, SETTLE = 3.0, 1.0  # s
-# The wheel's step: the rig example's (50 ms) holds its steady drive at slip 0.5 within 0.5 %; the conditions of
+# The wheel's step: the rig example's (62.5 ms) holds its steady drive at slip 0.5 within 0.6 %; the conditions of
 # the data reach from locked to spinning wheels, slip angles to 90 deg and wheels settling from the surface, and
 # their study is converged at 10 ms (docs/results/wheel.md), its runs as short as 0.3 s.
 DT = 0.01  # s

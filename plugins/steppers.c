@@ -328,7 +328,7 @@ static void across(const mjtNum v[3], mjtNum p[2][3]) {
 // dF/dv (3 x 3, row-major) of an element leading at v (n . v above the ramp's floor), given its force f0 = r L
 // there, for forward differences: F = r(n . v) L(v), r the ramp, L the law, which is rate-independent (L(c v) =
 // L(v), c > 0: dL/dv v = 0), so dF/dv = r'(n . v) L n^T + r (dL/dv p1 p1^T + dL/dv p2 p2^T), p1, p2 across v: two
-// probes of the law where the plain differences take three (a wheel's step: a sixth fewer calls of the law).
+// probes of the law where the plain differences take three.
 static void leading_slope(const FinrftSurface* p, const mjtNum* element, const mjtNum v[3], const mjtNum f0[3],
                           mjtNum h, mjtNum k[9]) {
   const mjtNum* n = element + 3;

@@ -148,6 +148,13 @@ def medium_forces(built: AttachedModel) -> Callable[[mujoco.MjData], np.ndarray]
     return lambda d: wrenches(d)[:, 3:]
 
 
+def _applied_lag(m: mujoco.MjModel, method: str) -> float:
+    """How far (s) before a step's end the fixed-step implicit ``method`` took the medium's force, at its new
+    velocity: (1 - midpoint) dt; 0 for the methods that take it at the state itself."""
+    chosen = methods.get(method)
+    return (1 - chosen.midpoint) * m.opt.timestep if chosen.implicit and not chosen.adaptive else 0.0
+
+
 def applied_state(built: AttachedModel, method: str) -> Callable[[mujoco.MjData], mujoco.MjData]:
     """Where the forces of the step that led to an MjData's state were taken, as an MjData after mj_forward: with a
     fixed-step implicit ``method``, its new velocity v at the positions the method took the medium's force at, the
@@ -158,8 +165,7 @@ def applied_state(built: AttachedModel, method: str) -> Callable[[mujoco.MjData]
     the medium, correlated with the velocity it drives) averages to other than the impulse the steps applied, by an
     amount first order in dt: the wheel rig free under its 21 N load came out 0.12 N short at 20 ms."""
     m = built.model
-    chosen = methods.get(method)
-    lag = (1 - chosen.midpoint) * m.opt.timestep if chosen.implicit and not chosen.adaptive else 0.0
+    lag = _applied_lag(m, method)
     if lag == 0:
         return lambda d: d
     where = mujoco.MjData(m)
@@ -176,10 +182,9 @@ def applied_state(built: AttachedModel, method: str) -> Callable[[mujoco.MjData]
 
 def record_forward(built: AttachedModel, method: str) -> Callable[[mujoco.MjModel, mujoco.MjData], None]:
     """The forward pass before a recording of a run that reads the medium's force and the drives' loads at
-    `applied_state`: with the native backend and a fixed-step implicit ``method``, without the medium's force,
-    which the recording does not read there (a tenth of a wheel's step saved); else mj_forward."""
-    chosen = methods.get(method)
-    if not (built.backend == "native" and chosen.implicit and not chosen.adaptive):
+    `applied_state`: with the native backend, where that is not the state itself, without the medium's force,
+    which the recording does not read there; else mj_forward."""
+    if built.backend != "native" or _applied_lag(built.model, method) == 0:
         return mujoco.mj_forward
     pause = native.function("finrft_pause_medium", None, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int)
 

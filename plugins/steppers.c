@@ -354,44 +354,53 @@ static void leading_slope(const FinrftSurface* p, const mjtNum* element, const m
   }
 }
 
-// dW/dtwist (6 x 6, row-major) of body j at twist t, sum_e A_e^T (dF_e/dv_e) A_e: each element's 3 x 3 by forward
-// differences from its force at t (kept by body_wrench at t) when `forward`, else central ones, in steps
-// h = 1e-6 (|v_e| + SURFACE_SPEED); forward, an element leading at v_e (its force not 0) with no DRFT term by
-// leading_slope's two probes. An element trailing at v_e and at every probe (n . v <= 0: every surface law and the
-// ramp are exactly 0 there) adds nothing and costs no call of its law.
+// dF/dv (3 x 3, row-major) of an element at v by differences along each axis in steps h: forward ones from its
+// force f0 there when `forward`, else central ones. 0 when it trails at v and at every probe (n . v <= 0: every
+// surface law and the ramp are exactly 0 there): its slope is then 0 and no call of its law is made.
+static int probed_slope(const FinrftSurface* p, const mjtNum* element, const mjtNum v[3], const mjtNum f0[3],
+                        mjtNum h, int forward, mjtNum k[9]) {
+  const mjtNum* n = element + 3;
+  mjtNum probe[2][3][3];
+  int sides = forward ? 1 : 2, leads = finrft_dot3(n, v) > 0;
+  for (int side = 0; side < sides; side++) {
+    for (int c = 0; c < 3; c++) {
+      mjtNum* u = probe[side][c];
+      for (int r = 0; r < 3; r++) u[r] = v[r];
+      u[c] += side ? -h : h;
+      leads |= finrft_dot3(n, u) > 0;
+    }
+  }
+  if (!leads) return 0;
+  for (int c = 0; c < 3; c++) {
+    mjtNum fu[3], fd[3];
+    element_force(p, element, probe[0][c], fu);
+    if (forward) {
+      for (int r = 0; r < 3; r++) k[3 * r + c] = (fu[r] - f0[r]) / h;
+    } else {
+      element_force(p, element, probe[1][c], fd);
+      for (int r = 0; r < 3; r++) k[3 * r + c] = (fu[r] - fd[r]) / (2 * h);
+    }
+  }
+  return 1;
+}
+
+// dW/dtwist (6 x 6, row-major) of body j at twist t, sum_e A_e^T (dF_e/dv_e) A_e: each element's 3 x 3 in steps
+// h = 1e-6 (|v_e| + SURFACE_SPEED), by forward differences from its force at t (kept by body_wrench at t) when
+// `forward`, else central ones (probed_slope); forward, an element leading at v_e (its force not 0) with no DRFT
+// term by leading_slope's two probes. An element trailing at v_e and at every probe adds nothing.
 static void body_slope(const Items* s, int j, const mjtNum t[6], int forward, mjtNum dw[36]) {
   const FinrftSurface* p = s->surface[j];
   mju_zero(dw, 36);
   for (int e = s->first[j]; e < s->first[j + 1]; e++) {
-    const mjtNum *element = s->element + FINRFT_SUBMERGED * (size_t)e, *n = element + 3;
-    mjtNum v[3], probe[2][3][3], k[9], a[18], ka[18];
+    const mjtNum* element = s->element + FINRFT_SUBMERGED * (size_t)e;
+    const mjtNum* f0 = s->element_force + 3 * (size_t)e;
+    mjtNum v[3], k[9], a[18], ka[18];
     element_velocity(t, element, v);
     mjtNum h = 1e-6 * (sqrt(finrft_dot3(v, v)) + SURFACE_SPEED);
-    const mjtNum* f0 = s->element_force + 3 * (size_t)e;
-    int rated = forward && p->drft_lambda == 0 && (f0[0] != 0 || f0[1] != 0 || f0[2] != 0);
-    int sides = forward ? 1 : 2, leads = finrft_dot3(n, v) > 0;
-    for (int side = 0; side < sides && !rated; side++) {
-      for (int c = 0; c < 3; c++) {
-        mjtNum* u = probe[side][c];
-        for (int r = 0; r < 3; r++) u[r] = v[r];
-        u[c] += side ? -h : h;
-        leads |= finrft_dot3(n, u) > 0;
-      }
-    }
-    if (rated) {
+    if (forward && p->drft_lambda == 0 && (f0[0] != 0 || f0[1] != 0 || f0[2] != 0)) {
       leading_slope(p, element, v, f0, h, k);
-    } else if (!leads) {
+    } else if (!probed_slope(p, element, v, f0, h, forward, k)) {
       continue;
-    }
-    for (int c = 0; c < 3 && !rated; c++) {
-      mjtNum fu[3], fd[3];
-      element_force(p, element, probe[0][c], fu);
-      if (forward) {
-        for (int r = 0; r < 3; r++) k[3 * r + c] = (fu[r] - f0[r]) / h;
-      } else {
-        element_force(p, element, probe[1][c], fd);
-        for (int r = 0; r < 3; r++) k[3 * r + c] = (fu[r] - fd[r]) / (2 * h);
-      }
     }
     // A_e = [-[arm]x | I], 3 x 6; then K A_e, and its rows added as A_e^T (K A_e) = ([arm]x K A_e ; K A_e)
     const mjtNum* arm = element;

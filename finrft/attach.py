@@ -228,7 +228,8 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str = (), law: str = "li
            coefficients: li2013.Coefficients | rft3d.Coefficients | None = None, medium: str | None = None,
            rho_c: float | None = None, mu_int: float | None = None, mu_surf: float | None = None,
            drft_lambda: float = 0.0, bulk_density: float | None = None,
-           v_reg: float = laws.SURFACE_V_REG, geoms: Sequence[str] = (), cull: bool = True) -> Attached:
+           v_reg: float = laws.SURFACE_V_REG, geoms: Sequence[str] = (), cull: bool = True,
+           internal_friction: float | None = None, surface_friction: float | None = None) -> Attached:
     """Add granular RFT to the named bodies of ``spec`` (before it is compiled): all the geoms of each of
     ``bodies``, and the geoms named in ``geoms`` (their bodies' other geoms left out).
 
@@ -237,8 +238,9 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str = (), law: str = "li
     ``coefficients`` (default: the generic medium) scaled by ``zeta`` (default 1), or instead of both a ``medium``
     of the catalogue (`finrft.media`, e.g. ``"poppy_seeds_lp"``); or ``rft3d`` (`finrft.laws.rft3d`) with
     ``coefficients`` (default: `rft3d.AGARWAL_2023`) and the medium's critical density ``rho_c`` (kg/m^3), internal friction ``mu_int`` and
-    the bodies' surface friction ``mu_surf``, all three required (a catalogued ``medium`` gives rho_c and mu_int
-    when it has them); ``drft_lambda`` (dimensionless, default 0: off):
+    the bodies' surface friction ``mu_surf``, all three required (a catalogued ``medium`` gives those it has; a
+    ``mu_surf`` given overrides its); the scene files' names are taken too: ``bulk_density`` for rft3d's rho_c,
+    ``internal_friction`` for mu_int, ``surface_friction`` for mu_surf (one name or the other); ``drft_lambda`` (dimensionless, default 0: off):
     DRFT's rate-dependent term on top of either law (`finrft.laws.drft`), with the medium's density: rft3d's
     ``rho_c``, li2013's ``bulk_density`` (kg/m^3; else the catalogued ``medium``'s, if it has one);
     ``v_reg`` (m/s, default `finrft.laws.SURFACE_V_REG`, 1e-4; 0: none): every element's force times
@@ -259,13 +261,15 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str = (), law: str = "li
     if not (math.isfinite(v_reg) and v_reg >= 0):
         raise SceneError(f"attach: v_reg must be >= 0 m/s, got {v_reg!r}")
     module = laws.module(law, laws.SURFACE)
+    # one vocabulary with the scene files: their names of rft3d's parameters are taken as its own
+    rho_c = _either(rho_c, bulk_density if module.DENSITY else None, "rho_c", "bulk_density")
+    bulk_density = None if module.DENSITY else bulk_density
+    mu_int = _either(mu_int, internal_friction, "mu_int", "internal_friction")
+    mu_surf = _either(mu_surf, surface_friction, "mu_surf", "surface_friction")
     parameters, catalogued = laws.surface_parameters(
         law, {"zeta": zeta, "rho_c": rho_c, "mu_int": mu_int, "mu_surf": mu_surf}, material, "attach")
     if catalogued is not None and coefficients is not None:
         raise SceneError(f"attach: medium={medium!r} gives the coefficients: pass one or the other")
-    if module.DENSITY and bulk_density is not None:
-        raise SceneError(f"attach: law {law}'s bulk density is {module.DENSITY}: pass {module.DENSITY}, not "
-                         f"bulk_density")
     known = material.get("bulk_density") if material is not None else None
     rho = drft.density(drft_lambda, parameters[module.DENSITY] if module.DENSITY else bulk_density,
                        None if known is None else known.value, "bulk_density", "attach")
@@ -349,6 +353,13 @@ def _bind(spec: mujoco.MjSpec, attached: Attached, surface: Surface) -> None:
     body.plugin = instance
     body.plugin.name = instance.name
     body.plugin.active = True
+
+
+def _either(value: float | None, alias: float | None, name: str, alias_name: str) -> float | None:
+    """A parameter given by its own name or by the scene files' (``alias_name``), not both."""
+    if value is not None and alias is not None:
+        raise SceneError(f"attach: {alias_name} is {name} by the scene files' name: give one of them")
+    return alias if value is None else value
 
 
 def attached_bodies(spec: mujoco.MjSpec, bodies: Sequence[str], geoms: Sequence[str]) -> list[str]:

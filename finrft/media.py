@@ -234,8 +234,10 @@ def sandswim_coefficients(length: float, depth: float, height: float, bulk_densi
 def immersion_properties(section: Any) -> tuple[float, float, float] | None:
     """What a chain scene's ``[medium]`` (`finrft.scene.Immersion`) gives `sandswim_coefficients`: its bulk
     density (kg/m^3), internal and surface friction coefficients, each given there or by its named medium (the
-    catalogue's internal friction angle as its tangent); None when any of them or the height is missing.
-    SceneError for an unknown medium or a value given by both."""
+    catalogue's internal friction angle as its tangent); None when the bulk density, internal friction or the height
+    is missing. The surface friction is the chain's: given, it overrides the catalogue's; 0 is the named medium's,
+    else frictionless (as medium.surface_friction of every scene). SceneError for an unknown medium or a value of
+    the medium's given by both."""
     material = medium(section.name) if section.name else None
     catalogued = {"bulk_density": "bulk_density", "internal_friction": "internal_friction_angle",
                   "surface_friction": "surface_friction"}
@@ -243,12 +245,14 @@ def immersion_properties(section: Any) -> tuple[float, float, float] | None:
     for key, quantity in catalogued.items():
         given = getattr(section, key)
         known = material.get(quantity) if material else None
+        if given and key == "surface_friction":
+            known = None
         if given and known:
             raise SceneError(f"medium.name = {section.name!r} gives {quantity}: leave medium.{key} out "
                              f"(got {given:g})")
         if known:
             given = math.tan(known.value) if quantity == "internal_friction_angle" else known.value
         values.append(given)
-    if not (section.height > 0 and all(values)):
+    if not (section.height > 0 and all(values[:2])):
         return None
     return tuple(values)

@@ -115,7 +115,10 @@ Medium = schema.section("Medium", (
     ("element_size", float, _f(0.005, "m", "size of the surface elements", minimum=0.0)),
     ("v_reg", float, _f(laws.SURFACE_V_REG, "m/s", "every element's force times tanh(max(n.v, 0) / v_reg): the "
                         "smooth onset of the leading-face switch and of the speed (finrft.laws.regularised); 0: "
-                        "none, the law's step as published", minimum=0.0, exclusive=False)),
+                        "none, the law's step as published", minimum=0.0, exclusive=False,
+                        least=laws.LEAST_V_REG, why_least=f"Newton's method settles velocities to 1e-10 m/s; a "
+                        f"ramp narrower than {laws.LEAST_V_REG:g} m/s leaves a resting body's force wherever it "
+                        f"stopped")),
     ("drft_lambda", float, _f(0.0, "", "DRFT's rate-dependent term (Agarwal et al. 2021 Sci. Adv.): the leading "
                               "elements also take a pressure drft_lambda * bulk_density * (v.n)^2; 0: off, the "
                               "quasi-static law alone; the paper fits O(1) values", minimum=0.0, exclusive=False)),
@@ -145,7 +148,12 @@ class Immersion:
                                   "internal friction angle); 0: the named medium's, if catalogued", minimum=0.0,
                                   exclusive=False)
     surface_friction: float = _f(0.0, "", "friction coefficient between the chain and the grains, 3D-RFT's "
-                                 "mu_surf; 0: the named medium's, if catalogued", minimum=0.0, exclusive=False)
+                                 "mu_surf; 0: the named medium's, if it catalogues one, else frictionless",
+                                 minimum=0.0, exclusive=False)
+
+
+# The keys a drive's profile and a control's kind use (`finrft.schema.unused`).
+CONSTANT, SINE = ("profile", ("constant",)), ("profile", ("sine",))
 
 
 @dataclass(frozen=True)
@@ -154,15 +162,16 @@ class JointDrive:
                     "the profile exactly (a very large armature) and the force it needs is recorded")
     profile: str = _f("constant", "", "constant: speed, reversed after each stroke; sine: start + amplitude "
                       "sin(2 pi frequency t + phase)", choices=("constant", "sine"))
-    speed: float = _f(0.1, "m/s or rad/s", "constant: speed of the joint (> 0 when it has a stroke)")
+    speed: float = _f(0.1, "m/s or rad/s", "constant: speed of the joint (> 0 when it has a stroke)",
+                      used_by=CONSTANT)
     stroke: float = _f(0.05, "m or rad", "constant: length of one stroke; 0: no reversal, the whole run",
-                       minimum=0.0, exclusive=False)
+                       minimum=0.0, exclusive=False, used_by=CONSTANT)
     cycles: int = _f(0, "", "constant: out-and-back cycles of a triangle wave, then the joint holds still; 0: one "
-                     "stroke out", minimum=0, exclusive=False)
+                     "stroke out", minimum=0, exclusive=False, used_by=CONSTANT)
     start: float = _f(0.0, "m or rad", "the joint's position at t = 0 (its qpos); a sine's centre")
-    amplitude: float = _f(0.0, "m or rad", "sine: amplitude")
-    frequency: float = _f(1.0, "Hz", "sine: frequency", minimum=0.0)
-    phase: float = _f(0.0, "rad", "sine: phase")
+    amplitude: float = _f(0.0, "m or rad", "sine: amplitude", used_by=SINE)
+    frequency: float = _f(1.0, "Hz", "sine: frequency", minimum=0.0, used_by=SINE)
+    phase: float = _f(0.0, "rad", "sine: phase", used_by=SINE)
 
 
 @dataclass(frozen=True)
@@ -171,12 +180,13 @@ class Control:
     kind: str = _f("constant", "", "constant: value; sine: offset + amplitude sin(2 pi frequency t + phase); table: "
                    "a CSV file of time_s,ctrl rows, linear in between (held beyond its ends)",
                    choices=("constant", "sine", "table"))
-    value: float = _f(0.0, "actuator's unit", "constant: the ctrl")
-    offset: float = _f(0.0, "actuator's unit", "sine: offset")
-    amplitude: float = _f(0.0, "actuator's unit", "sine: amplitude")
-    frequency: float = _f(1.0, "Hz", "sine: frequency", minimum=0.0)
-    phase: float = _f(0.0, "rad", "sine: phase")
-    table: str = _f("", "", "table: the CSV file (relative to the scene file), a header time_s,ctrl then rows")
+    value: float = _f(0.0, "actuator's unit", "constant: the ctrl", used_by=("kind", ("constant",)))
+    offset: float = _f(0.0, "actuator's unit", "sine: offset", used_by=("kind", ("sine",)))
+    amplitude: float = _f(0.0, "actuator's unit", "sine: amplitude", used_by=("kind", ("sine",)))
+    frequency: float = _f(1.0, "Hz", "sine: frequency", minimum=0.0, used_by=("kind", ("sine",)))
+    phase: float = _f(0.0, "rad", "sine: phase", used_by=("kind", ("sine",)))
+    table: str = _f("", "", "table: the CSV file (relative to the scene file), a header time_s,ctrl then rows",
+                    used_by=("kind", ("table",)))
     ramp: float = _f(0.0, "s", "the ctrl rises linearly from 0 to its profile over the first ramp seconds",
                      minimum=0.0, exclusive=False)
 
@@ -266,12 +276,30 @@ class UserScene(Sections):
         super().__post_init__()
         check_sim(self.sim)
         check_medium(self.medium)
+        check_sines(self)
 
     @property
     def duration(self) -> float:
         """The run's length (s): ``sim.duration``, or the constant drives' own."""
         stroke_time, strokes = drive_timing(self)
         return stroke_time * strokes
+
+
+# The fewest steps per period of a sine (drive or control) at sim.dt: fewer alias it (at one step per period a drive
+# lands on its start at every step and never moves).
+SINE_STEPS = 8
+
+
+def check_sines(scene: UserScene) -> None:
+    """SceneError for a sine [[drive]] or [[control]] with fewer than `SINE_STEPS` steps per period at sim.dt."""
+    dt = scene.sim.dt
+    sines = [(f"drive.{i}", j.frequency) for i, j in enumerate(scene.drive) if j.profile == "sine"]
+    sines += [(f"control.{i}", c.frequency) for i, c in enumerate(scene.control) if c.kind == "sine"]
+    for where, frequency in sines:
+        if 1 / (frequency * dt) < SINE_STEPS:
+            raise SceneError(f"{where}.frequency = {frequency:g} Hz has {1 / (frequency * dt):.3g} steps per period "
+                             f"at sim.dt = {dt:g} s, fewer than {SINE_STEPS}: set sim.dt <= "
+                             f"{1 / (SINE_STEPS * frequency):.3g} s, or lower the frequency")
 
 
 def drive_timing(scene: UserScene) -> tuple[float, int]:

@@ -29,14 +29,76 @@ Key = tuple[str, type, dataclasses.Field]
 
 def field(default: Any, unit: str, doc: str, *, choices: tuple[str, ...] | Callable[[], tuple[str, ...]] = (),
           minimum: float | None = None, exclusive: bool = True, maximum: float | None = None,
-          why_maximum: str = "") -> Any:
-    """A section's entry: its ``default``, its ``unit`` (SI; "" when dimensionless or a name), one line ``doc``, and
-    what values are allowed: ``choices`` (names, matched whatever their case; or a function giving them), a
-    ``minimum`` (``exclusive`` or not) and a ``maximum`` with ``why_maximum``, the reason shown when it is
-    exceeded."""
+          why_maximum: str = "", used_by: tuple[str, tuple[str, ...]] | None = None,
+          least: float | None = None, why_least: str = "") -> Any:
+    """A section's entry: its ``default``, its ``unit`` (SI, or the literature's where a key says so; "" when
+    dimensionless or a name), one line ``doc``, and what values are allowed: ``choices`` (names, matched whatever
+    their case; or a function giving them), a ``minimum`` (``exclusive`` or not) and a ``maximum`` with
+    ``why_maximum``, the reason shown when it is exceeded; ``least``, the smallest magnitude a value other than 0
+    may have, with ``why_least`` (a value below it is a slip of units, not a medium). ``used_by``: (the section's
+    key that selects, the values that use this key), e.g. ``("kind", ("sine",))``: an entry whose selector is
+    another value refuses this key at any value but its default (`unused`)."""
     return dataclasses.field(default=default, metadata={"unit": unit, "doc": doc, "choices": choices,
                                                         "minimum": minimum, "exclusive": exclusive,
-                                                        "maximum": maximum, "why_maximum": why_maximum})
+                                                        "maximum": maximum, "why_maximum": why_maximum,
+                                                        "used_by": used_by, "least": least, "why_least": why_least})
+
+
+def used_by(key: Key, selector: str, values: tuple[str, ...]) -> Key:
+    """``key`` (a declaration, as a law's ``KEYS`` holds) used only where ``selector`` is one of ``values``."""
+    name, kind, f = key
+    return name, kind, field(f.default, **{**f.metadata, "used_by": (selector, tuple(values))})
+
+
+# The units a value may be given in, as a suffix to its number ("90deg", "6e5 N/m3"): each unit's dimension and its
+# size in SI. A key's value is converted to the key's own unit; a suffix of another dimension is refused. The one
+# table of units of the schema, `--set`, the TOML and --bounds (`finrft.studies.bounds`).
+UNITS: dict[str, tuple[str, float]] = {
+    "m": ("length", 1.0), "cm": ("length", 1e-2), "mm": ("length", 1e-3),
+    "rad": ("angle", 1.0), "deg": ("angle", math.pi / 180),
+    "m/s": ("speed", 1.0), "mm/s": ("speed", 1e-3),
+    "rad/s": ("angular speed", 1.0), "deg/s": ("angular speed", math.pi / 180),
+    "s": ("time", 1.0), "ms": ("time", 1e-3), "Hz": ("frequency", 1.0),
+    "kg": ("mass", 1.0), "g": ("mass", 1e-3), "N": ("force", 1.0),
+    "N/m^3": ("stress per depth", 1.0), "N/m3": ("stress per depth", 1.0),
+    "N/cm^3": ("stress per depth", 1e6), "N/cm3": ("stress per depth", 1e6),
+    "kg/m^3": ("density", 1.0), "kg/m3": ("density", 1.0), "g/cm^3": ("density", 1e3), "g/cm3": ("density", 1e3),
+}
+
+
+def quantity(text: str, unit: str, where: str) -> float:
+    """A number given as text, bare (in ``unit``, the key's) or with a unit suffix of `UNITS` (``"90deg"``,
+    ``"6e5 N/m3"``), in ``unit``; SceneError beginning with ``where`` for text that is no number or a unit that is
+    not one of ``unit`` ("m or rad": either)."""
+    text = text.strip()
+    suffix = next((s for s in sorted(UNITS, key=len, reverse=True)
+                   if text.endswith(s) and _number_text(text[:-len(s)])), None)
+    try:
+        number = float(text[:-len(suffix)] if suffix else text)
+    except ValueError:
+        raise SceneError(f"{where} must be a number ({unit or 'dimensionless'}), optionally with a unit such as "
+                         f"{_examples(unit)}, got {text!r}") from None
+    if suffix is None:
+        return number
+    fits = [u for u in unit.split(" or ") if u in UNITS and UNITS[u][0] == UNITS[suffix][0]]
+    if not fits:
+        raise SceneError(f"{suffix} is no unit of {where}, whose unit is {unit or 'none'}: give it in "
+                         f"{unit or 'plain numbers'}" + (f", or e.g. {_examples(unit)}" if _examples(unit) else ""))
+    return number * UNITS[suffix][1] / UNITS[fits[0]][1]
+
+
+def _number_text(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _examples(unit: str) -> str:
+    """The suffixes a key of ``unit`` takes, as "90deg, 1.5rad"."""
+    dimensions = {UNITS[u][0] for u in unit.split(" or ") if u in UNITS}
+    return ", ".join(s for s, (d, _) in UNITS.items() if d in dimensions)
 
 
 def section(name: str, keys: Iterable[Key], module: str, doc: str) -> type:
@@ -109,6 +171,8 @@ def check(section_name: str, f: dataclasses.Field, value: Any) -> Any:
     choices (the canonical spelling returned) and bounds; SceneError naming ``section_name.f.name`` otherwise."""
     key, meta = f"{section_name}.{f.name}", f.metadata
     if f.type in ("float", float):
+        if isinstance(value, str):
+            value = quantity(value, meta["unit"], key)
         if isinstance(value, bool) or not isinstance(value, numbers.Real):  # numpy's scalars are numbers too
             raise SceneError(f"{key} must be a number ({meta['unit'] or 'dimensionless'}), got {value!r}")
         value = float(value)
@@ -141,7 +205,29 @@ def check(section_name: str, f: dataclasses.Field, value: Any) -> Any:
     if high is not None and value > high:
         raise SceneError(f"{key} must be <= {high:g} {meta['unit']}".rstrip() + f" ({meta['why_maximum']}), got "
                          f"{value!r}")
+    least = meta.get("least")
+    if least is not None and 0 < abs(value) < least:
+        raise SceneError(f"{key} = {value:g} {meta['unit']} is implausibly small (|value| >= {least:g} "
+                         f"{meta['unit']}, or 0: {meta['why_least']})")
     return value
+
+
+def unused(where: str, entry: Any, default: Any) -> None:
+    """SceneError for a key of a section's ``entry`` (named ``where``) that its selector does not use (`field`'s
+    ``used_by``) yet holds a value other than in ``default``, the scene's default section: a key given that would
+    be silently ignored (a default, or a value set back to it, passes)."""
+    for f in dataclasses.fields(entry):
+        rule = f.metadata.get("used_by")
+        if rule is None or getattr(entry, f.name) == getattr(default, f.name):
+            continue
+        selector, values = rule
+        chosen = getattr(entry, selector)
+        if chosen not in values:
+            default = next(g.default for g in dataclasses.fields(entry) if g.name == selector)
+            told = " (the default: it is not given)" if chosen == default else ""
+            raise SceneError(f"{where}.{f.name} is used by {selector} = {' or '.join(map(repr, values))} only, and "
+                             f"this entry's {selector} is {chosen!r}{told}: set {where}.{selector}"
+                             + (f" = {values[0]!r}" if len(values) == 1 else "") + f", or leave {f.name} out")
 
 
 def check_sections(scene: Any) -> None:
@@ -149,20 +235,24 @@ def check_sections(scene: Any) -> None:
     declared class, each entry of its type, choices and bounds; the canonical values (a float for an int, a
     choice's spelling) are set in place. SceneError naming the key otherwise."""
     cls = type(scene)
+    defaults = {f.name: f.default_factory for f in dataclasses.fields(cls)
+                if f.default_factory is not dataclasses.MISSING}
     for section_name, section_cls in sections(cls).items():
         value = getattr(scene, section_name)
         if section_name in arrays(cls):
             if not isinstance(value, (tuple, list)):
                 raise SceneError(f"[[{section_name}]] must be a tuple of {section_cls.__name__} entries, got "
                                  f"{type(value).__name__} {value!r:.60}")
-            value = tuple(_checked(f"{section_name}.{i}", section_cls, entry) for i, entry in enumerate(value))
+            value = tuple(_checked(f"{section_name}.{i}", section_cls, entry, section_cls)
+                          for i, entry in enumerate(value))
         else:
-            value = _checked(section_name, section_cls, value)
+            value = _checked(section_name, section_cls, value, defaults.get(section_name, section_cls))
         object.__setattr__(scene, section_name, value)
 
 
-def _checked(where: str, section_cls: type, value: Any) -> Any:
-    """One section of a scene (or entry of an array of tables), its entries checked (`check`)."""
+def _checked(where: str, section_cls: type, value: Any, default: Callable[[], Any]) -> Any:
+    """One section of a scene (or entry of an array of tables), its entries checked (`check`) and those its
+    selectors do not use against the scene's ``default()`` section (`unused`)."""
     if type(value) is not section_cls:  # a subclass would carry keys the scene does not have
         raise SceneError(f"[{where}] must be a {section_cls.__name__} section, got {type(value).__name__} "
                          f"{value!r:.60}")
@@ -172,7 +262,9 @@ def _checked(where: str, section_cls: type, value: Any) -> Any:
         canonical = check(where, f, given)
         if type(canonical) is not type(given) or canonical != given:
             changes[f.name] = canonical
-    return dataclasses.replace(value, **changes) if changes else value
+    value = dataclasses.replace(value, **changes) if changes else value
+    unused(where, value, default())
+    return value
 
 
 def from_dict(data: Mapping[str, Any], cls: type) -> Any:

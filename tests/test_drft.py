@@ -155,7 +155,7 @@ def test_bad_input_names_what_to_set(capsys):
         attach(spec, ["probe"], drft_lambda=1.0)
     with pytest.raises(SceneError, match="drft_lambda must be >= 0"):
         attach(spec, ["probe"], drft_lambda=-1.0, bulk_density=1500.0)
-    with pytest.raises(SceneError, match="pass rho_c, not bulk_density"):
+    with pytest.raises(SceneError, match="bulk_density is rho_c by the scene files. name: give one of them"):
         attach(spec, ["probe"], drft_lambda=1.0, **RFT3D, **LI2013)
     with pytest.raises(SceneError, match="set medium.bulk_density"):
         scene_from_dict({"medium": {"drft_lambda": 1.0}}, IntrusionScene)

@@ -329,6 +329,9 @@ class UserModel:
         if scene.model.keyframe and scene.model.keyframe not in keys:
             raise SceneError(f"model.keyframe: the model has no keyframe named {scene.model.keyframe!r} (its "
                              f"keyframes: {', '.join(repr(k) for k in keys if k) or 'none'})")
+        if scene.model.keyframe:
+            check_keyframe(m, scene.model.keyframe)
+        check_reach(scene, m, bodies)
         tables = tuple(read_table(c.table, f"control.{i}") if c.kind == "table" else None
                        for i, c in enumerate(scene.control))
         links = tuple(m.body(i).name or f"body{i}" for i in range(1, m.nbody))
@@ -483,6 +486,50 @@ def run_robot(scene: UserScene, *, control: Controller | None = None, progress: 
     at every step) drives its actuators instead of the scene's [[control]]. The result carries its error
     estimate as every run (`finrft.run`); `robot_summary` says what ``result.summary()`` reports."""
     return run(UserModel.of(scene, control), scene, progress=progress, max_error=max_error)
+
+
+def check_keyframe(m: mujoco.MjModel, name: str) -> None:
+    """SceneError naming the first value of keyframe ``name`` that is not finite (MuJoCo takes nan and inf from a
+    <key>, and the run would fail later with advice that cannot help)."""
+    key = m.key(name)
+    for entry in ("qpos", "qvel", "act", "ctrl", "mpos", "mquat"):
+        values = np.asarray(getattr(key, entry)).ravel()
+        bad = np.flatnonzero(~np.isfinite(values))
+        if bad.size:
+            raise SceneError(f"model.keyframe {name!r}: its {entry}[{bad[0]}] is {values[bad[0]]}: every value of a "
+                             f"keyframe must be a finite number; fix the model's <key name=\"{name}\">")
+
+
+# How far (in the attached bodies' extents) the attached geoms may start from the free surface, beyond the fall
+# that gravity gives them over the run: RFT's fits cover intrusions of the order of the intruder's size, and a
+# surface a hundred sizes away is a slip (mm for m, a sign) rather than a burrowing or a drop.
+REACH = 100.0
+
+
+def check_reach(scene: UserScene, m: mujoco.MjModel, bodies: list[str]) -> None:
+    """SceneError when medium.surface_z is so far from the attached geoms at the start (the keyframe's pose, or
+    the model's own) that they cannot reach the medium (above it by more than `REACH` extents plus a free fall of
+    the whole run, g T^2 / 2) or lie deeper than `REACH` extents below it."""
+    d = mujoco.MjData(m)
+    if scene.model.keyframe:
+        d.qpos[:] = m.key(scene.model.keyframe).qpos
+    mujoco.mj_kinematics(m, d)
+    geoms = np.flatnonzero(np.isin(m.geom_bodyid, [m.body(b).id for b in bodies]))
+    if not geoms.size:
+        return
+    low = (d.geom_xpos[geoms] - m.geom_rbound[geoms, None]).min(axis=0)
+    high = (d.geom_xpos[geoms] + m.geom_rbound[geoms, None]).max(axis=0)
+    size = float(np.linalg.norm(high - low))
+    surface = scene.medium.surface_z
+    fall = 0.5 * float(np.linalg.norm(m.opt.gravity)) * scene.duration ** 2
+    if low[2] - surface > REACH * size + fall:
+        raise SceneError(f"medium.surface_z = {surface:g} m lies {low[2] - surface:.3g} m below the attached geoms' "
+                         f"lowest point, which cannot reach it in the run ({REACH:g} times their extent "
+                         f"{size:.3g} m plus a {fall:.3g} m fall at most): give surface_z in metres, near the model")
+    if surface - high[2] > REACH * size:
+        raise SceneError(f"medium.surface_z = {surface:g} m lies {surface - high[2]:.3g} m above the attached geoms, "
+                         f"more than {REACH:g} times their extent ({size:.3g} m) deep: no RFT fit covers that; give "
+                         f"surface_z in metres, near the model")
 
 
 # The example robots shipped in finrft.mjcf, each a model, its scene and a TOML scene for a robot run (their

@@ -64,6 +64,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
+from .. import schema
 from ..errors import SceneError
 
 SEGMENT = "segment"  # the KIND of a segment law
@@ -106,8 +107,34 @@ def described(kind: str = SEGMENT) -> str:
 
 
 def keys(kind: str = SEGMENT) -> tuple[Any, ...]:
-    """Every law's own keys (``KEYS``) of a kind, the laws by name: what a scene's section for them holds."""
-    return tuple(key for name in names(kind) for key in getattr(module(name, kind), "KEYS", ()))
+    """Every law's own keys (``KEYS``) of a kind, the laws by name: what a scene's section for them holds, each
+    used only by the laws that declare it or read it (their ``SECTION_KEYS``): a key of another law than the
+    section's ``law``, given, is refused (`finrft.schema.unused`)."""
+    declared: dict[str, Any] = {}
+    for name in names(kind):
+        for key in getattr(module(name, kind), "KEYS", ()):
+            declared.setdefault(key[0], key)
+
+    def users(key: str) -> tuple[str, ...]:
+        return tuple(name for name in names(kind)
+                     if key in {k[0] for k in getattr(module(name, kind), "KEYS", ())}
+                     or key in getattr(module(name, kind), "SECTION_KEYS", {}).values())
+    return tuple(schema.used_by(key, "law", users(name)) for name, key in declared.items())
+
+
+# A segment law's normal-force coefficient (N/m^3, per unit area and depth) below this is refused as a slip of
+# units. Granular resistance per unit depth is of order rho g times a friction coefficient: the weakest catalogued
+# medium's zeta is 0.33 N/cm^3 = 3.3e5 N/m^3 (finrft/media.toml) and the paper's weak shallow-plate fit 1.8e4
+# N/m^3, while 100 N/m^3 is rho g of a bed of 10 kg/m^3, lighter than any grains. A scene written when coefficients
+# were forces per segment (N, of order 0.1 to 10) lands far below it.
+LEAST_COEFFICIENT = 100.0
+WHY_LEAST = ("granular resistance is of order rho g, >= 1e4 N/m^3 for any grains; the weakest catalogued medium "
+             "gives 3.3e5: a value in N per segment? divide it by the face's area x mean depth, m^3")
+
+# The smallest regularisation speed (m/s) a scene may give other than 0: Newton's method stops within 1e-10 m/s
+# of the velocity (finrft.integrate.NEWTON_TOLERANCE); a ramp 1000 times wider keeps the force a body at rest
+# takes from it within 0.1 % (a narrower one leaves the rest force wherever Newton's method stopped in the ramp).
+LEAST_V_REG = 1e-7
 
 
 def check(rft: Any, medium: tuple[float, float, float] | None) -> None:
@@ -176,11 +203,13 @@ def surface_parameters(law: str, given: dict[str, float | None], material: Any, 
         owner = next(name for name, m in sorted(surface.items()) if foreign[0] in getattr(m, "PARAMETERS", ()))
         raise SceneError(f"{where}: {', '.join(shown.get(k, k) for k in foreign)} belong to law {owner}, not {law}")
     found, coefficients = law_module.catalogued(material) if material is not None else ({}, None)
-    both = [shown.get(key, key) for key in found if given.get(key) is not None]
+    intruder = getattr(law_module, "INTRUDER", ())
+    both = [shown.get(key, key) for key in found if given.get(key) is not None and key not in intruder]
     if both:
         raise SceneError(f"{where}: the named medium {material.name!r} gives {', '.join(both)}: leave "
                          f"{', '.join(both)} out, or name no medium (one or the other)")
-    return law_module.checked({**given, **found}, where, shown), coefficients
+    own = {key: value for key, value in given.items() if value is not None}
+    return law_module.checked({**given, **found, **own}, where, shown), coefficients
 
 
 class FeedsEnergy(RuntimeWarning):

@@ -47,9 +47,12 @@ SECTION_KEYS = {"zeta": "zeta"}
 DENSITY = ""  # none of its parameters is the medium's bulk density
 FEEDS_ENERGY = ""  # dissipative over the whole range (the module's docstring)
 # The law's own keys of a scene's [medium] (`finrft.scene.Medium` is built from every surface law's).
-KEYS = (("zeta", float, field(1.0, "", "li2013, li2013-planar: the medium's scale: alpha_z of a horizontal plate pushed down, in "
-                              "N/cm^3 (the generic coefficients are scaled by it; only without medium.name)",
-                              minimum=0.0)),)
+# zeta is in N/cm^3, the literature's unit and the one exception to SI in scene files: every published zeta and
+# the catalogue give it so ("0.6 N/cm3" and "6e5 N/m3" read as 0.6 too).
+KEYS = (("zeta", float, field(1.0, "N/cm^3", "li2013, li2013-planar: the medium's scale: alpha_z of a horizontal "
+                              "plate pushed down, in N/cm^3, the literature's unit (not SI; a suffix converts: "
+                              "\"6e5 N/m3\" is 0.6); the generic coefficients are scaled by it; only without "
+                              "medium.name", minimum=0.0)),)
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from ..schema import field
-from . import components
+from . import LEAST_COEFFICIENT, WHY_LEAST, components
 
 KIND = "segment"
 SUMMARY = "direction-cosine law (the paper's model)"  # what the scene's rft.law documents
@@ -23,7 +23,8 @@ SUMMARY = "direction-cosine law (the paper's model)"  # what the scene's rft.law
 # authors' 1.2 N and -0.2 N per 33 mm segment, over its face 33 x 55 mm at 37.5 mm mean depth.
 KEYS = (("f_perp", float, field(17630.85399449036, "N/m^3", "normal force coefficient per unit area and depth "
                                 "(paper law): a segment's is this x its face's area x mean depth; < 0 would pull "
-                                "the plate along", minimum=0.0, exclusive=False)),
+                                "the plate along", minimum=0.0, exclusive=False,
+                                least=LEAST_COEFFICIENT, why_least=WHY_LEAST)),
         ("f_par", float, field(-2938.475665748393, "N/m^3", "tangential force coefficient per unit area and depth "
                                "(paper law; < 0 feeds energy in)")))
 INTENSIVE = ("f_perp", "f_par")

@@ -68,7 +68,11 @@ KEYS = (("internal_friction", float, field(0.0, "", "rft3d: the medium's interna
                                            "of its internal friction angle); 0: the named medium's", minimum=0.0,
                                            exclusive=False)),
         ("surface_friction", float, field(0.0, "", "rft3d: friction coefficient mu_surf between the bodies and the "
-                                          "grains (0: frictionless)", minimum=0.0, exclusive=False)))
+                                          "grains; 0: the named medium's, if it catalogues one, else frictionless",
+                                          minimum=0.0, exclusive=False)))
+# The parameters that are the intruder's rather than the medium's: a value given overrides the catalogue's (which
+# holds the one of the intruder its source measured), where for the medium's own the two may not both be given.
+INTRUDER = ("mu_surf",)
 
 # Why the published fit can feed energy in (tests/test_rft3d.py measures it): `attach` says so once.
 FEEDS_ENERGY = ("its fitted normal stress pulls outward on about 5 % of grazing leading faces (n.v < 0.2 |v|), "
@@ -178,16 +182,18 @@ def element_forces(normal: np.ndarray, velocity: np.ndarray, depth: np.ndarray, 
 
 
 def given(section: Any) -> dict[str, float | None]:
-    """The law's parameters a scene's ``[medium]`` gives (None: not given, the named medium's)."""
+    """The law's parameters a scene's ``[medium]`` gives (None: not given, the named medium's): surface_friction =
+    0 beside a medium.name is the medium's, without one frictionless (one meaning, as a chain's [medium])."""
     return {"rho_c": section.bulk_density or None, "mu_int": section.internal_friction or None,
-            "mu_surf": section.surface_friction}
+            "mu_surf": None if section.name and not section.surface_friction else section.surface_friction}
 
 
 def catalogued(medium) -> tuple[dict[str, float], None]:
-    """The parameters a catalogued medium (`finrft.media.Material`) gives: rho_c, its bulk density, and mu_int, the
-    tangent of its internal friction angle, those it has (mu_surf is the intruder's); no coefficients."""
-    rho, angle = medium.get("bulk_density"), medium.get("internal_friction_angle")
-    found = {}
+    """The parameters a catalogued medium (`finrft.media.Material`) gives: rho_c, its bulk density, mu_int, the
+    tangent of its internal friction angle, and mu_surf, the friction of the intruder its source measured (a value
+    given overrides it: `INTRUDER`), those it has; no coefficients."""
+    rho, angle, mu = medium.get("bulk_density"), medium.get("internal_friction_angle"), medium.get("surface_friction")
+    found = {} if mu is None else {"mu_surf": mu.value}
     if rho is not None:
         found["rho_c"] = rho.value
     if angle is not None:

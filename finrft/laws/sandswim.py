@@ -36,14 +36,15 @@ import numpy as np
 
 from ..errors import SceneError
 from ..schema import field
-from . import components
+from . import LEAST_COEFFICIENT, WHY_LEAST, components
 
 KIND = "segment"
 SUMMARY = "the sand-swimming law of Maladen et al. 2009"  # what the scene's rft.law documents
 # The law's keys of [rft], with their units (`finrft.scene.RFT` is built from every law's). A chain's scene may
 # leave all three at 0 to take them from its [medium].
 KEYS = (("c_s", float, field(0.0, "N/m^3", "sandswim law: C_S per unit area and depth (the medium's normal-force "
-                             "scale); all of c_s, c_f, gamma0 at 0: from [medium]", minimum=0.0, exclusive=False)),
+                             "scale); all of c_s, c_f, gamma0 at 0: from [medium]", minimum=0.0, exclusive=False,
+                             least=LEAST_COEFFICIENT, why_least=WHY_LEAST)),
         ("c_f", float, field(0.0, "N/m^3", "sandswim law: C_F per unit area and depth (the medium's friction-like "
                              "drag)", minimum=0.0, exclusive=False)),
         ("gamma0", float, field(0.0, "rad", "sandswim law: gamma0, how fast F_perp saturates with the angle of "

@@ -8,9 +8,8 @@ import math
 import numpy as np
 
 from ..scene import SceneError, field_of
+from ..schema import UNITS, quantity
 
-# The unit suffixes --bounds takes, each for the keys of one SI unit.
-SUFFIXES = {"deg": ("rad", math.pi / 180), "mm": ("m", 1e-3)}
 # SI units shown in the CLI's: radians (and per second) in degrees, metres in mm.
 DISPLAY = {"rad": 180 / math.pi, "rad/s": 180 / math.pi, "m": 1e3}
 DISPLAY_UNIT = {"rad": "deg", "rad/s": "deg/s", "m": "mm"}
@@ -26,36 +25,44 @@ def unit_of(cls: type, key: str) -> str | None:
 
 def parse_bounds(items: list[str], cls: type,
                  aliases: dict[str, str] | None = None) -> dict[str, tuple[float, float]]:
-    """--bounds KEY=LOW:HIGH items of ``cls``'s scene keys (or their ``aliases``) in SI, or in deg or mm where the
-    key's unit is rad or m; SceneError for an item that is not so."""
+    """--bounds KEY=LOW:HIGH items of ``cls``'s scene keys (or their ``aliases``) in SI, or with a unit suffix the
+    key's schema unit allows (`finrft.schema.quantity`: deg for rad, mm for m, ...), on HIGH for both or on each;
+    SceneError for an item that is not so."""
     bounds = {}
     for item in items:
         key, sep, span = item.partition("=")
         low, sep2, high = span.partition(":")
         if not sep or not sep2:
             raise SceneError(f"--bounds expects KEY=LOW:HIGH, got '{item}'")
-        scale = 1.0
-        for suffix, (si, factor) in SUFFIXES.items():
-            if high.strip().endswith(suffix):
-                unit = unit_of(cls, (aliases or {}).get(key.strip(), key.strip()))
-                if unit is not None and unit != si:
-                    other = next((f" or {s}" for s, (u, _) in SUFFIXES.items() if u == unit), "")
-                    raise SceneError(f"--bounds {item}: {suffix} is no unit of {key.strip()}, whose unit is "
-                                     f"{unit or 'none'}: give its bounds in {unit or 'plain numbers'}{other}")
-                scale, low, high = factor, low.strip().removesuffix(suffix), high.strip().removesuffix(suffix)
         name = (aliases or {}).get(key.strip(), key.strip())
+        low, high = low.strip(), high.strip()
+        suffix = next((s for s in sorted(UNITS, key=len, reverse=True) if high.endswith(s)), None)
+        if suffix is not None and _bare(low):
+            low += suffix
+        unit = unit_of(cls, name)
         twice = next((k for k in bounds if (aliases or {}).get(k, k) == name), None)
         if twice is not None:
             raise SceneError(f"--bounds {item}: {key.strip()} has bounds already ({twice}="
                              f"{bounds[twice][0]:g}:{bounds[twice][1]:g}): give each key's once")
+        if not (_bare(low.removesuffix(suffix or "")) and _bare(high.removesuffix(suffix or ""))):
+            raise SceneError(f"--bounds {item}: bounds must be numbers")
         try:
-            span = (float(low) * scale, float(high) * scale)
-        except ValueError:
-            raise SceneError(f"--bounds {item}: bounds must be numbers") from None
+            span = tuple(quantity(text, unit or "", key.strip()) for text in (low, high))
+        except (ValueError, SceneError) as exc:
+            raise SceneError(f"--bounds {item}: {exc}") from None
         if not all(map(math.isfinite, span)):
             raise SceneError(f"--bounds {item}: bounds must be finite numbers")
         bounds[key.strip()] = span
     return bounds
+
+
+def _bare(text: str) -> bool:
+    """Whether ``text`` is a plain number, without a unit."""
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
 
 
 def display_units(cls: type, keys: list[str], values: np.ndarray) -> np.ndarray:

@@ -230,6 +230,13 @@ def test_command_json_keys_and_files(tmp_path, capsys):
     (["--data", "/nonexistent/conditions.csv"], "conditions.csv"),
     (["--data", "/nonexistent/c.csv", "--slip", "0.2"], "--slip"),
     (["--slip", "0.5", "--sinkage", "20", "--load-from-data"], "--data"),
+    # grousers without a height once ran a smooth wheel; a load under the wheel's own weight failed in MuJoCo's
+    # mass check; a million grousers built and compiled for 14 minutes before the element limit refused them
+    (["--slip", "0.5", "--sinkage", "20", "--grousers", "8"], "--grouser-height"),
+    (["--slip", "0.5", "--load", "1"], "5.886 N"),
+    (["--slip", "0.5", "--sinkage", "20", "--grousers", "1000000", "--grouser-height", "5"], "at most 98 fit"),
+    (["--slip", "0.5", "--sinkage", "20", "--grousers", "90", "--grouser-height", "5", "--set",
+      "medium.element_size=0.3mm"], "surface elements, above 100000"),
 ])
 def test_bad_input_is_one_line_exit_2(capsys, argv, named):
     assert main(["wheel", *argv]) == 2

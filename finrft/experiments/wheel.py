@@ -30,6 +30,7 @@ import mujoco
 import numpy as np
 
 from .. import laws
+from ..attach import MAX_ELEMENTS
 from ..convergence import ErrorLimits
 from ..errors import SceneError, SimulationFailed, UsageError
 from ..experiment import Compared, Quantity, Result, run
@@ -93,6 +94,32 @@ class WheelScene(Sections):
         check_medium(self.medium)
         if self.wheel.grouser_height > 0 and self.wheel.grousers == 0:
             raise SceneError("wheel.grouser_height is set but wheel.grousers = 0: give the number of grousers")
+        if not self.wheel.model:
+            check_generated(self.wheel, self.medium.element_size)
+
+
+def check_generated(rig: WheelRig, element_size: float) -> None:
+    """SceneError, before anything is built, for a generated wheel whose grousers have no height, do not fit on
+    its rim or would cut into more surface elements than `finrft.attach` takes, or whose load is lighter than the
+    wheel and the fork it includes."""
+    if rig.grousers and not rig.grouser_height > 0:
+        raise SceneError(f"wheel.grousers = {rig.grousers} needs their height: set wheel.grouser_height (--grouser-"
+                         f"height MM), or grousers = 0 for a smooth wheel")
+    fit = math.floor(2 * math.pi * rig.radius / GROUSER_THICKNESS)
+    if rig.grousers > fit:
+        raise SceneError(f"wheel.grousers = {rig.grousers}: at most {fit} fit side by side on the rim "
+                         f"({1e3 * 2 * math.pi * rig.radius:.4g} mm round, each {1e3 * GROUSER_THICKNESS:g} mm thick)")
+    # each grouser's outer face alone is cut into this many elements (its other faces and the rim add more)
+    least = rig.grousers * math.ceil(rig.width / element_size - 1e-9) * math.ceil(
+        GROUSER_THICKNESS / element_size - 1e-9)
+    if least > MAX_ELEMENTS:
+        raise SceneError(f"wheel.grousers = {rig.grousers} at medium.element_size = {element_size:g} m gives more "
+                         f"than {least} surface elements, above {MAX_ELEMENTS}: use fewer grousers or a larger "
+                         f"element_size")
+    carried = FORK_MASS + WHEEL_MASS
+    if not rig.load > carried * GRAVITY:
+        raise SceneError(f"wheel.load = {rig.load:g} N must exceed the weight of the generated wheel and the fork it "
+                         f"includes ({carried * GRAVITY:.4g} N; --load N)")
 
 
 register_scene(WheelScene, title="A wheel on a single-wheel rig: `finrft wheel`; `finrft.WheelScene`")

@@ -353,7 +353,8 @@ def to_toml(scene: Any) -> str:
             dataclasses.is_dataclass(section) for section in sections(type(scene)).values()):
         raise SceneError(f"to_toml: a scene is written (finrft.Scene, RobotScene, ...), got {type(scene).__name__} "
                          f"{scene!r:.60}")
-    lines = ["# finrft scene: SI units throughout"]
+    lines = ["# finrft scene: each key's unit in brackets, SI but for medium.zeta (N/cm^3, the literature's); a value "
+             "may carry a unit suffix: \"90deg\", \"5mm\""]
     many = arrays(type(scene))
     for section_name, cls in sections(type(scene)).items():
         entries = getattr(scene, section_name) if section_name in many else (getattr(scene, section_name),)

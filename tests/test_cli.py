@@ -2,6 +2,7 @@
 
 import argparse
 import json
+import math
 import re
 import signal
 import subprocess
@@ -419,3 +420,25 @@ def test_law_sandswim_is_the_papers_magnitudes_per_unit_coefficient(tmp_path, ca
     i = list(zip(data["psi_deg"], data["gamma0_deg"])).index((30, 45))
     assert data["f_perp_c_s"][i] == pytest.approx(np.sin(np.arctan(0.5)), abs=1e-12)
     assert (tmp_path / "map.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_scene_reads_a_robot_scene_and_dumps_a_template_to_start_from(tmp_path, capsys):
+    # `finrft scene --scene robot.toml` said "unknown scene section [model]"; there was no template to start from
+    from finrft.experiments.user_model import example
+    from finrft.scene import UserScene, load_scene, scene_from_dict
+    assert main(["scene", "--scene", example("hexapod")]) == 0
+    read = scene_from_dict(tomllib.loads(capsys.readouterr().out), UserScene)
+    assert read == load_scene(example("hexapod"), cls=UserScene)
+    assert main(["scene", "--dump", "robot"]) == 0
+    text = capsys.readouterr().out
+    data = tomllib.loads(text)
+    assert {"model", "medium", "drive", "control", "sim"} <= set(data)
+    # every key commented, its unit in brackets where it has one
+    keys = [line for line in text.splitlines() if re.match(r"^\w+ = ", line)]
+    assert keys and all("  # " in line for line in keys)
+    assert all(re.search(r"  # \[(m|s|m/s|N/cm\^3|kg/m\^3|Hz|rad|m or rad|m/s or rad/s|actuator's unit)\]", line)
+               for line in keys if line.split()[0] in ("surface_z", "dt", "zeta", "amplitude", "phase", "frequency"))
+    path = tmp_path / "robot.toml"
+    path.write_text(text)
+    assert main(["scene", "--scene", str(path), "--set", "control.0.kind=sine", "--set", "control.0.phase=90deg"]) == 0
+    assert tomllib.loads(capsys.readouterr().out)["control"][0]["phase"] == pytest.approx(math.pi / 2)

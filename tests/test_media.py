@@ -2,6 +2,7 @@
 the stress map equal to the law at its grid points, its figure, and bad input; a named medium in attach and in
 scenes."""
 
+import dataclasses
 import json
 import math
 
@@ -14,10 +15,10 @@ from finrft import geometry, laws, media
 from finrft.attach import attach
 from finrft.cli import main
 from finrft.experiments.intrusion import intrude
-from finrft.laws import li2013, sandswim
+from finrft.laws import li2013, rft3d, sandswim
 from finrft.experiments.intrusion import IntrusionScene
 from finrft.experiments.swim import RobotScene
-from finrft.scene import Scene, SceneError, load_scene, preset, scene_from_dict, to_toml
+from finrft.scene import Scene, SceneError, UserScene, load_scene, preset, scene_from_dict, to_toml
 
 CM3 = li2013.N_PER_CM3
 # alpha_z(0, 90 deg) of the poppy-seed sets: the sum of their A and B coefficients (Li 2013's zeta of a medium)
@@ -279,3 +280,35 @@ def test_result_files_record_the_medium(tmp_path, capsys):
     assert main(["drag", "--set", "medium.name=sand", "--quiet"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "unknown medium 'sand'" in err[0]
+
+
+def test_surface_friction_left_at_0_is_the_named_mediums_everywhere():
+    # rft3d in sand_3d_rft_code ran at mu_surf = 0 (the reference's "0: frictionless") where media.md said "0: the
+    # named medium's": one meaning now, in scenes and in attach; a value given is the intruder's own
+    catalogued = media.medium("sand_3d_rft_code").get("surface_friction").value
+    scene = scene_from_dict({"medium": {"law": "rft3d", "name": "sand_3d_rft_code"}}, UserScene)
+    resolved, _ = laws.surface_parameters("rft3d", rft3d.given(scene.medium), media.medium("sand_3d_rft_code"), "m")
+    assert resolved["mu_surf"] == catalogued == 0.1806
+    mine = scene.replace(**{"medium.surface_friction": 0.4})
+    assert laws.surface_parameters("rft3d", rft3d.given(mine.medium), media.medium("sand_3d_rft_code"),
+                                   "m")[0]["mu_surf"] == 0.4
+    spec = mujoco.MjSpec.from_string(BOX)
+    assert attach(spec, "plate", law="rft3d", medium="sand_3d_rft_code",
+                  backend="python").parameters["mu_surf"] == catalogued
+    # without a named medium, 0 is frictionless (nothing to take it from)
+    plain = scene_from_dict({"medium": {"law": "rft3d", "bulk_density": 1500, "internal_friction": 0.5}},
+                            UserScene)
+    assert laws.surface_parameters("rft3d", rft3d.given(plain.medium), None, "m")[0]["mu_surf"] == 0.0
+    # a chain's [medium] reads it the same way
+    chain = preset("physical").medium
+    assert media.immersion_properties(dataclasses.replace(chain, name="", bulk_density=1500.0,
+                                                          internal_friction=0.5))[2] == 0.0
+
+
+def test_attach_takes_the_scene_files_names_too():
+    def parameters(**given):
+        return attach(mujoco.MjSpec.from_string(BOX), "plate", law="rft3d", backend="python", **given).parameters
+    assert parameters(bulk_density=1500.0, internal_friction=0.5, surface_friction=0.3) == parameters(
+        rho_c=1500.0, mu_int=0.5, mu_surf=0.3) == {"rho_c": 1500.0, "mu_int": 0.5, "mu_surf": 0.3}
+    with pytest.raises(SceneError, match="internal_friction is mu_int by the scene files' name: give one of them"):
+        parameters(rho_c=1500.0, mu_int=0.5, internal_friction=0.5, mu_surf=0.3)

@@ -2,16 +2,20 @@
 
 import argparse
 import dataclasses
+import math
+import re
+import tomllib
 
 import pytest
 
 from finrft import laws, schema
 from finrft.errors import Error, SceneError, UsageError
 from finrft.experiments.flags import preset_name
-from finrft.laws import table
+from finrft.laws import li2013, table
 from finrft.experiments.intrusion import IntrusionScene
 from finrft.experiments.swim import RobotScene
-from finrft.scene import RFT, Medium, Scene, UserScene, field_of, preset, presets, scene_from_dict, scene_kinds
+from finrft.scene import (RFT, Control, JointDrive, Medium, RobotSim, Scene, UserScene, field_of, preset, presets,
+                          scene_from_dict, scene_kinds)
 
 
 class Recorder:
@@ -114,3 +118,89 @@ def test_a_scene_built_directly_takes_the_canonical_values():
     scene = Scene(sim=dataclasses.replace(Scene().sim, dt=1, integrator="Euler", method="explicit"))
     assert type(scene.sim.dt) is float and scene.sim.integrator == "euler"
     assert scene == scene_from_dict({"sim": {"dt": 1, "integrator": "Euler", "method": "explicit"}})
+
+
+@pytest.mark.parametrize("build, named", [
+    # a key the entry's kind (profile, law) does not use was accepted and ignored
+    (lambda: UserScene(control=(Control(actuator="a", amplitude=1.0, frequency=2.0),)),
+     "control.0.amplitude is used by kind = 'sine' only, and this entry's kind is 'constant' (the default"),
+    (lambda: UserScene(control=(Control(actuator="a", kind="sine", value=3.0),)), "control.0.value is used by kind"),
+    (lambda: UserScene(control=(Control(actuator="a", kind="sine", table="t.csv"),)), "control.0.table"),
+    (lambda: UserScene(drive=(JointDrive(joint="j", profile="sine", stroke=0.1),)), "drive.0.stroke is used by"),
+    (lambda: scene_from_dict({"medium": {"law": "rft3d", "zeta": 0.5, "bulk_density": 1500,
+                                         "internal_friction": 0.5}}, UserScene), "medium.zeta is used by law"),
+    (lambda: scene_from_dict({"medium": {"internal_friction": 0.5}}, UserScene),
+     "medium.internal_friction is used by law = 'rft3d' only"),
+    (lambda: preset("physical").replace(**{"rft.law": "sandswim", "rft.c_s": 0, "rft.c_f": 0, "rft.gamma0": 0,
+                                           "rft.table": "forces.csv"}), "rft.table is used by law = 'table'"),
+])
+def test_a_key_the_entrys_kind_does_not_use_is_refused(build, named):
+    with pytest.raises(SceneError, match=re.escape(named)):
+        build()
+
+
+def test_defaults_and_keys_set_back_to_them_are_no_unused_keys():
+    # the rule refuses what a user gave: a dump (every key at its value) reads back, whatever the kinds
+    for kind in scene_kinds():
+        for name in kind.presets or ("",):
+            scene = preset(name, kind.cls) if name else kind.cls()
+            assert scene_from_dict(tomllib.loads(schema.to_toml(scene)), kind.cls) == scene
+    sine = UserScene(control=(Control(actuator="a", kind="sine", amplitude=1.0),))
+    assert sine.replace(**{"control.0.value": 0.0}) == sine
+    # the robot's own default [rft] (the paper law's coefficients) under another law is no key the user gave
+    assert preset("physical", RobotScene).rft.law == "sandswim"
+
+
+def test_a_unit_suffix_is_read_in_the_keys_unit_and_refused_where_it_does_not_fit():
+    assert schema.quantity("90deg", "rad", "k") == pytest.approx(math.pi / 2)
+    assert schema.quantity("6e5 N/m3", "N/cm^3", "k") == pytest.approx(0.6)
+    assert schema.quantity("5 mm", "m or rad", "k") == pytest.approx(0.005)
+    assert scene_from_dict({"sim": {"dt": "0.5ms"}}, Scene).sim.dt == pytest.approx(5e-4)
+    with pytest.raises(SceneError, match="mm is no unit of plate.damping"):
+        scene_from_dict({"plate": {"damping": "5mm"}}, Scene)
+    with pytest.raises(SceneError, match="sim.dt must be a number"):
+        scene_from_dict({"sim": {"dt": "fast"}}, Scene)
+    # --bounds reads the same table: any suffix the key's unit allows
+    from finrft.studies.bounds import parse_bounds
+    assert parse_bounds(["sim.dt=0.1:1ms"], Scene)["sim.dt"] == pytest.approx((1e-4, 1e-3))
+
+
+def test_zeta_declares_its_unit_the_literatures():
+    # scene files are SI but for zeta, which every source gives in N/cm^3: the schema says so plainly
+    assert field_of(UserScene, "medium.zeta").metadata["unit"] == "N/cm^3"
+    assert "N/cm^3" in schema.to_toml(UserScene()).splitlines()[0]
+
+
+def test_per_segment_coefficients_are_refused_as_a_slip_of_units():
+    # rft.f_perp = 2.0 meant 2 N per segment before coefficients were N/m^3: read as 2 N/m^3, forces 1e-4 of it
+    with pytest.raises(SceneError, match=r"rft.f_perp = 2 N/m\^3 is implausibly small .* N per segment"):
+        preset("paper").replace(**{"rft.f_perp": 2.0})
+    with pytest.raises(SceneError, match="rft.c_s = 0.6 N/m"):
+        preset("physical").replace(**{"rft.c_s": 0.6, "rft.c_f": 0.05, "rft.gamma0": 0.5})
+    # the floor lies far below every medium: 1e-3 of the weakest catalogued zeta, and below the paper's weak fit
+    from finrft import media
+    weakest = min(m.get("zeta").value for m in media.media() if m.get("zeta")) * li2013.N_PER_CM3
+    assert laws.LEAST_COEFFICIENT <= 1e-3 * weakest
+    assert laws.LEAST_COEFFICIENT < preset("paper").rft.f_perp / 100
+
+
+def test_the_least_v_reg_is_far_above_newtons_tolerance():
+    from finrft.integrate import NEWTON_TOLERANCE
+    assert laws.LEAST_V_REG / NEWTON_TOLERANCE >= 1e3 * (1 - 1e-9)
+    assert laws.LEAST_V_REG <= laws.SURFACE_V_REG / 100
+    with pytest.raises(SceneError, match="medium.v_reg = 3e-10 m/s is implausibly small"):
+        scene_from_dict({"medium": {"v_reg": 3e-10}}, UserScene)
+    assert scene_from_dict({"medium": {"v_reg": 0}}, UserScene).medium.v_reg == 0  # none: the law as published
+
+
+@pytest.mark.parametrize("frequency, ok", [(125.0, True), (126.0, False)])
+def test_a_sine_needs_eight_steps_per_period(frequency, ok):
+    def build():
+        return UserScene(control=(Control(actuator="a", kind="sine", frequency=frequency),),
+                         sim=RobotSim(dt=1e-3, duration=1.0))
+    if ok:
+        build()
+    else:
+        with pytest.raises(SceneError, match=r"control.0.frequency = 126 Hz has 7.94 steps per period at sim.dt = "
+                                             r"0.001 s, fewer than 8: set sim.dt <= 0.000992 s"):
+            build()

@@ -109,13 +109,35 @@ def test_python_backend_gives_the_native_run(tmp_path):
     ({"set": "model.bodies=arm"}, "no body named 'arm'"),
     ({"set": "drive.profile=step"}, "drive.0.profile = 'step' is not allowed: use one of constant, sine"),
     ({"xml": MODEL.replace('type="slide" axis="1 0 0"', 'type="ball"')}, "ball joint: drive a slide or hinge"),
+    # each of these once ran to exit 0 with a wrong result: a key the entry's kind ignores, a sine with no kind
+    # (constant 0), a sine faster than the step (aliased: never moves), a surface out of reach or absurdly deep,
+    # a regularisation narrower than Newton's tolerance (a wrong rest force), a keyframe of NaN
+    ({"set": "drive.amplitude=0.01"}, "drive.0.amplitude is used by profile = 'sine' only"),
+    ({"set": ("control.0.actuator=a", "control.0.amplitude=1", "control.0.frequency=2")},
+     "this entry's kind is 'constant' (the default: it is not given): set control.0.kind = 'sine'"),
+    ({"set": ("medium.law=rft3d", "medium.zeta=2", "medium.bulk_density=1500", "medium.internal_friction=0.5")},
+     "medium.zeta is used by law = 'li2013' or 'li2013-planar' only"),
+    ({"set": ("drive.profile=sine", "drive.speed=0.1", "drive.stroke=0.05", "drive.frequency=1000",
+              "sim.duration=0.1")}, "drive.0.frequency = 1000 Hz has 1 steps per period"),
+    ({"set": ("drive.profile=sine", "drive.stroke=0.05", "drive.frequency=200", "sim.duration=0.1")},
+     "set sim.dt <= 0.000625 s"),
+    ({"set": "medium.surface_z=1e10"}, "medium.surface_z = 1e+10 m lies"),
+    ({"set": "medium.surface_z=-1e10"}, "cannot reach it"),
+    ({"set": "medium.v_reg=3e-10"}, "medium.v_reg = 3e-10 m/s is implausibly small"),
+    ({"set": "sim.dt=1deg"}, "deg is no unit of sim.dt, whose unit is s"),
+    ({"set": "model.keyframe=start", "xml": MODEL.replace("</worldbody>", '</worldbody><keyframe><key name="start" '
+                                                          'qpos="nan"/></keyframe>')},
+     "model.keyframe 'start': its qpos[0] is nan"),
+    ({"set": "model.keyframe=start", "xml": MODEL.replace("</worldbody>", '</worldbody><keyframe><key name="start" '
+                                                          'qvel="inf"/></keyframe>')}, "its qvel[0] is inf"),
 ])
 def test_bad_input_is_one_line_exit_2_and_writes_nothing(tmp_path, capsys, edit, named):
     model, scene = _files(tmp_path)
     if "xml" in edit:
         model.write_text(edit["xml"])
     argv = ["run", edit.get("model", str(model)), "--scene", str(scene), "--out", str(tmp_path / "run.h5")]
-    assert main([*argv, *(["--set", edit["set"]] if "set" in edit else [])]) == 2
+    sets = edit.get("set", ())
+    assert main([*argv, *(item for key in ((sets,) if isinstance(sets, str) else sets) for item in ("--set", key))]) == 2
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and "Traceback" not in err and named in err, err
     assert not (tmp_path / "run.h5").exists()
@@ -229,3 +251,19 @@ def test_a_control_table_is_read_as_every_file_is(tmp_path):
                           (tmp_path / "none.csv", "cannot read control.0.table .*none.csv")):
         with pytest.raises(finrft.SceneError, match=message):
             read_table(str(path), "control.0")
+
+
+def test_values_take_unit_suffixes_in_the_toml_and_in_set(tmp_path):
+    # --bounds took deg and mm; --set and the TOML refused them. One parser now reads all three.
+    _, scene = _files(tmp_path)
+    scene.write_text(SCENE.format(cycles=0).replace("stroke = 0.02", 'stroke = "20mm"'))
+    given = load_scene(scene, cls=UserScene, overrides=dict(
+        finrft.scene.parse_override(item, UserScene) for item in (
+            "drive.profile=sine", "drive.stroke=0.05", "drive.speed=0.1", "drive.amplitude=5mm", "drive.phase=90deg",
+            "sim.duration=0.5", "medium.zeta=6e5 N/m3")))
+    assert given.drive[0].amplitude == pytest.approx(0.005) and given.drive[0].phase == pytest.approx(math.pi / 2)
+    assert given.medium.zeta == pytest.approx(0.6)  # zeta's unit is N/cm^3: 6e5 N/m^3 is 0.6 of it
+    assert load_scene(scene, cls=UserScene).drive[0].stroke == pytest.approx(0.02)
+    # a key set back to its default is no key the kind ignores: a dumped scene reads back
+    assert load_scene(scene, cls=UserScene, overrides={"drive.amplitude": 0.0}).drive[0].amplitude == 0.0
+

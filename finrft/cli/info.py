@@ -5,10 +5,10 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from .. import laws
+from .. import laws, schema
 from .. import scene as scenes
 from ..experiments.swim import RobotScene
-from ..errors import UsageError
+from ..errors import SceneError, UsageError
 from ..experiments.flags import add_force, add_json, add_quiet
 from ..files import atomic_path
 from .common import check_output, print_json, said_written, say
@@ -16,25 +16,61 @@ from .common import check_output, print_json, said_written, say
 
 def add_scene(sub: Any) -> None:
     p = sub.add_parser("scene", help="print a resolved scene as TOML",
-                       description="Print the full resolved scene (SI units) as TOML, to copy and edit.")
+                       description="Print the full resolved scene (SI units; each key's unit in brackets) as TOML, "
+                       "to copy and edit. A --scene file is read as the kind of scene its sections make (plate, "
+                       "two-fin robot, your own model, wheel, intrusion).")
     p.add_argument("--dump", metavar="NAME", help=f"preset to print (default: physical): a plate preset "
-                   f"({', '.join(scenes.presets(scenes.Scene))}), or with --robot a robot preset "
-                   f"({', '.join(scenes.presets(RobotScene))})")
-    p.add_argument("--robot", action="store_true", help="a robot scene instead of a plate scene")
+                   f"({', '.join(scenes.presets(scenes.Scene))}), with --robot a robot preset "
+                   f"({', '.join(scenes.presets(RobotScene))}), or '{TEMPLATE}': a template of your own model's "
+                   f"scene (finrft run), one of each section")
+    p.add_argument("--robot", action="store_true", help="the two-fin robot's scene instead of a plate scene")
     p.add_argument("--scene", metavar="FILE.toml", help="resolve this file (instead of --dump)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a key (SI)")
     add_quiet(p)
     p.set_defaults(handler=scene)
 
 
+# --dump's name of the template of a user's model scene (`finrft run`).
+TEMPLATE = "robot"
+
+
+def template() -> scenes.UserScene:
+    """A user's model scene to start from: every section, one [[drive]] and one [[control]] entry, with names to
+    replace (MODEL.xml, BODY, JOINT, ACTUATOR)."""
+    return scenes.UserScene(model=scenes.Model(path="MODEL.xml", bodies=("BODY",)),
+                            drive=(scenes.JointDrive(joint="JOINT"),),
+                            control=(scenes.Control(actuator="ACTUATOR"),),
+                            sim=scenes.RobotSim(duration=1.0))
+
+
 def scene(args: argparse.Namespace) -> int:
     if args.scene and args.dump:
         raise UsageError(f"give --scene {args.scene} or --dump {args.dump}, not both")
-    kind = RobotScene if args.robot else scenes.Scene
+    if args.dump == TEMPLATE and not args.robot:
+        overrides = dict(scenes.parse_override(item, scenes.UserScene) for item in args.set)
+        print(f"# Your own model in the medium (finrft run --scene FILE.toml): replace MODEL.xml, BODY, JOINT and "
+              f"ACTUATOR\n# by your model's names; leave out [[drive]] or [[control]] entries you do not need.\n"
+              + scenes.to_toml(template().replace(**overrides)), end="")
+        return 0
+    kind = RobotScene if args.robot else _kind_of(args.scene)
     overrides = dict(scenes.parse_override(item, kind) for item in args.set)
     resolved = scenes.load_scene(args.scene, preset_name=args.dump or "physical", overrides=overrides, cls=kind)
     print(scenes.to_toml(resolved), end="")
     return 0
+
+
+def _kind_of(path: str | None) -> type:
+    """The registered scene kind whose sections hold every section of the file at ``path`` (a plate scene when
+    several do, or no file is given); the file's own errors are left to reading it."""
+    from ..files import read_text, read_toml
+    if path is None:
+        return scenes.Scene
+    try:
+        given = set(read_toml(read_text(path, "scene file"), path))
+    except SceneError:
+        return scenes.Scene
+    fits = [kind.cls for kind in scenes.scene_kinds() if given <= set(schema.sections(kind.cls))]
+    return scenes.Scene if not fits or scenes.Scene in fits else fits[0]
 
 
 def add_medium(sub: Any) -> None:

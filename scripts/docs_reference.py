@@ -61,6 +61,11 @@ def _range(meta: dict[str, Any]) -> str:
         parts.append(f"{'>' if exclusive else '≥'} {low:g}")
     if high is not None:
         parts.append(f"≤ {high:.6g}" + (f" ({meta['why_maximum']})" if meta.get("why_maximum") else ""))
+    if meta.get("least") is not None:
+        parts.append(f"0 or magnitude ≥ {meta['least']:g}")
+    if meta.get("used_by"):
+        selector, values = meta["used_by"]
+        parts.append(f"only with {selector} = " + " or ".join(f"`{v}`" for v in values))
     return ", ".join(parts)
 
 
@@ -74,9 +79,11 @@ def scene_reference() -> str:
     lines = ["# Scene reference", "",
              "Generated from the scene schema (the sections of `finrft/scene.py` and of each experiment's module in "
              "`finrft/experiments/`, each field's metadata) when the documentation is built: it is the code's own "
-             "list of keys. A scene file is TOML in SI units; a key it leaves out takes the default below (a "
-             "preset, `finrft scene --dump NAME`, sets many of them). On the command line any key is "
-             "`--set SECTION.KEY=VALUE`.", ""]
+             "list of keys. A scene file is TOML in SI units, but for `medium.zeta`, in N/cm³ as the literature gives it; "
+             "a number may carry a unit suffix that fits its key's unit (`\"90deg\"`, `\"5mm\"`, `\"6e5 N/m3\"`), "
+             "converted to the key's unit. A key it leaves out takes the default below (a preset, `finrft scene "
+             "--dump NAME`, sets many of them); a key its entry's kind, profile or law does not use (\"only with\") "
+             "is refused unless left at its default. On the command line any key is `--set SECTION.KEY=VALUE`.", ""]
     for title, cls in scene_classes().items():
         lines += [f"## {title}", ""]
         if cls.__doc__:

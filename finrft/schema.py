@@ -224,7 +224,7 @@ def unused(where: str, entry: Any, default: Any) -> None:
         chosen = getattr(entry, selector)
         if chosen not in values:
             default = next(g.default for g in dataclasses.fields(entry) if g.name == selector)
-            told = " (the default: it is not given)" if chosen == default else ""
+            told = " (its default)" if chosen == default else ""
             raise SceneError(f"{where}.{f.name} is used by {selector} = {' or '.join(map(repr, values))} only, and "
                              f"this entry's {selector} is {chosen!r}{told}: set {where}.{selector}"
                              + (f" = {values[0]!r}" if len(values) == 1 else "") + f", or leave {f.name} out")

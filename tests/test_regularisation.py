@@ -55,3 +55,26 @@ def test_bad_v_reg_is_refused():
     from finrft.attach import attach
     with pytest.raises(SceneError, match="v_reg must be >= 0"):
         attach(mujoco.MjSpec.from_string(body_xml(PLATE.format(z=0))), ["probe"], v_reg=-1.0)
+
+
+@pytest.mark.parametrize("v_reg, resolved", [(laws.LEAST_V_REG, True), (3e-10, False)])
+def test_a_box_at_rest_takes_its_weight_down_to_the_least_v_reg(v_reg, resolved):
+    # A 0.5 kg box resting 1 mm deep (newton, 1 ms): its medium force is its weight, upright, when v_reg is at least
+    # LEAST_V_REG; at 3e-10 m/s, a ramp as narrow as Newton's velocity tolerance, the force is wherever the solve
+    # stopped in it (sideways forces, a torque): what a scene now refuses.
+    from finrft import integrate
+    from finrft.attach import attach
+    from finrft.scene import Sim
+    spec = mujoco.MjSpec.from_string("""<mujoco><option timestep="0.001" integrator="implicitfast"/><worldbody>
+      <body name="box" pos="0 0 0.009"><freejoint/><geom type="box" size="0.05 0.05 0.01" mass="0.5"/></body>
+    </worldbody></mujoco>""")
+    attached = attach(spec, "box", backend="native", element_size=0.01, v_reg=v_reg)
+    m = spec.compile()
+    d = mujoco.MjData(m)
+    advance = integrate.stepper(m, Sim(method="newton", dt=1e-3), "native", [], attached)
+    with attached.installed(m):
+        assert advance(d, 500) == 0
+        force, torque = attached.forces(m, d)["box"]
+    weight = 0.5 * -m.opt.gravity[2]
+    upright = abs(force[2] - weight) < 1e-6 * weight and np.abs(force[:2]).max() < 1e-9 and np.abs(torque).max() < 1e-9
+    assert upright == resolved, (force, torque)

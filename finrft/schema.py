@@ -72,7 +72,7 @@ def quantity(text: str, unit: str, where: str) -> float:
     not one of ``unit`` ("m or rad": either)."""
     text = text.strip()
     suffix = next((s for s in sorted(UNITS, key=len, reverse=True)
-                   if text.endswith(s) and _number_text(text[:-len(s)])), None)
+                   if text.endswith(s) and is_number(text[:-len(s)])), None)
     try:
         number = float(text[:-len(suffix)] if suffix else text)
     except ValueError:
@@ -87,7 +87,8 @@ def quantity(text: str, unit: str, where: str) -> float:
     return number * UNITS[suffix][1] / UNITS[fits[0]][1]
 
 
-def _number_text(text: str) -> bool:
+def is_number(text: str) -> bool:
+    """Whether ``text`` is a plain number, without a unit."""
     try:
         float(text)
     except ValueError:

@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from ..scene import SceneError, field_of
-from ..schema import UNITS, quantity
+from ..schema import UNITS, is_number, quantity
 
 # SI units shown in the CLI's: radians (and per second) in degrees, metres in mm.
 DISPLAY = {"rad": 180 / math.pi, "rad/s": 180 / math.pi, "m": 1e3}
@@ -37,14 +37,14 @@ def parse_bounds(items: list[str], cls: type,
         name = (aliases or {}).get(key.strip(), key.strip())
         low, high = low.strip(), high.strip()
         suffix = next((s for s in sorted(UNITS, key=len, reverse=True) if high.endswith(s)), None)
-        if suffix is not None and _bare(low):
+        if suffix is not None and is_number(low):
             low += suffix
         unit = unit_of(cls, name)
         twice = next((k for k in bounds if (aliases or {}).get(k, k) == name), None)
         if twice is not None:
             raise SceneError(f"--bounds {item}: {key.strip()} has bounds already ({twice}="
                              f"{bounds[twice][0]:g}:{bounds[twice][1]:g}): give each key's once")
-        if not (_bare(low.removesuffix(suffix or "")) and _bare(high.removesuffix(suffix or ""))):
+        if not (is_number(low.removesuffix(suffix or "")) and is_number(high.removesuffix(suffix or ""))):
             raise SceneError(f"--bounds {item}: bounds must be numbers")
         try:
             span = tuple(quantity(text, unit or "", key.strip()) for text in (low, high))
@@ -54,15 +54,6 @@ def parse_bounds(items: list[str], cls: type,
             raise SceneError(f"--bounds {item}: bounds must be finite numbers")
         bounds[key.strip()] = span
     return bounds
-
-
-def _bare(text: str) -> bool:
-    """Whether ``text`` is a plain number, without a unit."""
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
 
 
 def display_units(cls: type, keys: list[str], values: np.ndarray) -> np.ndarray:

@@ -136,3 +136,36 @@ def test_the_forces_of_an_mjdata_of_another_model_are_refused():
         attached.forces(model, mujoco.MjData(plain))
     with pytest.raises(SceneError, match="data must be a mujoco.MjData, got NoneType"):
         attached.forces(model, None)
+
+
+@pytest.mark.parametrize("change,named", [
+    ({"spec": None}, "spec must be a mujoco.MjSpec"), ({"bodies": None}, "bodies must be a name or a list of names"),
+    ({"bodies": ["plate", 3]}, "bodies must be"), ({"geoms": 7}, "geoms must be"), ({"law": 3}, "law must be a str"),
+    ({"backend": None}, "backend must be a str"), ({"medium": 1}, "medium must be a str"),
+    ({"zeta": "1"}, "zeta must be a number or None"), ({"surface_z": None}, "surface_z must be a number, got"),
+    ({"element_size": "5mm"}, "element_size must be a number"), ({"v_reg": [1e-4]}, "v_reg must be a number"),
+    ({"drft_lambda": None}, "drft_lambda must be a number"), ({"rho_c": "dense"}, "rho_c must be a number"),
+    ({"cull": "no"}, "cull must be True or False"),
+])
+def test_attach_refuses_arguments_of_the_wrong_type_naming_them(change, named):
+    spec = mujoco.MjSpec.from_string(PLATE.format(w=0.02, h=0.03))
+    given = {"spec": spec, "bodies": ["plate"], "zeta": 1.0, **change}
+    with pytest.raises(SceneError, match=f"attach: {named}"):
+        finrft.attach(given.pop("spec"), given.pop("bodies"), **given)
+
+
+def test_the_run_api_refuses_arguments_of_the_wrong_type_naming_them(tmp_path):
+    (tmp_path / "arm.xml").write_text(ARM)
+    scene = UserScene().replace(**{"model.path": str(tmp_path / "arm.xml"), "model.bodies": ["rod"],
+                                   "sim.duration": 0.05})
+    with pytest.raises(SceneError, match="run_robot: the scene must be a finrft.UserScene"):
+        finrft.run_robot(None)
+    with pytest.raises(SceneError, match="run_robot: control must be a callable"):
+        finrft.run_robot(scene, control=5)
+    with pytest.raises(SceneError, match="run: progress must be a callable"):
+        finrft.run_robot(scene, progress=5)
+    plate, drive = finrft.preset("physical"), finrft.Drive(speed=0.03, stroke=0.01, cycles=1)
+    with pytest.raises(SceneError, match="run: progress must be a callable"):
+        finrft.simulate(plate, drive, progress=3)
+    with pytest.raises(SceneError, match="run: estimate_error must be True or False"):
+        finrft.simulate(plate, drive, estimate_error="no")

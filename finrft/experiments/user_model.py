@@ -499,6 +499,12 @@ def run_robot(scene: UserScene, *, control: Controller | None = None, progress: 
     """Run a user's model as a robot (`UserModel`): ``control(t, data) -> ctrl`` (one value per actuator, called
     at every step) drives its actuators instead of the scene's [[control]]. The result carries its error
     estimate as every run (`finrft.run`); `robot_summary` says what ``result.summary()`` reports."""
+    if not isinstance(scene, UserScene):
+        raise SceneError(f"run_robot: the scene must be a finrft.UserScene (finrft.load_scene(path, cls=UserScene)), "
+                         f"got {type(scene).__name__} {scene!r:.60}")
+    if control is not None and not callable(control):
+        raise SceneError(f"run_robot: control must be a callable control(t, data) -> ctrl, or None, got "
+                         f"{type(control).__name__} {control!r:.60}")
     return run(UserModel.of(scene, control), scene, progress=progress, max_error=max_error)
 
 

@@ -563,6 +563,23 @@ def _mesh(model: mujoco.MjModel, g: int) -> tuple[np.ndarray, np.ndarray]:
     return vert[face].astype(float)
 
 
+def _outward(model: mujoco.MjModel, g: int) -> np.ndarray:
+    """A mesh geom's triangles (T, 3, 3) wound counter-clockwise seen from outside, as `_triangles` takes them: a
+    closed mesh wound the other way throughout (negative volume) is turned over; SceneError for one whose triangles
+    are wound both ways (an edge run the same way by two triangles), whose outside no winding tells."""
+    mesh = model.geom_dataid[g]
+    face = model.mesh_face[model.mesh_faceadr[mesh]:model.mesh_faceadr[mesh] + model.mesh_facenum[mesh]]
+    t = _mesh(model, g)
+    face = face[np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1) > 0]
+    edges = np.concatenate([face[:, [0, 1]], face[:, [1, 2]], face[:, [2, 0]]])
+    if len(np.unique(edges, axis=0)) < len(edges):
+        raise SceneError(f"attach: the triangles of mesh geom {model.geom(g).name or g!r} are wound both ways (some "
+                         f"face inward): wind every triangle counter-clockwise seen from outside")
+    closed = len(np.unique(np.concatenate([edges, edges[:, ::-1]]), axis=0)) == len(edges)
+    volume = np.einsum("ti,ti->", t[:, 0], np.cross(t[:, 1], t[:, 2])) / 6
+    return t[:, ::-1] if closed and volume < 0 else t
+
+
 def _area(model: mujoco.MjModel, g: int) -> float:
     """A geom's surface area (for an ellipsoid, an upper bound)."""
     size, kind = model.geom_size[g], int(model.geom_type[g])
@@ -587,7 +604,7 @@ def _geom_elements(model: mujoco.MjModel, g: int, h: float) -> tuple[np.ndarray,
     if kind == _G.mjGEOM_ELLIPSOID:
         return _bands(size, 0.0, np.pi, 0.0, h)
     if kind == _G.mjGEOM_MESH:
-        return _triangles(_mesh(model, g), h)
+        return _triangles(_outward(model, g), h)
     r, half = size[0], size[1]
     if kind == _G.mjGEOM_CYLINDER:
         ends = [_disk(r, half, 1.0, h), _disk(r, -half, -1.0, h)]

@@ -169,3 +169,35 @@ def test_the_run_api_refuses_arguments_of_the_wrong_type_naming_them(tmp_path):
         finrft.simulate(plate, drive, progress=3)
     with pytest.raises(SceneError, match="run: estimate_error must be True or False"):
         finrft.simulate(plate, drive, estimate_error="no")
+
+
+# A 4 cm cube as a mesh, each face two triangles counter-clockwise seen from outside (vertex i at
+# (-1)^(1 + bit) 2 cm along x, y, z for bits 2, 1, 0 of i).
+CUBE_FACES = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1], [2, 3, 7], [2, 7, 6],
+                       [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])
+CUBE = """<mujoco><option gravity="0 0 0"/><asset><mesh name="cube" vertex="{vertex}" face="{face}"/></asset>
+  <worldbody><body name="b"><freejoint/><geom name="g" {geom} mass="1"/></body></worldbody></mujoco>"""
+
+
+def _cube_force(faces=None) -> np.ndarray:
+    vertex = " ".join(f"{0.02 * (2 * ((i >> k) & 1) - 1)}" for i in range(8) for k in (2, 1, 0))
+    geom = 'type="box" size="0.02 0.02 0.02"' if faces is None else 'type="mesh" mesh="cube"'
+    faces = CUBE_FACES if faces is None else faces
+    spec = mujoco.MjSpec.from_string(CUBE.format(vertex=vertex, face=" ".join(map(str, faces.ravel())), geom=geom))
+    attached = finrft.attach(spec, ["b"], zeta=1.0, surface_z=0.05)
+    model = spec.compile()
+    data = mujoco.MjData(model)
+    data.qvel[:3] = [0.05, 0.0, -0.1]  # sinking and moving sideways: the bottom and one side lead
+    mujoco.mj_forward(model, data)
+    return attached.forces(model, data)["b"][0]
+
+
+def test_a_mesh_wound_inward_gives_the_force_of_the_mesh_wound_outward():
+    box = _cube_force()  # the same cube as a box geom: flat faces, exact for both
+    assert box[2] > 1.0
+    assert _cube_force(CUBE_FACES) == pytest.approx(box, rel=1e-6)  # float32 vertices
+    assert _cube_force(CUBE_FACES[:, ::-1]) == pytest.approx(box, rel=1e-6)  # float32 vertices
+    mixed = CUBE_FACES.copy()
+    mixed[3] = mixed[3, ::-1]
+    with pytest.raises(SceneError, match="triangles of mesh geom 'g' are wound both ways"):
+        _cube_force(mixed)

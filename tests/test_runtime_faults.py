@@ -201,3 +201,19 @@ def test_a_mesh_wound_inward_gives_the_force_of_the_mesh_wound_outward():
     mixed[3] = mixed[3, ::-1]
     with pytest.raises(SceneError, match="triangles of mesh geom 'g' are wound both ways"):
         _cube_force(mixed)
+
+
+@pytest.mark.parametrize("backend", ["native", "python"])
+def test_newton_does_not_take_a_root_whose_residual_it_never_made_small(tmp_path, backend):
+    # A 0.5 kg box 1e10 m below the surface at rest: the medium could hold 1e14 N, so the root's sinking speed
+    # (about 5e-18 m/s) lies below the ramp's floor (1e-12 v_reg), where the law gives no force. The step's change
+    # there is below Newton's velocity tolerance, which alone took the state with no medium force at all and the
+    # box hanging in the air of its own accord; the residual (its whole weight) now stops the run instead.
+    (tmp_path / "box.xml").write_text("""<mujoco><option gravity="0 0 -9.81"/><worldbody>
+      <body name="box" pos="0 0 0.01"><freejoint/><geom type="box" size="0.05 0.05 0.01" mass="0.5"/></body>
+      </worldbody></mujoco>""")
+    scene = UserScene().replace(**{"model.path": str(tmp_path / "box.xml"), "model.bodies": ["box"],
+                                   "medium.law": "li2013-planar", "sim.duration": 0.02, "sim.backend": backend,
+                                   "medium.surface_z": 1e10})
+    with pytest.raises(SimulationFailed, match="Newton's method of the implicit step did not converge at t = 0 s"):
+        finrft.run_robot(scene, max_error=None)

@@ -11,7 +11,8 @@
   (M - dt D') dv = dt (f(v) - F(v) + F(v + dv)), D' without the RFT term, f every force MuJoCo computed at v.
   A rate-independent law is nearly a step function of the velocity's direction, so on light segments the
   linearisation at v (the implicit step, Newton's first iterate) overshoots and chatters; Newton's method with a
-  backtracking line search on the residual converges to the root (|change| <= 1e-10 (1 + |qvel|)). The
+  backtracking line search on the residual converges to the root (|change| <= 1e-10 (1 + |qvel|), and the
+  residual at most NEWTON_RESIDUAL of dt times the step's largest force). The
   penalty stops are taken at the step's end too, at the deflection d + dt (v + dv). With attached surfaces alone
   (no segments) it keeps its slope while each full step cuts the residual by SURFACE_DECREASE (fresh again when
   that stops, or when a search stalls on a kept one) and takes a step below the tolerance without a residual to

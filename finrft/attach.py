@@ -165,6 +165,7 @@ class Attached:
                        ) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
         """Each attached body's elements at the state of ``data`` (after mj_kinematics): centres (N, 3, m) and
         outward unit normals (N, 3), world frame, and areas (N, m^2): to draw or inspect them."""
+        self.check_data(model, data, "Attached.world_elements")
         out = {}
         for surface in self.surfaces:
             body = model.body(surface.body).id
@@ -175,6 +176,8 @@ class Attached:
 
     def check_compiled(self, model: mujoco.MjModel) -> None:
         """SceneError unless ``model`` was compiled from the spec after `attach`: one compiled before has no RFT."""
+        if not isinstance(model, mujoco.MjModel):
+            raise SceneError(f"Attached: model must be a mujoco.MjModel (spec.compile()), got {type(model).__name__}")
         text = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_TEXT, callbacks.PYTHON_MARK)
         start = model.text_adr[text] if text >= 0 else 0
         marked = set() if text < 0 else set(bytes(model.text_data[start:start + model.text_size[text] - 1]).decode()

@@ -136,6 +136,11 @@ def test_the_forces_of_an_mjdata_of_another_model_are_refused():
         attached.forces(model, mujoco.MjData(plain))
     with pytest.raises(SceneError, match="data must be a mujoco.MjData, got NoneType"):
         attached.forces(model, None)
+    with pytest.raises(SceneError, match="data is an MjData of another model"):
+        attached.world_elements(other, data)
+    with pytest.raises(SceneError, match="model must be a mujoco.MjModel"):
+        with attached.installed(spec):
+            pass
 
 
 @pytest.mark.parametrize("change,named", [

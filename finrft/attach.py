@@ -56,6 +56,9 @@ class Surface:
     centre: np.ndarray
     normal: np.ndarray
     area: np.ndarray
+    # Per geom cut: its place among the body's geoms, then the type, size, pos and quat it was cut at (G, 12): a
+    # geom changed since (resized in the spec, or in model.geom_size for domain randomisation) has other elements.
+    geoms: np.ndarray = field(default_factory=lambda: np.zeros((0, 12)))
 
 
 @dataclass(frozen=True, eq=False)
@@ -100,6 +103,29 @@ class Attached:
         wrench = self.wrenches(model)(data)
         return {s.body: (w[3:], w[:3]) for s, w in zip(self.surfaces, wrench)}
 
+    def check_data(self, model: mujoco.MjModel, data: mujoco.MjData, where: str = "Attached.forces") -> None:
+        """SceneError unless ``model`` is an MjModel whose geoms are those `attach` cut and ``data`` an MjData of
+        it: another model's MjData gives another model's numbers, or none."""
+        if not isinstance(model, mujoco.MjModel):
+            raise SceneError(f"{where}: model must be a mujoco.MjModel, got {type(model).__name__}")
+        if not isinstance(data, mujoco.MjData):
+            raise SceneError(f"{where}: data must be a mujoco.MjData, got {type(data).__name__}")
+        if data.model._address != model._address:
+            raise SceneError(f"{where}: data is an MjData of another model: pass mujoco.MjData(model) of the model "
+                             f"given")
+        self.check_geoms(model)
+
+    def check_geoms(self, model: mujoco.MjModel) -> None:
+        """SceneError when a geom `attach` cut into elements has another type, size, position or orientation in
+        ``model`` than it had then: its elements, and so its force, would be those of the old geom."""
+        for surface in self.surfaces:
+            body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, surface.body)
+            if body < 0 or not len(surface.geoms):
+                continue
+            message = _changed_geom(model, body, surface)
+            if message:
+                raise SceneError(message)
+
     def wrenches(self, model: mujoco.MjModel, applied: bool = False) -> Callable[[mujoco.MjData], np.ndarray]:
         """A reader of the medium's wrench on each attached body at the state of an MjData of ``model`` (after
         mj_forward): (B, 6), the torque about the body's origin (N m), then the force (N), world frame, in the order
@@ -113,6 +139,7 @@ class Attached:
             instances = [int(model.body_plugin[model.body(s.body).id]) for s in self.surfaces]
 
             def native_read(data: mujoco.MjData) -> np.ndarray:
+                self.check_data(model, data, "Attached.wrenches")
                 out = np.zeros((len(instances), 6))
                 for row, instance in zip(out, instances):
                     found = -2 if last is None else last(model._address, data._address, instance, row.ctypes.data)
@@ -126,6 +153,7 @@ class Attached:
         forces = SurfaceForces(self, model)
 
         def python_read(data: mujoco.MjData) -> np.ndarray:
+            self.check_data(model, data, "Attached.wrenches")
             out = np.zeros((len(forces.bodies), 6))
             for row, (body, surface) in zip(out, forces.bodies):
                 force, arm = forces.element_forces(model, data, body, surface)
@@ -137,6 +165,7 @@ class Attached:
                        ) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
         """Each attached body's elements at the state of ``data`` (after mj_kinematics): centres (N, 3, m) and
         outward unit normals (N, 3), world frame, and areas (N, m^2): to draw or inspect them."""
+        self.check_data(model, data, "Attached.world_elements")
         out = {}
         for surface in self.surfaces:
             body = model.body(surface.body).id
@@ -147,6 +176,8 @@ class Attached:
 
     def check_compiled(self, model: mujoco.MjModel) -> None:
         """SceneError unless ``model`` was compiled from the spec after `attach`: one compiled before has no RFT."""
+        if not isinstance(model, mujoco.MjModel):
+            raise SceneError(f"Attached: model must be a mujoco.MjModel (spec.compile()), got {type(model).__name__}")
         text = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_TEXT, callbacks.PYTHON_MARK)
         start = model.text_adr[text] if text >= 0 else 0
         marked = set() if text < 0 else set(bytes(model.text_data[start:start + model.text_size[text] - 1]).decode()
@@ -156,6 +187,7 @@ class Attached:
             if body < 0 or not (model.body_plugin[body] >= 0 if self.backend == "native" else surface.body in marked):
                 raise SceneError(f"attach: the model has no RFT on body {surface.body!r}: it was compiled before "
                                  f"attach (or from another spec); compile the spec after attach")
+        self.check_geoms(model)
 
     def callback(self, model: mujoco.MjModel) -> "SurfaceForces":
         """The Python backend's passive-force callback for the compiled model."""
@@ -215,6 +247,7 @@ class SurfaceForces:
         return arm[below], surface.normal[below] @ rotation.T, depth[below], surface.area[below]
 
     def __call__(self, m: mujoco.MjModel, d: mujoco.MjData) -> None:
+        self.attached.check_geoms(m)  # model.geom_size may change between steps (domain randomisation)
         for body, surface in self.bodies:
             force, arm = self.element_forces(m, d, body, surface)
             mujoco.mj_applyFT(m, d, force.sum(axis=0), np.cross(arm, force).sum(axis=0), d.xpos[body], body,
@@ -253,9 +286,13 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str = (), law: str = "li
     elements that face another geom of the same kinematic tree closely (`TOUCHING`), such as the end faces of
     neighbouring links of a chain, which the grains cannot reach. Raises `SceneError` on bad input.
     """
+    _check_types(spec, bodies, geoms, {"law": law, "backend": backend, "medium": medium},
+                 {"surface_z": surface_z, "element_size": element_size, "drft_lambda": drft_lambda, "v_reg": v_reg},
+                 {"zeta": zeta, "rho_c": rho_c, "mu_int": mu_int, "mu_surf": mu_surf, "bulk_density": bulk_density},
+                 cull)
     material = media.medium(medium) if medium is not None else None
-    names = [bodies] if isinstance(bodies, str) else list(bodies)
-    chosen = _chosen_geoms(spec, names, [geoms] if isinstance(geoms, str) else list(geoms))
+    names = _names(bodies, "bodies")
+    chosen = _chosen_geoms(spec, names, _names(geoms, "geoms"))
     names += list(chosen)
     _check(names, law, surface_z, element_size, backend)
     if not (math.isfinite(v_reg) and v_reg >= 0):
@@ -321,6 +358,39 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str = (), law: str = "li
     return attached
 
 
+def _names(value: Sequence[str] | str, key: str) -> list[str]:
+    """A name or a sequence of names as a list; SceneError naming ``key`` for anything else."""
+    if isinstance(value, str):
+        return [value]
+    if isinstance(value, (list, tuple)) and all(isinstance(v, str) for v in value):
+        return list(value)
+    raise SceneError(f"attach: {key} must be a name or a list of names (str), got {type(value).__name__} "
+                     f"{value!r:.60}")
+
+
+def _is_number(value: object) -> bool:
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+
+
+def _check_types(spec: object, bodies: object, geoms: object, texts: dict[str, object], numbers: dict[str, object],
+                 optional: dict[str, object], cull: object) -> None:
+    """SceneError naming the first argument of `attach` of the wrong type (texts may be None only as ``medium``)."""
+    if not isinstance(spec, mujoco.MjSpec):
+        raise SceneError(f"attach: spec must be a mujoco.MjSpec (attach before compiling: mujoco.MjSpec.from_file"
+                         f"(...)), got {type(spec).__name__}")
+    _names(bodies, "bodies")
+    _names(geoms, "geoms")
+    for key, value in texts.items():
+        if not (isinstance(value, str) or (key == "medium" and value is None)):
+            raise SceneError(f"attach: {key} must be a str, got {type(value).__name__} {value!r:.60}")
+    for key, value in {**numbers, **optional}.items():
+        if not (_is_number(value) or (key in optional and value is None)):
+            raise SceneError(f"attach: {key} must be a number{' or None' if key in optional else ''}, got "
+                             f"{type(value).__name__} {value!r:.60}")
+    if not isinstance(cull, (bool, np.bool_)):
+        raise SceneError(f"attach: cull must be True or False, got {type(cull).__name__} {cull!r:.60}")
+
+
 def _check(names: list[str], law: str, surface_z: float, element_size: float, backend: str) -> None:
     if law not in laws.names(laws.SURFACE):
         raise SceneError(f"attach: law must be one of {', '.join(laws.names(laws.SURFACE))}, got {law!r}")
@@ -348,6 +418,7 @@ def _bind(spec: mujoco.MjSpec, attached: Attached, surface: Surface) -> None:
         "surface_z": repr(attached.surface_z),
         "v_reg": repr(attached.v_reg),
         "elements": " ".join(map(repr, elements.ravel().tolist())),  # repr: the Python backend's exact numbers
+        "geoms": " ".join(map(repr, surface.geoms.ravel().tolist())),
     }
     body = spec.body(surface.body)
     body.plugin = instance
@@ -431,7 +502,35 @@ def _surface(model: mujoco.MjModel, data: mujoco.MjData, name: str, body: int, h
     if not len(area):
         raise SceneError(f"attach: every element of body {name!r} faces another geom of its tree closely (culled): "
                          f"pass cull=False, or attach the geoms the medium reaches")
-    return Surface(name, centre, normal, area)
+    cut = np.column_stack([geoms - model.body_geomadr[body], _geometry(model, geoms)])
+    return Surface(name, centre, normal, area, cut)
+
+
+def _geometry(model: mujoco.MjModel, geoms: np.ndarray) -> np.ndarray:
+    """What a geom's elements are cut from, per geom (G, 11): type, size, pos, quat."""
+    return np.column_stack([model.geom_type[geoms], model.geom_size[geoms], model.geom_pos[geoms],
+                            model.geom_quat[geoms]]).astype(float)
+
+
+def _changed_geom(model: mujoco.MjModel, body: int, surface: Surface) -> str:
+    """Why the geoms of ``surface`` in ``model`` are not those `attach` cut (the first one changed), or ""; the twin
+    of the native plugin's check (geoms_changed in plugins/finrft_surface.c)."""
+    place = surface.geoms[:, 0].astype(int)
+    geoms = model.body_geomadr[body] + place
+    if np.all(place < model.body_geomnum[body]) and np.array_equal(_geometry(model, geoms), surface.geoms[:, 1:]):
+        return ""
+    for row, k, g in zip(surface.geoms, place, geoms):
+        there = k < model.body_geomnum[body]
+        if not there or not np.array_equal(_geometry(model, np.array([g]))[0], row[1:]):
+            return geom_changed((model.geom(g).name if there else "") or f"#{k}", surface.body)
+    return ""
+
+
+def geom_changed(geom: str, body: str) -> str:
+    """The message for a geom changed since `attach` cut it (the native plugin's says the same)."""
+    return (f"geom {geom!r} of body {body!r} changed its type, size, position or orientation since finrft.attach cut "
+            f"it into elements, which keep the old geom's force: call attach on a spec that has the geoms' final "
+            f"sizes (one spec per size when randomising), then compile it")
 
 
 def _inside(model: mujoco.MjModel, data: mujoco.MjData, g: int, points: np.ndarray) -> np.ndarray:
@@ -478,6 +577,23 @@ def _mesh(model: mujoco.MjModel, g: int) -> tuple[np.ndarray, np.ndarray]:
     return vert[face].astype(float)
 
 
+def _outward(model: mujoco.MjModel, g: int) -> np.ndarray:
+    """A mesh geom's triangles (T, 3, 3) wound counter-clockwise seen from outside, as `_triangles` takes them: a
+    closed mesh wound the other way throughout (negative volume) is turned over; SceneError for one whose triangles
+    are wound both ways (an edge run the same way by two triangles), whose outside no winding tells."""
+    mesh = model.geom_dataid[g]
+    face = model.mesh_face[model.mesh_faceadr[mesh]:model.mesh_faceadr[mesh] + model.mesh_facenum[mesh]]
+    t = _mesh(model, g)
+    face = face[np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1) > 0]
+    edges = np.concatenate([face[:, [0, 1]], face[:, [1, 2]], face[:, [2, 0]]])
+    if len(np.unique(edges, axis=0)) < len(edges):
+        raise SceneError(f"attach: the triangles of mesh geom {model.geom(g).name or g!r} are wound both ways (some "
+                         f"face inward): wind every triangle counter-clockwise seen from outside")
+    closed = len(np.unique(np.concatenate([edges, edges[:, ::-1]]), axis=0)) == len(edges)
+    volume = np.einsum("ti,ti->", t[:, 0], np.cross(t[:, 1], t[:, 2])) / 6
+    return t[:, ::-1] if closed and volume < 0 else t
+
+
 def _area(model: mujoco.MjModel, g: int) -> float:
     """A geom's surface area (for an ellipsoid, an upper bound)."""
     size, kind = model.geom_size[g], int(model.geom_type[g])
@@ -502,7 +618,7 @@ def _geom_elements(model: mujoco.MjModel, g: int, h: float) -> tuple[np.ndarray,
     if kind == _G.mjGEOM_ELLIPSOID:
         return _bands(size, 0.0, np.pi, 0.0, h)
     if kind == _G.mjGEOM_MESH:
-        return _triangles(_mesh(model, g), h)
+        return _triangles(_outward(model, g), h)
     r, half = size[0], size[1]
     if kind == _G.mjGEOM_CYLINDER:
         ends = [_disk(r, half, 1.0, h), _disk(r, -half, -1.0, h)]

@@ -205,6 +205,12 @@ def run(experiment: Experiment, scene: Any, *, progress: Callable[[float], None]
     if not isinstance(scene, expected):
         raise SceneError(f"{experiment.name}: the scene must be a finrft.{expected.__name__} (from finrft.preset or "
                          f"finrft.load_scene), got {type(scene).__name__} {scene!r:.60}")
+    if progress is not None and not callable(progress):
+        raise SceneError(f"run: progress must be a callable progress(fraction) or None, got {type(progress).__name__} "
+                         f"{progress!r:.60}")
+    if not isinstance(estimate_error, (bool, np.bool_)):
+        raise SceneError(f"run: estimate_error must be True or False, got {type(estimate_error).__name__} "
+                         f"{estimate_error!r:.60}")
     laws.warn_if_feeds_energy(geometry.segment_law(scene))
     # A companion on the run's model (the adaptive methods') steps the run's MjData again, reset: a new one costs
     # a tenth of a physical gait's companion (the bindings' wrappers).

@@ -11,7 +11,8 @@
   (M - dt D') dv = dt (f(v) - F(v) + F(v + dv)), D' without the RFT term, f every force MuJoCo computed at v.
   A rate-independent law is nearly a step function of the velocity's direction, so on light segments the
   linearisation at v (the implicit step, Newton's first iterate) overshoots and chatters; Newton's method with a
-  backtracking line search on the residual converges to the root (|change| <= 1e-10 (1 + |qvel|)). The
+  backtracking line search on the residual converges to the root (|change| <= 1e-10 (1 + |qvel|), and the
+  residual at most NEWTON_RESIDUAL of dt times the step's largest force). The
   penalty stops are taken at the step's end too, at the deflection d + dt (v + dv). With attached surfaces alone
   (no segments) it keeps its slope while each full step cuts the residual by SURFACE_DECREASE (fresh again when
   that stops, or when a search stalls on a kept one) and takes a step below the tolerance without a residual to
@@ -93,6 +94,9 @@ NEWTON_ITERATIONS = 50
 NEWTON_TOLERANCE = 1e-10
 NEWTON_HALVINGS = 10
 NEWTON_SHARE = 1e-2  # the adaptive newton method stops Newton's method at this share of the step's tolerance
+# Newton's method takes an iterate as the root only where its residual is at most this share of dt times the step's
+# largest force, besides its change being small (NEWTON_RESIDUAL in steppers.c).
+NEWTON_RESIDUAL = 1e-3
 # Spans of time (s) shorter than this are the rounding of d.time (TIME_ROUNDING in steppers.c): the adaptive steps
 # stop this short of their end, and a step this close to the step size was not cut short to land there.
 TIME_ROUNDING = 1e-12
@@ -427,8 +431,15 @@ class PythonImplicit:
         force, slope = self._forces(forces, qvel, ahead, True, forward=iterations > 1)
         other = self._rhs - (force if taken is None else taken)
 
+        at = [force]  # the RFT and stop forces at the last iterate whose residual was taken
+
         def residual(dv: np.ndarray) -> np.ndarray:
-            return matrix @ dv - dt * (other + self._forces(forces, qvel + dv, dt, False)[0])
+            at[0] = self._forces(forces, qvel + dv, dt, False)[0]
+            return matrix @ dv - dt * (other + at[0])
+
+        def small(g: np.ndarray) -> bool:  # residual_small in steppers.c
+            return np.abs(g).max(initial=0.0) <= NEWTON_RESIDUAL * dt * max(np.abs(other).max(initial=0.0),
+                                                                              np.abs(at[0]).max(initial=0.0))
         dv = np.zeros(m.nv)
         g = -dt * (other + force)
         # attached surfaces alone: the leaner Newton's method of newton_solve in steppers.c (the same root)
@@ -437,7 +448,7 @@ class PythonImplicit:
             step = np.linalg.solve(matrix - dt * slope, -g)
             if iterations == 1:
                 return step
-            if lean and np.abs(step).max() <= self.tolerance * (1 + np.abs(qvel + dv + step).max()):
+            if lean and np.abs(step).max() <= self.tolerance * (1 + np.abs(qvel + dv + step).max()) and small(g):
                 return dv + step
             norm, alpha = np.linalg.norm(g), 1.0
             while True:
@@ -447,7 +458,7 @@ class PythonImplicit:
                 alpha /= 2
             dv, g = dv + alpha * step, trial
             if (np.abs(alpha * step).max() <= self.tolerance * (1 + np.abs(qvel + dv).max())
-                    and (fresh or alpha >= 1e-6)):
+                    and (fresh or alpha >= 1e-6) and small(g)):
                 return dv
             if lean and fresh and np.linalg.norm(trial) > (1 - 1e-4 * alpha) * norm:  # a kink: halve (steppers.c)
                 return None

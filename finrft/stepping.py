@@ -21,6 +21,35 @@ from .native import Code, captured_warnings
 from .scene import ExplicitSim
 
 _BAD_STATE = (mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL)
+_W = mujoco.mjtWarning
+# MuJoCo's other warnings, each a run that goes on with a wrong result: what happened, and what to do. MuJoCo zeroes
+# every ctrl of the model when one is bad (NaN or beyond mjMAXVAL, 1e10), drops the contacts or constraints beyond
+# its arena, and a singular mass matrix gives arbitrary accelerations. (The bad-state ones are `unstable`.)
+_VOID = {
+    int(_W.mjWARN_BADCTRL): ("ctrl of actuator {name} is NaN or beyond +-{max:g}, so MuJoCo zeroed every ctrl of "
+                             "the model", "give ctrl values in the actuator's unit, within +-{max:g}"),
+    int(_W.mjWARN_CONTACTFULL): ("MuJoCo's contact buffer is full, so contacts were dropped",
+                                 "give the model more memory (<size memory=\"...\"/>) or fewer colliding geoms"),
+    int(_W.mjWARN_CNSTRFULL): ("MuJoCo's constraint buffer is full, so constraints were dropped",
+                               "give the model more memory (<size memory=\"...\"/>)"),
+    int(_W.mjWARN_INERTIA): ("the mass matrix is singular at dof {index}",
+                             "give every moving body a positive mass and inertia"),
+}
+
+
+def void_run(m: mujoco.MjModel, d: mujoco.MjData) -> SimulationFailed | None:
+    """The failure a MuJoCo warning raised on ``d`` since it was made or reset means (`_VOID`), or None: a run
+    that raised one is no result, whatever it recorded."""
+    for kind, (what, advice) in _VOID.items():
+        stat = d.warning[kind]
+        if stat.number:
+            index = int(stat.lastinfo)
+            name = (m.actuator(index).name or str(index)) if kind == _W.mjWARN_BADCTRL and 0 <= index < m.nu \
+                else str(index)
+            fill = {"name": repr(name), "index": index, "max": mujoco.mjMAXVAL}
+            return SimulationFailed(f"{what.format(**fill)} ({stat.number} time(s), by t = {d.time:.4g} s): the "
+                                    f"run is void; {advice.format(**fill)}")
+    return None
 
 # The largest distance a prescribed drive may fall behind (or run ahead of) its motion within a stroke, as a share
 # of the stroke. Its armature holds it there only while the load is small against armature / time^2: a light driven
@@ -320,6 +349,12 @@ def step_through(m: mujoco.MjModel, d: mujoco.MjData, scene: Any, advance: Stepp
                 code = _walk(advance, d, step, int(events[i + 1]), times[i + 1], scene.sim, adaptive, on_step)
             if code or any(counts[w] for w in bad):
                 raise unstable(scene, d.time, messages, code or 1)
+            failure = void_run(m, d)
+            if failure is not None:
+                raise failure
+        failure = void_run(m, d)  # the last sample's forward pass
+        if failure is not None:
+            raise failure
     if probe:
         # Samples whose three steps before lie in one stroke (a reversal jumps the velocities on purpose).
         inside = np.searchsorted(starts, samples - 3, side="right") == np.searchsorted(starts, samples, side="right")

@@ -121,6 +121,8 @@ typedef struct {
   int body;
   int n;
   double* element;  // n x 7: centre, normal (body frame), area
+  int ngeom;        // the geoms the elements were cut from (config `geoms`; 0: not given, nothing checked)
+  double* geom;     // ngeom x 12: place among the body's geoms, type, size, pos, quat as they were cut
   int paused;       // as FinrftInstance's
   int has_applied;  // 1 when the last passive force computation on this mjData applied `applied` (not paused)
   double applied[6];

@@ -16,12 +16,16 @@
 //   drft_lambda   optional, >= 0 (absent: 0, off): DRFT's dimensionless lambda
 //   bulk_density  with drft_lambda > 0: > 0, the medium's density rho_c, kg/m^3
 //   elements      "cx cy cz nx ny nz area ..." per element: centre and outward unit normal in the body frame, m^2
+//   geoms         optional: "k type sx sy sz px py pz qw qx qy qz ..." per geom the elements were cut from (its
+//                 place among the body's geoms, then as the model held it then); a model whose geom differs (resized
+//                 in the spec, or in geom_size after compile) stops with an error rather than apply the old force
 //
 // No static state: everything lives in the per-mjData struct, so instances and threads never share memory; the
 // compute callback allocates nothing, unless it is stepped with another model than its instance's (rollout).
 
 #include <math.h>
 #include <stdint.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -237,11 +241,12 @@ FINRFT_EXPORT void finrft_drft_element_force(double drft_lambda, double rho_c, c
 
 static const char* kSurfaceAttributes[] = {"law",         "coefficients", "zeta",  "xi",      "mu_surf",
                                            "surface_z",   "v_reg",        "drft_lambda", "bulk_density",
-                                           "elements"};
+                                           "elements",    "geoms"};
 
 static void surface_free(FinrftSurface* p) {
   if (!p) return;
   free(p->element);
+  free(p->geom);
   free(p);
 }
 
@@ -382,6 +387,20 @@ static int surface_init(const mjModel* m, mjData* d, int instance) {
     return -1;
   }
   read_numbers(text, p->element, count);
+  const char* geoms = mj_getPluginConfig(m, instance, "geoms");
+  count = geoms && *geoms ? read_numbers(geoms, NULL, 0) : 0;
+  if (count < 0 || count % 12) {
+    mju_warning("finrft.surface: config 'geoms' must hold 12 numbers per geom");
+    surface_free(p);
+    return -1;
+  }
+  p->ngeom = count / 12;
+  p->geom = count ? (double*)malloc(count * sizeof(double)) : NULL;
+  if (count && !p->geom) {
+    surface_free(p);
+    return -1;
+  }
+  if (count) read_numbers(geoms, p->geom, count);
   p->model = m;
   d->plugin_data[instance] = (uintptr_t)p;
   return 0;
@@ -398,16 +417,48 @@ static void surface_destroy(mjData* d, int instance) {
 
 static void surface_reset(const mjModel* m, mjtNum* plugin_state, void* plugin_data, int instance) {}
 
+// The first geom of the instance's body that differs from what its elements were cut from (config `geoms`), as
+// its place in p->geom; -1 when none does. Checked at every use: geom_size may change between steps.
+static int geom_changed(const mjModel* m, const FinrftSurface* p) {
+  for (int j = 0; j < p->ngeom; j++) {
+    const double* cut = p->geom + 12 * j;
+    int k = (int)cut[0], g = m->body_geomadr[p->body] + k;
+    if (k >= m->body_geomnum[p->body] || m->geom_type[g] != (int)cut[1]) return j;
+    for (int i = 0; i < 3; i++)
+      if (m->geom_size[3 * g + i] != cut[2 + i] || m->geom_pos[3 * g + i] != cut[5 + i]) return j;
+    for (int i = 0; i < 4; i++)
+      if (m->geom_quat[4 * g + i] != cut[8 + i]) return j;
+  }
+  return -1;
+}
+
 // The instance for the model `d` is stepped with, made again when it was made for another: as finrft_instance.
 const FinrftSurface* finrft_surface_instance(const mjModel* m, mjData* d, int instance) {
   const FinrftSurface* p = (const FinrftSurface*)d->plugin_data[instance];
-  if (p && p->model == m) return p;
-  surface_destroy(d, instance);
-  if (surface_init(m, d, instance)) {
-    finrft_poison(m, d);
-    return NULL;
+  if (!p || p->model != m) {
+    surface_destroy(d, instance);
+    if (surface_init(m, d, instance)) {
+      finrft_poison(m, d);
+      return NULL;
+    }
+    p = (const FinrftSurface*)d->plugin_data[instance];
   }
-  return (const FinrftSurface*)d->plugin_data[instance];
+  int changed = geom_changed(m, p);
+  if (changed >= 0) {
+    // as geom_changed in finrft/attach.py
+    int k = (int)p->geom[12 * changed], g = m->body_geomadr[p->body] + k;
+    const char* geom = k < m->body_geomnum[p->body] ? mj_id2name(m, mjOBJ_GEOM, g) : NULL;
+    const char* body = mj_id2name(m, mjOBJ_BODY, p->body);
+    char label[24];
+    if (!geom || !*geom) {
+      snprintf(label, sizeof(label), "#%d", k);
+      geom = label;
+    }
+    mju_error("geom '%s' of body '%s' changed its type, size, position or orientation since finrft.attach cut it "
+              "into elements, which keep the old geom's force: call attach on a spec that has the geoms' final "
+              "sizes (one spec per size when randomising), then compile it", geom, body ? body : "");
+  }
+  return p;
 }
 
 void finrft_surface_law_force(const FinrftSurface* p, const mjtNum normal[3], const mjtNum v[3], mjtNum depth,

@@ -40,6 +40,11 @@
 #define NEWTON_HALVINGS 10
 // The adaptive newton method stops Newton's method at NEWTON_SHARE of the step's tolerance.
 #define NEWTON_SHARE 1e-2
+// Newton's method takes an iterate as the root only where its residual, besides its change, is small: at most this
+// share of dt times the largest force of the step (`residual_small`). A change below the velocity tolerance alone
+// took a box 1e10 m deep at rest, with no force (none below RAMP_FLOOR v_reg, where its root lies), and with
+// v_reg = 3e-10 m/s, three times the tolerance, a force a fifth off.
+#define NEWTON_RESIDUAL 1e-3
 // Spans of time (s) shorter than this are the rounding of d->time, which the sum of the steps leaves a few of its last
 // bits off `end`: the adaptive steps stop this short of `end`, and a step this close to the step size was not cut
 // short to land on `end`. Where the `end`s (the samples) are a whole number of largest steps apart, a stretch at the
@@ -535,6 +540,17 @@ static mjtNum newton_residual(const Items* s, Newton* w, const mjtNum* qvel, con
   return mju_norm(out, nv);
 }
 
+// Whether the residual g (of the iterate whose RFT and stop forces are w->force) is at most NEWTON_RESIDUAL of dt
+// times the step's largest force, w->other's or w->force's.
+static int residual_small(const Newton* w, const mjtNum* g, int nv, mjtNum dt) {
+  mjtNum size = 0, scale = 0;
+  for (int i = 0; i < nv; i++) {
+    size = mju_max(size, fabs(g[i]));
+    scale = mju_max(scale, mju_max(fabs(w->other[i]), fabs(w->force[i])));
+  }
+  return size <= NEWTON_RESIDUAL * dt * scale;
+}
+
 // The velocity change of one step from the start step_prepare saw into ws->w.dv (ws->rhs = M qacc at v). With
 // iterations == 1 the linearly implicit step in the RFT force (the first Newton iterate, no line search, stops as
 // MuJoCo computed them); otherwise the root of G, with the stops' torque taken at the new positions too, by
@@ -585,7 +601,7 @@ static int newton_solve(Workspace* ws, const mjtNum* qvel, mjtNum dt, int iterat
         size = mju_max(size, fabs(w->step[i]));
         scale = mju_max(scale, fabs(qvel[i] + w->dv[i] + w->step[i]));
       }
-      if (size <= tolerance * (1 + scale)) {
+      if (size <= tolerance * (1 + scale) && residual_small(w, w->g, nv, dt)) {
         for (int i = 0; i < nv; i++) w->dv[i] += w->step[i];
         return 0;
       }
@@ -606,7 +622,7 @@ static int newton_solve(Workspace* ws, const mjtNum* qvel, mjtNum dt, int iterat
     }
     mjtNum before = norm;
     norm = trial_norm;
-    if (change <= tolerance * (1 + scale) && (fresh || alpha >= 1e-6)) return 0;
+    if (change <= tolerance * (1 + scale) && (fresh || alpha >= 1e-6) && residual_small(w, w->g, nv, dt)) return 0;
     // On attached surfaces, a search that fails on a fresh slope has met a kink of a law (an element switching
     // on) with no descent left: iterating on creeps across it by 1e-6 of a step per iteration, at 20 residuals
     // each, so the step is halved at once instead (the sand-swimmer's steps: half the calls of the law).

@@ -111,6 +111,15 @@ def control_value(c: Control, table: tuple[np.ndarray, np.ndarray] | None, t: fl
     return value * (min(1.0, t / c.ramp) if c.ramp > 0 else 1.0)
 
 
+def control_reach(c: Control, table: tuple[np.ndarray, np.ndarray] | None) -> float:
+    """The largest |ctrl| a control entry asks for at any time (the ramp only scales it down)."""
+    if c.kind == "constant":
+        return abs(c.value)
+    if c.kind == "sine":
+        return abs(c.offset) + abs(c.amplitude)
+    return float(np.max(np.abs(table[1])))
+
+
 Controller = Callable[[float, mujoco.MjData], Any]
 
 
@@ -172,6 +181,9 @@ class RobotTrial:
         if not np.all(np.isfinite(values)):
             raise SceneError(f"control(t, data) returned a value that is not finite at t = {self.d.time:g} s: "
                              f"{values}")
+        if np.any(np.abs(values) > mujoco.mjMAXVAL):
+            raise SceneError(f"control(t, data) returned a value beyond MuJoCo's limit +-{mujoco.mjMAXVAL:g} at t = "
+                             f"{self.d.time:g} s (MuJoCo would zero every ctrl): give ctrl in the actuator's unit")
         if values.shape != (self.m.nu,):
             raise SceneError(f"control(t, data) returned {values.size} values: give one ctrl per actuator "
                              f"({self.m.nu})")
@@ -334,6 +346,11 @@ class UserModel:
         check_reach(scene, m, bodies)
         tables = tuple(read_table(c.table, f"control.{i}") if c.kind == "table" else None
                        for i, c in enumerate(scene.control))
+        for i, (c, table) in enumerate(zip(scene.control, tables)):
+            reach = control_reach(c, table)
+            if not reach <= mujoco.mjMAXVAL:
+                raise SceneError(f"control.{i}: its ctrl reaches {reach:g}, beyond MuJoCo's limit +-"
+                                 f"{mujoco.mjMAXVAL:g} (MuJoCo would zero every ctrl): give it in the actuator's unit")
         links = tuple(m.body(i).name or f"body{i}" for i in range(1, m.nbody))
         return cls(kinds, links, actuators, tables, control, tuple(bodies))
 
@@ -485,6 +502,12 @@ def run_robot(scene: UserScene, *, control: Controller | None = None, progress: 
     """Run a user's model as a robot (`UserModel`): ``control(t, data) -> ctrl`` (one value per actuator, called
     at every step) drives its actuators instead of the scene's [[control]]. The result carries its error
     estimate as every run (`finrft.run`); `robot_summary` says what ``result.summary()`` reports."""
+    if not isinstance(scene, UserScene):
+        raise SceneError(f"run_robot: the scene must be a finrft.UserScene (finrft.load_scene(path, cls=UserScene)), "
+                         f"got {type(scene).__name__} {scene!r:.60}")
+    if control is not None and not callable(control):
+        raise SceneError(f"run_robot: control must be a callable control(t, data) -> ctrl, or None, got "
+                         f"{type(control).__name__} {control!r:.60}")
     return run(UserModel.of(scene, control), scene, progress=progress, max_error=max_error)
 
 

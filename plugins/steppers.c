@@ -42,8 +42,7 @@
 #define NEWTON_SHARE 1e-2
 // Newton's method takes an iterate as the root only where its residual, besides its change, is small: at most this
 // share of dt times the largest force of the step (`residual_small`). A change below the velocity tolerance alone
-// took a box 1e10 m deep at rest, with no force (none below RAMP_FLOOR v_reg, where its root lies), and with
-// v_reg = 3e-10 m/s, three times the tolerance, a force a fifth off.
+// took a box 1e10 m deep at rest with no force: its root lies below RAMP_FLOOR v_reg, where the law gives none.
 #define NEWTON_RESIDUAL 1e-3
 // Spans of time (s) shorter than this are the rounding of d->time, which the sum of the steps leaves a few of its last
 // bits off `end`: the adaptive steps stop this short of `end`, and a step this close to the step size was not cut

@@ -15,8 +15,9 @@ from finrft.scene import UserScene
 
 # A rod on a hinge, 5 cm above the sand, a velocity actuator on it.
 ARM = """<mujoco><option gravity="0 0 0"/><worldbody><body name="rod" pos="0 0 0.05">
-  <joint name="hinge" type="hinge" axis="0 0 1"/><geom type="capsule" fromto="0 0 0 0.1 0 0" size="0.002" mass="0.001"/>
-  </body></worldbody><actuator><velocity name="motor" joint="hinge" kv="1e-3"/></actuator></mujoco>"""
+  <joint name="hinge" type="hinge" axis="0 0 1"/>
+  <geom type="capsule" fromto="0 0 0 0.1 0 0" size="0.002" mass="0.001"/></body></worldbody>
+  <actuator><velocity name="motor" joint="hinge" kv="1e-3"/></actuator></mujoco>"""
 
 
 def _arm_scene(tmp_path, control: str) -> str:
@@ -27,7 +28,8 @@ def _arm_scene(tmp_path, control: str) -> str:
     return str(tmp_path / "scene.toml")
 
 
-@pytest.mark.parametrize("control", ['kind = "constant"\nvalue = 2e10', 'kind = "sine"\namplitude = 1e11\nfrequency = 1',
+@pytest.mark.parametrize("control", ['kind = "constant"\nvalue = 2e10',
+                                     'kind = "sine"\namplitude = 1e11\nfrequency = 1',
                                      'kind = "sine"\noffset = -6e9\namplitude = 6e9\nfrequency = 1',
                                      'kind = "table"\ntable = "ctrl.csv"'])
 def test_a_ctrl_beyond_mujocos_limit_is_refused_before_the_run(tmp_path, capsys, control):
@@ -49,7 +51,8 @@ def test_a_python_controller_beyond_mujocos_limit_is_refused(tmp_path):
 
 # A body of 40 spheres resting on a floor: 40 contacts, more than MuJoCo's arena of {memory} holds constraints for.
 CROWD = """<mujoco><size memory="{memory}"/><option gravity="0 0 -9.81"/><worldbody>
-  <geom type="plane" size="1 1 0.1"/><body name="b" pos="0 0 0.0099"><freejoint/>{spheres}</body></worldbody></mujoco>"""
+  <geom type="plane" size="1 1 0.1"/><body name="b" pos="0 0 0.0099"><freejoint/>{spheres}</body>
+  </worldbody></mujoco>"""
 
 
 def test_a_mujoco_warning_during_a_run_fails_it_naming_the_warning(tmp_path, capsys):
@@ -65,7 +68,8 @@ def test_a_mujoco_warning_during_a_run_fails_it_naming_the_warning(tmp_path, cap
     assert len(err.strip().splitlines()) == 1 and "constraint buffer is full" in err and "memory" in err, err
     assert not out.exists()
     # the same model with room for its contacts runs
-    assert main(["run", "--scene", str(scene), "--set", f"model.path={tmp_path / 'roomy.xml'}", "--out", str(out)]) == 0
+    roomy = f"model.path={tmp_path / 'roomy.xml'}"
+    assert main(["run", "--scene", str(scene), "--set", roomy, "--out", str(out)]) == 0
 
 
 # The README's plate: 4 cm x 6 cm, its top at the surface, dragged normal to its face at 10 cm/s in the generic

@@ -37,10 +37,11 @@ record_dt = 0.01
 
 
 def reached(scene: UserScene) -> tuple[float, str]:
-    """How far (s of simulated time) a run got, and its Chatter's message ("" when it finished)."""
+    """How far (s of simulated time, to its last recorded instant) a run got, and its Chatter's message ("" when it
+    finished)."""
     done = [0.0]
     try:
-        finrft.run_robot(scene, progress=lambda f: done.__setitem__(0, f), max_error=None)
+        finrft.run(finrft.UserModel.of(scene), scene, progress=lambda f: done.__setitem__(0, f), estimate_error=False)
     except Chatter as exc:
         return done[0] * scene.sim.duration, str(exc)
     return scene.sim.duration, ""

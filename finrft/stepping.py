@@ -309,6 +309,7 @@ class ChatterProbe:
         return float(self.ends[len(self._chattered) - len(recent) + first] * self.dt)
 
     def seen(self) -> Chattering:
+        """What the probes saw over the run."""
         hits = np.flatnonzero(self._chattered)
         return Chattering(share=len(hits) / max(1, len(self._chattered)),
                           first=float(self.ends[hits[0]] * self.dt) if len(hits) else math.nan,

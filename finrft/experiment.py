@@ -139,6 +139,7 @@ class Result(Estimated):
     wall_s: float
     backend: str = "python"
     steps_rejected: int = 0          # the adaptive method's rejected steps, and newton's halved ones
+    chattering: Any = None           # what the chatter probe saw of chatter that came and went (`Chattering`)
 
     def __getattr__(self, name: str) -> Any:
         # Only for names that are not fields; the guard keeps unpickling (no fields yet) from recursing.
@@ -258,7 +259,7 @@ def _once(experiment: Experiment, scene: Any, built: Any, d: mujoco.MjData, prog
     after_step = getattr(trial, "after_step", None)
     with installed(m, python_forces(built) if built.backend == "python" else None), native.untimed(), \
             controlled(m, getattr(trial, "control", None)):
-        step_through(m, d, scene, advance, steps, starts, samples, trial.on_stroke, on_sample, progress, watch,
+        seen = step_through(m, d, scene, advance, steps, starts, samples, trial.on_stroke, on_sample, progress, watch,
                      forward=None if companion else getattr(trial, "forward", mujoco.mj_forward),
                      stroke_time=drive.stroke_time, speeds=speeds,
                      on_step=None if after_step is None else lambda: after_step(d))
@@ -266,7 +267,7 @@ def _once(experiment: Experiment, scene: Any, built: Any, d: mujoco.MjData, prog
     result = Result(experiment=experiment, scene=scene,
                     time=instants(samples, steps, starts, scene.sim, drive.stroke_time), series=series, values=values,
                     steps=advance.taken, wall_s=time.perf_counter() - start, backend=built.backend,
-                    steps_rejected=advance.rejected)
+                    steps_rejected=advance.rejected, chattering=seen)
     experiment.check(result)
     require_finite(series, f"{experiment.name} at dt {dt:g} s")
     return result

@@ -451,6 +451,8 @@ def robot_summary(experiment: UserModel, run: Result) -> dict[str, Any]:
     - ``drive_load``: per [[drive]], the mean force (N) or torque (N m) it applies (``drive_load_units``).
     - ``actuator_power_W``: the mean mechanical power of the actuators, sum of actuator_force x
       actuator_velocity (negative: they absorb work).
+    - ``chatter``: null, or where the chatter probe saw chatter that came and went (`stepping.Chattering`): the
+      share of its probes that chattered, when the first did and its largest swing over the chatter speed.
     - ``cost_of_transport``: P+ / (m g v), with P+ the mean positive power of the actuators and the drives (each
       one's power clipped at 0: work they absorb is not recovered), m the model's mass, g gravity's magnitude and
       v the centre of mass's mean horizontal speed; null, with ``cost_of_transport_note`` saying why, when the
@@ -494,6 +496,9 @@ def robot_summary(experiment: UserModel, run: Result) -> dict[str, Any]:
                                                           f"x g {gravity:.4g} m/s^2 x speed {speed:.4g} m/s)")
     out.update(cost_of_transport=cot, cost_of_transport_note=note, model_size_m=run.model_size,
                scale_m=run_scale(run))
+    seen = run.chattering
+    out["chatter"] = None if seen is None or seen.share == 0 else {
+        "share": seen.share, "first_s": seen.first, "largest_swing": seen.worst}
     return out
 
 
@@ -631,6 +636,11 @@ class RunCommand(Command):
         cot = s["cost_of_transport"]
         lines.append(f"cost of transport {cot:.4g} ({s['cost_of_transport_note']})" if cot is not None
                      else f"cost of transport: none ({s['cost_of_transport_note']})")
+        if s["chatter"]:
+            c = s["chatter"]
+            lines.append(f"chatter in {100 * c['share']:.2g} % of the probes, from t = {c['first_s']:.3g} s (at most "
+                         f"{c['largest_swing']:.3g} times the chatter speed): too little to stop the run; the error "
+                         f"estimate judges its figures")
         e = s["error_estimate"]
         lines.append(f"estimated discretisation error (companion run at {s['error_companion']}): positions "
                      f"{e['position_mm']:.2g} mm ({e['position_percent']:.2g} % of the run's scale, "

@@ -189,6 +189,13 @@ class Result(Estimated):
         summary = self.experiment.summary(self)
         return {key: summary[key] for key in figures(self.scene) if key in summary}
 
+    @property
+    def coarse_companion(self) -> bool:
+        """Whether the error estimate may come from a companion at longer steps (`convergence.checked`): not for an
+        experiment that says so (``coarse_companion = False``: a robot, whose means a coarse step can miss either
+        way)."""
+        return bool(getattr(self.experiment, "coarse_companion", True))
+
     def headline(self) -> tuple[FigureLimit, ...]:
         """The figures bounded by default (`ErrorLimits.figures` None): the experiment's ``headline``, if any."""
         return tuple(getattr(self.experiment, "headline", ()))

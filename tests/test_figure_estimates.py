@@ -6,7 +6,7 @@ import pytest
 
 import finrft
 from finrft.cli import main
-from finrft.convergence import ErrorLimits, FigureLimit
+from finrft.convergence import ROBOT_HEADLINE, ErrorLimits, FigureLimit
 from finrft.experiment import run
 from finrft.experiments.flags import limits
 from finrft.experiments.user_model import UserModel, example, window_mean
@@ -60,6 +60,7 @@ def test_limits_bound_the_figures_named_or_the_headline_ones_and_only_those_a_ru
     estimate = {"com_velocity_m_s": [3e-4, 0, 0], "cost_of_transport": None, "positive_power_W": 0.03,
                 "position_percent": 7.0}
     headline = (FigureLimit("com_velocity_m_s", 2.0, floor=1e-4), FigureLimit("cost_of_transport", 2.0))
+    assert {f.key for f in ROBOT_HEADLINE} == {"com_speed_m_s", "cost_of_transport"}
     # the default limits bound the headline figures (3 % > 2 % of the speed), not the positions, and not a cost
     # of transport the run does not report
     over = ErrorLimits().exceeded(estimate, figures, headline)

@@ -463,11 +463,13 @@ class UserModel:
     def relative_differences(self, result: Result, differences: dict[str, float]) -> dict[str, float]:
         return {"position_percent": 100 * 1e-3 * differences["position_mm"] / run_scale(result)}
 
-    # The reported figures the error estimate covers one by one (`robot_summary`), and those bounded by default.
+    # The reported figures the error estimate covers one by one (`robot_summary`), and those bounded by default;
+    # from the companion at half the step alone (`convergence.checked`).
     headline = ROBOT_HEADLINE
+    coarse_companion = False
 
     def figures(self, scene: UserScene) -> tuple[str, ...]:
-        return ("com_velocity_m_s", "com_position_m", "medium_force_N", "body_medium_force_N", "drive_load",
+        return ("com_velocity_m_s", "com_speed_m_s", "com_position_m", "medium_force_N", "body_medium_force_N", "drive_load",
                 "actuator_power_W", "positive_power_W", "cost_of_transport")
 
     def start(self, scene: UserScene, built: AttachedModel, d: mujoco.MjData, companion: bool) -> RobotTrial:
@@ -503,7 +505,7 @@ def robot_summary(experiment: UserModel, run: Result) -> dict[str, Any]:
     """What a robot run reports over the window [sim.settle, end] (`finrft run --json`; SI units):
 
     - ``com_velocity_m_s``: the centre of mass's mean velocity, its displacement over the window / the window;
-      ``com_position_m``: where it ends.
+      ``com_speed_m_s``: its horizontal magnitude; ``com_position_m``: where it ends.
     - ``medium_force_N``: the mean total force of the medium on the attached bodies; ``body_medium_force_N``: per
       body.
     - ``drive_load``: per [[drive]], the mean force (N) or torque (N m) it applies (``drive_load_units``).
@@ -550,7 +552,7 @@ def robot_summary(experiment: UserModel, run: Result) -> dict[str, Any]:
     else:
         cot, note = positive / (mass * gravity * speed), (f"positive power {positive:.4g} W / (mass {mass:.4g} kg "
                                                           f"x g {gravity:.4g} m/s^2 x speed {speed:.4g} m/s)")
-    out.update(cost_of_transport=cot, cost_of_transport_note=note, model_size_m=run.model_size,
+    out.update(com_speed_m_s=speed, cost_of_transport=cot, cost_of_transport_note=note, model_size_m=run.model_size,
                scale_m=run_scale(run))
     return out
 
@@ -643,7 +645,8 @@ class RunCommand(Command):
         lines.append(f"estimated discretisation error (companion run at {s['error_companion']}): positions "
                      f"{e['position_mm']:.2g} mm ({e['position_percent']:.2g} % of the run's scale, "
                      f"{1e3 * s['scale_m']:.3g} mm), centre of mass velocity {e['velocity_mm_s']:.2g} mm/s; its "
-                     f"mean (mm/s) {mm(f'{1e3 * v:.2g}' for v in e['com_velocity_m_s'])}"
+                     f"mean (mm/s) {mm(f'{1e3 * v:.2g}' for v in e['com_velocity_m_s'])}, speed "
+                     f"{1e3 * e['com_speed_m_s']:.2g} mm/s"
                      + ("" if e.get("cost_of_transport") is None
                         else f", cost of transport {e['cost_of_transport']:.2g}")
                      + f", positive power {e['positive_power_W']:.2g} W")

@@ -393,6 +393,10 @@ class Wheel:
     def relative_differences(self, result: Result, differences: dict[str, float]) -> dict[str, float]:
         return self.robot.relative_differences(result, differences)
 
+    def figures(self, scene: WheelScene) -> tuple[str, ...]:
+        """The reported figures estimated one by one (`wheel_summary`); none bounded by default."""
+        return ("Fx_N", "Fy_N", "Fz_N", "sinkage_mm", "axle_torque_Nm")
+
     def check(self, result: Result) -> None:
         pass
 

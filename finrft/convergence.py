@@ -22,8 +22,11 @@ A result reports ``error_estimate``: the largest estimated error of each quantit
 unit (``angle_deg``; ``force_N`` or ``torque_Nm``, the per-stroke mean drive load, and ``peak_force_N`` or
 ``peak_torque_Nm``, its peak, at least the run's own `resolution` of it; ``eta_points``, ``body_mm``;
 ``position_mm`` and ``velocity_mm_s``, a user's model's bodies and centre of mass, and ``position_percent``, the
-same positions as a share of the run's scale). `ErrorLimits` bounds the angles, eta and that share; the loads and
-the absolute positions are reported, not bounded, as their scale is the scene's.
+same positions as a share of the run's scale), and each figure a robot's or a wheel's summary reports under its
+own key (`FIGURES`: its summary against the companion's). `ErrorLimits` bounds the angles, eta, that share and
+the figures it names (`FigureLimit`: relative to the figure's magnitude or in its unit), by default the
+experiment's headline figures; the loads and the absolute positions are reported, not bounded, as their scale is
+the scene's.
 """
 
 from __future__ import annotations

@@ -13,14 +13,20 @@ or gives an estimate above the limit, a fine companion takes steps half as long 
 SAFETY |run - companion| / (1 - 1/2): a coarse companion can be outside the range where the error falls with the step
 (an explicit feedback that needs the run's step), and only the fine one refuses a run. An adaptive run whose coarse
 estimate is within a limit but above CONFIRM of it is compared with the fine companion as well, and reports the
-larger of the two estimates: its error can fall much slower than its largest step.
+larger of the two estimates: its error can fall much slower than its largest step. An experiment whose figures
+are estimated one by one (a robot's means, `Result.figure_values`) takes the fine companion alone: on the three
+example robots the coarse one put their estimates at 0.1 to 95 times the error measured at 1/8 of the step, the
+fine one at 1.5 to 5.3 times (docs/guide/methods.md).
 
 A result reports ``error_estimate``: the largest estimated error of each quantity it reports, named with its
 unit (``angle_deg``; ``force_N`` or ``torque_Nm``, the per-stroke mean drive load, and ``peak_force_N`` or
 ``peak_torque_Nm``, its peak, at least the run's own `resolution` of it; ``eta_points``, ``body_mm``;
 ``position_mm`` and ``velocity_mm_s``, a user's model's bodies and centre of mass, and ``position_percent``, the
-same positions as a share of the run's scale). `ErrorLimits` bounds the angles, eta and that share; the loads and
-the absolute positions are reported, not bounded, as their scale is the scene's.
+same positions as a share of the run's scale), and each figure a robot's or a wheel's summary reports under its
+own key (`FIGURES`: its summary against the companion's). `ErrorLimits` bounds the angles, eta, that share and
+the figures it names (`FigureLimit`: relative to the figure's magnitude or in its unit), by default the
+experiment's headline figures; the loads and the absolute positions are reported, not bounded, as their scale is
+the scene's.
 """
 
 from __future__ import annotations
@@ -56,6 +62,87 @@ SAFETY = 2.0
 CONFIRM = 0.25
 
 
+# The figures a run's summary reports and estimates (`Result.figure_values`), each under its own key in
+# ``error_estimate``, in its unit: the robot's (`user_model.robot_summary`) and the wheel's (`wheel.wheel_summary`).
+FIGURES = ("com_velocity_m_s", "com_speed_m_s", "com_position_m", "medium_force_N", "body_medium_force_N", "drive_load",
+           "actuator_power_W", "positive_power_W", "cost_of_transport", "Fx_N", "Fy_N", "Fz_N", "sinkage_mm",
+           "axle_torque_Nm")
+# The share of a run's scale its positions may be off where neither the limits nor the experiment name figures.
+POSITION_PERCENT = 5.0
+
+
+@dataclass(frozen=True)
+class FigureLimit:
+    """The largest estimated error of one reported figure: ``value`` percent of the figure's magnitude (the norm of
+    all its components) where ``relative``, else ``value`` in the figure's unit; never below ``floor`` (the
+    figure's unit), which keeps a figure near 0 (a robot that hardly moves) from asking for no error at all."""
+
+    key: str
+    value: float
+    relative: bool = True
+    floor: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.key not in FIGURES:
+            raise SceneError(f"max_error: no reported figure is named {self.key!r} (the figures: "
+                             f"{', '.join(FIGURES)}; and angle_deg, eta_points, position_percent)")
+        value = real(f"max_error {self.key}", self.value, "%" if self.relative else "the figure's unit")
+        if not value > 0:
+            raise SceneError(f"max_error {self.key} must be > 0, got {value!r}")
+        object.__setattr__(self, "value", value)
+
+    def allowed(self, figure: Any) -> float:
+        """The largest error accepted on a figure of this value."""
+        return max(self.value * magnitude(figure) / 100 if self.relative else self.value, self.floor)
+
+    def __str__(self) -> str:
+        return f"{self.key}={self.value:g}{'%' if self.relative else ''}"
+
+
+# A robot's headline figures, bounded where the limits name none (`ErrorLimits.figures`): its mean horizontal
+# speed and its cost of transport, each to 2 % (what a lab compares gaits by), the speed never below 0.1 mm/s (a
+# robot that does not move, `user_model.STILL_SPEED`). The estimate is 1-5 times the actual error, so the figures
+# are then within 0.4-2 % of the converged run. The speed, not the velocity: the example hexapod's heading turns
+# with the step (its velocity 2.9 % off at 1 ms) while its speed is 0.18 % off.
+ROBOT_HEADLINE = (FigureLimit("com_speed_m_s", 2.0, floor=1e-4), FigureLimit("cost_of_transport", 2.0))
+
+
+def magnitude(figure: Any) -> float:
+    """The norm of a figure's components (a number, a list, or a dict of them; None: 0)."""
+    return float(np.linalg.norm(components(figure))) if figure is not None else 0.0
+
+
+def components(figure: Any) -> np.ndarray:
+    """A figure's numbers, flattened in order (a dict by its keys' order)."""
+    if isinstance(figure, dict):
+        return np.concatenate([components(v) for v in figure.values()]) if figure else np.zeros(0)
+    return np.ravel(np.asarray(figure, dtype=float))
+
+
+def figure_difference(a: Any, b: Any) -> Any:
+    """|a - b| component by component, in the figures' own shape; where only one of them is defined (a cost of
+    transport where the other run does not move), the defined one's size: the estimate cannot be smaller."""
+    if a is None or b is None:
+        return None if a is None else abs(magnitude(a))
+    if isinstance(a, dict):
+        return {key: figure_difference(value, b.get(key)) for key, value in a.items()}
+    if isinstance(a, (list, tuple)):
+        return [figure_difference(x, y) for x, y in zip(a, b)]
+    return abs(float(a) - float(b))
+
+
+def figure_map(function: Callable[..., float], *figures: Any) -> Any:
+    """``function`` applied to the matching numbers of figures of one shape."""
+    first = figures[0]
+    if first is None:
+        return None
+    if isinstance(first, dict):
+        return {key: figure_map(function, *(f[key] for f in figures)) for key in first}
+    if isinstance(first, (list, tuple)):
+        return [figure_map(function, *items) for items in zip(*figures)]
+    return float(function(*figures))
+
+
 @dataclass(frozen=True)
 class ErrorLimits:
     """The largest estimated discretisation error a result may carry."""
@@ -69,30 +156,63 @@ class ErrorLimits:
     # (SAFETY times Richardson's, from a companion half or five times the step) overstates a robot's error 2-4
     # times: the example swimmer at 1 ms is estimated at 2.4 % and its mean speed is 1.1 % from a run at 1/8 of the
     # step (`finrft bench robots` measures each example's); 5 % keeps the true error near the 2 % robots need.
-    position_percent: float = 5.0
+    # None: POSITION_PERCENT where the experiment bounds no headline figures (the wheel), else unbounded (a robot:
+    # its figures are what it reports, and its positions' estimate refused a hexapod whose speed was 0.18 % off).
+    position_percent: float | None = None
+    # The reported figures bounded (`FigureLimit`); None: the experiment's headline figures (`ROBOT_HEADLINE`). A
+    # figure a run does not report (a cost of transport where the robot does not move) bounds nothing.
+    figures: tuple[FigureLimit, ...] | None = None
 
     def __post_init__(self) -> None:
         units = {"angle_deg": "degrees", "eta_points": "points", "position_percent": "percent"}
         for name, unit in units.items():
+            if name == "position_percent" and self.position_percent is None:
+                continue
             value = real(f"max_error {name}", getattr(self, name), unit)
             if not value > 0:
                 raise SceneError(f"max_error {name} must be > 0 {unit}, got {value!r}")
             object.__setattr__(self, name, value)
+        if self.figures is not None:
+            if not all(isinstance(f, FigureLimit) for f in self.figures):
+                raise SceneError(f"max_error figures must be finrft.convergence.FigureLimit entries, got "
+                                 f"{self.figures!r:.60}")
+            object.__setattr__(self, "figures", tuple(self.figures))
 
     @classmethod
     def uniform(cls, value: float) -> ErrorLimits:
         """The same number for every bounded quantity: degrees for angles, points for eta, percent of the run's
-        scale for a user's model's positions."""
+        scale for a user's model's positions (the experiment's headline figures keep their own limits)."""
         return cls(angle_deg=value, eta_points=value, position_percent=value)
 
     def scaled(self, factor: float) -> ErrorLimits:
         """Every limit times ``factor``."""
-        return ErrorLimits(**{key: factor * value for key, value in dataclasses.asdict(self).items()})
+        return ErrorLimits(angle_deg=factor * self.angle_deg, eta_points=factor * self.eta_points,
+                           position_percent=None if self.position_percent is None
+                           else factor * self.position_percent,
+                           figures=None if self.figures is None else tuple(
+                               dataclasses.replace(f, value=factor * f.value, floor=factor * f.floor)
+                               for f in self.figures))
 
-    def exceeded(self, estimate: dict[str, float]) -> list[str]:
-        """The bounded quantities of an estimate that exceed their limit, as 'name = value > limit'."""
-        return [f"{key} = {estimate[key]:.3g} > {limit:g}" for key, limit in dataclasses.asdict(self).items()
-                if key in estimate and not estimate[key] <= limit]
+    def exceeded(self, estimate: dict[str, Any], figures: dict[str, Any] | None = None,
+                 headline: tuple[FigureLimit, ...] = ()) -> list[str]:
+        """The bounded quantities of an estimate that exceed their limit, as 'name = value > limit': the angles,
+        eta and positions, and the reported ``figures`` (key -> the run's value) the limits name, or else the
+        experiment's ``headline`` ones."""
+        position = self.position_percent
+        if position is None and not headline:
+            position = POSITION_PERCENT
+        limits = {"angle_deg": self.angle_deg, "eta_points": self.eta_points, "position_percent": position}
+        over = [f"{key} = {estimate[key]:.3g} > {limit:g}" for key, limit in limits.items()
+                if limit is not None and key in estimate and not estimate[key] <= limit]
+        for f in (headline if self.figures is None else self.figures):
+            value = (figures or {}).get(f.key)
+            if value is None or estimate.get(f.key) is None:
+                continue
+            error, allowed = magnitude(estimate[f.key]), f.allowed(value)
+            if not error <= allowed:
+                share = f" ({100 * error / magnitude(value):.3g} %)" if magnitude(value) > 0 else ""
+                over.append(f"{f.key} = {error:.3g}{share} > {allowed:.3g} ({f})")
+        return over
 
 
 @dataclass(kw_only=True)
@@ -115,9 +235,16 @@ class Checked(Protocol):
     @property
     def stroke_time(self) -> float: ...
 
-    def differences(self, other: Any) -> dict[str, float]: ...
+    def differences(self, other: Any) -> dict[str, Any]: ...
 
     def resolution(self) -> dict[str, float]: ...
+
+    def figure_values(self) -> dict[str, Any]: ...
+
+    @property
+    def coarse_companion(self) -> bool: ...
+
+    def headline(self) -> tuple[FigureLimit, ...]: ...
 
 
 R = TypeVar("R", bound=Checked)
@@ -187,7 +314,7 @@ def checked(build: Callable[[Any], M], run_once: Callable[[Any, M, Callable[[flo
     adaptive = methods.get(sim.method).adaptive
     coarse = COMPARE_EVERY * (every if adaptive else math.lcm(every, COARSER)) * sim.dt
     ratios = [(FINER, COMPARE_EVERY * every * sim.dt)]
-    if adaptive or run.stroke_time >= MIN_STROKE_STEPS * COARSER * sim.dt:
+    if run.coarse_companion and (adaptive or run.stroke_time >= MIN_STROKE_STEPS * COARSER * sim.dt):
         ratios.insert(0, (COARSER, coarse))
     kept: tuple[dict[str, float], str] | None = None  # a coarse estimate near its limit, which the fine one checks
     for n, (ratio, interval) in enumerate(ratios, start=1):
@@ -198,18 +325,21 @@ def checked(build: Callable[[Any], M], run_once: Callable[[Any, M, Callable[[flo
             if n < len(ratios):
                 continue
             raise
-        estimate = {key: float(SAFETY * value / abs(ratio - 1)) for key, value in run.differences(other).items()}
+        estimate = {key: figure_map(lambda v: SAFETY * v / abs(ratio - 1), value)
+                    for key, value in run.differences(other).items()}
         for key, floor in run.resolution().items():
             estimate[key] = max(estimate.get(key, 0.0), floor)
         if kept is not None:
-            estimate = {key: max(value, kept[0].get(key, 0.0)) for key, value in estimate.items()}
+            estimate = {key: value if kept[0].get(key) is None else figure_map(max, value, kept[0][key])
+                        for key, value in estimate.items()}
             label = f"{kept[1]} and {label}"
         run.error_estimate, run.error_companion = estimate, label
-        over = [] if limits is None else limits.exceeded(estimate)
+        figures, headline = run.figure_values(), run.headline()
+        over = [] if limits is None else limits.exceeded(estimate, figures, headline)
         if n == len(ratios):
             break
         # without limits (report only), the default ones say which estimate needs confirming: it is reported alike
-        if not over and adaptive and (limits or ErrorLimits()).scaled(CONFIRM).exceeded(estimate):
+        if not over and adaptive and (limits or ErrorLimits()).scaled(CONFIRM).exceeded(estimate, figures, headline):
             kept = (estimate, label)
             continue
         if not over:

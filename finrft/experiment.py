@@ -18,7 +18,8 @@ import mujoco
 import numpy as np
 
 from . import geometry, laws, native
-from .convergence import ErrorLimits, Estimated, checked, max_difference, paired, require_finite
+from .convergence import (ErrorLimits, Estimated, FigureLimit, checked, figure_difference, max_difference, paired,
+                          require_finite)
 from .callbacks import controlled, installed
 from .coupling import PythonCoupling
 from .drive import Drive
@@ -160,8 +161,9 @@ class Result(Estimated):
     def stroke_time(self) -> float:
         return self.experiment.drive_for(self.scene).stroke_time
 
-    def differences(self, other: Result) -> dict[str, float]:
-        """Largest differences from a run of the same experiment at another resolution (`Compared`)."""
+    def differences(self, other: Result) -> dict[str, Any]:
+        """Largest differences from a run of the same experiment at another resolution (`Compared`), and the
+        differences of its reported figures (`figure_values`)."""
         i, j = paired(self.time, other.time)
         quantities = self.quantities
         out = {}
@@ -171,7 +173,33 @@ class Result(Estimated):
                 else max_difference(self.series[s], other.series[s]) for s in c.series))
         # An experiment may add differences relative to its own scale (a robot's travel or size).
         relative = getattr(self.experiment, "relative_differences", None)
-        return out if relative is None else {**out, **relative(self, out)}
+        if relative is not None:
+            out.update(relative(self, out))
+        # and each figure its summary reports, summary against summary, in the figure's unit and shape
+        theirs = other.figure_values()
+        out.update({key: figure_difference(value, theirs.get(key)) for key, value in self.figure_values().items()
+                    if value is not None or theirs.get(key) is not None})
+        return out
+
+    def figure_values(self) -> dict[str, Any]:
+        """The figures of the summary the error estimate covers one by one (the experiment's ``figures(scene)``,
+        keys of `convergence.FIGURES`), by key."""
+        figures = getattr(self.experiment, "figures", None)
+        if figures is None:
+            return {}
+        summary = self.experiment.summary(self)
+        return {key: summary[key] for key in figures(self.scene) if key in summary}
+
+    @property
+    def coarse_companion(self) -> bool:
+        """Whether the error estimate may come from a companion at longer steps (`convergence.checked`): not for an
+        experiment that says so (``coarse_companion = False``: a robot, whose means a coarse step can miss either
+        way)."""
+        return bool(getattr(self.experiment, "coarse_companion", True))
+
+    def headline(self) -> tuple[FigureLimit, ...]:
+        """The figures bounded by default (`ErrorLimits.figures` None): the experiment's ``headline``, if any."""
+        return tuple(getattr(self.experiment, "headline", ()))
 
     def resolution(self) -> dict[str, float]:
         """Errors the run knows without a companion (the experiment's ``resolution(result)``, if it has one)."""

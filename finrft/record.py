@@ -32,7 +32,9 @@ _ROOT_ATTRS = ("schema", "scene_toml", "scene_json", "drive_json", "cycles", "su
 def _provenance(scene: Any, summary: dict[str, Any]) -> dict[str, Any]:
     """What every result file stores about how it was made, and the run's own error estimate (finrft.convergence),
     one attribute per quantity, the unit in its name: error_estimate_angle_deg, ..._force_N, ..._eta_points."""
-    estimate = {f"error_estimate_{key}": value for key, value in (summary.get("error_estimate") or {}).items()}
+    # a figure's estimate per body (a dict) as JSON: an HDF5 attribute holds a number or an array
+    estimate = {f"error_estimate_{key}": json.dumps(value) if isinstance(value, dict) or value is None else value
+                for key, value in (summary.get("error_estimate") or {}).items()}
     if estimate:
         estimate["error_companion"] = summary["error_companion"]
     return {"scene_toml": to_toml(scene), "scene_json": json.dumps(scene.to_dict()),

@@ -58,7 +58,9 @@ def test_a_plate_dragged_at_constant_speed_balances_the_medium_and_moves_at_the_
     assert s["positive_power_W"] == pytest.approx(DRAG_N * 0.1, rel=1e-6)
     assert s["cost_of_transport"] == pytest.approx(DRAG_N / (10 * 9.81), rel=1e-6)
     assert s["actuator_power_W"] == 0 and s["steps"] == 300 and s["sim_time_s"] == pytest.approx(0.3)
-    assert set(s["error_estimate"]) == {"position_mm", "velocity_mm_s", "position_percent"}
+    assert set(s["error_estimate"]) == {"position_mm", "velocity_mm_s", "position_percent", "com_velocity_m_s",
+                                        "com_speed_m_s", "com_position_m", "medium_force_N", "body_medium_force_N", "drive_load",
+                                        "actuator_power_W", "positive_power_W", "cost_of_transport"}
 
 
 def test_a_single_drive_table_with_cycles_keeps_its_own_length_and_holds_after_it(tmp_path):

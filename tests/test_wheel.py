@@ -216,6 +216,9 @@ def test_command_json_keys_and_files(tmp_path, capsys):
     assert s["slip"] == 0.5 and s["slip_angle_deg"] == pytest.approx(15) and s["sinkage_mm"] == pytest.approx(20)
     assert s["Fy_N"] < 0 < s["Fz_N"]  # the hub's velocity to the wheel's left: the sand pushes it right
     assert "force_N" in s["error_estimate"]
+    # every figure its own estimate, in its unit; a prescribed sinkage is exact
+    assert {"Fx_N", "Fy_N", "Fz_N", "sinkage_mm", "axle_torque_Nm"} <= set(s["error_estimate"])
+    assert s["error_estimate"]["sinkage_mm"] == pytest.approx(0, abs=1e-9)
 
 
 @pytest.mark.parametrize("argv, named", [

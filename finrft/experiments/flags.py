@@ -7,7 +7,7 @@ import argparse
 import math
 from typing import Callable
 
-from ..convergence import ErrorLimits
+from ..convergence import FIGURES, POSITION_PERCENT, ROBOT_HEADLINE, ErrorLimits, FigureLimit
 from ..errors import UsageError
 
 
@@ -51,20 +51,54 @@ def add_result_files(p: argparse.ArgumentParser) -> None:
     add_quiet(p)
 
 
+def max_error_item(text: str) -> float | tuple[str, float, bool]:
+    """An argparse type: one --max-error item, a bare number (every bounded quantity, as `ErrorLimits.uniform`)
+    or NAME=VALUE (a quantity of `ErrorLimits` or a reported figure, `convergence.FIGURES`), VALUE% relative to
+    the figure's magnitude, else in its unit."""
+    name, equals, value = text.partition("=")
+    if not equals:
+        return number("degrees or points")(text)
+    name, value = name.strip(), value.strip()
+    names = ("angle_deg", "eta_points", "position_percent", *FIGURES)
+    if name not in names:
+        raise argparse.ArgumentTypeError(f"no bounded quantity or reported figure named {name!r}: give one of "
+                                         f"{', '.join(names)}, as NAME=VALUE or NAME=VALUE%")
+    relative = value.endswith("%")
+    if relative and name in ("angle_deg", "eta_points"):
+        raise argparse.ArgumentTypeError(f"{name} is bounded in its own unit: give {name}=VALUE, without %")
+    return name, number("%" if relative else "the figure's unit")(value.removesuffix("%")), relative
+
+
 def add_max_error(p: argparse.ArgumentParser) -> None:
     d = ErrorLimits()
-    p.add_argument("--max-error", type=number("degrees or points"), metavar="X", help="largest estimated "
-                   "discretisation error accepted, one number for every bounded quantity: degrees for angles, "
-                   "percentage points for eta, percent of a run's scale (its travel or the model's size) for the "
-                   f"positions of finrft run (default: {d.angle_deg:g} deg, {d.eta_points:g} points, "
-                   f"{d.position_percent:g} %%); every run estimates its own from a companion run at another step, and "
-                   "a larger one stops with exit status 1, nothing written")
+    headline = ", ".join(str(f) for f in ROBOT_HEADLINE)
+    p.add_argument("--max-error", type=max_error_item, action="append", metavar="X or NAME=X[%]", help="largest "
+                   "estimated discretisation error accepted (repeatable). A bare number bounds every bounded "
+                   "quantity: degrees for angles, percentage points for eta, percent of a run's scale (its travel "
+                   "or the model's size) for the positions of finrft run; NAME=X bounds one of them, or one figure "
+                   f"a run reports ({', '.join(FIGURES)}) in its unit, NAME=X%% in percent of its magnitude: the "
+                   f"figures named replace the default ones (default: {d.angle_deg:g} deg, {d.eta_points:g} "
+                   f"points; a robot's {headline.replace('%', '%%')}, the speed never below 0.1 mm/s; "
+                   f"{POSITION_PERCENT:g} %% of the scale where no figure is bounded). Every run estimates its own "
+                   "error from a companion run at another step, and a larger one on a figure the run reports stops "
+                   "with exit status 1, nothing written")
 
 
 def limits(args: argparse.Namespace) -> ErrorLimits:
     """The error limits --max-error sets; the defaults for a command without the flag."""
-    max_error = getattr(args, "max_error", None)
-    return ErrorLimits() if max_error is None else ErrorLimits.uniform(max_error)
+    uniform: dict[str, float] = {}
+    named: dict[str, float] = {}
+    figures: dict[str, FigureLimit] = {}
+    for item in getattr(args, "max_error", None) or ():
+        if isinstance(item, tuple):
+            name, value, relative = item
+            if name in FIGURES:
+                figures[name] = FigureLimit(name, value, relative)
+            else:
+                named[name] = value
+        else:
+            uniform = dict(angle_deg=item, eta_points=item, position_percent=item)
+    return ErrorLimits(**{**uniform, **named}, figures=tuple(figures.values()) if figures else None)
 
 
 def add_workers(p: argparse.ArgumentParser) -> None:

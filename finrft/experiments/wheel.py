@@ -420,6 +420,10 @@ class Wheel:
     def relative_differences(self, result: Result, differences: dict[str, float]) -> dict[str, float]:
         return self.robot.relative_differences(result, differences)
 
+    def figures(self, scene: WheelScene) -> tuple[str, ...]:
+        """The reported figures estimated one by one (`wheel_summary`); none bounded by default."""
+        return ("Fx_N", "Fy_N", "Fz_N", "sinkage_mm", "axle_torque_Nm")
+
     def check(self, result: Result) -> None:
         pass
 
@@ -481,9 +485,10 @@ def wheel_summary(experiment: Wheel, run: Result) -> dict[str, Any]:
     point, ``slip``, ``slip_angle_deg``; the run's own keys (error_estimate, ...) are added by `Result.summary`."""
     scene = run.scene
     w, t, settle = scene.wheel, run.time, scene.sim.settle
-    force = wheel_frame(w.slip_angle) @ window_mean(t, run.medium_force[:, 0], settle)
+    # the force and loads over every step (`user_model.WindowMeans`), the sinkage over the recorded samples
+    force = wheel_frame(w.slip_angle) @ run.window_means["medium_force"][0]
     depth = experiment.outer + scene.medium.surface_z - run.body_position[:, 0, 2]
-    loads = window_mean(t, run.drive_load, settle)
+    loads = run.window_means["drive_load"]
     rim = rim_speed(w.slip, w.speed)
     return {"Fx_N": float(force[0]), "Fy_N": float(force[1]), "Fz_N": float(force[2]),
             "sinkage_mm": 1e3 * float(window_mean(t, depth, settle)), "slip": w.slip,

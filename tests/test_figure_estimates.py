@@ -1,0 +1,94 @@
+"""A robot run's means over every step, whatever record_dt, and an error estimate and limit for every figure it
+reports (finrft.convergence.FigureLimit, --max-error NAME=X%)."""
+
+import numpy as np
+import pytest
+
+import finrft
+from finrft.cli import main
+from finrft.convergence import ROBOT_HEADLINE, ErrorLimits, FigureLimit
+from finrft.experiment import run
+from finrft.experiments.flags import limits
+from finrft.experiments.user_model import UserModel, example, window_mean
+from finrft.scene import SceneError, UserScene, load_scene
+
+MEANS = ("medium_force_N", "drive_load", "actuator_power_W", "positive_power_W")
+
+
+def _summaries(scene):
+    """The summary at the scene's record_dt and at every step, and the every-step run itself."""
+    every = scene.replace(**{"sim.record_dt": scene.sim.dt})
+    sparse = run(UserModel.of(scene), scene, estimate_error=False)
+    dense = run(UserModel.of(every), every, estimate_error=False)
+    return sparse.summary(), dense.summary(), dense
+
+
+@pytest.mark.parametrize("name, method, dt", [("sand_swimmer", "newton-midpoint", 1e-3),
+                                               ("hexapod", "explicit", 1e-4)])
+def test_means_do_not_depend_on_record_dt_and_are_the_integral_over_every_step(name, method, dt, monkeypatch):
+    # the explicit step's means are read without a forward pass of their own (`RobotTrial.after_step`); the chatter
+    # probe, which a hexapod's feet resting in the sand trip at 0.1 ms, is not what is tested here
+    monkeypatch.setattr("finrft.experiment.chatter_speeds", lambda m, d, groups, attached, watch:
+                        np.full(len(watch), np.inf))
+    # an example for 1.2 s: its actuators' power changes within a 10 ms sample interval
+    scene = load_scene(example(name), cls=UserScene, overrides={
+        "sim.duration": 1.2, "sim.settle": 0.6, "sim.method": method, "sim.dt": dt, "sim.record_dt": 0.01})
+    sparse, dense, every = _summaries(scene)
+    for key in MEANS:  # the means of the 10 ms samples differed by 5e-5 W of 0.70 W here, 9 % over 5 s
+        assert np.allclose(sparse[key], dense[key], rtol=1e-9, atol=1e-12), key
+    # an independent integration: the trapezoid rule over the samples of every step
+    t, settle = every.time, scene.sim.settle
+    power = every.actuator_force * every.actuator_velocity
+    assert dense["actuator_power_W"] == pytest.approx(window_mean(t, power.sum(axis=1), settle), rel=1e-9)
+    assert dense["positive_power_W"] == pytest.approx(
+        window_mean(t, np.maximum(power, 0).sum(axis=1), settle), rel=1e-9)
+    assert dense["medium_force_N"] == pytest.approx(window_mean(t, every.medium_force, settle).sum(axis=0),
+                                                    rel=1e-9, abs=1e-12)
+
+
+def test_a_figure_limit_is_relative_to_its_magnitude_with_a_floor():
+    speed = FigureLimit("com_velocity_m_s", 2.0, floor=1e-4)
+    assert speed.allowed([0.03, 0.04, 0.0]) == pytest.approx(0.02 * 0.05)  # 2 % of |v| = 50 mm/s
+    assert speed.allowed([1e-6, 0, 0]) == 1e-4                             # a robot that hardly moves: the floor
+    assert FigureLimit("cost_of_transport", 0.5, relative=False).allowed(10.0) == 0.5
+    with pytest.raises(SceneError, match="no reported figure is named 'speed'"):
+        FigureLimit("speed", 2.0)
+
+
+def test_limits_bound_the_figures_named_or_the_headline_ones_and_only_those_a_run_reports():
+    figures = {"com_velocity_m_s": [0.01, 0.0, 0.0], "cost_of_transport": None, "positive_power_W": 0.3}
+    estimate = {"com_velocity_m_s": [3e-4, 0, 0], "cost_of_transport": None, "positive_power_W": 0.03,
+                "position_percent": 7.0}
+    headline = (FigureLimit("com_velocity_m_s", 2.0, floor=1e-4), FigureLimit("cost_of_transport", 2.0))
+    assert {f.key for f in ROBOT_HEADLINE} == {"com_speed_m_s", "cost_of_transport"}
+    # the default limits bound the headline figures (3 % > 2 % of the speed), not the positions, and not a cost
+    # of transport the run does not report
+    over = ErrorLimits().exceeded(estimate, figures, headline)
+    assert len(over) == 1 and over[0].startswith("com_velocity_m_s = 0.0003 (3 %) > 0.0002"), over
+    # named figures replace them: positive power within 10 %, the speed unbounded
+    assert ErrorLimits(figures=(FigureLimit("positive_power_W", 10.0),)).exceeded(estimate, figures, headline) == []
+    # an experiment without headline figures keeps the positions' 5 % of its scale
+    assert ErrorLimits().exceeded(estimate, figures, ()) == ["position_percent = 7 > 5"]
+
+
+class _Args:
+    def __init__(self, *items):
+        from finrft.experiments.flags import max_error_item
+        self.max_error = [max_error_item(i) for i in items]
+
+
+def test_max_error_takes_a_bare_number_or_named_figures():
+    assert limits(_Args("1")) == ErrorLimits.uniform(1.0)  # as before: degrees, points, percent of the scale
+    named = limits(_Args("com_velocity_m_s=1%", "cost_of_transport=0.2", "position_percent=8"))
+    assert named.figures == (FigureLimit("com_velocity_m_s", 1.0), FigureLimit("cost_of_transport", 0.2, False))
+    assert named.position_percent == 8 and named.angle_deg == ErrorLimits().angle_deg
+    assert limits(_Args()) == ErrorLimits()
+
+
+@pytest.mark.parametrize("item, named", [("speed=2%", "no bounded quantity or reported figure named 'speed'"),
+                                         ("angle_deg=1%", "angle_deg is bounded in its own unit"),
+                                         ("cost_of_transport=-1%", "must be > 0")])
+def test_a_bad_max_error_is_one_line_and_exit_2(item, named, capsys):
+    assert main(["run", "--example", "hexapod", "--max-error", item]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and named in err, err

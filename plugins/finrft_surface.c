@@ -460,6 +460,14 @@ void finrft_surface_element_force(const FinrftSurface* p, const mjtNum normal[3]
   }
 }
 
+// The depth below the surface of the element whose centre (body frame) is e, the body at origin with rotation R:
+// the arm's z alone, as mju_mulMatVec3 sums it, so that the elements above the surface (most of a legged robot's)
+// cost no more.
+static inline double element_depth(const FinrftSurface* p, const mjtNum origin[3], const mjtNum R[9],
+                                   const double e[3]) {
+  return p->surface_z - (origin[2] + (R[6] * e[0] + R[7] * e[1] + R[8] * e[2]));
+}
+
 void finrft_surface_wrench(const FinrftSurface* p, const mjData* d, const mjtNum twist[6], mjtNum wrench[6]) {
   const mjtNum* origin = d->xpos + 3 * p->body;
   const mjtNum* R = d->xmat + 9 * p->body;
@@ -467,9 +475,9 @@ void finrft_surface_wrench(const FinrftSurface* p, const mjData* d, const mjtNum
   for (int i = 0; i < p->n; i++) {
     const double* e = p->element + 7 * i;
     mjtNum arm[3], normal[3], v[3], f[3], moment[3];
-    mju_mulMatVec3(arm, R, e);
-    double depth = p->surface_z - (origin[2] + arm[2]);
+    double depth = element_depth(p, origin, R, e);
     if (!(depth > 0)) continue;
+    mju_mulMatVec3(arm, R, e);
     mju_mulMatVec3(normal, R, e + 3);
     mju_cross(v, twist, arm);
     mju_addTo3(v, twist + 3);
@@ -487,9 +495,9 @@ int finrft_surface_submerged(const FinrftSurface* p, const mjData* d, mjtNum* ou
   for (int i = 0; i < p->n; i++) {
     const double* e = p->element + 7 * i;
     mjtNum* o = out + FINRFT_SUBMERGED * count;
-    mju_mulMatVec3(o, R, e);
-    o[6] = p->surface_z - (origin[2] + o[2]);
+    o[6] = element_depth(p, origin, R, e);
     if (!(o[6] > 0)) continue;
+    mju_mulMatVec3(o, R, e);
     mju_mulMatVec3(o + 3, R, e + 3);
     o[7] = e[6];
     count++;

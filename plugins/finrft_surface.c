@@ -67,9 +67,9 @@ static void alpha_unit(const double coef[NCOEF], double zeta, double cb, double 
 
 // The cosine and sine of atan2(y, x) (1 and 0 at the origin, as atan2(0, 0) = 0).
 static void unit_angle(double y, double x, double* c, double* s) {
-  double size = norm2(x, y);
-  *c = size > 0 ? x / size : 1;
-  *s = size > 0 ? y / size : 0;
+  double size = norm2(x, y), inverse = size > 0 ? 1 / size : 0;
+  *c = size > 0 ? x * inverse : 1;
+  *s = y * inverse;
 }
 
 // (alpha_x, alpha_z), N/m^3, for any beta and gamma.
@@ -116,15 +116,28 @@ FINRFT_EXPORT void finrft_li2013_planar_element_force(const double coef[NCOEF], 
   force[2] = scale * a[1];
 }
 
-// Treers et al.'s weights of the two parts of a unit velocity, as F1_FIT, F23_FIT in li2013.py.
+// Treers et al.'s weights of the two parts of a unit velocity, as F1_FIT, F23_FIT in li2013.py: f1 = a (tanh(b s -
+// c) + tanh(c)) / d and f23 = a (atanh(b s - c) + atanh(c)) / d, each sum in one closed form of u = b s (one expm1,
+// one log1p where the two tanh or atanh calls were half a call of the law):
+//   tanh(u - c) + tanh(c) = sinh(u) / (cosh(u - c) cosh c) = E / (cosh c (e^-c E + 2 cosh c)), E = expm1(2 u),
+//   atanh(u - c) + atanh(c) = log1p(2 u / ((1 + c - u) (1 - c))) / 2.
+#define F1_A 0.440850096954369
+#define F1_B 3.62263982880971
+#define F1_C 1.60910808139526
+#define F1_D 0.832324700111401
+#define F23_A 1.99392673405210
+#define F23_B 1.61146827229181
+#define F23_C 0.973746396532650
+#define F23_D 5.81083560370960
+
 static double weight_across(double size) {
-  return 0.440850096954369 * (tanh(3.62263982880971 * size - 1.60910808139526) + tanh(1.60910808139526)) /
-         0.832324700111401;
+  double grow = expm1(2 * F1_B * size);
+  return F1_A / (F1_D * cosh(F1_C)) * grow / (exp(-F1_C) * grow + 2 * cosh(F1_C));
 }
 
 static double weight_within(double size) {
-  return 1.99392673405210 * (atanh(1.61146827229181 * size - 0.973746396532650) + atanh(0.973746396532650)) /
-         5.81083560370960;
+  double u = F23_B * size;
+  return F23_A / (2 * F23_D) * log1p(2 / (1 - F23_C) * u / (1 + F23_C - u));
 }
 
 // The unit horizontal direction of a, else of b, else x (as _horizontal_unit in li2013.py).
@@ -138,8 +151,9 @@ static void horizontal_unit(const double a[3], const double b[3], double e[2]) {
   e[0] = 1;
   e[1] = 0;
   if (size > 0) {
-    e[0] = pick[0] / size;
-    e[1] = pick[1] / size;
+    double inverse = 1 / size;
+    e[0] = pick[0] * inverse;
+    e[1] = pick[1] * inverse;
   }
 }
 
@@ -150,11 +164,21 @@ static void li2013_stress(const double coef[NCOEF], double zeta, const double n[
   double e1[2] = {e2[1], -e2[0]};
   double across = u[0] * e1[0] + u[1] * e1[1];
   double along = u[0] * e2[0] + u[1] * e2[1];
-  double f1 = weight_across(fabs(across)), f23 = weight_within(norm2(along, u[2]));
-  double a[2], a1[2];
-  li2013_alpha_at(coef, zeta, -(n[0] * e2[0] + n[1] * e2[1]), n[2], -u[2], along, a);
-  alpha_unit(coef, zeta, 1, 0, 1, 0, a1);
-  double side = f1 * a1[0] * (across > 0 ? 1 : across < 0 ? -1 : 0);
+  double within = norm2(along, u[2]);
+  double f1 = weight_across(fabs(across)), f23 = weight_within(within);
+  // Li's angles in the (e2, z) plane: the face's beta = atan2(-n.e2, n_z) and the motion's gamma = atan2(-u_z,
+  // along), whose size is `within`
+  double a[2], cb, sb, cg = 1, sg = 0;
+  unit_angle(-(n[0] * e2[0] + n[1] * e2[1]), n[2], &cb, &sb);
+  if (within > 0) {
+    double inverse = 1 / within;
+    cg = along * inverse;
+    sg = -u[2] * inverse;
+  }
+  alpha_unit(coef, zeta, cb, sb, cg, sg, a);
+  // alpha_1 = alpha_x(0, 0), alpha_unit's sum at beta = gamma = 0 without its call
+  double alpha_1 = zeta * (coef[5] + coef[6] + coef[7]);
+  double side = f1 * alpha_1 * (across > 0 ? 1 : across < 0 ? -1 : 0);
   for (int i = 0; i < 2; i++) stress[i] = -side * e1[i] - f23 * a[0] * e2[i];
   stress[2] = f23 * a[1];
 }
@@ -167,8 +191,8 @@ FINRFT_EXPORT void finrft_li2013_element_force(const double coef[NCOEF], double 
                                                double force[3]) {
   force[0] = force[1] = force[2] = 0;
   if (!(depth > 0) || !(n[0] * v[0] + n[1] * v[1] + n[2] * v[2] > 0)) return;
-  double speed = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
-  double u[3] = {v[0] / speed, v[1] / speed, v[2] / speed};
+  double inverse = 1 / sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+  double u[3] = {v[0] * inverse, v[1] * inverse, v[2] * inverse};
   double tilt = norm2(n[0], n[1]) / sqrt(1 - (1 - 1e-3) * (1 - 1e-3));
   if (tilt > 1) tilt = 1;
   double w = tilt * tilt * (3 - 2 * tilt);
@@ -487,6 +511,14 @@ void finrft_surface_element_force(const FinrftSurface* p, const mjtNum normal[3]
   }
 }
 
+// The depth below the surface of the element whose centre (body frame) is e, the body at origin with rotation R:
+// the arm's z alone, as mju_mulMatVec3 sums it, so that the elements above the surface (most of a legged robot's)
+// cost no more.
+static inline double element_depth(const FinrftSurface* p, const mjtNum origin[3], const mjtNum R[9],
+                                   const double e[3]) {
+  return p->surface_z - (origin[2] + (R[6] * e[0] + R[7] * e[1] + R[8] * e[2]));
+}
+
 void finrft_surface_wrench(const FinrftSurface* p, const mjData* d, const mjtNum twist[6], mjtNum wrench[6]) {
   const mjtNum* origin = d->xpos + 3 * p->body;
   const mjtNum* R = d->xmat + 9 * p->body;
@@ -494,9 +526,9 @@ void finrft_surface_wrench(const FinrftSurface* p, const mjData* d, const mjtNum
   for (int i = 0; i < p->n; i++) {
     const double* e = p->element + 7 * i;
     mjtNum arm[3], normal[3], v[3], f[3], moment[3];
-    mju_mulMatVec3(arm, R, e);
-    double depth = p->surface_z - (origin[2] + arm[2]);
+    double depth = element_depth(p, origin, R, e);
     if (!(depth > 0)) continue;
+    mju_mulMatVec3(arm, R, e);
     mju_mulMatVec3(normal, R, e + 3);
     mju_cross(v, twist, arm);
     mju_addTo3(v, twist + 3);
@@ -514,9 +546,9 @@ int finrft_surface_submerged(const FinrftSurface* p, const mjData* d, mjtNum* ou
   for (int i = 0; i < p->n; i++) {
     const double* e = p->element + 7 * i;
     mjtNum* o = out + FINRFT_SUBMERGED * count;
-    mju_mulMatVec3(o, R, e);
-    o[6] = p->surface_z - (origin[2] + o[2]);
+    o[6] = element_depth(p, origin, R, e);
     if (!(o[6] > 0)) continue;
+    mju_mulMatVec3(o, R, e);
     mju_mulMatVec3(o + 3, R, e + 3);
     o[7] = e[6];
     count++;

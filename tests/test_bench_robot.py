@@ -26,3 +26,16 @@ def test_a_robots_force_is_held_to_its_worst_component():
     assert bench._relative(np.array([0.49, 3e-24, 21.0]), reference) == pytest.approx(0.02)
     assert bench._relative(np.array([0.5, 0.0, 21.21]), reference) == pytest.approx(0.01)
     assert bench._relative(np.array([0.0463]), np.array([0.0462])) == pytest.approx(0.1 / 46.2)
+
+
+def test_step_costs_compare_one_step_of_each_from_the_same_state():
+    from finrft.experiments.user_model import example
+    from finrft.scene import UserScene, load_scene
+    scene = load_scene(example("wheel_rig"), cls=UserScene)
+    elements = bench._elements(scene)
+    costs = bench._step_costs(scene, 5e-4, 0.0, elements)
+    # a newton step takes the wrench, its slope and Newton's iterates: more calls of the law than mj_step's one
+    assert costs["implicit_over_explicit_step"] > 1
+    assert costs["implicit_over_explicit_step"] == pytest.approx(costs["implicit_step_us"] / costs["explicit_step_us"])
+    for kind in ("implicit", "explicit"):
+        assert costs[f"{kind}_ns_per_element_step"] == pytest.approx(1e3 * costs[f"{kind}_step_us"] / elements)

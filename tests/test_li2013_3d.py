@@ -27,6 +27,18 @@ def test_the_weights_are_0_at_0_and_1_at_1():
     np.testing.assert_allclose(li2013.weights([0.0, 1.0], [0.0, 1.0]), [[0, 1], [0, 1]], atol=1e-12)
 
 
+def test_the_weights_closed_forms_are_the_published_tanh_and_atanh_sums():
+    # Treers et al.'s fit as their code writes it, term by term, against the one-call closed forms
+    s = np.linspace(0.0, 1.0, 1001)
+    a, b, c, d = li2013.F1_FIT
+    f1 = [a * (math.tanh(b * x - c) + math.tanh(c)) / d for x in s]
+    a, b, c, d = li2013.F23_FIT
+    f23 = [a * (math.atanh(b * x - c) + math.atanh(c)) / d for x in s]
+    got = li2013.weights(s, s)
+    np.testing.assert_allclose(got[0], f1, rtol=1e-13, atol=1e-15)
+    np.testing.assert_allclose(got[1], f23, rtol=1e-13, atol=1e-15)
+
+
 def test_motion_in_the_plane_of_the_normal_is_the_planar_form():
     normal = unit(RNG.normal(size=(2000, 3)))
     horizontal = unit(normal[:, :2])

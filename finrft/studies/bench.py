@@ -402,7 +402,9 @@ def robots(names: tuple[str, ...] | None = None, *, duration: float = 0.0, log: 
     `ROBOT_ACCURACY` of the converged one, as the default's must be. Where none is (each chatters or misses), the
     speed-up is at least the cost of the finest explicit run, its steps (duration over that step) times one explicit
     step of the model with the medium (timed in C), over the default's. The default and the explicit step found are
-    timed `ROBOT_ROUNDS` more times in turn, each its best. Errors are relative: the mean speed of the
+    timed `ROBOT_ROUNDS` more times in turn, each its best. The cost of one step of the default's method and of
+    one explicit step (at the step found, else the finest tried), from the same state in one process
+    (`_step_costs`): per element per step beyond the bare step, and their ratio. Errors are relative: the mean speed of the
     centre of mass over the window (swimmer, hexapod), the mean force of the medium (wheel), its worst component."""
     from ..experiment import run
     from ..experiments.user_model import EXAMPLES, UserModel, example
@@ -475,6 +477,7 @@ def robots(names: tuple[str, ...] | None = None, *, duration: float = 0.0, log: 
             step = _explicit_step_s(scene, finest)
             row.update(explicit_us_per_step=1e6 * step,
                        speedup_over_explicit_at_least=row["duration_s"] / finest * step / wall)
+        row.update(_step_costs(scene, row.get("explicit_dt", dt * EXPLICIT_FRACTIONS[-1]), bare, elements))
         out["robots"][name] = row
         speedup = (f"{row['speedup_over_explicit']:.2f}x faster than the explicit step at {row['explicit_dt']:g} s"
                    if row.get("speedup_over_explicit", 0) >= 1 else
@@ -485,9 +488,57 @@ def robots(names: tuple[str, ...] | None = None, *, duration: float = 0.0, log: 
         log(f"{name}: {scene.sim.method} at {dt:g} s, {row['sim_s_per_wall_s']:.2f} simulated s per wall s; "
             f"{ROBOT_FIGURE[name]} {100 * error:.2f} % from the converged run (dt {dt / 8:g} s); "
             f"{row['cost_over_bare']:.1f}x bare mj_step, {row['ns_per_element_step']:.0f} ns per element per step "
-            f"({elements} elements); {speedup}")
+            f"({elements} elements); {speedup}; a step from the same state, in C: {scene.sim.method} "
+            f"{row['implicit_ns_per_element_step']:.0f} ns per element, explicit "
+            f"{row['explicit_ns_per_element_step']:.0f} ns, {row['implicit_over_explicit_step']:.1f} explicit steps")
         _tick(progress, i + 1, len(names))
     return out
+
+
+# The step costs (`_step_costs`): the run is stepped to this time, at most its settle, and its steps timed from
+# there, the medium's elements below the surface and moving as in the run; each kind of step this many at a time,
+# interleaved over STEP_ROUNDS rounds, the best of each kept.
+STEP_COST_START = 0.5
+STEP_COST_STEPS = 50
+STEP_ROUNDS = 5
+
+
+def _step_costs(scene: Any, explicit_dt: float, bare_s: float, elements: int) -> dict[str, float]:
+    """One step of the scene's method at its step and one of MuJoCo's explicit step at ``explicit_dt``, each timed
+    in C from the same state (the run's at `STEP_COST_START` s or its settle, the earlier), with ``ctrl`` held
+    there, in one process: the wall seconds of each, the cost per element per step of each beyond the bare step
+    (``bare_s``, the model without the medium), and the implicit step's cost in explicit steps."""
+    from ..callbacks import controlled
+    from ..experiments.user_model import UserModel
+    from ..integrate import stepper
+    experiment = UserModel.of(scene)
+    built = experiment.build(scene)
+    m, explicit_m = built.model, UserModel.of(scene).build(scene).model
+    explicit_m.opt.timestep = explicit_dt
+    d = mujoco.MjData(m)
+    trial = experiment.start(scene, built, d, False)
+    advance = stepper(m, scene.sim, built.backend, built.groups, getattr(built, "attached", None))
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    start = np.zeros(mujoco.mj_stateSize(m, spec))
+    with native.untimed():
+        with controlled(m, getattr(trial, "control", None)):
+            advance(d, max(1, round(min(STEP_COST_START, scene.sim.settle) / scene.sim.dt)))
+        mujoco.mj_getState(m, d, start, spec)
+        explicit_d = mujoco.MjData(explicit_m)
+
+        def implicit() -> None:
+            mujoco.mj_setState(m, d, start, spec)
+            advance(d, STEP_COST_STEPS)
+
+        def explicit() -> None:
+            mujoco.mj_setState(explicit_m, explicit_d, start, spec)
+            mujoco.mj_step(explicit_m, explicit_d, STEP_COST_STEPS)
+        walls = {k: min(v) / STEP_COST_STEPS
+                 for k, v in _interleaved({"implicit": implicit, "explicit": explicit}, STEP_ROUNDS).items()}
+    return {"implicit_step_us": 1e6 * walls["implicit"], "explicit_step_us": 1e6 * walls["explicit"],
+            "implicit_ns_per_element_step": 1e9 * (walls["implicit"] - bare_s) / elements,
+            "explicit_ns_per_element_step": 1e9 * (walls["explicit"] - bare_s) / elements,
+            "implicit_over_explicit_step": walls["implicit"] / walls["explicit"]}
 
 
 def _elements(scene: Any) -> int:

@@ -24,6 +24,7 @@ def truth():
     return preset("paper").replace(**{"plate.stiffness": 0.3, "plate.damping": 0.8})
 
 
+@pytest.mark.slow  # 150 evaluations of two drags; the fast suite's fit of b alone (below) recovers its truth too
 def test_fit_recovers_known_parameters(truth, tmp_path):
     data = [simulated_drag(truth, speed, 0.15) for speed in (0.02, 0.04)]
     start = preset("paper")  # k = 0.209, b = 1.43: both well off

@@ -51,6 +51,7 @@ def test_fit_cli_writes_a_scene_drag_accepts(tmp_path, capsys, truth):
     assert main(["drag", "--scene", str(scene), "--distance", "5"]) == 0
 
 
+@pytest.mark.slow  # the paper's fit reproduced: 20 evaluations of three measured drags
 def test_paper_procedure_on_the_measurements():
     # The paper's fit (damping only, k = 0.209) against the three measured speeds. With the preset's 1 kg m^2
     # inertias the plate cannot bend as fast as the measured one at any damping: the fit runs to the lowest

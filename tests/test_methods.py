@@ -182,6 +182,7 @@ def test_chatter_stops_the_run_loudly():
 LIMIT_STOP = preset("physical").replace(**{"sim.method": "adaptive-newton", "plate.stop": "limit"})
 
 
+@pytest.mark.slow  # the Python twin over 4,700 adaptive steps: minutes
 def test_adaptive_twins_agree_through_a_limit_stop():
     # The light plate out and back, folding and closing onto its origami stop modelled as a MuJoCo limit. Its samples
     # (20 ms) are a whole number of its largest steps (1 ms) apart, so a stretch at the largest step ends on each

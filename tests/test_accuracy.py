@@ -2,9 +2,12 @@
 
 import csv
 
+import pytest
+
 from finrft.cli import main
 
 
+@pytest.mark.slow  # a study: every method at every step on four scenes, minutes on two cores
 def test_quick_accuracy_study(tmp_path, capsys):
     out = tmp_path / "acc"
     assert main(["bench", "accuracy", "--quick", "--out", str(out), "--workers", "2"]) == 0

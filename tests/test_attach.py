@@ -5,7 +5,6 @@ plugin against the Python backend; bad input."""
 import mujoco
 import numpy as np
 import pytest
-from scipy import integrate
 
 import finrft
 from finrft.attach import MAX_ELEMENTS, attach
@@ -64,13 +63,15 @@ def test_element_size_convergence_where_the_surface_cuts_elements():
 
 def sphere_drag(radius: float) -> float:
     """The planar law integrated over the leading, submerged quarter of a sphere centred on the surface, moving along
-    +x at 0.1 m/s, unregularised: the x force, by adaptive quadrature."""
-    def integrand(theta, phi):
-        n = np.array([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)])
-        force = li2013_planar.element_forces(n[None], [[0.1, 0, 0]], [-radius * n[2]],
-                                             [radius ** 2 * np.sin(theta)])
-        return force[0, 0]
-    return integrate.dblquad(integrand, -np.pi / 2, np.pi / 2, np.pi / 2, np.pi, epsabs=1e-10, epsrel=1e-10)[0]
+    +x at 0.1 m/s, unregularised: the x force, by Gauss-Legendre quadrature in theta and phi (the integrand is smooth
+    there: 100 x 100 nodes agree with adaptive quadrature at 1e-10 to 1e-13, 100 times faster)."""
+    x, w = np.polynomial.legendre.leggauss(100)
+    theta, phi = np.meshgrid(3 * np.pi / 4 + np.pi / 4 * x, np.pi / 2 * x, indexing="ij")
+    weights = np.outer(np.pi / 4 * w, np.pi / 2 * w).ravel()
+    n = np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)], axis=-1).reshape(-1, 3)
+    force = li2013_planar.element_forces(n, np.tile([0.1, 0, 0], (len(n), 1)), -radius * n[:, 2],
+                                         radius ** 2 * np.sin(theta).ravel())
+    return float(force[:, 0] @ weights)
 
 
 def test_sphere_converges_to_the_integrated_law():

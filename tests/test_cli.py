@@ -289,8 +289,8 @@ def _run_cli(*argv: str, **options) -> subprocess.Popen:
 
 
 def test_closed_stdout_is_no_traceback(errors_only):
-    # finrft swim --json | head -c 10: the reader goes away before finrft writes.
-    done = _run_cli("swim", "--json")
+    # finrft swim --json | head -c 10: the reader goes away before finrft writes (--quiet: stderr holds no text).
+    done = _run_cli("swim", "--json", "--quiet")
     done.stdout.close()
     err = errors_only(done.stderr.read())
     assert done.wait() == 141 and err == ""
@@ -373,6 +373,70 @@ def test_every_command_takes_quiet(capsys, argv):
     assert ("--forces-csv FILE.csv" in text) == (argv == ["drag"])  # rotate refuses it, so does not offer it
 
 
+def _takes_json(parser: argparse.ArgumentParser, argv: list[str]) -> bool:
+    for name in argv:
+        (sub,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+        parser = sub.choices[name]
+    return any("--json" in action.option_strings for action in parser._actions)
+
+
+# Cheap arguments for every command that takes --json ({tmp}: the test's folder, which holds the files below);
+# the long ones run with the slow studies.
+SLOW = pytest.mark.slow
+JSON_ARGS = {
+    "drag": FAST,
+    "rotate": ["--amplitude", "30", "--set", "sim.dt=0.001"],
+    "intrude": ["--angles", "0", "--set", "plate.depth=0.02"],
+    "swim": ["--preset", "paper"],
+    "run": ["{tmp}/plate.xml", "--scene", "{tmp}/scene.toml"],
+    "wheel": ["--slip", "0.5", "--sinkage", "20", "--set", "sim.duration=0.2", "--set", "sim.settle=0.1"],
+    "medium": [],
+    "law": ["sandswim"],
+    "fit-rft": ["--data", "{tmp}/forces.csv"],
+    "bench robot": pytest.param(["--budget", "1", "--workers", "1"], marks=SLOW),
+    "optimize": pytest.param(["--budget", "1", "--workers", "1", "--set", "sim.dt=1e-4"], marks=SLOW),
+    "fit": pytest.param(["--data", "{data}/origami_v30.csv", "--params", "b", "--budget", "1", "--workers", "1"],
+                        marks=SLOW),
+    "table": pytest.param(["--preset", "paper", "--workers", "1"], marks=SLOW),
+    "bench backends": pytest.param(["--batch", "1", "--workers", "1"], marks=SLOW),
+    "bench robots": pytest.param(["--robot", "sand_swimmer", "--duration", "0.6"], marks=SLOW),
+    "bench modelling": pytest.param([], marks=SLOW),
+    "bench fit": pytest.param(["--budget", "1", "--workers", "1"], marks=SLOW),
+}
+
+
+def test_every_command_with_json_is_tried():
+    parser = build_parser()
+    assert sorted(JSON_ARGS) == sorted(" ".join(argv) for argv in COMMANDS if _takes_json(parser, argv))
+
+
+@pytest.mark.parametrize("command,args", [pytest.param(k, *v.values, marks=v.marks) if hasattr(v, "values")
+                                          else (k, v) for k, v in JSON_ARGS.items()], ids=list(JSON_ARGS))
+def test_json_is_alone_on_stdout(tmp_path, capsys, command, args):
+    """finrft COMMAND --json | python -m json.tool: stdout holds the JSON and nothing else, the text goes to stderr."""
+    from finrft.data import plate_drag_dir
+    from test_user_model import MODEL, SCENE
+    (tmp_path / "plate.xml").write_text(MODEL)
+    (tmp_path / "scene.toml").write_text(SCENE.format(cycles=1))
+    (tmp_path / "forces.csv").write_text("attack_deg,force_normal_N,force_tangential_N\n"
+                                         "0,0,-0.5\n45,-1,-0.1\n90,-2,0\n")
+    argv = [*command.split(), "--json", *(a.format(tmp=tmp_path, data=plate_drag_dir()) for a in args)]
+    assert main(argv) == 0
+    out, err = capsys.readouterr()
+    json.loads(out)  # the whole of stdout
+    assert out.count("\n") == 1 and err.strip()  # one line; the text, still shown, on stderr
+
+
+def test_json_moves_the_text_to_stderr_unchanged(capsys):
+    assert main(["drag", *FAST]) == 0
+    text = capsys.readouterr().out
+    assert main(["drag", "--json", *FAST]) == 0
+    out, err = capsys.readouterr()
+    wall = re.compile(r" in [\d.]+ s\b")  # the one figure that differs between two runs
+    assert wall.sub("", err) == wall.sub("", text)
+    assert json.loads(out)["steps"] == int(err.split(" steps taken")[0].split()[-1])
+
+
 def _bar_updates(monkeypatch) -> list[tuple[float, float]]:
     """Turn stderr into a terminal and record (count, total) at every progress bar update."""
     import tqdm
@@ -408,10 +472,10 @@ def test_progress_of_a_drag_and_quiet(monkeypatch, capsys, quiet):
 def test_law_sandswim_is_the_papers_magnitudes_per_unit_coefficient(tmp_path, capsys):
     from finrft.laws import sandswim
     assert main(["law", "sandswim", "--json", "--plot", str(tmp_path / "map.png")]) == 0
-    out = capsys.readouterr().out
-    data = _last_json(out)
+    out, text = capsys.readouterr()
+    data = json.loads(out)
     assert list(data) == ["law", "units", "psi_deg", "gamma0_deg", "f_perp_c_s", "f_perp_c_f", "f_par_c_f"]
-    assert {len(data[k]) for k in list(data)[2:]} == {91 * 18} and "F_perp = C_S f_perp_c_s" in out
+    assert {len(data[k]) for k in list(data)[2:]} == {91 * 18} and "F_perp = C_S f_perp_c_s" in text
     assert sorted(set(data["psi_deg"])) == list(range(91))  # every degree
     psi, gamma0 = np.radians(data["psi_deg"]), np.radians(data["gamma0_deg"])
     # recombined with coefficients, the map is the law's magnitudes (the papers' form)

@@ -63,9 +63,9 @@ def test_a_new_experiment_needs_no_edit_of_the_cli(registry, capsys):
 
     assert "nudge" in _subcommands(build_parser())
     assert main(["nudge", "--speed", "40", "--json"]) == 0
-    out = capsys.readouterr().out.splitlines()
-    assert out[0].startswith("nudged: peak force")
-    summary = json.loads(out[-1])
+    captured = capsys.readouterr()
+    assert captured.err.startswith("nudged: peak force")  # the text beside --json: stdout is the JSON's
+    summary = json.loads(captured.out)
     # The same drag through the Python API, on the preset every command defaults to.
     direct = finrft.simulate(finrft.preset("physical").replace(**{"plate.kind": "rigid"}),
                              finrft.Drive(speed=0.04, stroke=0.005))
@@ -77,10 +77,10 @@ def test_a_new_experiment_needs_no_edit_of_the_cli(registry, capsys):
 def test_fresh_swim_is_the_physical_robot_swimming_forward_without_warning(capsys):
     assert main(["swim", "--json"]) == 0
     captured = capsys.readouterr()
-    assert captured.err == ""
-    summary = json.loads(captured.out.splitlines()[-1])
+    assert "warning" not in captured.err  # which holds the summary text beside --json
+    summary = json.loads(captured.out)
     assert summary["eta_steady"] > 0  # the physical robot swims forward; the paper preset's eta is -7 %
-    assert "authors' model" not in captured.out
+    assert "authors' model" not in captured.err
     assert finrft.laws.feeds_energy(segment_law(finrft.preset("physical", finrft.RobotScene))) == ""  # warned or not before
 
 

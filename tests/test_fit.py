@@ -24,6 +24,7 @@ def truth():
     return preset("paper").replace(**{"plate.stiffness": 0.3, "plate.damping": 0.8})
 
 
+@pytest.mark.slow  # 150 evaluations of two drags; the fast suite's fit of b alone (below) recovers its truth too
 def test_fit_recovers_known_parameters(truth, tmp_path):
     data = [simulated_drag(truth, speed, 0.15) for speed in (0.02, 0.04)]
     start = preset("paper")  # k = 0.209, b = 1.43: both well off
@@ -50,6 +51,7 @@ def test_fit_cli_writes_a_scene_drag_accepts(tmp_path, capsys, truth):
     assert main(["drag", "--scene", str(scene), "--distance", "5"]) == 0
 
 
+@pytest.mark.slow  # the paper's fit reproduced: 20 evaluations of three measured drags
 def test_paper_procedure_on_the_measurements():
     # The paper's fit (damping only, k = 0.209) against the three measured speeds. With the preset's 1 kg m^2
     # inertias the plate cannot bend as fast as the measured one at any damping: the fit runs to the lowest

@@ -77,14 +77,14 @@ def test_a_bad_catalogue_is_refused(entry, message):
 
 def test_medium_list_json_shows_units_and_sources(capsys):
     assert main(["medium", "--list", "--json"]) == 0
-    out = capsys.readouterr().out
-    listed = _last_json(out)
+    out, text = capsys.readouterr()
+    listed = json.loads(out)
     assert [m["name"] for m in listed] == list(media.names())
     beads = next(m for m in listed if m["name"] == "glass_beads_3mm")
     assert beads["values"]["grain_diameter"] == {"value": pytest.approx(3.0), "unit": "mm",
                                                  "source": media.medium("glass_beads_3mm").get("grain_diameter").source,
                                                  "status": ""}
-    assert "zeta = 1 N/cm^3" in out and "(unverified)" in out and "not found: zeta" in out
+    assert "zeta = 1 N/cm^3" in text and "(unverified)" in text and "not found: zeta" in text
     assert main(["medium", "--json"]) == 0  # --list is the default, as its help says
     assert _last_json(capsys.readouterr().out) == listed
 

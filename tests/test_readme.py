@@ -2,7 +2,9 @@
 
 The convention, by the block's language:
 
-- ```python: saved as a script and run by the package's Python in a fresh folder; it must succeed and print.
+- ```python: saved as a script and run by the package's Python in a fresh folder; it must succeed and print. A
+  ``print(...)`` line whose comment ends in ``= VALUE UNIT`` states what it prints: VALUE, sign included, must be in
+  the output.
 - ```console: its ``$ `` lines (a line ending in a backslash goes on with the next) run as one bash script
   (``set -euo pipefail``) in a fresh folder, with the package's ``finrft`` and ``python`` first on PATH; the lines
   without ``$ `` are output, not checked.
@@ -31,6 +33,7 @@ PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
 FENCE = re.compile(r"(?:^<!-- (?P<mark>not run|slow): (?P<why>[^\n]*?) -->\n)?^```(?P<lang>[\w-]*)\n(?P<body>.*?)^```$",
                    flags=re.S | re.M)
 RUN = ("python", "console", "toml")
+STATED = re.compile(r"^\s*print\(.*#.*= (?P<value>[-+]?\d[\d.]*) \S+\s*$", flags=re.M)
 
 
 @dataclass(frozen=True)
@@ -123,6 +126,10 @@ def _run_python(block: Block, tmp_path: Path) -> None:
                           env=_environment())
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip(), "an example should show its result"
+    for stated in STATED.finditer(block.body):
+        # a number of its own, not part of another ("26.64" is not what "-26.64" says)
+        shown = re.search(rf"(?<![-+\d.]){re.escape(stated['value'])}(?![\d])", done.stdout)
+        assert shown, f"{block.name}: the comment says {stated['value']}, the block prints {done.stdout!r}"
 
 
 def _run_console(block: Block, tmp_path: Path) -> None:

@@ -21,7 +21,8 @@ def _compare(scene, drive):
     return angle, force, run
 
 
-@pytest.mark.parametrize("cycles", [None, 1])
+# The one-way drag is the cycle's first stroke, which the fast suite checks in the cycle.
+@pytest.mark.parametrize("cycles", [pytest.param(None, marks=pytest.mark.slow), 1])
 def test_paper_preset_drag_matches_reference(paper, cycles):
     assert paper.plate.stop == "penalty"
     angle, force, run = _compare(paper, Drive(cycles=cycles))
@@ -36,6 +37,7 @@ def test_paper_preset_rotation_matches_reference(paper):
     assert force < 1e-3 * run.peak_drive_force
 
 
+@pytest.mark.slow  # 80,000 steps of 0.1 ms and the reference's solution over them
 def test_light_soft_plate_matches_reference(paper):
     # Inertia 1e-4 kg m^2 (1e4 x below the preset): the hinges respond within millimetres of travel, so the
     # reversal must fall on the step grid (4 s strokes, 0.1 ms steps) for the two to reverse at the same instant.

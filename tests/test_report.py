@@ -9,6 +9,7 @@ from rerun.chunk import RrdReader
 from finrft.cli import main
 
 
+@pytest.mark.slow  # every figure of the paper regenerated: minutes on two cores
 def test_quick_report(tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)  # away from the repository: the measurements come with the package
     out = tmp_path / "report"

@@ -87,10 +87,16 @@ def progress(args: argparse.Namespace, total: float, what: str,
 
 
 def say(args: argparse.Namespace, text: str) -> None:
-    """Human text on stdout, unless --quiet (or empty); it keeps a progress bar intact."""
+    """Human text, unless --quiet (or empty), on stdout; on stderr with --json, so that stdout holds the JSON alone
+    (finrft drag --json | python -m json.tool). It keeps a progress bar intact."""
     if text and not args.quiet:
         from tqdm import tqdm
-        tqdm.write(text, file=sys.stdout)
+        tqdm.write(text, file=text_stream(args))
+
+
+def text_stream(args: argparse.Namespace):
+    """Where human text goes: stderr when stdout is the JSON's."""
+    return sys.stderr if getattr(args, "json", False) else sys.stdout
 
 
 def said_written(args: argparse.Namespace, files: Sequence[tuple[str, str | None]]) -> None:

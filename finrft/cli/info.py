@@ -109,8 +109,8 @@ def add_law(sub: Any) -> None:
                    help="a medium of the catalogue (finrft medium --list; default: %(default)s)")
     p.add_argument("--plot", metavar="FILE.png", help="write the map as a figure, one colour map per field")
     add_force(p)
-    p.add_argument("--json", action="store_true", help="print the map as JSON on the last line of stdout: law, the "
-                   "two angle axes (_deg) and each field, flat lists of one entry per grid point")
+    p.add_argument("--json", action="store_true", help="print the map as JSON, alone on stdout (the text goes to "
+                   "stderr): law, the two angle axes (_deg) and each field, flat lists of one entry per grid point")
     add_quiet(p)
     p.set_defaults(handler=law)
 

@@ -19,7 +19,8 @@ from ..experiments.flags import add_force, add_json, add_max_error, add_quiet, a
 from ..experiments.plate import add_plate_scene, resolve_plate
 from ..experiments.swim import add_robot, resolve_robot
 from ..files import atomic_path
-from .common import Interrupted, check_output, print_json, progress, said_written, say, write_text
+from .common import (Interrupted, check_output, print_json, progress, said_written, say, text_stream,
+                     write_text)
 
 
 def _add_search(p: argparse.ArgumentParser, command: str) -> None:
@@ -293,7 +294,7 @@ def fit_rft(args: argparse.Namespace) -> int:
         write_text(args.out, fragment)
         said_written(args, (("law", args.out), ("table", table_path)))
     else:
-        print(fragment, end="")
+        print(fragment, end="", file=text_stream(args))
     print_json(args, {"f_perp": law.f_perp, "f_par": law.f_par, "v_reg": law.v_reg,
                       "table": {"attack_deg": table.attack_deg, "f_perp": table.f_perp, "f_par": table.f_par}})
     return 0

@@ -136,11 +136,11 @@ def _add_accuracy(kinds: Any) -> argparse.ArgumentParser:
                          "MuJoCo integrator, implicit, newton: steps of 10 µs to 10 ms; adaptive and adaptive-newton: "
                          "tolerances 0.1 to 1e-5), v_reg (0.1, 1, 10 mm/s) and backend (python at steps of 1 ms and "
                          "more); write DIR/accuracy.csv, a chart of error against wall time (accuracy.png) and a "
-                         "summary of the fastest setting within 0.1° and 1° (accuracy.md). Takes about 4 minutes on "
-                         "two cores.")
+                         "summary of the fastest setting within 0.1° and 1° (accuracy.md). Takes many minutes; "
+                         "the CSV gives each run's wall time.")
     p.add_argument("--out", default="accuracy", metavar="DIR", help="output folder (default: %(default)s)")
     p.add_argument("--quick", action="store_true",
-                   help="steps of 0.1 and 1 ms, one tolerance and v_reg, and a coarser reference (about 25 s)")
+                   help="steps of 0.1 and 1 ms, one tolerance and v_reg, and a coarser reference")
     add_workers(p)
     add_force(p)
     return p

@@ -34,8 +34,8 @@ def add_quiet(p: argparse.ArgumentParser) -> None:
 
 
 def add_json(p: argparse.ArgumentParser, what: str) -> None:
-    p.add_argument("--json", action="store_true", help=f"print {what} as JSON on the last line of stdout (each key "
-                   "names its unit: SI, or _deg, _mm where the key says so)")
+    p.add_argument("--json", action="store_true", help=f"print {what} as JSON, alone on stdout (the text goes to "
+                   "stderr; each key names its unit: SI, or _deg, _mm where the key says so)")
 
 
 def add_force(p: argparse.ArgumentParser) -> None:

@@ -4,7 +4,6 @@ chattering run (`step_through`). `experiment.run` uses it for every experiment."
 
 from __future__ import annotations
 
-import math
 from typing import Any, Callable, Sequence
 
 import mujoco
@@ -15,7 +14,7 @@ from .convergence import MAX_STEPS, check_resolution, check_size, record_every
 from .drive import Drive
 from .errors import Chatter, NotConverged, SceneError, SimulationFailed, SimulationUnstable, StepUnderflow
 from .attach import Attached
-from .integrate import SURFACE_SPEED, Stepper
+from .integrate import SURFACE_SPEED, LoadPeak, Stepper
 from .models import ARMATURE_RATIO, ForceGroup
 from .native import Code, captured_warnings
 from .scene import ExplicitSim
@@ -35,13 +34,11 @@ class Prescribed:
     each reversal the rest of the system takes the impulse an ideal kinematic constraint would give it.
 
     The drive's impulse over a stroke is exactly -armature times the change of its velocity (summed over the
-    joints), and its instantaneous force or torque is -armature * qacc. Called after every step (`track`), it keeps
-    each stroke's peak load, the largest instantaneous load at any step's state (the reversal's, after its jump,
-    included) whatever samples the run records, and how much the load changes between that step and its
-    neighbours (`peak_change`): the load's largest value between steps is within about that of the steps',
-    where a companion run's comparison can miss it (the paper plate's peak at its stop converges unevenly in dt).
-    A stroke whose joints end more than DRIVE_LAG of the stroke off the prescribed motion stops the run
-    (SimulationFailed).
+    joints), and its instantaneous force or torque is -armature * qacc. Each stroke's peak load (`peak`) and its
+    change to the neighbouring steps (`peak_change`) are the stroke's `LoadPeak` (``load_peak``): taken as the
+    stroke starts (after the reversal's jump) and, by a stepper given it (`integrate.stepper`), at every step's
+    state, whatever samples the run records. A stroke whose joints end more than DRIVE_LAG of the stroke off the
+    prescribed motion stops the run (SimulationFailed).
     """
 
     def __init__(self, dofs: Sequence[int], qpos: Sequence[int], armature: float, drive: Drive) -> None:
@@ -49,50 +46,33 @@ class Prescribed:
         self.impulse = np.zeros(drive.strokes)
         self.peak = np.zeros(drive.strokes)
         self.peak_change = np.zeros(drive.strokes)
-        self._load = math.nan        # the load at the last step (NaN: none yet in this stroke)
-        self._after_peak = False     # the last step set its stroke's peak
+        self.load_peak = LoadPeak(self.dofs, armature)
         self._stroke_velocity = np.zeros(len(self.dofs))
         self._stroke = 0
         self._stroke_start = (0.0, np.zeros(len(self.qpos)))  # the time and the joints' positions as it started
 
     def start_stroke(self, m: mujoco.MjModel, d: mujoco.MjData, k: int) -> None:
         if k:
-            self._close(d)
+            self._close(m, d)
             d.qpos[self.qpos] = self.drive.stroke_start(k)
             jump_velocities(m, d, self.dofs, self.armature, self.drive.stroke_velocity(k) - d.qvel[self.dofs])
         else:
             d.qvel[self.dofs] = self.drive.stroke_velocity(0)
         self._stroke, self._stroke_velocity = k, d.qvel[self.dofs].copy()
         self._stroke_start = (d.time, d.qpos[self.qpos].copy())
-        self._load, self._after_peak = math.nan, False
-        self.track(m, d)
+        self.load_peak.restart()
+        self.load_peak.take(m, d)
 
-    def track(self, m: mujoco.MjModel, d: mujoco.MjData) -> None:
-        """After a step (and as a stroke starts): the stroke's peak load, and its change to the neighbouring
-        steps, take the load at this state."""
-        mujoco.mj_forward(m, d)
-        qacc = d.qacc
-        load = self.armature * max(abs(qacc[i]) for i in self.dofs)
-        k = self._stroke
-        if self._after_peak:
-            self.peak_change[k] = max(self.peak_change[k], abs(self.peak[k] - load))
-        higher = load > self.peak[k]
-        if higher:
-            self.peak[k] = load
-            self.peak_change[k] = 0.0 if math.isnan(self._load) else abs(load - self._load)
-        # a peak at the stroke's first state is at its instant exactly: nothing earlier in the stroke to miss, and
-        # the load falling after it (a light plate relaxing to the new velocity in microseconds) is no error
-        self._after_peak = higher and not math.isnan(self._load)
-        self._load = load
-
-    def finish(self, d: mujoco.MjData) -> None:
-        self._close(d)
+    def finish(self, m: mujoco.MjModel, d: mujoco.MjData) -> None:
+        self._close(m, d)
 
     def load(self, d: mujoco.MjData) -> np.ndarray:
         """What each joint's drive applies now (after mj_forward): N or N m."""
         return -self.armature * d.qacc[self.dofs]
 
-    def _close(self, d: mujoco.MjData) -> None:
+    def _close(self, m: mujoco.MjModel, d: mujoco.MjData) -> None:
+        self.load_peak.flush(m, d)
+        self.peak[self._stroke], self.peak_change[self._stroke] = self.load_peak.peak, self.load_peak.change
         self.impulse[self._stroke] = -self.armature * np.sum(d.qvel[self.dofs] - self._stroke_velocity)
         start, q0 = self._stroke_start
         lag = float(np.max(np.abs(d.qpos[self.qpos] - q0 - self.drive.stroke_velocity(self._stroke) *
@@ -249,36 +229,20 @@ def check_adaptive_budget(sim: Any, duration: float) -> None:
                          f"steps over the run's {duration:.4g} s, more than {MAX_STEPS:.0e}: raise sim.max_step")
 
 
-def _walk(advance: Stepper, d: mujoco.MjData, step: int, end: int, end_time: float, sim: Any, adaptive: bool,
-          on_step: Callable[[], None]) -> int:
-    """From scheduled step ``step`` to ``end`` (at ``end_time``) one step at a time, ``on_step()`` after each; an
-    adaptive method, whose steps are its own, to every instant of a grid of its largest step instead (sim.max_step
-    rounded to whole steps of sim.dt, at least one), which cuts its steps there but keeps their size. The stepper's
-    code at the first failure, else 0."""
-    stride = max(1, round(sim.max_step / sim.dt)) if adaptive else 1
-    for k in [*range((step // stride + 1) * stride, end, stride), end]:
-        code = advance.until(d, end_time if k == end else k * sim.dt) if adaptive else advance(d, 1)
-        if code:
-            return code
-        on_step()
-    return 0
-
-
 def step_through(m: mujoco.MjModel, d: mujoco.MjData, scene: Any, advance: Stepper, steps: int,
                  starts: np.ndarray, samples: np.ndarray, on_stroke: Callable[[int], None],
                  on_sample: Callable[[int], None], progress: Callable[[float], None] | None = None,
                  watch: Sequence[int] = (),
                  forward: Callable[[mujoco.MjModel, mujoco.MjData], None] | None = mujoco.mj_forward,
                  stroke_time: float = 0.0,
-                 speeds: np.ndarray | None = None, on_step: Callable[[], None] | None = None) -> None:
+                 speeds: np.ndarray | None = None) -> None:
     """Step a model through a run: ``on_stroke(k)`` as stroke k starts, ``on_sample(i)`` (after ``forward(m, d)``,
     mj_forward or the trial's own; None: only the state is current) at recorded step ``samples[i]``; ``advance``
     steps in chunks in between. Stops loudly if the state blows up, or if the ``watch`` dofs chatter (fixed-step
     methods: the three steps before every PROBE_EVERY-th sample are taken one by one and checked when the run ends),
     each by more than its chatter speed in ``speeds`` (`chatter_speeds`; None: CHATTER_DV).
     An adaptive method steps to each event's `instants` (the drive's strokes last ``stroke_time``) and restarts its
-    step size at each reversal. ``on_step()``, when given, is called after every step (the fixed-step methods
-    then step one at a time; an adaptive method at every instant of a grid of its largest step: `_walk`)."""
+    step size at each reversal."""
     adaptive = methods.get(scene.sim.method).adaptive
     if adaptive:
         check_adaptive_budget(scene.sim, steps * scene.sim.dt)
@@ -314,10 +278,7 @@ def step_through(m: mujoco.MjModel, d: mujoco.MjData, scene: Any, advance: Stepp
                     progress(step / steps)
             if step == steps:
                 break
-            if on_step is None:
-                code = advance.until(d, times[i + 1]) if adaptive else advance(d, int(events[i + 1] - step))
-            else:
-                code = _walk(advance, d, step, int(events[i + 1]), times[i + 1], scene.sim, adaptive, on_step)
+            code = advance.until(d, times[i + 1]) if adaptive else advance(d, int(events[i + 1] - step))
             if code or any(counts[w] for w in bad):
                 raise unstable(scene, d.time, messages, code or 1)
     if probe:

@@ -238,7 +238,7 @@ def package_version(name: str) -> str:
 
 def provenance() -> dict[str, str]:
     """The versions of finrft, MuJoCo and numpy, and the time of writing (UTC, ISO 8601)."""
-    import mujoco  # here: the command line reads files before it needs either
+    import mujoco  # here: `finrft --version` imports this module, and needs neither
     import numpy as np
 
     return {"finrft_version": package_version("finrft"), "mujoco_version": mujoco.__version__,

@@ -30,7 +30,10 @@ The API, by topic:
   from 3D-RFT (a plate or robot scene's ``[medium]`` does it for its chain)
 - fitting plate parameters to measured drags: `read_drag`, `resolve_params`, `fit` -> `Fit`
 - optimising the robot's gait: `optimize`, `Variable`
-- files: `write_h5`, `write_rrd` (any result); they load h5py and rerun on first use, not on ``import finrft``
+- files: `write_h5`, `write_rrd` (any result)
+
+Each name loads its module on first use, so ``import finrft`` (and ``finrft --version``) loads neither MuJoCo nor
+numpy, scipy, h5py or rerun; ``finrft.NAME`` of a module (``finrft.convergence``) imports it too.
 
 The studies built on the engine (the CMA-ES search, the fit, Table I, the report, the benchmarks) are in
 finrft.studies: import other names from their modules by their full path (``from finrft.studies.fit import
@@ -39,6 +42,8 @@ simulated_drag``). ``finrft.__version__`` is the installed version.
 
 from __future__ import annotations
 
+import sys
+import types
 from importlib import import_module, metadata
 from typing import Any
 
@@ -47,38 +52,54 @@ try:
 except metadata.PackageNotFoundError:  # a source tree on the path, not installed
     __version__ = "0+unknown"
 
-from .attach import attach
-from .batch import PlateRollouts, local_executor, map_jobs, rollout_plates, run_experiments, run_many
-from .drive import Drive
-from .errors import Error, SceneError, SimulationFailed, SimulationUnstable
-from .experiment import Experiment, Result, run
-from .experiments.intrusion import Intrusion, IntrusionScene
-from .experiments.plate import PlateTest, simulate
-from .experiments.swim import RobotScene, Swim, swim
-from .experiments.user_model import UserModel, run_robot
-from .experiments.wheel import Wheel, WheelScene, run_wheel
-from .media import medium
-from .scene import Scene, UserScene, load_scene, preset, to_toml
-from .studies.fit import Fit, fit, read_drag, resolve_params
-from .studies.optimize import Variable, optimize
-from .studies.table import table_rows, table_scenes
+# Every exported name and the module it lives in, loaded on first use (`__getattr__`).
+_HOMES = {
+    ".attach": ("attach",),
+    ".batch": ("PlateRollouts", "local_executor", "map_jobs", "rollout_plates", "run_experiments", "run_many"),
+    ".drive": ("Drive",),
+    ".errors": ("Error", "SceneError", "SimulationFailed", "SimulationUnstable"),
+    ".experiment": ("Experiment", "Result", "run"),
+    ".experiments.intrusion": ("Intrusion", "IntrusionScene"),
+    ".experiments.plate": ("PlateTest", "simulate"),
+    ".experiments.swim": ("RobotScene", "Swim", "swim"),
+    ".experiments.user_model": ("UserModel", "run_robot"),
+    ".experiments.wheel": ("Wheel", "WheelScene", "run_wheel"),
+    ".media": ("medium",),
+    ".scene": ("Scene", "UserScene", "load_scene", "preset", "to_toml"),
+    ".studies.fit": ("Fit", "fit", "read_drag", "resolve_params"),
+    ".studies.optimize": ("Variable", "optimize"),
+    ".studies.table": ("table_rows", "table_scenes"),
+    ".record": ("write_h5", "write_rrd"),
+}
+_HOME = {name: module for module, names in _HOMES.items() for name in names}
 
-_RECORDING = ("write_h5", "write_rrd")
-
-__all__ = ["Drive", "Error", "Experiment", "Fit", "Intrusion", "IntrusionScene", "PlateRollouts", "PlateTest",
-           "Result", "RobotScene", "Scene", "SceneError", "SimulationFailed", "SimulationUnstable", "Swim",
-           "UserModel", "UserScene", "Variable", "attach", "fit", "load_scene", "local_executor", "map_jobs", "medium",
-           "optimize", "preset", "read_drag", "resolve_params", "rollout_plates", "run", "run_experiments",
-           "run_many", "run_robot", "run_wheel", "simulate", "swim", "table_rows", "table_scenes", "to_toml", "Wheel",
-           "WheelScene", *_RECORDING]
+__all__ = sorted(_HOME)
 
 
 def __getattr__(name: str) -> Any:
-    # The writers live in finrft.record, which imports h5py and rerun: load it on first use.
-    if name in _RECORDING:
-        return getattr(import_module(".record", __name__), name)
+    home = _HOME.get(name)
+    if home is not None:
+        value = getattr(import_module(home, __name__), name)
+        globals()[name] = value
+        return value
+    try:
+        return import_module(f".{name}", __name__)
+    except ModuleNotFoundError as exc:
+        if exc.name != f"{__name__}.{name}":
+            raise
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_RECORDING))
+    return sorted(set(globals()) | set(_HOME))
+
+
+class _Package(types.ModuleType):
+    def __setattr__(self, name: str, value: Any) -> None:
+        # Importing a submodule sets it on its package: finrft.attach, the module, would hide the function attach.
+        if name in _HOME and isinstance(value, types.ModuleType):
+            return
+        super().__setattr__(name, value)
+
+
+sys.modules[__name__].__class__ = _Package

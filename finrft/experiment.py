@@ -76,7 +76,8 @@ class Trial(Protocol):
     reads: dict[str, Callable[[mujoco.MjData], Any]]  # readings at every recorded instant (after mj_forward)
     watch: list[int]                                  # dofs the chatter probe watches
     # Optional: ``control(m, d)``, MuJoCo's control callback for the run (ctrl and qfrc_applied at every step);
-    # ``after_step(d)``, called after every step (peaks taken from every step, not the recorded samples);
+    # ``peak``, an `integrate.LoadPeak` the stepper takes the drive's load into at every step (a peak from every
+    # step, not the recorded samples); ``after_step(d)``, called after every step (means over every step);
     # ``forward(m, d)``, the forward pass before each reading (default mj_forward).
 
     def on_stroke(self, k: int) -> None: ...
@@ -281,16 +282,16 @@ def _once(experiment: Experiment, scene: Any, built: Any, d: mujoco.MjData, prog
             readings[name][i] = value
 
     attached = getattr(built, "attached", None)
-    advance = stepper(m, scene.sim, built.backend, built.groups, attached)
+    advance = stepper(m, scene.sim, built.backend, built.groups, attached, getattr(trial, "peak", None))
     watch = [] if companion else trial.watch
     speeds = chatter_speeds(m, d, built.groups, attached, watch)
     after_step = getattr(trial, "after_step", None)
     with installed(m, python_forces(built) if built.backend == "python" else None), native.untimed(), \
             controlled(m, getattr(trial, "control", None)):
-        seen = step_through(m, d, scene, advance, steps, starts, samples, trial.on_stroke, on_sample, progress, watch,
-                     forward=None if companion else getattr(trial, "forward", mujoco.mj_forward),
-                     stroke_time=drive.stroke_time, speeds=speeds,
-                     on_step=None if after_step is None else lambda: after_step(d))
+        seen = step_through(m, d, scene, advance, steps, starts, samples, trial.on_stroke, on_sample, progress,
+                            watch, forward=None if companion else getattr(trial, "forward", mujoco.mj_forward),
+                            stroke_time=drive.stroke_time, speeds=speeds,
+                            on_step=None if after_step is None else lambda: after_step(d))
     series, values = trial.finish(d, readings)
     result = Result(experiment=experiment, scene=scene,
                     time=instants(samples, steps, starts, scene.sim, drive.stroke_time), series=series, values=values,

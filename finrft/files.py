@@ -23,9 +23,6 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any, Iterator
 
-import mujoco
-import numpy as np
-
 from .errors import SceneError, UsageError
 
 # The largest text file finrft reads (scenes, tables, data): far above any it ships or writes.
@@ -241,6 +238,9 @@ def package_version(name: str) -> str:
 
 def provenance() -> dict[str, str]:
     """The versions of finrft, MuJoCo and numpy, and the time of writing (UTC, ISO 8601)."""
+    import mujoco  # here: `finrft --version` imports this module, and needs neither
+    import numpy as np
+
     return {"finrft_version": package_version("finrft"), "mujoco_version": mujoco.__version__,
             "numpy_version": np.__version__,
             "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds")}

@@ -78,6 +78,7 @@ An adaptive stepper also steps ``until(d, t)``, to an instant off the grid (a re
 from __future__ import annotations
 
 import ctypes
+import math
 from typing import Callable, Protocol, Sequence
 
 import mujoco
@@ -124,21 +125,79 @@ class Stepper(Protocol):
 
 
 Counts = ctypes.c_int64 * 2  # steps taken, steps rejected: the native functions add to it
+# What the native steppers that keep a `LoadPeak` take after their own arguments: its `native_args`.
+_PEAK_ARGS = (ctypes.c_int, ctypes.POINTER(ctypes.c_int), ctypes.c_double, ctypes.POINTER(ctypes.c_double))
 
 
 def stepper(m: mujoco.MjModel, sim: Sim, backend: str, groups: Sequence[ForceGroup],
-            attached: Attached | None = None) -> Stepper:
+            attached: Attached | None = None, peak: LoadPeak | None = None) -> Stepper:
     """The step function for a model: MuJoCo's step, or the implicit or adaptive method (native or numpy), as the
     method's entry in `finrft.methods` says. The implicit methods take implicitly the forces of the segment force
     ``groups`` and of the ``attached`` surfaces (`finrft.attach`; the native steppers find both in the model's
-    plugin instances)."""
+    plugin instances). Given a ``peak``, the stepper takes the drive's load at every step's state into it (an
+    adaptive method's: at every instant of a grid of its largest step, `Adaptive.until`)."""
     method = methods.get(sim.method)
     iterations = NEWTON_ITERATIONS if method.newton else 1
     if method.adaptive:
-        return Adaptive(m, sim, method.stepper, iterations, backend, groups, attached)
+        return Adaptive(m, sim, method.stepper, iterations, backend, groups, attached, peak)
     if method.implicit:
-        return Implicit(m, method.stepper, iterations, backend, groups, attached, method.midpoint)
-    return Explicit(m)
+        return Implicit(m, method.stepper, iterations, backend, groups, attached, method.midpoint, peak)
+    return Explicit(m, backend, peak)
+
+
+class LoadPeak:
+    """A prescribed drive's largest load in a stroke, taken at every step's state (the twin of plugins/peaks.c):
+    armature times the largest |qacc| of its dofs, from a forward pass. Besides the peak it keeps how much the load
+    changes between the peak's step and its neighbours (`change`): the load's largest value between steps is within
+    about that of the steps', where a companion run's comparison can miss it (the paper plate's peak at its stop
+    converges unevenly in dt). The native steppers keep it in C (``state``, peaks.c's slots: the peak, its change,
+    the last load, NaN before the stroke's first, 1 when that one set the peak, and 1 when the present state's load
+    is still to be taken, which the native explicit steps take from the next step's own forward pass); the numpy
+    twin in `take` after every step."""
+
+    PEAK, CHANGE, LAST, AFTER_PEAK, PENDING = range(5)
+
+    def __init__(self, dofs: Sequence[int], armature: float) -> None:
+        self.dofs, self.armature = list(dofs), float(armature)
+        self.state = np.zeros(5)
+        self.restart()
+        self.native_args = (ctypes.c_int(len(self.dofs)), (ctypes.c_int * len(self.dofs))(*self.dofs),
+                            ctypes.c_double(self.armature), self.state.ctypes.data_as(ctypes.POINTER(ctypes.c_double)))
+
+    def restart(self) -> None:
+        """A new stroke: no load taken yet."""
+        self.state[:] = (0.0, 0.0, np.nan, 0.0, 0.0)
+
+    def take(self, m: mujoco.MjModel, d: mujoco.MjData) -> None:
+        """Take the load at the state of ``d`` (after a forward pass, which this runs)."""
+        mujoco.mj_forward(m, d)
+        qacc = d.qacc
+        load = self.armature * max(abs(qacc[i]) for i in self.dofs)
+        state = self.state
+        peak, last = float(state[self.PEAK]), float(state[self.LAST])
+        if state[self.AFTER_PEAK]:
+            state[self.CHANGE] = max(state[self.CHANGE], abs(peak - load))
+        higher = load > peak
+        if higher:
+            state[self.PEAK] = load
+            state[self.CHANGE] = 0.0 if math.isnan(last) else abs(load - last)
+        # a peak at the stroke's first state is at its instant exactly: nothing earlier in the stroke to miss, and
+        # the load falling after it (a light plate relaxing to the new velocity in microseconds) is no error
+        state[self.AFTER_PEAK] = higher and not math.isnan(last)
+        state[self.LAST], state[self.PENDING] = load, 0.0
+
+    def flush(self, m: mujoco.MjModel, d: mujoco.MjData) -> None:
+        """Take the present state's load if the steps left it pending: before the state jumps, and at the end."""
+        if self.state[self.PENDING]:
+            self.take(m, d)
+
+    @property
+    def peak(self) -> float:
+        return float(self.state[self.PEAK])
+
+    @property
+    def change(self) -> float:
+        return float(self.state[self.CHANGE])
 
 
 class _Counted:
@@ -155,15 +214,33 @@ class _Counted:
 
 
 class Explicit(_Counted):
-    """MuJoCo's own step."""
+    """MuJoCo's own step; with a `LoadPeak`, the native backend's in C (finrft_explicit_peak)."""
 
-    def __init__(self, m: mujoco.MjModel) -> None:
+    def __init__(self, m: mujoco.MjModel, backend: str = "native", peak: LoadPeak | None = None) -> None:
         super().__init__()
-        self.m = m
+        self.m, self.peak = m, peak
+        self._native = None
+        if peak is not None and backend == "native":
+            # Called for every few steps (a plate's samples and chatter probes: 830 calls in a drag of 6667 steps),
+            # so with its arguments made once, as ctypes objects, and no argtypes to convert them: a third of the
+            # call's cost, about 3 % of the drag's.
+            self._native = native.function("finrft_explicit_peak", ctypes.c_int)
+            self._native.argtypes = None
+            self._model = ctypes.c_void_p(m._address)
+            self._data: tuple[mujoco.MjData | None, ctypes.c_void_p] = (None, ctypes.c_void_p())
 
     def __call__(self, d: mujoco.MjData, n: int) -> int:
-        mujoco.mj_step(self.m, d, n)
         self.counts[0] += n
+        if self.peak is None:
+            mujoco.mj_step(self.m, d, n)
+        elif self._native is not None:
+            if self._data[0] is not d:
+                self._data = (d, ctypes.c_void_p(d._address))
+            return self._native(self._model, self._data[1], ctypes.c_int(n), *self.peak.native_args)
+        else:
+            for _ in range(n):
+                mujoco.mj_step(self.m, d)
+                self.peak.take(self.m, d)
         return 0
 
 
@@ -171,19 +248,30 @@ class Implicit(_Counted):
     """The implicit (one Newton iteration) or newton method, native or numpy."""
 
     def __init__(self, m: mujoco.MjModel, native_stepper: str, iterations: int, backend: str,
-                 groups: Sequence[ForceGroup], attached: Attached | None = None, midpoint: float = 0.0) -> None:
+                 groups: Sequence[ForceGroup], attached: Attached | None = None, midpoint: float = 0.0,
+                 peak: LoadPeak | None = None) -> None:
         super().__init__()
-        self.m, self.iterations, self.midpoint = m, iterations, midpoint
+        self.m, self.iterations, self.midpoint, self.peak = m, iterations, midpoint, peak
         if backend == "native":
-            self._native = _native(native_stepper, ctypes.c_int, ctypes.c_int, ctypes.c_double,
-                                   ctypes.POINTER(ctypes.c_int64))
+            # finrft_implicit_peak calls the method's own stepper, finrft_implicit_step, one step at a time
+            self._native = _native(native_stepper if peak is None else "finrft_implicit_peak", ctypes.c_int,
+                                   ctypes.c_int, ctypes.c_double, ctypes.POINTER(ctypes.c_int64),
+                                   *(() if peak is None else _PEAK_ARGS))
         else:
             self._native, self._python = None, PythonImplicit(m, groups, attached)
 
     def __call__(self, d: mujoco.MjData, n: int) -> int:
         if self._native is not None:
-            return self._native(self.m._address, d._address, n, self.iterations, self.midpoint, self.counts)
-        return self._python.steps(d, n, self.m.opt.timestep, self.iterations, self.counts, self.midpoint)
+            return self._native(self.m._address, d._address, n, self.iterations, self.midpoint, self.counts,
+                                *(() if self.peak is None else self.peak.native_args))
+        if self.peak is None:
+            return self._python.steps(d, n, self.m.opt.timestep, self.iterations, self.counts, self.midpoint)
+        for _ in range(n):
+            failed = self._python.steps(d, 1, self.m.opt.timestep, self.iterations, self.counts, self.midpoint)
+            if failed:
+                return failed
+            self.peak.take(self.m, d)
+        return 0
 
 
 class Adaptive(_Counted):
@@ -191,14 +279,19 @@ class Adaptive(_Counted):
     call to the next."""
 
     def __init__(self, m: mujoco.MjModel, sim: Sim, native_stepper: str, iterations: int, backend: str,
-                 groups: Sequence[ForceGroup], attached: Attached | None = None) -> None:
+                 groups: Sequence[ForceGroup], attached: Attached | None = None, peak: LoadPeak | None = None) -> None:
         super().__init__()
         self.m, self.max_step, self.tolerance, self.h = m, sim.max_step, sim.tolerance, sim.dt
-        self.iterations = iterations
-        self._native = None
-        if backend == "native":
+        self.iterations, self.dt, self.peak = iterations, sim.dt, peak
+        self._native = self._native_peak = None
+        if backend == "native" and peak is None:
             self._native = _native(native_stepper, ctypes.c_double, ctypes.c_double, ctypes.c_double,
                                    ctypes.c_int, ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int64))
+        elif backend == "native":  # it calls the method's stepper, finrft_adaptive_advance, to each instant
+            self._native_peak = _native("finrft_adaptive_peak", ctypes.c_int, ctypes.POINTER(ctypes.c_double),
+                                        ctypes.c_double, ctypes.c_double, ctypes.c_int,
+                                        ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int64),
+                                        *_PEAK_ARGS)
         else:
             self._implicit = PythonImplicit(m, groups, attached)
             # Newton's error, a velocity, moves a position by h times it: far below what the step's test allows
@@ -219,7 +312,11 @@ class Adaptive(_Counted):
         self.h = min(self.h, self.max_step * np.sqrt(self.tolerance))
 
     def until(self, d: mujoco.MjData, end: float) -> int:
-        """Steps to time ``end`` exactly, off the grid of ``sim.dt`` if need be (a reversal of the drive)."""
+        """Steps to time ``end`` exactly, off the grid of ``sim.dt`` if need be (a reversal of the drive). With a
+        `LoadPeak`, the load is taken at every instant of a grid of the largest step (sim.max_step rounded to whole
+        steps of sim.dt, at least one) before ``end`` and at ``end``: the steps are cut there but keep their size."""
+        if self.peak is not None:
+            return self._through(d, self._grid(d.time, end))
         duration = end - d.time
         if self._native is not None:
             h = ctypes.c_double(self.h)
@@ -228,6 +325,30 @@ class Adaptive(_Counted):
             self.h = h.value
             return failed
         return self._python(d, duration)
+
+    def _grid(self, start: float, end: float) -> np.ndarray:
+        """The instants `until` takes the load at from ``start`` to ``end``, both on or rounded to the scheduled
+        steps of sim.dt (a reversal's instant is rounded to the step its stroke starts at)."""
+        stride = max(1, round(self.max_step / self.dt))
+        first, last = (round(start / self.dt) // stride + 1) * stride, round(end / self.dt)
+        return np.r_[np.arange(first, last, stride) * self.dt, end]
+
+    def _through(self, d: mujoco.MjData, instants: np.ndarray) -> int:
+        """Steps to each of ``instants`` in turn, the load taken into the peak at each."""
+        if self._native_peak is not None:
+            h = ctypes.c_double(self.h)
+            failed = self._native_peak(self.m._address, d._address, len(instants),
+                                       instants.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), self.max_step,
+                                       self.tolerance, self.iterations, ctypes.byref(h), self.counts,
+                                       *self.peak.native_args)
+            self.h = h.value
+            return failed
+        for instant in instants:
+            failed = self._python(d, instant - d.time)
+            if failed:
+                return failed
+            self.peak.take(self.m, d)
+        return 0
 
     def _python(self, d: mujoco.MjData, duration: float) -> int:
         m, spec, end = self.m, self._spec, d.time + duration

@@ -18,7 +18,6 @@ from importlib import resources
 from typing import Any
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from .laws import rft3d, sandswim
 from .errors import SceneError
@@ -221,6 +220,8 @@ def sandswim_coefficients(length: float, depth: float, height: float, bulk_densi
     def residual(x: np.ndarray) -> np.ndarray:
         law_perp, law_par = sandswim.magnitudes(PSI, *x)
         return np.concatenate([law_perp - perp, law_par - par])
+
+    from scipy.optimize import least_squares  # here: scipy.optimize took half the command line's start
 
     c_f = max(float(par.max()), 1e-6)
     start = np.array([max(float(perp[-1]) - c_f, 1e-3), c_f, math.pi / 4])

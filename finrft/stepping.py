@@ -16,7 +16,7 @@ from .convergence import MAX_STEPS, check_resolution, check_size, record_every
 from .drive import Drive
 from .errors import Chatter, NotConverged, SceneError, SimulationFailed, SimulationUnstable, StepUnderflow
 from .attach import Attached
-from .integrate import SURFACE_SPEED, Stepper
+from .integrate import SURFACE_SPEED, LoadPeak, Stepper
 from .models import ARMATURE_RATIO, ForceGroup
 from .native import Code, captured_warnings
 from .scene import ExplicitSim
@@ -65,13 +65,11 @@ class Prescribed:
     each reversal the rest of the system takes the impulse an ideal kinematic constraint would give it.
 
     The drive's impulse over a stroke is exactly -armature times the change of its velocity (summed over the
-    joints), and its instantaneous force or torque is -armature * qacc. Called after every step (`track`), it keeps
-    each stroke's peak load, the largest instantaneous load at any step's state (the reversal's, after its jump,
-    included) whatever samples the run records, and how much the load changes between that step and its
-    neighbours (`peak_change`): the load's largest value between steps is within about that of the steps',
-    where a companion run's comparison can miss it (the paper plate's peak at its stop converges unevenly in dt).
-    A stroke whose joints end more than DRIVE_LAG of the stroke off the prescribed motion stops the run
-    (SimulationFailed).
+    joints), and its instantaneous force or torque is -armature * qacc. Each stroke's peak load (`peak`) and its
+    change to the neighbouring steps (`peak_change`) are the stroke's `LoadPeak` (``load_peak``): taken as the
+    stroke starts (after the reversal's jump) and, by a stepper given it (`integrate.stepper`), at every step's
+    state, whatever samples the run records. A stroke whose joints end more than DRIVE_LAG of the stroke off the
+    prescribed motion stops the run (SimulationFailed).
     """
 
     def __init__(self, dofs: Sequence[int], qpos: Sequence[int], armature: float, drive: Drive) -> None:
@@ -79,50 +77,33 @@ class Prescribed:
         self.impulse = np.zeros(drive.strokes)
         self.peak = np.zeros(drive.strokes)
         self.peak_change = np.zeros(drive.strokes)
-        self._load = math.nan        # the load at the last step (NaN: none yet in this stroke)
-        self._after_peak = False     # the last step set its stroke's peak
+        self.load_peak = LoadPeak(self.dofs, armature)
         self._stroke_velocity = np.zeros(len(self.dofs))
         self._stroke = 0
         self._stroke_start = (0.0, np.zeros(len(self.qpos)))  # the time and the joints' positions as it started
 
     def start_stroke(self, m: mujoco.MjModel, d: mujoco.MjData, k: int) -> None:
         if k:
-            self._close(d)
+            self._close(m, d)
             d.qpos[self.qpos] = self.drive.stroke_start(k)
             jump_velocities(m, d, self.dofs, self.armature, self.drive.stroke_velocity(k) - d.qvel[self.dofs])
         else:
             d.qvel[self.dofs] = self.drive.stroke_velocity(0)
         self._stroke, self._stroke_velocity = k, d.qvel[self.dofs].copy()
         self._stroke_start = (d.time, d.qpos[self.qpos].copy())
-        self._load, self._after_peak = math.nan, False
-        self.track(m, d)
+        self.load_peak.restart()
+        self.load_peak.take(m, d)
 
-    def track(self, m: mujoco.MjModel, d: mujoco.MjData) -> None:
-        """After a step (and as a stroke starts): the stroke's peak load, and its change to the neighbouring
-        steps, take the load at this state."""
-        mujoco.mj_forward(m, d)
-        qacc = d.qacc
-        load = self.armature * max(abs(qacc[i]) for i in self.dofs)
-        k = self._stroke
-        if self._after_peak:
-            self.peak_change[k] = max(self.peak_change[k], abs(self.peak[k] - load))
-        higher = load > self.peak[k]
-        if higher:
-            self.peak[k] = load
-            self.peak_change[k] = 0.0 if math.isnan(self._load) else abs(load - self._load)
-        # a peak at the stroke's first state is at its instant exactly: nothing earlier in the stroke to miss, and
-        # the load falling after it (a light plate relaxing to the new velocity in microseconds) is no error
-        self._after_peak = higher and not math.isnan(self._load)
-        self._load = load
-
-    def finish(self, d: mujoco.MjData) -> None:
-        self._close(d)
+    def finish(self, m: mujoco.MjModel, d: mujoco.MjData) -> None:
+        self._close(m, d)
 
     def load(self, d: mujoco.MjData) -> np.ndarray:
         """What each joint's drive applies now (after mj_forward): N or N m."""
         return -self.armature * d.qacc[self.dofs]
 
-    def _close(self, d: mujoco.MjData) -> None:
+    def _close(self, m: mujoco.MjModel, d: mujoco.MjData) -> None:
+        self.load_peak.flush(m, d)
+        self.peak[self._stroke], self.peak_change[self._stroke] = self.load_peak.peak, self.load_peak.change
         self.impulse[self._stroke] = -self.armature * np.sum(d.qvel[self.dofs] - self._stroke_velocity)
         start, q0 = self._stroke_start
         lag = float(np.max(np.abs(d.qpos[self.qpos] - q0 - self.drive.stroke_velocity(self._stroke) *

@@ -9,6 +9,7 @@
 #define FINRFT_H_
 
 #include <math.h>
+#include <stdint.h>
 
 #include <mujoco/mujoco.h>
 
@@ -159,5 +160,10 @@ void finrft_surface_law_force(const FinrftSurface* p, const mjtNum normal[3], co
 // over these alone: an element above the surface has no force at any velocity.
 #define FINRFT_SUBMERGED 8
 int finrft_surface_submerged(const FinrftSurface* p, const mjData* d, mjtNum* out);
+
+// The steppers (steppers.c), which the peak-keeping steppers (peaks.c) call.
+int finrft_implicit_step(const mjModel* m, mjData* d, int nstep, int iterations, mjtNum midpoint, int64_t* counts);
+int finrft_adaptive_advance(const mjModel* m, mjData* d, mjtNum duration, mjtNum hmax, mjtNum tol, int iterations,
+                            mjtNum* h, int64_t* counts);
 
 #endif  // FINRFT_H_

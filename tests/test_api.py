@@ -27,6 +27,36 @@ def test_import_loads_neither_rerun_nor_matplotlib(tmp_path):
     assert done.stdout.split("\n")[:2] == ["[]", "True"]
 
 
+HEAVY = ("scipy", "matplotlib", "h5py", "rerun", "cma", "tqdm", "dask")
+
+
+def test_version_imports_neither_the_engine_nor_the_studies(tmp_path):
+    # `finrft --version` answers before the commands' parsers, whose imports took it 0.6 s of CPU
+    done = _python(f"""
+        import sys
+        from finrft.cli import main
+        try:
+            main(["--version"])
+        except SystemExit as exit:
+            print("exit", exit.code)
+        print(sorted(m for m in {HEAVY + ("mujoco", "numpy")} if m in sys.modules))
+        """, tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split("\n")[:3] == [f"finrft {finrft.__version__}", "exit 0", "[]"]
+
+
+def test_the_command_lines_parser_imports_no_study_package(tmp_path):
+    # Every command's flags, without what only some commands use (scipy.optimize, half the start, is the media's fit)
+    done = _python(f"""
+        import sys
+        from finrft.cli import build_parser
+        build_parser()
+        print(sorted(m for m in {HEAVY} if m in sys.modules))
+        """, tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split("\n")[0] == "[]"
+
+
 def test_every_export_is_documented_and_is_the_modules_own():
     import finrft.studies.fit  # importing a module of the same name must not replace the function
     from finrft.experiments.plate import simulate

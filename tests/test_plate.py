@@ -1,5 +1,6 @@
 """Plate tests on MuJoCo against closed forms, force balances, symmetry and convergence in dt."""
 
+import mujoco
 import numpy as np
 import pytest
 from scipy.optimize import brentq
@@ -74,6 +75,59 @@ def test_peak_is_taken_from_every_step_and_estimated(paper):
     assert change > 0.02
     assert coarse.error_estimate["peak_torque_Nm"] >= change
     assert coarse.summary()["error_estimate"]["peak_torque_Nm"] == coarse.error_estimate["peak_torque_Nm"]
+
+
+def _peak_by_hand(scene, drive):
+    """The largest drive load of a one-stroke drag at any step's state, stepped here one mj_step at a time with the
+    native plugin's forces, the load -armature * qacc read after mj_forward at each state."""
+    plate = build_plate(scene)
+    m, d = plate.model, mujoco.MjData(plate.model)
+    d.qvel[plate.drive_dof] = drive.stroke_velocity(0)
+    loads = []
+    for _ in range(round(drive.duration / scene.sim.dt) + 1):
+        mujoco.mj_forward(m, d)
+        loads.append(plate.armature * abs(d.qacc[plate.drive_dof]))
+        mujoco.mj_step(m, d)
+    return max(loads)
+
+
+@pytest.mark.parametrize("integrator", ["implicitfast", "euler", "rk4"])
+def test_native_explicit_steps_take_the_peak_at_every_step_without_python(paper, monkeypatch, integrator):
+    # The native steppers keep the peak themselves (plugins/peaks.c): Python steps and runs forward passes only at
+    # the recorded samples and the stroke's ends, not after every step (which cost the paper drag half its time),
+    # and the peak is still the largest load of every step's state, the stop engaging between samples included.
+    scene = paper.replace(**{"sim.integrator": integrator, "sim.record_dt": 0.05})
+    drive = Drive(speed=0.03, stroke=0.02)
+    steps = round(drive.duration / scene.sim.dt)
+    calls = {"mj_step": 0, "mj_forward": 0}
+
+    def counted(name):
+        call = getattr(mujoco, name)
+
+        def counting(*args):
+            calls[name] += 1
+            return call(*args)
+        return counting
+    for name in calls:
+        monkeypatch.setattr(mujoco, name, counted(name))
+    run = simulate(scene, drive, estimate_error=False)
+    monkeypatch.undo()
+    assert calls["mj_step"] == 0 and calls["mj_forward"] < steps / 10
+    assert run.peak_drive_force == pytest.approx(_peak_by_hand(scene, drive), rel=1e-12)
+    assert np.abs(run.drive_force).max() < run.peak_drive_force
+
+
+@pytest.mark.parametrize("method", ["explicit", "newton", "adaptive-newton"])
+def test_native_and_numpy_steppers_take_the_same_peak(method):
+    # The authors' plate turned out and back (a reversal, its stop engaging after it): each stroke's peak and its
+    # change to the neighbouring steps, kept in C by the native steppers and in Python by their numpy twins.
+    scene = preset("paper").replace(**{"sim.method": method, "plate.segment_inertia": 1e-3, "sim.dt": 1e-3})
+    drive = Drive(kind="rotate", speed=np.radians(60), stroke=np.radians(60), cycles=1)
+    native, python = (simulate(scene.replace(**{"sim.backend": b}), drive, estimate_error=False)
+                      for b in ("native", "python"))
+    assert np.all(native.stroke_peak > 0)
+    np.testing.assert_allclose(native.stroke_peak, python.stroke_peak, rtol=1e-9)
+    assert native.values["peak_resolution"] == pytest.approx(python.values["peak_resolution"], rel=1e-6, abs=1e-9)
 
 
 @pytest.mark.parametrize("kind", ["origami", "soft"])

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import itertools
 import os
 import signal
 import sys
@@ -22,11 +23,8 @@ from typing import Iterator, Sequence
 
 from .. import __version__
 from ..errors import SceneError, SimulationFailed
-from ..experiments import REGISTRY
 from ..files import keep_existing
-from . import info, search, studies
 from .common import Interrupted, Parser, one_line_warning
-from .run import add_experiment
 
 __all__ = ["build_parser", "main"]
 
@@ -40,8 +38,13 @@ DESCRIPTION = ("Compliant fins in granular media: resistive force theory (RFT) o
 
 def build_parser() -> argparse.ArgumentParser:
     """The full parser: a subcommand per registered experiment, then the other commands."""
+    # The commands' modules import the experiments (MuJoCo, numpy): here, not for `finrft --version` (`main`).
+    from ..experiments import REGISTRY
+    from . import info, search, studies
+    from .run import add_experiment
+
     parser = Parser(prog="finrft", description=DESCRIPTION)
-    parser.add_argument("--version", action="version", version=f"finrft {__version__}")
+    _add_version(parser)
     sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
     for command in REGISTRY.values():
         add_experiment(sub, command)
@@ -50,7 +53,26 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _add_version(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--version", action="version", version=f"finrft {__version__}")
+
+
+def _print_version_if_asked(argv: Sequence[str]) -> None:
+    """Print the version and exit (SystemExit 0), as the full parser would, if the options before the command ask
+    for it and not for the help, without building the full parser: its commands' imports were most of `finrft
+    --version`'s time. Anything else, an error included, is left to the full parser."""
+    front = Parser(prog="finrft", add_help=False)
+    front.add_argument("-h", "--help", action="store_true")
+    front.add_argument("--version", action="store_true")
+    with contextlib.suppress(SceneError):
+        asked, _ = front.parse_known_args(list(itertools.takewhile(lambda word: word.startswith("-"), argv)))
+        if asked.version and not asked.help:
+            print(f"finrft {__version__}")
+            raise SystemExit(0)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    _print_version_if_asked(sys.argv[1:] if argv is None else argv)
     parser = build_parser()
     if sys.stderr is None:  # started with stderr closed: its one-line reports go nowhere rather than to stdout
         sys.stderr = open(os.devnull, "w")

@@ -11,8 +11,6 @@ import sys
 from pathlib import Path
 from typing import Any, Callable, Iterator, Sequence
 
-import numpy as np
-
 from ..errors import SimulationFailed, UsageError
 from ..files import atomic_path, check_folder, check_target
 
@@ -108,6 +106,8 @@ def said_written(args: argparse.Namespace, files: Sequence[tuple[str, str | None
 
 def to_json(value: Any) -> str:
     """One line of strict JSON; a NaN or infinity anywhere is a failed result (exit 1), never invalid JSON."""
+    import numpy as np  # here: `finrft --version` imports this module, and needs no numpy
+
     try:
         return json.dumps(value, allow_nan=False,
                           default=lambda x: x.tolist() if isinstance(x, np.ndarray) else float(x))

@@ -205,7 +205,7 @@ class JointTrial:
     def __init__(self, built: AttachedModel, drive: Drive, d: mujoco.MjData, companion: bool) -> None:
         m = built.model
         dof, qpos = int(built.drive_dofs[0]), int(built.drive_qpos[0])
-        self.prescribed = Prescribed([dof], [qpos], float(built.armature[0]), drive)
+        self.model, self.prescribed = m, Prescribed([dof], [qpos], float(built.armature[0]), drive)
         d.qpos[qpos] = drive.start
         self.on_stroke = lambda k: self.prescribed.start_stroke(m, d, k)
         self.watch = [i for i in range(m.nv) if i != dof]
@@ -221,7 +221,7 @@ class JointTrial:
 
     def finish(self, d: mujoco.MjData, readings: dict[str, np.ndarray]) -> tuple[dict[str, np.ndarray],
                                                                                     dict[str, float]]:
-        self.prescribed.finish(d)
+        self.prescribed.finish(self.model, d)
         bodies, drive = readings["bodies"], readings["drive"]
         return ({"drive_position": drive[:, 0], "drive_load": drive[:, 1], "body_position": bodies[..., :3],
                  "rft_force": bodies[..., 3:], "stroke_impulse": self.prescribed.impulse}, {})

@@ -388,7 +388,7 @@ class _PlateTrial:
         self.base = Prescribed([plate.drive_dof], [plate.drive_qpos], plate.armature, test.drive)
         self.forces = SegmentForces(plate.groups[0])
         self.on_stroke = lambda k: self.base.start_stroke(m, d, k)
-        self.after_step = lambda d: self.base.track(m, d)
+        self.peak = self.base.load_peak
         self.watch = list(plate.hinge_dof)
         n, hinges = scene.plate.segments, plate.hinge_qpos
 
@@ -408,7 +408,7 @@ class _PlateTrial:
 
     def finish(self, d: mujoco.MjData, readings: dict[str, np.ndarray]) -> tuple[dict[str, np.ndarray],
                                                                                     dict[str, float]]:
-        self.base.finish(d)
+        self.base.finish(self.plate.model, d)
         x, q = readings["x"], readings["hinge"]
         segment_angle = np.cumsum(q, axis=1)
         if self.test.drive.kind == "rotate":

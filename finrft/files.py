@@ -103,6 +103,15 @@ def check_folder(folder: Path, name: str, error: type[SceneError] = SceneError) 
         raise error(f"{name}: cannot write in {folder}: {exc.strerror}") from None
 
 
+def write_bytes(path: Path, data: bytes | memoryview) -> None:
+    """Write ``data`` to a new file at ``path`` and on to the disk: OSError naming ``path`` when any of it cannot be
+    written (a full disk), before the file is published."""
+    with open(path, "xb") as handle:
+        handle.write(data)
+        handle.flush()
+        os.fsync(handle.fileno())
+
+
 # Whether `atomic_path` may replace a file that exists, where its caller does not say: the command line's writers
 # may not without --force (`keep_existing`).
 _exclusive: contextvars.ContextVar[bool] = contextvars.ContextVar("finrft_exclusive_writes", default=False)
@@ -135,6 +144,12 @@ def atomic_path(path: str | Path, *, exclusive: bool | None = None) -> Iterator[
             _publish_new(tmp, target)
         else:
             os.replace(tmp, target)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        if exc.filename not in (None, str(tmp)):
+            raise
+        # The file asked for, not its temporary, which is gone.
+        raise OSError(exc.errno, f"{exc.strerror or exc}: nothing was written", str(target)) from None
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise

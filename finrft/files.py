@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import contextvars
 import errno
+import io
 import os
 import re
 import stat
@@ -110,6 +111,20 @@ def write_bytes(path: Path, data: bytes | memoryview) -> None:
         handle.write(data)
         handle.flush()
         os.fsync(handle.fileno())
+
+
+@contextlib.contextmanager
+def hdf5_written(path: str | Path, *, exclusive: bool | None = None, **options: Any) -> Iterator[Any]:
+    """An HDF5 file (h5py.File, made with ``options``) to fill in the block, written to ``path`` by `atomic_path`
+    (``exclusive`` as there) when the block ends. It is built in memory and written by Python, which raises
+    OSError on a failed write: HDF5's own writes, failing on a full disk, leave its file object in a state whose
+    close crashes the process."""
+    import h5py  # here, not at the top: `import finrft` stays light
+    image = io.BytesIO()
+    with h5py.File(image, "w", **options) as f:
+        yield f
+    with atomic_path(path, exclusive=exclusive) as tmp:
+        write_bytes(tmp, image.getbuffer())
 
 
 # Whether `atomic_path` may replace a file that exists, where its caller does not say: the command line's writers

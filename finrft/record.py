@@ -8,14 +8,12 @@ interrupted or failed write never leaves a truncated file where a complete one i
 from __future__ import annotations
 
 import contextlib
-import io
 import json
 import os
 import uuid
 from pathlib import Path
 from typing import Any, Iterator, Mapping
 
-import h5py
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
@@ -23,7 +21,7 @@ import rerun.blueprint as rrb
 from . import geometry, laws
 from .errors import SceneError
 from .experiment import DISPLAY, Result
-from .files import atomic_path, check_target, provenance, write_bytes
+from .files import atomic_path, check_target, hdf5_written, provenance, write_bytes
 from .scene import to_toml
 
 # Written by write_h5 itself; extra_attrs may not replace them, or a file could contradict its own data.
@@ -76,10 +74,7 @@ def write_h5(run: Result, path: str | Path, *, extra_attrs: dict[str, Any] | Non
     check_new(path, force)
     experiment = run.experiment
     # Without force, a file that another process wrote since the check is kept: one of two writers refuses.
-    # Built in memory and written in one piece by Python: HDF5's own writes, failing on a full disk, leave its file
-    # object in a state whose close crashes the process (a segfault after the library's tracebacks).
-    image = io.BytesIO()
-    with h5py.File(image, "w", track_order=True) as f:
+    with hdf5_written(path, exclusive=None if force else True, track_order=True) as f:
         t = f.create_dataset("time", data=run.time)
         t.attrs.update(units="s", description="simulated time of each sample")
         t.make_scale("time")
@@ -95,8 +90,6 @@ def write_h5(run: Result, path: str | Path, *, extra_attrs: dict[str, Any] | Non
         feeds = laws.feeds_energy(geometry.segment_law(run.scene))
         f.attrs.update({"schema": experiment.schema, **_provenance(run.scene, run.summary()), **experiment.attrs(),
                         "sign_convention": experiment.sign_convention, "law_feeds_energy": feeds, **extra})
-    with atomic_path(path, exclusive=None if force else True) as tmp:
-        write_bytes(tmp, image.getbuffer())
 
 
 @contextlib.contextmanager

@@ -153,6 +153,7 @@ def atomic_path(path: str | Path, *, exclusive: bool | None = None) -> Iterator[
     # Not tempfile.mkstemp: its 0600 mode would carry over to the result; the writers create the file themselves.
     # The writer's pid in the name tells the next writer whether it still runs.
     tmp = target.with_name(f".{target.stem}.{os.getpid()}-{uuid.uuid4().hex[:12]}.tmp{target.suffix}")
+    _writing.add(tmp)
     try:
         yield tmp
         if _exclusive.get() if exclusive is None else exclusive:
@@ -168,6 +169,19 @@ def atomic_path(path: str | Path, *, exclusive: bool | None = None) -> Iterator[
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+    finally:
+        _writing.discard(tmp)
+
+
+# The temporary files `atomic_path` blocks are writing now.
+_writing: set[Path] = set()
+
+
+def remove_temporaries() -> None:
+    """Remove the temporary files being written, for a process that ends without leaving its blocks (os._exit)."""
+    for tmp in list(_writing):
+        with contextlib.suppress(OSError):
+            tmp.unlink()
 
 
 def _publish_new(tmp: Path, target: Path) -> None:

@@ -13,8 +13,9 @@ from __future__ import annotations
 import contextlib
 import os
 import signal
+import sys
 import threading
-from typing import Callable, Iterator
+from typing import Any, Callable, Iterator
 
 # How long (s) the command line waits for Python to raise a signal before it ends the process itself.
 GRACE = 0.25
@@ -29,8 +30,8 @@ class Interrupt(KeyboardInterrupt):
 
 
 # pending: a signal marked inside a deferred block, not yet raised; depth: nested deferred blocks (main thread);
-# last: the last signal received; raised: how many were raised to Python.
-_state = {"pending": 0, "depth": 0, "last": 0, "raised": 0}
+# last: the last signal received; raised: how many were raised to Python; watched: inside `watched`.
+_state = {"pending": 0, "depth": 0, "last": 0, "raised": 0, "watched": 0}
 
 
 def handler(signum: int, frame: object) -> None:
@@ -43,7 +44,9 @@ def handler(signum: int, frame: object) -> None:
 
 
 def _raise(signum: int) -> None:
-    _state["pending"] = 0
+    # Under `watched` a signal stays pending once raised: a KeyboardInterrupt raised in a finaliser or a weakref's
+    # callback is printed and dropped by Python, and the next `check` raises it again.
+    _state["pending"] = signum if _state["watched"] else 0
     _state["raised"] += 1
     raise Interrupt(signum)
 
@@ -92,7 +95,14 @@ def watched(on_timeout: Callable[[int], None]) -> Iterator[None]:
     if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "set_wakeup_fd"):
         yield
         return
-    _state["last"] = 0
+    _state.update(last=0, pending=0, watched=1)
+    unraisable = sys.unraisablehook
+
+    def dropped(info: Any) -> None:  # an interrupt a finaliser dropped is raised again by `check`: no traceback
+        if not isinstance(info.exc_value, Interrupt):
+            unraisable(info)
+
+    sys.unraisablehook = dropped
     reader, writer = os.pipe()
     os.set_blocking(writer, False)
     before = {number: signal.signal(number, handler) for number in SIGNALS}
@@ -121,6 +131,8 @@ def watched(on_timeout: Callable[[int], None]) -> Iterator[None]:
         yield
     finally:
         done.set()
+        _state.update(pending=0, watched=0)
+        sys.unraisablehook = unraisable
         signal.set_wakeup_fd(wakeup)
         for number, former in before.items():
             signal.signal(number, former)

@@ -73,3 +73,36 @@ except KeyboardInterrupt:
     assert done.returncode == 0 and errors_only(done.stderr) == "", done.stdout + done.stderr
     calls = int(done.stdout.split()[2])
     assert calls >= 50 and done.stdout.endswith("calls; None None\n")
+
+
+def test_ctrl_c_while_mujoco_converts_an_argument_is_the_search_interrupt(tmp_path, errors_only):
+    # Ctrl-C that lands while pybind11 converts an argument of MuJoCo's (the handler runs in the conversion) was a
+    # TypeError "incompatible function arguments" and exit 1, in about 1 of 30 interrupted searches.
+    code = f"""
+import os, signal, sys, mujoco
+from finrft import models
+from finrft.cli import main
+
+class Interrupting:
+    def __float__(self):
+        os.kill(os.getpid(), signal.SIGINT)
+        for _ in range(100):  # bytecodes in which Python runs the handler
+            pass
+        return 0.0
+
+built = []
+segment_spec = models._segment_spec
+def interrupted_spec(*args):
+    built.append(1)
+    if len(built) == 8:  # in the second generation, after the log's first write
+        mujoco.MjSpec().worldbody.add_body(pos=[Interrupting(), 0.0, 0.0])
+    return segment_spec(*args)
+models._segment_spec = interrupted_spec
+sys.exit(main(["optimize", "--preset", "paper", "--seed", "3", "--workers", "1", "--set", "gait.omega=3",
+               "--budget", "55", "--quiet", "--out", {str(tmp_path / "run.h5")!r}]))
+"""
+    done = subprocess.run([sys.executable, "-c", code], cwd=OUTSIDE, capture_output=True, text=True, timeout=300,
+                          preexec_fn=default_ctrl_c)
+    assert done.returncode == 130, done.stderr
+    assert errors_only(done.stderr) == (f"finrft: interrupted after 1 generation; continue with: finrft optimize "
+                                        f"--resume {tmp_path / 'run.h5'}\n")

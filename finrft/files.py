@@ -70,6 +70,19 @@ def check_regular(info: os.stat_result, path: str | Path, what: str, limit: int)
         raise SceneError(f"{what} {path} holds {info.st_size} bytes, more than the {limit} finrft reads")
 
 
+def not_a_file(path: str | Path) -> str:
+    """Why ``path`` is no regular file to read, for a message: "no such file", or what is there instead."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError as exc:
+        return "no such file" if exc.errno == errno.ENOENT else exc.strerror or str(exc)
+    for test, what in ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a pipe"), (stat.S_ISSOCK, "a socket"),
+                       (stat.S_ISCHR, "a device"), (stat.S_ISBLK, "a device")):
+        if test(mode):
+            return f"it is {what}, not a file"
+    return "it is not a regular file"
+
+
 def read_toml(text: str, origin: str) -> dict[str, Any]:
     """TOML text as a nested mapping; SceneError beginning with ``origin`` when it is malformed."""
     try:
@@ -89,6 +102,15 @@ def check_target(path: Any, what: str = "", error: type[SceneError] = SceneError
     check_folder(target.parent, name, error)
     if target.is_dir():
         raise error(f"{name} is a directory: give a file name")
+    # The file is written under a longer temporary name first (`atomic_path`), which must fit the file system too.
+    longest = len(os.fsencode(_temporary_name(target, 4194304)))  # Linux's largest pid
+    try:
+        limit = os.pathconf(target.parent, "PC_NAME_MAX")
+    except (OSError, ValueError, AttributeError):
+        limit = 255
+    if longest > limit:
+        raise error(f"{name}: the file name is too long (with the temporary name it is written under first, "
+                    f"{longest} bytes where the file system allows {limit}): give a shorter name")
     return target
 
 
@@ -152,7 +174,7 @@ def atomic_path(path: str | Path, *, exclusive: bool | None = None) -> Iterator[
     remove_stale_temporaries(target)
     # Not tempfile.mkstemp: its 0600 mode would carry over to the result; the writers create the file themselves.
     # The writer's pid in the name tells the next writer whether it still runs.
-    tmp = target.with_name(f".{target.stem}.{os.getpid()}-{uuid.uuid4().hex[:12]}.tmp{target.suffix}")
+    tmp = target.with_name(_temporary_name(target, os.getpid()))
     _writing.add(tmp)
     try:
         yield tmp
@@ -171,6 +193,10 @@ def atomic_path(path: str | Path, *, exclusive: bool | None = None) -> Iterator[
         raise
     finally:
         _writing.discard(tmp)
+
+
+def _temporary_name(target: Path, pid: int) -> str:
+    return f".{target.stem}.{pid}-{uuid.uuid4().hex[:12]}.tmp{target.suffix}"
 
 
 # The temporary files `atomic_path` blocks are writing now.

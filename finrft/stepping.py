@@ -10,7 +10,7 @@ from typing import Any, Callable, Sequence
 import mujoco
 import numpy as np
 
-from . import interrupts, methods
+from . import callbacks, interrupts, methods
 from .convergence import MAX_STEPS, check_resolution, check_size, record_every
 from .drive import Drive
 from .errors import Chatter, NotConverged, SceneError, SimulationFailed, SimulationUnstable, StepUnderflow
@@ -320,6 +320,7 @@ def step_through(m: mujoco.MjModel, d: mujoco.MjData, scene: Any, advance: Stepp
                 code = advance.until(d, times[i + 1]) if adaptive else advance(d, int(events[i + 1] - step))
             else:
                 code = _walk(advance, d, step, int(events[i + 1]), times[i + 1], scene.sim, adaptive, on_step)
+            callbacks.check(m)
             if code or any(counts[w] for w in bad):
                 raise unstable(scene, d.time, messages, code or 1)
     if probe:

@@ -106,3 +106,23 @@ sys.exit(main(["optimize", "--preset", "paper", "--seed", "3", "--workers", "1",
     assert done.returncode == 130, done.stderr
     assert errors_only(done.stderr) == (f"finrft: interrupted after 1 generation; continue with: finrft optimize "
                                         f"--resume {tmp_path / 'run.h5'}\n")
+
+
+def test_a_controller_error_inside_a_native_step_is_raised_to_the_caller():
+    # A controller that fails while a native stepper (MuJoCo's C code) calls it: was the interpreter's end.
+    code = """
+import dataclasses, finrft
+from finrft.experiments.user_model import example
+scene = dataclasses.replace(finrft.load_scene(example("sand_swimmer"), cls=finrft.UserScene), control=())
+calls = []
+def control(t, d):
+    calls.append(t)
+    return [1.0] if len(calls) > 30 else d.ctrl * 0
+try:
+    finrft.run_robot(scene, control=control)
+except finrft.SceneError as exc:
+    print(exc)
+"""
+    done = subprocess.run([sys.executable, "-c", code], cwd=OUTSIDE, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout == "control(t, data) returned 1 values: give one ctrl per actuator (6)\n"

@@ -36,7 +36,14 @@ class _Table:
     def __call__(self, m: mujoco.MjModel, d: mujoco.MjData) -> None:
         entry = self.callbacks.get(m._address)
         if entry is not None:
-            entry[0](m, d)
+            if m._address in _failed:
+                return
+            try:
+                entry[0](m, d)
+            except BaseException as exc:
+                # An exception that reaches MuJoCo's C code from a native stepper ends the interpreter (a fatal
+                # error): kept, the model's callbacks skipped, and raised by `check` when the stepper returns.
+                _failed[m._address] = exc
             return
         reason = "" if self.guard is None else self.guard(m)
         if reason:
@@ -59,7 +66,9 @@ class _Table:
             self.callbacks[key] = (callback, me)
         try:
             yield
+            check(model)
         finally:
+            _failed.pop(key, None)
             with _STATE:
                 if owner is None:
                     del self.callbacks[key]
@@ -69,6 +78,18 @@ class _Table:
                     self.put(self.previous)
                     self.previous = None
                 _STATE.notify_all()
+
+
+# The exception a model's callback raised (model address -> exception), until `check` raises it.
+_failed: dict[int, BaseException] = {}
+
+
+def check(model: mujoco.MjModel) -> None:
+    """Raise the exception a callback of ``model`` raised while MuJoCo stepped it, if any: after every call that
+    steps it from C (MuJoCo's bindings raise it themselves only from their own mj_step)."""
+    failure = _failed.pop(model._address, None)
+    if failure is not None:
+        raise failure
 
 
 class _State(threading.Condition):

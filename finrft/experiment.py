@@ -17,7 +17,7 @@ from typing import Any, Callable, Protocol
 import mujoco
 import numpy as np
 
-from . import geometry, laws, native
+from . import geometry, interrupts, laws, native
 from .convergence import (ErrorLimits, Estimated, FigureLimit, checked, figure_difference, max_difference, paired,
                           require_finite)
 from .callbacks import controlled, installed
@@ -253,7 +253,9 @@ def run(experiment: Experiment, scene: Any, *, progress: Callable[[float], None]
         else:
             mujoco.mj_resetData(built.model, d)
         return _once(experiment, s, built, d, p, companion)
-    return checked(experiment.build, once, scene, progress, max_error, estimate_error)
+    # A signal is raised between the run's steps (`interrupts.check` in step_through), never inside MuJoCo's calls.
+    with interrupts.deferred():
+        return checked(experiment.build, once, scene, progress, max_error, estimate_error)
 
 
 def python_forces(built: Any) -> Callable[[mujoco.MjModel, mujoco.MjData], None]:

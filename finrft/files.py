@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import contextvars
 import errno
+import io
 import os
 import re
 import stat
@@ -66,6 +67,19 @@ def check_regular(info: os.stat_result, path: str | Path, what: str, limit: int)
         raise SceneError(f"{what} {path} holds {info.st_size} bytes, more than the {limit} finrft reads")
 
 
+def not_a_file(path: str | Path) -> str:
+    """Why ``path`` is no regular file to read, for a message: "no such file", or what is there instead."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError as exc:
+        return "no such file" if exc.errno == errno.ENOENT else exc.strerror or str(exc)
+    for test, what in ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a pipe"), (stat.S_ISSOCK, "a socket"),
+                       (stat.S_ISCHR, "a device"), (stat.S_ISBLK, "a device")):
+        if test(mode):
+            return f"it is {what}, not a file"
+    return "it is not a regular file"
+
+
 def read_toml(text: str, origin: str) -> dict[str, Any]:
     """TOML text as a nested mapping; SceneError beginning with ``origin`` when it is malformed."""
     try:
@@ -85,6 +99,15 @@ def check_target(path: Any, what: str = "", error: type[SceneError] = SceneError
     check_folder(target.parent, name, error)
     if target.is_dir():
         raise error(f"{name} is a directory: give a file name")
+    # The file is written under a longer temporary name first (`atomic_path`), which must fit the file system too.
+    longest = len(os.fsencode(_temporary_name(target, 4194304)))  # Linux's largest pid
+    try:
+        limit = os.pathconf(target.parent, "PC_NAME_MAX")
+    except (OSError, ValueError, AttributeError):
+        limit = 255
+    if longest > limit:
+        raise error(f"{name}: the file name is too long (with the temporary name it is written under first, "
+                    f"{longest} bytes where the file system allows {limit}): give a shorter name")
     return target
 
 
@@ -98,6 +121,29 @@ def check_folder(folder: Path, name: str, error: type[SceneError] = SceneError) 
             pass
     except OSError as exc:
         raise error(f"{name}: cannot write in {folder}: {exc.strerror}") from None
+
+
+def write_bytes(path: Path, data: bytes | memoryview) -> None:
+    """Write ``data`` to a new file at ``path`` and on to the disk: OSError naming ``path`` when any of it cannot be
+    written (a full disk), before the file is published."""
+    with open(path, "xb") as handle:
+        handle.write(data)
+        handle.flush()
+        os.fsync(handle.fileno())
+
+
+@contextlib.contextmanager
+def hdf5_written(path: str | Path, *, exclusive: bool | None = None, **options: Any) -> Iterator[Any]:
+    """An HDF5 file (h5py.File, made with ``options``) to fill in the block, written to ``path`` by `atomic_path`
+    (``exclusive`` as there) when the block ends. It is built in memory and written by Python, which raises
+    OSError on a failed write: HDF5's own writes, failing on a full disk, leave its file object in a state whose
+    close crashes the process."""
+    import h5py  # here, not at the top: `import finrft` stays light
+    image = io.BytesIO()
+    with h5py.File(image, "w", **options) as f:
+        yield f
+    with atomic_path(path, exclusive=exclusive) as tmp:
+        write_bytes(tmp, image.getbuffer())
 
 
 # Whether `atomic_path` may replace a file that exists, where its caller does not say: the command line's writers
@@ -125,16 +171,40 @@ def atomic_path(path: str | Path, *, exclusive: bool | None = None) -> Iterator[
     remove_stale_temporaries(target)
     # Not tempfile.mkstemp: its 0600 mode would carry over to the result; the writers create the file themselves.
     # The writer's pid in the name tells the next writer whether it still runs.
-    tmp = target.with_name(f".{target.stem}.{os.getpid()}-{uuid.uuid4().hex[:12]}.tmp{target.suffix}")
+    tmp = target.with_name(_temporary_name(target, os.getpid()))
+    _writing.add(tmp)
     try:
         yield tmp
         if _exclusive.get() if exclusive is None else exclusive:
             _publish_new(tmp, target)
         else:
             os.replace(tmp, target)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        if exc.filename not in (None, str(tmp)):
+            raise
+        # The file asked for, not its temporary, which is gone.
+        raise OSError(exc.errno, f"{exc.strerror or exc}: nothing was written", str(target)) from None
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+    finally:
+        _writing.discard(tmp)
+
+
+def _temporary_name(target: Path, pid: int) -> str:
+    return f".{target.stem}.{pid}-{uuid.uuid4().hex[:12]}.tmp{target.suffix}"
+
+
+# The temporary files `atomic_path` blocks are writing now.
+_writing: set[Path] = set()
+
+
+def remove_temporaries() -> None:
+    """Remove the temporary files being written, for a process that ends without leaving its blocks (os._exit)."""
+    for tmp in list(_writing):
+        with contextlib.suppress(OSError):
+            tmp.unlink()
 
 
 def _publish_new(tmp: Path, target: Path) -> None:

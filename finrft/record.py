@@ -7,13 +7,13 @@ interrupted or failed write never leaves a truncated file where a complete one i
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import uuid
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Iterator, Mapping
 
-import h5py
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
@@ -21,7 +21,7 @@ import rerun.blueprint as rrb
 from . import geometry, laws
 from .errors import SceneError
 from .experiment import DISPLAY, Result
-from .files import atomic_path, check_target, provenance
+from .files import atomic_path, check_target, hdf5_written, provenance, write_bytes
 from .scene import to_toml
 
 # Written by write_h5 itself; extra_attrs may not replace them, or a file could contradict its own data.
@@ -76,7 +76,7 @@ def write_h5(run: Result, path: str | Path, *, extra_attrs: dict[str, Any] | Non
     check_new(path, force)
     experiment = run.experiment
     # Without force, a file that another process wrote since the check is kept: one of two writers refuses.
-    with atomic_path(path, exclusive=None if force else True) as tmp, h5py.File(tmp, "w", track_order=True) as f:
+    with hdf5_written(path, exclusive=None if force else True, track_order=True) as f:
         t = f.create_dataset("time", data=run.time)
         t.attrs.update(units="s", description="simulated time of each sample")
         t.make_scale("time")
@@ -94,12 +94,21 @@ def write_h5(run: Result, path: str | Path, *, extra_attrs: dict[str, Any] | Non
                         "sign_convention": experiment.sign_convention, "law_feeds_energy": feeds, **extra})
 
 
-def _stream(path: Path) -> rr.RecordingStream:
+@contextlib.contextmanager
+def _stream(path: Path) -> Iterator[rr.RecordingStream]:
+    """A recording written to ``path`` when the block ends. Kept in memory and written by Python, which raises
+    OSError on a failed write (a full disk): rerun's file writer only logs it, and leaves a file without its end."""
     rec = rr.RecordingStream("finrft", recording_id=uuid.uuid4())
     if not rec.is_enabled():
         raise RuntimeError(f"rerun logging is disabled (RERUN=off?), so {path} cannot be written")
-    rec.save(path)
-    return rec
+    memory = rec.memory_recording()
+    try:
+        yield rec
+        rec.flush()
+        data = memory.drain_as_bytes()
+    finally:
+        rec.disconnect()
+    write_bytes(path, data)
 
 
 def _send_scalars(rec: rr.RecordingStream, entity: str, label: str, times: rr.TimeColumn,
@@ -135,44 +144,35 @@ def write_rrd(run: Result, path: str | Path, *, force: bool = False) -> None:
     the timeline ``sim_time``. SceneError when the file exists, unless ``force``."""
     _check_result(run)
     check_new(path, force)
-    with atomic_path(path, exclusive=None if force else True) as tmp:
-        rec = _stream(tmp)
-        try:
-            rec.log("scene", rr.TextDocument(to_toml(run.scene), media_type=rr.MediaType.TEXT), static=True)
-            spatial, plots = _log(rec, run)
-            # The layout, once logging has made the views it shows.
-            rec.send_blueprint(rrb.Blueprint(rrb.Horizontal(
-                rrb.Tabs(*spatial, rrb.TextDocumentView(name="Scene", origin="scene"), active_tab=0),
-                rrb.Vertical(*plots), column_shares=[3, 2])), make_active=True, make_default=True)
-        finally:
-            # Closes the file sink, so the footer is written (or the file released before it is removed).
-            rec.disconnect()
+    with atomic_path(path, exclusive=None if force else True) as tmp, _stream(tmp) as rec:
+        rec.log("scene", rr.TextDocument(to_toml(run.scene), media_type=rr.MediaType.TEXT), static=True)
+        spatial, plots = _log(rec, run)
+        # The layout, once logging has made the views it shows.
+        rec.send_blueprint(rrb.Blueprint(rrb.Horizontal(
+            rrb.Tabs(*spatial, rrb.TextDocumentView(name="Scene", origin="scene"), active_tab=0),
+            rrb.Vertical(*plots), column_shares=[3, 2])), make_active=True, make_default=True)
 
 
 def write_optimization_rrd(path: str | Path, generations: list[tuple[np.ndarray, np.ndarray]],
                            names: list[str], best: Result) -> None:
     """An optimisation as a rerun recording: best eta per generation, the population in the searched variables
     (the first three, in the CLI's units) per generation, and the best gait's motion."""
-    with atomic_path(path) as tmp:
-        rec = _stream(tmp)
-        try:
-            best_so_far = -np.inf
-            for g, (values, etas) in enumerate(generations):
-                rec.set_time("generation", sequence=g)
-                finite = etas[np.isfinite(etas)]
-                best_so_far = max(best_so_far, float(finite.max()) if len(finite) else -np.inf)
-                if np.isfinite(best_so_far):
-                    rec.log("optimization/best_eta", rr.Scalars(100 * best_so_far))
-                cloud = np.zeros((len(values), 3))
-                cloud[:, :min(3, values.shape[1])] = values[:, :3]
-                rec.log("optimization/population", rr.Points3D(cloud, radii=0.5,
-                                                               colors=[[230, 80, 20]] * len(values)))
-            spatial, plots = _log(rec, best, prefix="best/")
-            views = rrb.Vertical(rrb.TimeSeriesView(name="Best eta per generation (%)", origin="optimization/best_eta"),
-                                 rrb.Spatial3DView(name="Population: " + ", ".join(names[:3]),
-                                                   origin="optimization/population"))
-            rec.send_blueprint(rrb.Blueprint(rrb.Horizontal(views, *spatial, rrb.Vertical(*plots),
-                                                            column_shares=[2, 2, 1])),
-                               make_active=True, make_default=True)
-        finally:
-            rec.disconnect()
+    with atomic_path(path) as tmp, _stream(tmp) as rec:
+        best_so_far = -np.inf
+        for g, (values, etas) in enumerate(generations):
+            rec.set_time("generation", sequence=g)
+            finite = etas[np.isfinite(etas)]
+            best_so_far = max(best_so_far, float(finite.max()) if len(finite) else -np.inf)
+            if np.isfinite(best_so_far):
+                rec.log("optimization/best_eta", rr.Scalars(100 * best_so_far))
+            cloud = np.zeros((len(values), 3))
+            cloud[:, :min(3, values.shape[1])] = values[:, :3]
+            rec.log("optimization/population", rr.Points3D(cloud, radii=0.5,
+                                                           colors=[[230, 80, 20]] * len(values)))
+        spatial, plots = _log(rec, best, prefix="best/")
+        views = rrb.Vertical(rrb.TimeSeriesView(name="Best eta per generation (%)", origin="optimization/best_eta"),
+                             rrb.Spatial3DView(name="Population: " + ", ".join(names[:3]),
+                                               origin="optimization/population"))
+        rec.send_blueprint(rrb.Blueprint(rrb.Horizontal(views, *spatial, rrb.Vertical(*plots),
+                                                        column_shares=[2, 2, 1])),
+                           make_active=True, make_default=True)

@@ -11,7 +11,7 @@ from typing import Any, Callable, Sequence
 import mujoco
 import numpy as np
 
-from . import methods
+from . import callbacks, interrupts, methods
 from .convergence import MAX_STEPS, check_resolution, check_size, record_every
 from .drive import Drive
 from .errors import Chatter, NotConverged, SceneError, SimulationFailed, SimulationUnstable, StepUnderflow
@@ -342,6 +342,7 @@ def _walk(advance: Stepper, d: mujoco.MjData, step: int, end: int, end_time: flo
     code at the first failure, else 0."""
     stride = max(1, round(sim.max_step / sim.dt)) if adaptive else 1
     for k in [*range((step // stride + 1) * stride, end, stride), end]:
+        interrupts.check()
         code = advance.until(d, end_time if k == end else k * sim.dt) if adaptive else advance(d, 1)
         if code:
             return code
@@ -380,6 +381,7 @@ def step_through(m: mujoco.MjModel, d: mujoco.MjData, scene: Any, advance: Stepp
     sample = 0
     with captured_warnings(messages):
         for i, step in enumerate(events):
+            interrupts.check()
             k = stroke_of[i]
             if step == starts[k]:
                 on_stroke(k)
@@ -400,6 +402,7 @@ def step_through(m: mujoco.MjModel, d: mujoco.MjData, scene: Any, advance: Stepp
                 code = advance.until(d, times[i + 1]) if adaptive else advance(d, int(events[i + 1] - step))
             else:
                 code = _walk(advance, d, step, int(events[i + 1]), times[i + 1], scene.sim, adaptive, on_step)
+            callbacks.check(m)
             if code or any(counts[w] for w in bad):
                 raise unstable(scene, d.time, messages, code or 1)
             failure = void_run(m, d)

@@ -242,3 +242,25 @@ def test_swim_recording_matches_its_hdf5(tmp_path):
     t, values = _temporal(chunks, "/motion/body_y", "Scalars:scalars")
     np.testing.assert_allclose(np.ravel(values), 1e3 * body, rtol=1e-12, atol=1e-12)
     assert _chunks(rrd, blueprint=True)
+
+
+def _small_file_limit() -> None:
+    # A file may not grow past 16 kB, as on a nearly full disk: writes past it fail (EFBIG) instead of the
+    # process being killed (SIGXFSZ).
+    import resource
+    import signal
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+    resource.setrlimit(resource.RLIMIT_FSIZE, (16_000, 16_000))
+
+
+@pytest.mark.parametrize("flag, name", [("--out", "run.h5"), ("--rrd", "run.rrd")])
+def test_a_write_that_fails_on_a_full_disk_is_one_line_and_no_file(tmp_path, flag, name, errors_only):
+    import subprocess
+    import sys
+    done = subprocess.run([sys.executable, "-m", "finrft", "drag", "--set", "sim.dt=0.001", "--distance", "30",
+                           "--quiet", flag, str(tmp_path / name)], capture_output=True, text=True,
+                          cwd=tmp_path.parent, preexec_fn=_small_file_limit, timeout=300)
+    err = errors_only(done.stderr)
+    assert done.returncode == 2, err
+    assert err.count("\n") == 1 and err.startswith(f"finrft: error: {tmp_path / name}: File too large"), err
+    assert not any(tmp_path.iterdir())

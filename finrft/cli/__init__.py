@@ -4,9 +4,10 @@ Every registered experiment (`finrft.experiments.REGISTRY`) is a subcommand run 
 other commands describe (`info`), search (`search`) or regenerate the paper's results and benchmarks (`studies`).
 
 Exit status: 0 success, 1 the simulation went unstable or its estimated discretisation error exceeds --max-error,
-2 bad input or a file that cannot be read or written (one line on stderr, nothing written), 130 interrupted
-(Ctrl-C, SIGTERM or SIGHUP), 141 stdout closed early (as Unix tools on SIGPIPE). Output paths are checked before anything runs;
-every command takes --quiet, every writer --force.
+2 bad input or a file that cannot be read or written (one line on stderr, nothing written), 128 + the signal's
+number when interrupted (130 Ctrl-C, 143 SIGTERM, 129 SIGHUP; within a second, also inside a long native call),
+141 stdout closed early (as Unix tools on SIGPIPE). Output paths are checked before anything runs; every command
+takes --quiet, every writer --force.
 """
 
 from __future__ import annotations
@@ -15,15 +16,13 @@ import argparse
 import contextlib
 import itertools
 import os
-import signal
 import sys
-import threading
 import warnings
-from typing import Iterator, Sequence
+from typing import Sequence
 
-from .. import __version__
+from .. import __version__, interrupts
 from ..errors import SceneError, SimulationFailed
-from ..files import keep_existing
+from ..files import keep_existing, remove_temporaries
 from .common import Interrupted, Parser, one_line_warning
 
 __all__ = ["build_parser", "main"]
@@ -33,7 +32,7 @@ DESCRIPTION = ("Compliant fins in granular media: resistive force theory (RFT) o
                "run estimates its own discretisation error. Every command runs the physical presets unless given "
                "--preset paper (the authors' model) or --scene. Exit status: 0 done, 1 the simulation went unstable "
                "or its estimated error exceeds --max-error, 2 bad input or a file that cannot be written, 130 "
-               "interrupted.")
+               "interrupted (143 on SIGTERM).")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -82,7 +81,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         os.dup2(os.open(os.devnull, os.O_WRONLY), 1)
         _report("finrft: error: standard output is closed: redirect it to a file or to /dev/null")
         return 2
-    with warnings.catch_warnings(), _terminations_interrupt():
+    # SIGTERM (a scheduler's pre-emption) and SIGHUP (a lost terminal) stop as Ctrl-C does, so that a search leaves
+    # a valid log, says how to continue it and shuts its workers down.
+    with warnings.catch_warnings(), interrupts.watched(_killed_in_native_code):
         warnings.showwarning = one_line_warning
         try:
             status = _dispatch(parser, argv)
@@ -94,27 +95,14 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 141
         except KeyboardInterrupt:
             _report("finrft: interrupted")
-            return 130
+            return 128 + interrupts.received()
 
 
-# What a job scheduler's pre-emption (SIGTERM) or a lost terminal (SIGHUP) sends: treated as Ctrl-C is, so that a
-# search leaves a valid log, says how to continue it and shuts its workers down.
-TERMINATIONS = tuple(getattr(signal, name) for name in ("SIGTERM", "SIGHUP") if hasattr(signal, name))
-
-
-@contextlib.contextmanager
-def _terminations_interrupt() -> Iterator[None]:
-    """SIGTERM and SIGHUP raise KeyboardInterrupt in the block (in the main thread; elsewhere Python allows no
-    handler), and their former handlers are restored after it."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    before = {number: signal.signal(number, signal.default_int_handler) for number in TERMINATIONS}
-    try:
-        yield
-    finally:
-        for number, handler in before.items():
-            signal.signal(number, handler)
+def _killed_in_native_code(signum: int) -> None:
+    """A signal Python could not raise in time (the main thread is in a long C call): the files being written are
+    removed, and the process ends (`interrupts.watched`)."""
+    remove_temporaries()
+    _report("finrft: interrupted")
 
 
 def _report(text: str) -> None:
@@ -140,7 +128,7 @@ def _dispatch(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> in
         return 1
     except Interrupted as exc:
         _report(f"finrft: {exc}")
-        return 130
+        return 128 + interrupts.received()
     except BrokenPipeError:
         raise
     except OSError as exc:  # a file that could not be read or written after the checks (disk full, removed)

@@ -16,7 +16,7 @@ from ..files import atomic_path, check_folder, check_target
 
 
 class Interrupted(Exception):
-    """Ctrl-C: reported in one line (how to continue, when there is a log) with exit status 130."""
+    """Ctrl-C: reported in one line (how to continue, when there is a log) with exit status 128 + the signal's number."""
 
 
 class Parser(argparse.ArgumentParser):

@@ -17,7 +17,7 @@ import numpy as np
 from .. import laws, methods, native
 from ..attach import Attached, SurfaceForces, attach
 from ..drive import Drive
-from ..files import check_regular, read_text
+from ..files import check_regular, not_a_file, read_text
 from ..models import ARMATURE_RATIO, INTEGRATORS, compile_spec
 from ..scene import Medium, SceneError
 from ..stepping import Prescribed
@@ -51,7 +51,7 @@ def read_spec(path: str) -> mujoco.MjSpec:
     if not path:
         raise SceneError("no model: give the MJCF file (finrft run MODEL.xml, or model.path in the scene)")
     if not Path(path).is_file():
-        raise SceneError(f"cannot read model file {path}: no such file")
+        raise SceneError(f"cannot read model file {path}: {not_a_file(path)}")
     check_model_files(Path(path))
     try:
         return mujoco.MjSpec.from_file(str(path))

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from ..files import atomic_path, check_regular
+from ..files import check_regular, hdf5_written
 from ..errors import SceneError
 
 OPTIMIZE = "finrft.optimize/2"
@@ -55,8 +55,7 @@ class Series:
 def write(path: str | Path, attrs: dict[str, Any], datasets: dict[str, Dataset]) -> None:
     """Replace ``path`` with a log of root ``attrs`` and ``datasets`` (each with its units and description), and
     their digest. It replaces the log it continues: a run owns its log (`finrft.files.locked`)."""
-    import h5py  # here, not at the top: `import finrft` stays light
-    with atomic_path(path, exclusive=False) as tmp, h5py.File(tmp, "w", track_order=True) as f:
+    with hdf5_written(path, exclusive=False, track_order=True) as f:
         f.attrs.update(attrs)
         for name, d in datasets.items():
             ds = f.create_dataset(name, data=d.data)

@@ -307,11 +307,14 @@ def _section(where: str, section_name: str, section_cls: type, given: Any, defau
 
 def updated(data: dict[str, dict[str, Any]], cls: type, updates: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
     """``data`` (a scene of class ``cls`` as nested dicts) with the dotted keys of ``updates`` set, in place; the
-    keys are checked, the values are checked when the scene is validated (`from_dict`)."""
+    keys are checked, the values are checked when the scene is validated (`from_dict`). A selector changed
+    (``--set rft.law=table``) drops the keys of its section that the new choice does not use and ``updates`` do not
+    set: they belonged to the choice it replaces (`unused`)."""
     for key, value in updates.items():
         section_name, index, name = _split(cls, key)
         if section_name not in arrays(cls):
             data[section_name][name] = value
+            _drop_unused(data[section_name], sections(cls)[section_name], name, value, updates, f"{section_name}.")
             continue
         entries = data[section_name] = list(data[section_name])
         if index is None:
@@ -325,7 +328,19 @@ def updated(data: dict[str, dict[str, Any]], cls: type, updates: Mapping[str, An
         if index == len(entries):
             entries.append({})
         entries[index] = {**entries[index], name: value}
+        _drop_unused(entries[index], sections(cls)[section_name], name, value, updates,
+                     (f"{section_name}.{index}.", f"{section_name}."))
     return data
+
+
+def _drop_unused(entry: dict[str, Any], section_cls: type, selector: str, value: Any, updates: Mapping[str, Any],
+                 prefixes: str | tuple[str, ...]) -> None:
+    """Drop from ``entry`` the keys that ``selector`` set to ``value`` does not use, unless ``updates`` set them."""
+    for f in dataclasses.fields(section_cls):
+        rule = f.metadata.get("used_by")
+        if rule and rule[0] == selector and str(value).lower() not in {v.lower() for v in rule[1]} and not any(
+                f"{prefix}{f.name}" in updates for prefix in ((prefixes,) if isinstance(prefixes, str) else prefixes)):
+            entry.pop(f.name, None)
 
 
 def replace(scene: Any, updates: Mapping[str, Any]) -> Any:

@@ -204,3 +204,14 @@ def test_a_sine_needs_eight_steps_per_period(frequency, ok):
         with pytest.raises(SceneError, match=r"control.0.frequency = 126 Hz has 7.94 steps per period at sim.dt = "
                                              r"0.001 s, fewer than 8: set sim.dt <= 0.000992 s"):
             build()
+
+
+def test_a_selector_set_drops_the_keys_of_the_choice_it_replaces():
+    # --set rft.law=table on a preset of the sandswim law: the preset's c_s, c_f, gamma0 were no keys the user gave
+    switched = preset("physical").replace(**{"rft.law": "table", "rft.table": "forces.csv"})
+    assert (switched.rft.law, switched.rft.c_s, switched.rft.table) == ("table", 0.0, "forces.csv")
+    # a key given beside the selector is still refused when the new choice does not use it
+    with pytest.raises(SceneError, match="rft.c_s is used by law = 'sandswim' only"):
+        preset("physical").replace(**{"rft.law": "table", "rft.table": "forces.csv", "rft.c_s": 1e4})
+    sine = UserScene(control=(Control(actuator="a", kind="sine", amplitude=1.0),))
+    assert sine.replace(**{"control.0.kind": "constant"}).control[0].amplitude == 0.0

@@ -43,6 +43,9 @@ class _Table:
             except BaseException as exc:
                 # An exception that reaches MuJoCo's C code from a native stepper ends the interpreter (a fatal
                 # error): kept, the model's callbacks skipped, and raised by `check` when the stepper returns.
+                # MuJoCo's bindings raise it themselves from their own mj_step (a user's step in a block).
+                if not getattr(_deferring, "on", False):
+                    raise
                 _failed[m._address] = exc
             return
         reason = "" if self.guard is None else self.guard(m)
@@ -82,6 +85,19 @@ class _Table:
 
 # The exception a model's callback raised (model address -> exception), until `check` raises it.
 _failed: dict[int, BaseException] = {}
+# Whether this thread's steps run from finrft's native steppers (`deferred`).
+_deferring = threading.local()
+
+
+@contextlib.contextmanager
+def deferred() -> Iterator[None]:
+    """A block whose steps run from finrft's native steppers, through C that cannot carry a Python exception: a
+    callback's exception is kept and raised by `check` after each call."""
+    _deferring.on = True
+    try:
+        yield
+    finally:
+        _deferring.on = False
 
 
 def check(model: mujoco.MjModel) -> None:

@@ -379,7 +379,7 @@ def step_through(m: mujoco.MjModel, d: mujoco.MjData, scene: Any, advance: Stepp
     bad = [int(w) for w in _BAD_STATE]
     messages: list[str] = []
     sample = 0
-    with captured_warnings(messages):
+    with captured_warnings(messages), callbacks.deferred():
         for i, step in enumerate(events):
             interrupts.check()
             k = stroke_of[i]

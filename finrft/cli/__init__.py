@@ -72,7 +72,6 @@ def _print_version_if_asked(argv: Sequence[str]) -> None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     _print_version_if_asked(sys.argv[1:] if argv is None else argv)
-    parser = build_parser()
     if sys.stderr is None:  # started with stderr closed: its one-line reports go nowhere rather than to stdout
         sys.stderr = open(os.devnull, "w")
     if sys.stdout is None:
@@ -86,7 +85,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     with warnings.catch_warnings(), interrupts.watched(_killed_in_native_code):
         warnings.showwarning = one_line_warning
         try:
-            status = _dispatch(parser, argv)
+            # the commands' imports too: a signal during them is an interrupt as any other
+            status = _dispatch(build_parser(), argv)
             sys.stdout.flush()  # a reader that went away shows here, not as a traceback at exit
             return status
         except BrokenPipeError:

@@ -35,6 +35,8 @@ MAX_SEGMENTS = 100
 
 # The keys of a chain's one-sided stop: a soft or rigid chain has none.
 ORIGAMI = ("kind", ("origami",))
+# The keys of the methods that size their own steps: a fixed step has none.
+ADAPTIVE = ("method", methods.adaptive())
 
 
 @dataclass(frozen=True)
@@ -89,9 +91,10 @@ class Sim:
     backend: str = _f("native", "", "where the RFT force is computed: the C plugin, or a Python callback "
                       "(native falls back to python when the plugin is unavailable)", choices=("native", "python"))
     method: str = _f("newton", "", methods.described(), choices=methods.names())
-    max_step: float = _f(1e-3, "s", "adaptive methods: largest step", minimum=0.0)
+    max_step: float = _f(1e-3, "s", "adaptive methods: largest step", minimum=0.0, used_by=ADAPTIVE)
     tolerance: float = _f(1e-4, "", "adaptive methods: error per step, relative (absolute below 1e-3)", minimum=0.0,
-                          maximum=0.1, why_maximum="a looser step-doubling test accepts steps of any error")
+                          maximum=0.1, why_maximum="a looser step-doubling test accepts steps of any error",
+                          used_by=ADAPTIVE)
     record_dt: float = _f(0.02, "s", "interval between recorded samples (rounded to whole steps)", minimum=0.0)
 
 

@@ -105,6 +105,7 @@ def test_bad_input_is_one_line_exit_2_and_writes_nothing(tmp_path, capsys, argv,
     ("[plate]\nsegments = 2.5", "plate.segments"),
     ("[fluid]\nrho = 1", "[fluid]"),
     ("[rft]\nlaw = 'table'", "rft.table"),
+    ("[sim]\nmethod = 'newton'\ntolerance = 1e-3", "sim.tolerance is used by method = 'adaptive' or 'adaptive-newton'"),
     ("[plate]\nkind = 'soft'\nstop_stiffness = 2e4", "plate.stop_stiffness is used by kind = 'origami'"),
 ])
 def test_bad_scene_files(tmp_path, capsys, text, named):
@@ -146,6 +147,7 @@ def test_scene_dump_round_trips(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("argv,section,dropped", [
+    (["--robot", "--dump", "paper", "--set", "sim.method=newton"], "sim", ("tolerance", "max_step")),
     (["--scene", "origami.toml", "--set", "plate.kind=rigid"], "plate", ("stop", "stop_stiffness"))])
 def test_a_selector_switched_by_set_drops_the_keys_of_the_choice_it_replaces(tmp_path, monkeypatch, capsys, argv,
                                                                              section, dropped):

@@ -62,6 +62,11 @@ def explicit() -> tuple[str, ...]:
     return tuple(name for name, m in METHODS.items() if not m.implicit)
 
 
+def adaptive() -> tuple[str, ...]:
+    """The methods that size their steps by an error estimate: the ones that read sim.tolerance and sim.max_step."""
+    return tuple(name for name, m in METHODS.items() if m.adaptive)
+
+
 def described() -> str:
     """Every method in one sentence each, as the schema's documentation of ``sim.method``."""
     return "; ".join(f"{m.name}: {m.doc}" for m in METHODS.values())

@@ -33,6 +33,11 @@ from .schema import field_of, split_key, to_toml  # noqa: F401
 # N^3: with 100 physical segments a 10 mm drag already takes ~2 s under the newton method, 200 take ~15 s.
 MAX_SEGMENTS = 100
 
+# The keys of a chain's one-sided stop: a soft or rigid chain has none.
+ORIGAMI = ("kind", ("origami",))
+# The keys of the methods that size their own steps: a fixed step has none.
+ADAPTIVE = ("method", methods.adaptive())
+
 
 @dataclass(frozen=True)
 class Chain:
@@ -52,9 +57,9 @@ class Chain:
     damping: float = _f(0.04555, "N m s/rad", "hinge damping b", minimum=0.0, exclusive=False)
     stop: str = _f("penalty", "", "origami stop: the penalty spring (taken implicitly by the newton method), or a "
                    "MuJoCo joint limit",
-                   choices=("limit", "penalty"))
+                   choices=("limit", "penalty"), used_by=ORIGAMI)
     stop_stiffness: float = _f(1.0e4, "N m/rad", "penalty stop: torque -(k_stop (d + |d|)) d for hinge deflection d",
-                               minimum=0.0)
+                               minimum=0.0, used_by=ORIGAMI)
 
 
 @dataclass(frozen=True)
@@ -66,7 +71,7 @@ class Plate(Chain):
     chain: str = _f("planar", "", "planar: hinges about z only; spatial: each segment also turns freely about "
                     "its own x and y axes (a 3D chain)", choices=("planar", "spatial"))
     rigid_as: str = _f("body", "", "rigid plate: one body, or hinged segments held together by weld constraints",
-                       choices=("body", "welds"))
+                       choices=("body", "welds"), used_by=("kind", ("rigid",)))
 
 
 RFT = schema.section("RFT", (
@@ -86,9 +91,10 @@ class Sim:
     backend: str = _f("native", "", "where the RFT force is computed: the C plugin, or a Python callback "
                       "(native falls back to python when the plugin is unavailable)", choices=("native", "python"))
     method: str = _f("newton", "", methods.described(), choices=methods.names())
-    max_step: float = _f(1e-3, "s", "adaptive methods: largest step", minimum=0.0)
+    max_step: float = _f(1e-3, "s", "adaptive methods: largest step", minimum=0.0, used_by=ADAPTIVE)
     tolerance: float = _f(1e-4, "", "adaptive methods: error per step, relative (absolute below 1e-3)", minimum=0.0,
-                          maximum=0.1, why_maximum="a looser step-doubling test accepts steps of any error")
+                          maximum=0.1, why_maximum="a looser step-doubling test accepts steps of any error",
+                          used_by=ADAPTIVE)
     record_dt: float = _f(0.02, "s", "interval between recorded samples (rounded to whole steps)", minimum=0.0)
 
 

@@ -20,7 +20,7 @@ from conftest import default_ctrl_c
 from finrft.laws.table import paper_table, write_table
 from finrft.cli import build_parser, main
 from finrft.experiments.swim import RobotScene
-from finrft.scene import preset, to_toml
+from finrft.scene import Scene, preset, to_toml
 
 # Subprocesses run outside the repository: from its root `python -m finrft` would import the source tree, which
 # holds neither the built plugin nor the packaged models, instead of the installed package.
@@ -105,6 +105,8 @@ def test_bad_input_is_one_line_exit_2_and_writes_nothing(tmp_path, capsys, argv,
     ("[plate]\nsegments = 2.5", "plate.segments"),
     ("[fluid]\nrho = 1", "[fluid]"),
     ("[rft]\nlaw = 'table'", "rft.table"),
+    ("[sim]\nmethod = 'newton'\ntolerance = 1e-3", "sim.tolerance is used by method = 'adaptive' or 'adaptive-newton'"),
+    ("[plate]\nkind = 'soft'\nstop_stiffness = 2e4", "plate.stop_stiffness is used by kind = 'origami'"),
 ])
 def test_bad_scene_files(tmp_path, capsys, text, named):
     path = tmp_path / "scene.toml"
@@ -142,6 +144,19 @@ def test_scene_dump_round_trips(tmp_path, capsys):
     assert main(["scene", "--scene", str(path), "--set", "sim.dt=2e-4"]) == 0
     resolved = tomllib.loads(capsys.readouterr().out)
     assert resolved["plate"]["stiffness"] == 0.5 and resolved["sim"]["dt"] == 2e-4
+
+
+@pytest.mark.parametrize("argv,section,dropped", [
+    (["--robot", "--dump", "paper", "--set", "sim.method=newton"], "sim", ("tolerance", "max_step")),
+    (["--scene", "origami.toml", "--set", "plate.kind=rigid"], "plate", ("stop", "stop_stiffness"))])
+def test_a_selector_switched_by_set_drops_the_keys_of_the_choice_it_replaces(tmp_path, monkeypatch, capsys, argv,
+                                                                             section, dropped):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "origami.toml").write_text("[plate]\nkind = 'origami'\nstop = 'limit'\nstop_stiffness = 2e4\n")
+    assert main(["scene", *argv]) == 0
+    resolved = tomllib.loads(capsys.readouterr().out)[section]
+    default = getattr(RobotScene() if "--robot" in argv else Scene(), section)
+    assert all(resolved[key] == getattr(default, key) for key in dropped)
 
 
 @pytest.mark.parametrize("file_value,override,expected", [

@@ -181,7 +181,7 @@ long count_stop(void) { long c = calls; calls = -1; return c; }
 ALLOCATION_RUN = r"""
 import ctypes, json, sys
 import mujoco
-from finrft import integrate, models
+from finrft import integrate, methods, models
 from finrft.experiments import swim
 from finrft.experiments.swim import RobotScene
 from finrft.scene import preset
@@ -189,7 +189,8 @@ counter = ctypes.CDLL(sys.argv[1])
 counter.count_stop.restype = ctypes.c_long
 out = {}
 for method in ("implicit", "newton", "newton-midpoint", "adaptive", "adaptive-newton"):
-    scene = preset("physical", RobotScene).replace(**{"sim.method": method, "sim.dt": 3e-4, "sim.max_step": 1e-3})
+    largest = {"sim.max_step": 1e-3} if methods.get(method).adaptive else {}
+    scene = preset("physical", RobotScene).replace(**{"sim.method": method, "sim.dt": 3e-4, **largest})
     robot = swim.build_robot(scene)
     d = mujoco.MjData(robot.model)
     d.qpos[robot.servo_qpos] = scene.gait.theta2

@@ -133,6 +133,16 @@ def test_a_scene_built_directly_takes_the_canonical_values():
      "medium.internal_friction is used by law = 'rft3d' only"),
     (lambda: preset("physical").replace(**{"rft.law": "sandswim", "rft.c_s": 0, "rft.c_f": 0, "rft.gamma0": 0,
                                            "rft.table": "forces.csv"}), "rft.table is used by law = 'table'"),
+    # the origami stop on a plate or fin that has none; an adaptive method's tolerance under a fixed step
+    (lambda: scene_from_dict({"plate": {"kind": "soft", "stop": "limit"}}), "plate.stop is used by kind = 'origami'"),
+    (lambda: scene_from_dict({"plate": {"kind": "rigid", "stop_stiffness": 1e5}}),
+     "plate.stop_stiffness is used by kind = 'origami' only, and this entry's kind is 'rigid'"),
+    (lambda: scene_from_dict({"fin": {"kind": "soft", "stop_stiffness": 1e3}}, RobotScene),
+     "fin.stop_stiffness is used by kind = 'origami'"),
+    (lambda: scene_from_dict({"plate": {"rigid_as": "welds"}}), "plate.rigid_as is used by kind = 'rigid' only"),
+    (lambda: scene_from_dict({"sim": {"method": "newton", "tolerance": 1e-3}}),
+     "sim.tolerance is used by method = 'adaptive' or 'adaptive-newton' only, and this entry's method is 'newton'"),
+    (lambda: scene_from_dict({"sim": {"max_step": 0.01}}, UserScene), "sim.max_step is used by method = 'adaptive'"),
 ])
 def test_a_key_the_entrys_kind_does_not_use_is_refused(build, named):
     with pytest.raises(SceneError, match=re.escape(named)):
@@ -215,3 +225,23 @@ def test_a_selector_set_drops_the_keys_of_the_choice_it_replaces():
         preset("physical").replace(**{"rft.law": "table", "rft.table": "forces.csv", "rft.c_s": 1e4})
     sine = UserScene(control=(Control(actuator="a", kind="sine", amplitude=1.0),))
     assert sine.replace(**{"control.0.kind": "constant"}).control[0].amplitude == 0.0
+
+
+
+def test_a_switch_of_plate_kind_drops_the_origami_stop():
+    stopped = preset("paper").replace(**{"plate.stop": "limit", "plate.stop_stiffness": 2e4})
+    rigid = stopped.replace(**{"plate.kind": "rigid", "plate.rigid_as": "welds"})
+    assert (rigid.plate.stop, rigid.plate.stop_stiffness) == (Scene().plate.stop, Scene().plate.stop_stiffness)
+    assert rigid.replace(**{"plate.kind": "origami"}).plate.rigid_as == "body"
+    with pytest.raises(SceneError, match="plate.stop is used by kind = 'origami'"):
+        preset("paper").replace(**{"plate.kind": "soft", "plate.stop": "limit"})
+
+
+def test_a_switch_to_a_fixed_step_drops_the_adaptive_methods_keys():
+    # the robot presets' tolerance and largest step are the preset's, not keys the user gave
+    for name in presets(RobotScene):
+        fixed = preset(name, RobotScene).replace(**{"sim.method": "newton"})
+        assert (fixed.sim.tolerance, fixed.sim.max_step) == (RobotScene().sim.tolerance, RobotScene().sim.max_step)
+    assert preset("physical").replace(**{"sim.method": "adaptive", "sim.tolerance": 1e-3}).sim.tolerance == 1e-3
+    with pytest.raises(SceneError, match="sim.tolerance is used by method"):
+        preset("paper", RobotScene).replace(**{"sim.method": "newton", "sim.tolerance": 1e-3})

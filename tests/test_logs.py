@@ -117,6 +117,8 @@ def test_optimize_resumes_after_a_real_signal_bit_for_bit(tmp_path, capsys, refe
     _assert_same_log(log, reference)
 
 
+# a fit run twice, once cut by SIGKILL: with the slow studies
+@pytest.mark.slow
 def test_fit_resumes_after_sigkill_bit_for_bit(tmp_path, capsys, drag_data):
     reference = tmp_path / "reference.h5"
     assert main([*FIT, "--data", str(drag_data), "--out", str(reference), "--json"]) == 0
@@ -162,6 +164,8 @@ def test_ctrl_c_without_a_log(monkeypatch, capsys):
     assert capsys.readouterr().err == "finrft: interrupted\n"
 
 
+# three searches: with the slow studies
+@pytest.mark.slow
 def test_resumed_run_keeps_its_seed_and_extends_its_budget(tmp_path, capsys, reference):
     reference, expected = reference
     log = tmp_path / "run.h5"

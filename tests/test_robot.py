@@ -49,6 +49,8 @@ def test_half_model_equals_full_model_for_a_symmetric_gait(quick, drag_law):
     assert abs(half.summary()["D1_mm"]) > 10.0
 
 
+# the Python backend steps the whole robot in numpy (about a minute on two cores): with the slow studies
+@pytest.mark.slow
 def test_backends_agree_on_the_robot(quick):
     # Step for step, at a step too coarse for an accurate eta (estimated 1 point): the twins, not eta, are tested.
     scene = quick.replace(**{"sim.dt": 2e-4})

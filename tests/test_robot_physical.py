@@ -100,6 +100,8 @@ def test_physical_table_json_fields(capsys):
     assert [row["gait"] for row in rows if row["fitted"]] == ["Optimized"]
 
 
+# a swim and its independent ODE solution, half a minute on two cores: with the slow studies
+@pytest.mark.slow
 def test_the_robot_in_its_medium_matches_the_independent_solution(physical):
     # The hand-derived equations (finrft.reference), given the arm's law and the body's drag the medium derives, as
     # numbers: the same hinge angles, body travel and eta as MuJoCo with the adaptive-newton method at a tight

@@ -62,6 +62,11 @@ def explicit() -> tuple[str, ...]:
     return tuple(name for name, m in METHODS.items() if not m.implicit)
 
 
+def adaptive() -> tuple[str, ...]:
+    """The methods that size their own steps: the only ones that read sim.max_step and sim.tolerance."""
+    return tuple(name for name, m in METHODS.items() if m.adaptive)
+
+
 def described() -> str:
     """Every method in one sentence each, as the schema's documentation of ``sim.method``."""
     return "; ".join(f"{m.name}: {m.doc}" for m in METHODS.values())

@@ -86,9 +86,11 @@ class Sim:
     backend: str = _f("native", "", "where the RFT force is computed: the C plugin, or a Python callback "
                       "(native falls back to python when the plugin is unavailable)", choices=("native", "python"))
     method: str = _f("newton", "", methods.described(), choices=methods.names())
-    max_step: float = _f(1e-3, "s", "adaptive methods: largest step", minimum=0.0)
+    max_step: float = _f(1e-3, "s", "adaptive methods: largest step", minimum=0.0,
+                         used_by=("method", methods.adaptive()))
     tolerance: float = _f(1e-4, "", "adaptive methods: error per step, relative (absolute below 1e-3)", minimum=0.0,
-                          maximum=0.1, why_maximum="a looser step-doubling test accepts steps of any error")
+                          maximum=0.1, why_maximum="a looser step-doubling test accepts steps of any error",
+                          used_by=("method", methods.adaptive()))
     record_dt: float = _f(0.02, "s", "interval between recorded samples (rounded to whole steps)", minimum=0.0)
 
 

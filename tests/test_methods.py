@@ -20,8 +20,8 @@ def test_the_methods_table_says_what_each_method_does():
     assert field_of(Scene, "sim.method").metadata["choices"] == methods.names()
     drive = Drive(speed=0.03, stroke=0.006, cycles=1)
     for name, method in methods.METHODS.items():
-        scene = preset("paper").replace(**{"sim.method": name, "sim.dt": 1e-4, "sim.max_step": 1e-2,
-                                           "sim.tolerance": 1e-3})
+        adaptive = {"sim.max_step": 1e-2, "sim.tolerance": 1e-3} if method.adaptive else {}
+        scene = preset("paper").replace(**{"sim.method": name, "sim.dt": 1e-4, **adaptive})
         if method.implicit:
             with pytest.raises(SceneError, match="implicitfast"):
                 scene.replace(**{"sim.integrator": "euler"})
@@ -239,12 +239,13 @@ def test_native_step_too_big_for_the_arena_says_so_and_leaves_the_state(method):
 def test_adaptive_newton_converges_to_newton_on_the_light_plate():
     # The physical plate (light segments, stiff penalty stops): adaptive-newton against newton at 10 µs (itself
     # within 1e-4 deg of newton at 20 µs); the error stays small at loose tolerances and falls at tight ones.
-    light = preset("physical").replace(**{"sim.dt": 1e-3, "sim.max_step": 1e-2})
+    light = preset("physical").replace(**{"sim.dt": 1e-3})
     drive = Drive(speed=0.03, stroke=0.015, cycles=1)
     fine = simulate(light.replace(**{"sim.dt": 1e-5}), drive, estimate_error=False)
     errors = []
     for tolerance in (1e-1, 1e-2, 1e-5):
-        run = simulate(light.replace(**{"sim.method": "adaptive-newton", "sim.tolerance": tolerance}), drive,
+        run = simulate(light.replace(**{"sim.method": "adaptive-newton", "sim.max_step": 1e-2,
+                                        "sim.tolerance": tolerance}), drive,
                        estimate_error=False)
         assert np.allclose(run.time, fine.time)
         errors.append(np.degrees(np.abs(np.c_[run.segment_angle, run.hinge_angle]

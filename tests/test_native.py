@@ -189,7 +189,8 @@ counter = ctypes.CDLL(sys.argv[1])
 counter.count_stop.restype = ctypes.c_long
 out = {}
 for method in ("implicit", "newton", "newton-midpoint", "adaptive", "adaptive-newton"):
-    scene = preset("physical", RobotScene).replace(**{"sim.method": method, "sim.dt": 3e-4, "sim.max_step": 1e-3})
+    adaptive = {"sim.max_step": 1e-3} if method.startswith("adaptive") else {}
+    scene = preset("physical", RobotScene).replace(**{"sim.method": method, "sim.dt": 3e-4, **adaptive})
     robot = swim.build_robot(scene)
     d = mujoco.MjData(robot.model)
     d.qpos[robot.servo_qpos] = scene.gait.theta2

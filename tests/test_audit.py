@@ -1,0 +1,29 @@
+"""Inputs that a run would ignore or misread, found by trying the command line and the API as a user would."""
+
+import pytest
+
+from finrft.cli import main
+from finrft.errors import SceneError
+from finrft.experiments.swim import RobotScene
+from finrft.scene import preset
+
+
+@pytest.mark.parametrize("override", ["sim.max_step=1", "sim.tolerance=1e-3"])
+def test_a_fixed_step_method_refuses_the_adaptive_keys(capsys, override):
+    # The plate's newton method takes steps of sim.dt: a largest step or a tolerance given to it changed nothing.
+    assert main(["drag", "--distance", "5", "--set", override]) == 2
+    err = capsys.readouterr().err
+    assert f"{override.split('=')[0]} is used by method = 'adaptive' or 'adaptive-newton' only" in err
+    assert len(err.splitlines()) == 1
+    with pytest.raises(SceneError, match="sim.max_step is used by method"):
+        preset("physical").replace(**{"sim.max_step": 1e-2})
+
+
+def test_switching_to_a_fixed_step_drops_the_presets_adaptive_keys():
+    # The robot's physical preset is adaptive-newton with its own max_step and tolerance; newton asked by --set
+    # runs without them, and sets them back when the method goes back.
+    scene = preset("physical", RobotScene)
+    fixed = scene.replace(**{"sim.method": "newton"})
+    assert (fixed.sim.max_step, fixed.sim.tolerance) == (RobotScene().sim.max_step, RobotScene().sim.tolerance)
+    assert scene.replace(**{"sim.method": "adaptive", "sim.max_step": 0.01}).sim.max_step == 0.01
+

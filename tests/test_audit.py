@@ -27,3 +27,11 @@ def test_switching_to_a_fixed_step_drops_the_presets_adaptive_keys():
     assert (fixed.sim.max_step, fixed.sim.tolerance) == (RobotScene().sim.max_step, RobotScene().sim.tolerance)
     assert scene.replace(**{"sim.method": "adaptive", "sim.max_step": 0.01}).sim.max_step == 0.01
 
+
+@pytest.mark.parametrize("scene", [None, RobotScene()])
+def test_run_wheel_refuses_a_scene_of_another_kind(scene):
+    # was an AttributeError ('NoneType' object has no attribute 'wheel') from building the wheel
+    from finrft import run_wheel
+    with pytest.raises(SceneError, match="wheel: the scene must be a finrft.WheelScene"):
+        run_wheel(scene)
+

@@ -35,3 +35,10 @@ def test_run_wheel_refuses_a_scene_of_another_kind(scene):
     with pytest.raises(SceneError, match="wheel: the scene must be a finrft.WheelScene"):
         run_wheel(scene)
 
+
+def test_bounds_name_a_unit_of_the_wrong_dimension():
+    # was "bounds must be numbers", for two numbers with units, one of them no angle
+    from finrft.studies.bounds import parse_bounds
+    with pytest.raises(SceneError, match="mm is no unit of gait.theta1, whose unit is rad"):
+        parse_bounds(["gait.theta1=0deg:90mm"], RobotScene)
+    assert parse_bounds(["gait.theta1=0deg:90deg"], RobotScene)["gait.theta1"] == pytest.approx((0.0, 1.5707963))

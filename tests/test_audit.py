@@ -1,5 +1,7 @@
 """Inputs that a run would ignore or misread, found by trying the command line and the API as a user would."""
 
+from pathlib import Path
+
 import pytest
 
 from finrft.cli import main
@@ -42,3 +44,17 @@ def test_bounds_name_a_unit_of_the_wrong_dimension():
     with pytest.raises(SceneError, match="mm is no unit of gait.theta1, whose unit is rad"):
         parse_bounds(["gait.theta1=0deg:90mm"], RobotScene)
     assert parse_bounds(["gait.theta1=0deg:90deg"], RobotScene)["gait.theta1"] == pytest.approx((0.0, 1.5707963))
+
+
+def test_a_zeta_in_newtons_per_cubic_metre_is_refused_not_run():
+    # 6e5 (the literature's 0.6 N/cm^3 in N/m^3) ran into "Newton's method did not converge ... reduce sim.dt"
+    import mujoco
+    from finrft import UserScene, attach, load_scene
+    xml = ("<mujoco><worldbody><body name='b'><freejoint/><geom type='box' size='.05 .05 .01'/></body></worldbody>"
+           "</mujoco>")
+    with pytest.raises(SceneError, match="zeta = 600000 N/cm\\^3 is more than 100 N/cm\\^3"):
+        attach(mujoco.MjSpec.from_string(xml), "b", zeta=6e5)
+    with pytest.raises(SceneError, match="medium.zeta = 600000 N/cm\\^3 .* give zeta in N/cm\\^3"):
+        load_scene(Path(__file__).parents[1] / "mjcf" / "hexapod.toml", cls=UserScene,
+                   overrides={"medium.law": "li2013", "medium.name": "", "medium.zeta": 6e5})
+    attach(mujoco.MjSpec.from_string(xml), "b", zeta=3.05)  # the hardest catalogued medium

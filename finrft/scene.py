@@ -194,6 +194,10 @@ class Control:
 
 
 def check_medium(m: Any) -> None:
+    if m.bulk_density and not m.drft_lambda and not laws.module(m.law, laws.SURFACE).DENSITY:
+        raise SceneError(f"medium.bulk_density is used by drft_lambda > 0 and a law with a density (rft3d) only, and "
+                         f"this medium's law is {m.law!r} with drft_lambda = 0: set medium.drft_lambda, or leave "
+                         f"bulk_density out")
     material = media.medium(m.name) if m.name else None
     catalogued = material.get("bulk_density") if material else None
     drft.density(m.drft_lambda, m.bulk_density or None, None if catalogued is None else catalogued.value,

@@ -58,3 +58,17 @@ def test_a_zeta_in_newtons_per_cubic_metre_is_refused_not_run():
         load_scene(Path(__file__).parents[1] / "mjcf" / "hexapod.toml", cls=UserScene,
                    overrides={"medium.law": "li2013", "medium.name": "", "medium.zeta": 6e5})
     attach(mujoco.MjSpec.from_string(xml), "b", zeta=3.05)  # the hardest catalogued medium
+
+
+def test_a_density_that_no_term_uses_is_refused():
+    # li2013 reads no density: bulk_density there feeds DRFT's term alone, and with the term off it changed nothing
+    import mujoco
+    from finrft import UserScene, attach, load_scene
+    xml = ("<mujoco><worldbody><body name='b'><freejoint/><geom type='box' size='.05 .05 .01'/></body></worldbody>"
+           "</mujoco>")
+    with pytest.raises(SceneError, match="attach: bulk_density is used by drft_lambda > 0"):
+        attach(mujoco.MjSpec.from_string(xml), "b", bulk_density=1500.0)
+    with pytest.raises(SceneError, match="medium.bulk_density is used by drft_lambda > 0"):
+        load_scene(Path(__file__).parents[1] / "mjcf" / "hexapod.toml", cls=UserScene,
+                   overrides={"medium.law": "li2013", "medium.name": "", "medium.bulk_density": 1500.0})
+    assert attach(mujoco.MjSpec.from_string(xml), "b", bulk_density=1500.0, drft_lambda=1.0).bulk_density == 1500.0

@@ -72,3 +72,10 @@ def test_a_density_that_no_term_uses_is_refused():
         load_scene(Path(__file__).parents[1] / "mjcf" / "hexapod.toml", cls=UserScene,
                    overrides={"medium.law": "li2013", "medium.name": "", "medium.bulk_density": 1500.0})
     assert attach(mujoco.MjSpec.from_string(xml), "b", bulk_density=1500.0, drft_lambda=1.0).bulk_density == 1500.0
+
+
+def test_a_step_far_longer_than_the_stroke_is_one_line(capsys):
+    # was numpy's "overflow encountered in scalar divide" warning on the line before the error
+    assert main(["drag", "--distance", "20", "--set", "sim.dt=1e300"]) == 2
+    err = capsys.readouterr().err
+    assert "is longer than a stroke" in err and len(err.splitlines()) == 1

@@ -34,6 +34,10 @@ from .schema import field_of, split_key, to_toml  # noqa: F401
 MAX_SEGMENTS = 100
 
 
+# The keys of the origami stop, which the other kinds of chain have not.
+ORIGAMI = ("kind", ("origami",))
+
+
 @dataclass(frozen=True)
 class Chain:
     """Rigid segments in series on compliant hinges: the plate, or a robot's fin."""
@@ -52,9 +56,9 @@ class Chain:
     damping: float = _f(0.04555, "N m s/rad", "hinge damping b", minimum=0.0, exclusive=False)
     stop: str = _f("penalty", "", "origami stop: the penalty spring (taken implicitly by the newton method), or a "
                    "MuJoCo joint limit",
-                   choices=("limit", "penalty"))
+                   choices=("limit", "penalty"), used_by=ORIGAMI)
     stop_stiffness: float = _f(1.0e4, "N m/rad", "penalty stop: torque -(k_stop (d + |d|)) d for hinge deflection d",
-                               minimum=0.0)
+                               minimum=0.0, used_by=ORIGAMI)
 
 
 @dataclass(frozen=True)
@@ -66,7 +70,7 @@ class Plate(Chain):
     chain: str = _f("planar", "", "planar: hinges about z only; spatial: each segment also turns freely about "
                     "its own x and y axes (a 3D chain)", choices=("planar", "spatial"))
     rigid_as: str = _f("body", "", "rigid plate: one body, or hinged segments held together by weld constraints",
-                       choices=("body", "welds"))
+                       choices=("body", "welds"), used_by=("kind", ("rigid",)))
 
 
 RFT = schema.section("RFT", (

@@ -95,3 +95,13 @@ def test_a_plate_kind_set_drops_the_presets_stop():
     assert preset("physical").replace(**{"plate.kind": "soft"}).plate.kind == "soft"
     with pytest.raises(SceneError, match="plate.stop is used by kind = 'origami' only"):
         preset("physical").replace(**{"plate.kind": "soft", "plate.stop": "limit"})
+
+
+@pytest.mark.parametrize("angles,said", [("", "--angles expects comma-separated degrees"),
+                                         (",", "--angles expects comma-separated degrees"),
+                                         ("30,30", "--angles: an angle is given twice")])
+def test_intrude_angles_name_what_is_wrong(capsys, angles, said):
+    # an empty list was "each angle must be within -90..90 degrees"; an angle given twice ran twice
+    assert main(["intrude", "--angles", angles]) == 2
+    err = capsys.readouterr().err
+    assert said in err and len(err.splitlines()) == 1

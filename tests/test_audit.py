@@ -105,3 +105,11 @@ def test_intrude_angles_name_what_is_wrong(capsys, angles, said):
     assert main(["intrude", "--angles", angles]) == 2
     err = capsys.readouterr().err
     assert said in err and len(err.splitlines()) == 1
+
+
+def test_the_robot_template_with_robot_says_which_flag_to_drop(capsys):
+    # was "unknown preset 'robot': use one of paper, physical", though --dump robot is a template
+    assert main(["scene", "--robot", "--dump", "robot"]) == 2
+    err = capsys.readouterr().err
+    assert "leave out --robot" in err and len(err.splitlines()) == 1
+    assert main(["scene", "--dump", "robot"]) == 0

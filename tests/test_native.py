@@ -50,7 +50,7 @@ def test_mujoco_version_mismatch_falls_back_with_one_line(monkeypatch, capsys):
         monkeypatch.setitem(native._status, key, value)
     monkeypatch.setattr(mujoco, "mj_version", lambda: 4001000)
     monkeypatch.setattr(mujoco, "mj_loadPluginLibrary", lambda path: pytest.fail("loaded a mismatched plugin"))
-    assert main(["drag", "--distance", "5", "--json"]) == 0
+    assert main(["drag", "--distance", "5", "--json", "--quiet"]) == 0
     out, err = capsys.readouterr()
     assert err == (f"finrft: warning: the native RFT plugin was built for MuJoCo {mujoco.mj_versionString()} but "
                    f"MuJoCo 4.1.0 is installed; using the Python backend (reinstall finrft to rebuild it)\n")

@@ -113,3 +113,14 @@ def test_the_robot_template_with_robot_says_which_flag_to_drop(capsys):
     err = capsys.readouterr().err
     assert "leave out --robot" in err and len(err.splitlines()) == 1
     assert main(["scene", "--dump", "robot"]) == 0
+
+
+def test_ctrl_c_while_the_commands_load_is_one_line_and_130(monkeypatch, capsys):
+    # was a KeyboardInterrupt traceback from the commands' imports and death by SIGINT (-2)
+    import finrft.cli as cli
+
+    def interrupted():
+        raise KeyboardInterrupt
+    monkeypatch.setattr(cli, "build_parser", interrupted)
+    assert main(["drag", "--distance", "5"]) == 130
+    assert capsys.readouterr().err == "finrft: interrupted\n"

@@ -72,7 +72,11 @@ def _print_version_if_asked(argv: Sequence[str]) -> None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     _print_version_if_asked(sys.argv[1:] if argv is None else argv)
-    parser = build_parser()
+    try:
+        parser = build_parser()  # the commands' imports: a second or more on a busy machine, Ctrl-C included
+    except KeyboardInterrupt:
+        _report("finrft: interrupted")
+        return 130
     if sys.stderr is None:  # started with stderr closed: its one-line reports go nowhere rather than to stdout
         sys.stderr = open(os.devnull, "w")
     if sys.stdout is None:

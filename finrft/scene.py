@@ -34,6 +34,10 @@ from .schema import field_of, split_key, to_toml  # noqa: F401
 MAX_SEGMENTS = 100
 
 
+# Why a chain's lengths stop at 1 m: a plate or fin of granular RFT is centimetres in size, and a larger value is
+# one in mm (the command line's unit) written where the scene's metres belong.
+IN_MM = "scene lengths are in metres; a value in mm is 1000 times larger: give 33 mm as 0.033 or \"33mm\""
+
 # The keys of the origami stop, which the other kinds of chain have not.
 ORIGAMI = ("kind", ("origami",))
 
@@ -47,7 +51,8 @@ class Chain:
     segments: int = _f(3, "", "number of rigid segments in series", minimum=1, exclusive=False,
                        maximum=MAX_SEGMENTS, why_maximum="a step's cost grows as N^2..N^3 in the chain's dense "
                        "mass matrix")
-    segment_length: float = _f(0.033, "m", "length of one segment", minimum=0.0)
+    segment_length: float = _f(0.033, "m", "length of one segment", minimum=0.0, maximum=1.0,
+                               why_maximum=IN_MM)
     segment_mass: float = _f(0.00289, "kg", "mass of one segment, at its midpoint", minimum=0.0)
     segment_inertia: float = _f(2.623e-7, "kg m^2", "rotational inertia of a segment about z through its centre",
                                 minimum=0.0)
@@ -63,7 +68,8 @@ class Chain:
 
 @dataclass(frozen=True)
 class Plate(Chain):
-    rod_length: float = _f(0.007, "m", "extension rod from the driven base point to the first hinge", minimum=0.0)
+    rod_length: float = _f(0.007, "m", "extension rod from the driven base point to the first hinge", minimum=0.0,
+                           maximum=1.0, why_maximum=IN_MM)
     rod_mass: float = _f(0.010, "kg", "mass of the extension rod, at its midpoint", minimum=0.0)
     rod_inertia: float = _f(4.08e-8, "kg m^2", "rotational inertia of the rod about z through its centre",
                             minimum=0.0)
@@ -145,9 +151,10 @@ class Immersion:
 
     name: str = _f("", "", "a medium of the catalogue (finrft medium --list); empty: unnamed")
     depth: float = _f(0.010, "m", "depth of the chain's top edge below the free surface", minimum=0.0,
-                      exclusive=False)
+                      exclusive=False, maximum=1.0, why_maximum=IN_MM)
     height: float = _f(0.055, "m", "the chain's vertical extent (the plate's or fin's height): a segment's face is "
-                       "segment_length x height, at mean depth depth + height / 2", minimum=0.0)
+                       "segment_length x height, at mean depth depth + height / 2", minimum=0.0, maximum=1.0,
+                       why_maximum=IN_MM)
     bulk_density: float = _f(0.0, "kg/m^3", "the medium's critical (bulk) density, 3D-RFT's rho_c; 0: the named "
                              "medium's, if catalogued", minimum=0.0, exclusive=False)
     internal_friction: float = _f(0.0, "", "the medium's internal friction coefficient, 3D-RFT's mu_int (tan of the "

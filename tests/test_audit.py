@@ -124,3 +124,15 @@ def test_ctrl_c_while_the_commands_load_is_one_line_and_130(monkeypatch, capsys)
     monkeypatch.setattr(cli, "build_parser", interrupted)
     assert main(["drag", "--distance", "5"]) == 130
     assert capsys.readouterr().err == "finrft: interrupted\n"
+
+
+@pytest.mark.parametrize("override", ["plate.segment_length=33", "plate.rod_length=7", "medium.depth=10",
+                                      "medium.height=55"])
+def test_a_chain_length_in_mm_is_refused(capsys, override):
+    # 33 m segments and a 10 m depth ran with exit 0; a 55 m tall plate failed as "give the driven body more mass"
+    assert main(["drag", "--distance", "20", "--set", override]) == 2
+    err = capsys.readouterr().err
+    assert "must be <= 1 m (scene lengths are in metres; a value in mm is 1000 times larger" in err
+    assert len(err.splitlines()) == 1
+    assert main(["swim", "--arm-length", "65000"]) == 2  # the flag is in mm: a 65 m arm
+    assert "arm.length must be <= 1 m" in capsys.readouterr().err

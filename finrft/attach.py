@@ -301,6 +301,9 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str = (), law: str = "li
     # one vocabulary with the scene files: their names of rft3d's parameters are taken as its own
     rho_c = _either(rho_c, bulk_density if module.DENSITY else None, "rho_c", "bulk_density")
     bulk_density = None if module.DENSITY else bulk_density
+    if bulk_density is not None and not drft_lambda:
+        raise SceneError(f"attach: bulk_density is used by drft_lambda > 0 and a law with a density (rft3d) only, "
+                         f"and law {law!r} has drft_lambda = 0: pass drft_lambda, or leave bulk_density out")
     mu_int = _either(mu_int, internal_friction, "mu_int", "internal_friction")
     mu_surf = _either(mu_surf, surface_friction, "mu_surf", "surface_friction")
     parameters, catalogued = laws.surface_parameters(

@@ -39,6 +39,11 @@ ORIGAMI = ("kind", ("origami",))
 ADAPTIVE = ("method", methods.adaptive())
 
 
+# Why a chain's lengths stop at 1 m: a plate or fin of granular RFT is centimetres in size, and a larger value is
+# one in mm (the command line's unit) written where the scene's metres belong.
+IN_MM = "scene lengths are in metres; a value in mm is 1000 times larger: give 33 mm as 0.033 or \"33mm\""
+
+
 @dataclass(frozen=True)
 class Chain:
     """Rigid segments in series on compliant hinges: the plate, or a robot's fin."""
@@ -48,7 +53,8 @@ class Chain:
     segments: int = _f(3, "", "number of rigid segments in series", minimum=1, exclusive=False,
                        maximum=MAX_SEGMENTS, why_maximum="a step's cost grows as N^2..N^3 in the chain's dense "
                        "mass matrix")
-    segment_length: float = _f(0.033, "m", "length of one segment", minimum=0.0)
+    segment_length: float = _f(0.033, "m", "length of one segment", minimum=0.0, maximum=1.0,
+                               why_maximum=IN_MM)
     segment_mass: float = _f(0.00289, "kg", "mass of one segment, at its midpoint", minimum=0.0)
     segment_inertia: float = _f(2.623e-7, "kg m^2", "rotational inertia of a segment about z through its centre",
                                 minimum=0.0)
@@ -64,7 +70,8 @@ class Chain:
 
 @dataclass(frozen=True)
 class Plate(Chain):
-    rod_length: float = _f(0.007, "m", "extension rod from the driven base point to the first hinge", minimum=0.0)
+    rod_length: float = _f(0.007, "m", "extension rod from the driven base point to the first hinge", minimum=0.0,
+                           maximum=1.0, why_maximum=IN_MM)
     rod_mass: float = _f(0.010, "kg", "mass of the extension rod, at its midpoint", minimum=0.0)
     rod_inertia: float = _f(4.08e-8, "kg m^2", "rotational inertia of the rod about z through its centre",
                             minimum=0.0)
@@ -145,9 +152,10 @@ class Immersion:
 
     name: str = _f("", "", "a medium of the catalogue (finrft medium --list); empty: unnamed")
     depth: float = _f(0.010, "m", "depth of the chain's top edge below the free surface", minimum=0.0,
-                      exclusive=False)
+                      exclusive=False, maximum=1.0, why_maximum=IN_MM)
     height: float = _f(0.055, "m", "the chain's vertical extent (the plate's or fin's height): a segment's face is "
-                       "segment_length x height, at mean depth depth + height / 2", minimum=0.0)
+                       "segment_length x height, at mean depth depth + height / 2", minimum=0.0, maximum=1.0,
+                       why_maximum=IN_MM)
     bulk_density: float = _f(0.0, "kg/m^3", "the medium's critical (bulk) density, 3D-RFT's rho_c; 0: the named "
                              "medium's, if catalogued", minimum=0.0, exclusive=False)
     internal_friction: float = _f(0.0, "", "the medium's internal friction coefficient, 3D-RFT's mu_int (tan of the "
@@ -198,6 +206,10 @@ class Control:
 
 
 def check_medium(m: Any) -> None:
+    if m.bulk_density and not m.drft_lambda and not laws.module(m.law, laws.SURFACE).DENSITY:
+        raise SceneError(f"medium.bulk_density is used by drft_lambda > 0 and a law with a density (rft3d) only, and "
+                         f"this medium's law is {m.law!r} with drft_lambda = 0: set medium.drft_lambda, or leave "
+                         f"bulk_density out")
     material = media.medium(m.name) if m.name else None
     catalogued = material.get("bulk_density") if material else None
     drft.density(m.drft_lambda, m.bulk_density or None, None if catalogued is None else catalogued.value,

@@ -19,6 +19,11 @@ from finrft.scene import SceneError, scene_from_dict
 RNG = np.random.default_rng(2021)
 RFT3D = {"law": "rft3d", "rho_c": 1500.0, "mu_int": 0.4, "mu_surf": 0.3}
 LI2013 = {"bulk_density": 1500.0}
+
+
+def off(law):
+    """A law's arguments with the term off: li2013's density is the term's alone, and refused without it."""
+    return {k: v for k, v in law.items() if k != "bulk_density"}
 # 4 cm x 6 cm horizontal plate, its lower face 5 cm deep, on a vertical slide
 FLAT = body_xml('<geom type="box" size="0.02 0.03 0.0005" pos="0 0 -0.0495" mass="1"/>',
                 '<joint type="slide" axis="0 0 1"/>')
@@ -36,7 +41,7 @@ def random_elements(n):
 @pytest.mark.parametrize("backend", ["native", "python"])
 def test_horizontal_plate_pushed_down_takes_lambda_rho_v2_a_more(law, backend):
     speed, lam = 0.8, 1.7
-    still, _ = passive(FLAT, [-speed], backend=backend, **law)
+    still, _ = passive(FLAT, [-speed], backend=backend, **off(law))
     fast, attached = passive(FLAT, [-speed], backend=backend, drft_lambda=lam, **law)
     assert attached.drft_lambda == lam and attached.bulk_density == 1500.0
     assert fast[0] - still[0] == pytest.approx(lam * 1500.0 * speed ** 2 * AREA, rel=1e-9)  # 3.917 N, up
@@ -50,7 +55,7 @@ def test_term_goes_as_speed_squared_and_leaves_the_quasi_static_part(law):
     for _ in range(3):
         qvel = RNG.normal(scale=[0.2, 0.2, 0.2, 3, 3, 3])
         # the bare laws (v_reg = 0): the ramp of the regularisation is rate-dependent by design
-        static = [passive(xml, k * qvel, backend="python", v_reg=0.0, **law)[0] for k in (1, 2)]
+        static = [passive(xml, k * qvel, backend="python", v_reg=0.0, **off(law))[0] for k in (1, 2)]
         total = [passive(xml, k * qvel, backend="python", drft_lambda=1.0, v_reg=0.0, **law)[0] for k in (1, 2)]
         np.testing.assert_allclose(static[1], static[0], rtol=1e-9, atol=1e-9 * np.abs(static[0]).max())
         extra = [t - s for t, s in zip(total, static)]
@@ -119,7 +124,7 @@ def test_native_plugin_equals_python_backend(law):
         qvel = RNG.normal(scale=[0.5, 0.5, 0.5, 5, 5, 5])
         fast, _ = passive(xml, qvel, qpos, drft_lambda=2.0, element_size=0.003, **law)
         slow, _ = passive(xml, qvel, qpos, backend="python", drft_lambda=2.0, element_size=0.003, **law)
-        still, _ = passive(xml, qvel, qpos, backend="python", element_size=0.003, **law)
+        still, _ = passive(xml, qvel, qpos, backend="python", element_size=0.003, **off(law))
         assert np.abs(slow - still).max() > 1e-2
         np.testing.assert_allclose(fast, slow, rtol=1e-9, atol=1e-9 * np.abs(slow).max())
 
@@ -132,9 +137,11 @@ def _forces(medium, speed=0.5):
 
 def test_off_by_default_bit_identical():
     plain = _forces({})
-    for medium in ({"drft_lambda": 0.0}, {"drft_lambda": 0.0, "bulk_density": 1500.0}):
-        for a, b in zip(plain, _forces(medium)):
-            assert np.array_equal(a, b)
+    for a, b in zip(plain, _forces({"drft_lambda": 0.0})):
+        assert np.array_equal(a, b)
+    # a density the term would not use is refused rather than ignored
+    with pytest.raises(SceneError, match="medium.bulk_density is used by drft_lambda > 0"):
+        _forces({"drft_lambda": 0.0, "bulk_density": 1500.0})
 
 
 def test_intrusion_at_two_speeds_differs_by_lambda_rho_v2_a():

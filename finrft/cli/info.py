@@ -46,7 +46,10 @@ def template() -> scenes.UserScene:
 def scene(args: argparse.Namespace) -> int:
     if args.scene and args.dump:
         raise UsageError(f"give --scene {args.scene} or --dump {args.dump}, not both")
-    if args.dump == TEMPLATE and not args.robot:
+    if args.dump == TEMPLATE and args.robot:
+        raise UsageError(f"--dump {TEMPLATE} is the template of your own model's scene (finrft run): leave out "
+                         f"--robot, or dump a preset of the two-fin robot (--robot --dump paper or physical)")
+    if args.dump == TEMPLATE:
         overrides = dict(scenes.parse_override(item, scenes.UserScene) for item in args.set)
         print(f"# Your own model in the medium (finrft run --scene FILE.toml): replace MODEL.xml, BODY, JOINT and "
               f"ACTUATOR\n# by your model's names; leave out [[drive]] or [[control]] entries you do not need.\n"

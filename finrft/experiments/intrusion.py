@@ -202,8 +202,12 @@ def _angles(text: str) -> list[float]:
         angles = [float(a) for a in text.split(",") if a.strip()]
     except ValueError:
         raise UsageError(f"--angles expects comma-separated degrees, e.g. 0,30,60,90, got '{text}'") from None
-    if not angles or not all(-90 <= a <= 90 for a in angles):
+    if not angles:
+        raise UsageError(f"--angles expects comma-separated degrees, e.g. 0,30,60,90, got '{text}'")
+    if not all(-90 <= a <= 90 for a in angles):
         raise UsageError(f"--angles: each angle must be within -90..90 degrees, got '{text}'")
+    if len(set(angles)) < len(angles):
+        raise UsageError(f"--angles: an angle is given twice in '{text}': give each once")
     return angles
 
 

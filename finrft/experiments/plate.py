@@ -109,7 +109,8 @@ def drive_armature(moved: float, scene: Scene, resolved: Resolved, drive: str, s
     if speed is None:
         return armature
     scale = load_scale(scene, resolved, drive, speed)
-    resolving = 2 * DRIVE_RESOLUTION * scale * scene.sim.dt / np.spacing(speed)
+    # Python floats: a step too long for the stroke (refused when the drive is timed) gives inf, not numpy's warning
+    resolving = 2 * DRIVE_RESOLUTION * float(scale) * scene.sim.dt / float(np.spacing(speed))
     return float(min(armature, resolving)) if resolving > 0 else armature
 
 

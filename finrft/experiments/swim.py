@@ -30,8 +30,8 @@ from ..geometry import Resolved, resolve
 from ..laws import SegmentLaw
 from ..models import (ARMATURE_RATIO, AttachedChain, ForceGroup, addresses, attach_chain, bind_plugin, compile_spec,
                       force_group, new_spec, penalty_stiffness)
-from ..scene import (RFT, Chain, Immersion, SceneError, Sections, Sim, check_chain_law, check_sim, load_scene,
-                     parse_override, register_scene, resolution)
+from ..scene import (IN_MM, RFT, Chain, Immersion, SceneError, Sections, Sim, check_chain_law, check_sim,
+                     load_scene, parse_override, register_scene, resolution)
 from ..schema import field as _f
 from ..stepping import Prescribed
 from ..views import centre_line
@@ -77,7 +77,8 @@ class Body:
 
 @dataclass(frozen=True)
 class Arm:
-    length: float = _f(0.065, "m", "arm length L_a, pivot to the fin's first hinge", minimum=0.0)
+    length: float = _f(0.065, "m", "arm length L_a, pivot to the fin's first hinge", minimum=0.0, maximum=1.0,
+                       why_maximum=IN_MM)
     pivot: float = _f(0.0275, "m", "distance of the arm's pivot from the body's axis", minimum=0.0,
                       exclusive=False)
     mass_base: float = _f(0.001158, "kg", "arm mass at zero length (servo horn)", minimum=0.0, exclusive=False)

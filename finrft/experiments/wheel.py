@@ -377,6 +377,9 @@ class Wheel:
 
     @classmethod
     def of(cls, scene: WheelScene) -> Wheel:
+        if not isinstance(scene, WheelScene):  # read before run() checks the scene's type
+            raise SceneError(f"wheel: the scene must be a finrft.WheelScene (from finrft.preset or "
+                             f"finrft.load_scene), got {type(scene).__name__} {scene!r:.60}")
         w = wheel_model(scene.wheel, scene.medium.surface_z)
         m = compile_spec(w.spec)
         drives = robot_scene(scene, w.radius, w.spin_sign).drive

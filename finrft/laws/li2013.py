@@ -226,12 +226,20 @@ def catalogued(medium) -> tuple[dict[str, float], Coefficients]:
     return {"zeta": zeta}, coefficients
 
 
+# zeta above it is a value in N/m^3 (1e6 times larger) rather than a medium: the catalogue's lie within 0.3..3.1.
+MAX_ZETA = 100.0
+
+
 def checked(parameters: dict[str, float | None], where: str, shown: dict[str, str]) -> dict[str, float]:
     """The law's parameters, zeta 1 when not given; SceneError beginning with ``where`` for a bad one, named as in
     ``shown``."""
     zeta = 1.0 if parameters.get("zeta") is None else parameters["zeta"]
     if not (math.isfinite(zeta) and zeta > 0):
         raise SceneError(f"{where}: {shown.get('zeta', 'zeta')} must be > 0, got {zeta!r}")
+    if zeta > MAX_ZETA:
+        raise SceneError(f"{where}: {shown.get('zeta', 'zeta')} = {zeta:g} N/cm^3 is more than {MAX_ZETA:g} N/cm^3, "
+                         f"{MAX_ZETA / 3:.0f} times the hardest catalogued medium's: a value in N/m^3 is 1e6 times "
+                         f"larger; give zeta in N/cm^3 (\"6e5 N/m3\" reads as 0.6)")
     return {"zeta": float(zeta)}
 
 

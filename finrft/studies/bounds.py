@@ -44,8 +44,6 @@ def parse_bounds(items: list[str], cls: type,
         if twice is not None:
             raise SceneError(f"--bounds {item}: {key.strip()} has bounds already ({twice}="
                              f"{bounds[twice][0]:g}:{bounds[twice][1]:g}): give each key's once")
-        if not (is_number(low.removesuffix(suffix or "")) and is_number(high.removesuffix(suffix or ""))):
-            raise SceneError(f"--bounds {item}: bounds must be numbers")
         try:
             span = tuple(quantity(text, unit or "", key.strip()) for text in (low, high))
         except (ValueError, SceneError) as exc:

@@ -1,0 +1,138 @@
+"""Inputs that a run would ignore or misread, found by trying the command line and the API as a user would."""
+
+from pathlib import Path
+
+import pytest
+
+from finrft.cli import main
+from finrft.errors import SceneError
+from finrft.experiments.swim import RobotScene
+from finrft.scene import preset
+
+
+@pytest.mark.parametrize("override", ["sim.max_step=1", "sim.tolerance=1e-3"])
+def test_a_fixed_step_method_refuses_the_adaptive_keys(capsys, override):
+    # The plate's newton method takes steps of sim.dt: a largest step or a tolerance given to it changed nothing.
+    assert main(["drag", "--distance", "5", "--set", override]) == 2
+    err = capsys.readouterr().err
+    assert f"{override.split('=')[0]} is used by method = 'adaptive' or 'adaptive-newton' only" in err
+    assert len(err.splitlines()) == 1
+    with pytest.raises(SceneError, match="sim.max_step is used by method"):
+        preset("physical").replace(**{"sim.max_step": 1e-2})
+
+
+def test_switching_to_a_fixed_step_drops_the_presets_adaptive_keys():
+    # The robot's physical preset is adaptive-newton with its own max_step and tolerance; newton asked by --set
+    # runs without them, and sets them back when the method goes back.
+    scene = preset("physical", RobotScene)
+    fixed = scene.replace(**{"sim.method": "newton"})
+    assert (fixed.sim.max_step, fixed.sim.tolerance) == (RobotScene().sim.max_step, RobotScene().sim.tolerance)
+    assert scene.replace(**{"sim.method": "adaptive", "sim.max_step": 0.01}).sim.max_step == 0.01
+
+
+@pytest.mark.parametrize("scene", [None, RobotScene()])
+def test_run_wheel_refuses_a_scene_of_another_kind(scene):
+    # was an AttributeError ('NoneType' object has no attribute 'wheel') from building the wheel
+    from finrft import run_wheel
+    with pytest.raises(SceneError, match="wheel: the scene must be a finrft.WheelScene"):
+        run_wheel(scene)
+
+
+def test_bounds_name_a_unit_of_the_wrong_dimension():
+    # was "bounds must be numbers", for two numbers with units, one of them no angle
+    from finrft.studies.bounds import parse_bounds
+    with pytest.raises(SceneError, match="mm is no unit of gait.theta1, whose unit is rad"):
+        parse_bounds(["gait.theta1=0deg:90mm"], RobotScene)
+    assert parse_bounds(["gait.theta1=0deg:90deg"], RobotScene)["gait.theta1"] == pytest.approx((0.0, 1.5707963))
+
+
+def test_a_zeta_in_newtons_per_cubic_metre_is_refused_not_run():
+    # 6e5 (the literature's 0.6 N/cm^3 in N/m^3) ran into "Newton's method did not converge ... reduce sim.dt"
+    import mujoco
+    from finrft import UserScene, attach, load_scene
+    xml = ("<mujoco><worldbody><body name='b'><freejoint/><geom type='box' size='.05 .05 .01'/></body></worldbody>"
+           "</mujoco>")
+    with pytest.raises(SceneError, match="zeta = 600000 N/cm\\^3 is more than 100 N/cm\\^3"):
+        attach(mujoco.MjSpec.from_string(xml), "b", zeta=6e5)
+    with pytest.raises(SceneError, match="medium.zeta = 600000 N/cm\\^3 .* give zeta in N/cm\\^3"):
+        load_scene(Path(__file__).parents[1] / "mjcf" / "hexapod.toml", cls=UserScene,
+                   overrides={"medium.law": "li2013", "medium.name": "", "medium.zeta": 6e5})
+    attach(mujoco.MjSpec.from_string(xml), "b", zeta=3.05)  # the hardest catalogued medium
+
+
+def test_a_density_that_no_term_uses_is_refused():
+    # li2013 reads no density: bulk_density there feeds DRFT's term alone, and with the term off it changed nothing
+    import mujoco
+    from finrft import UserScene, attach, load_scene
+    xml = ("<mujoco><worldbody><body name='b'><freejoint/><geom type='box' size='.05 .05 .01'/></body></worldbody>"
+           "</mujoco>")
+    with pytest.raises(SceneError, match="attach: bulk_density is used by drft_lambda > 0"):
+        attach(mujoco.MjSpec.from_string(xml), "b", bulk_density=1500.0)
+    with pytest.raises(SceneError, match="medium.bulk_density is used by drft_lambda > 0"):
+        load_scene(Path(__file__).parents[1] / "mjcf" / "hexapod.toml", cls=UserScene,
+                   overrides={"medium.law": "li2013", "medium.name": "", "medium.bulk_density": 1500.0})
+    assert attach(mujoco.MjSpec.from_string(xml), "b", bulk_density=1500.0, drft_lambda=1.0).bulk_density == 1500.0
+
+
+def test_a_step_far_longer_than_the_stroke_is_one_line(capsys):
+    # was numpy's "overflow encountered in scalar divide" warning on the line before the error
+    assert main(["drag", "--distance", "20", "--set", "sim.dt=1e300"]) == 2
+    err = capsys.readouterr().err
+    assert "is longer than a stroke" in err and len(err.splitlines()) == 1
+
+
+@pytest.mark.parametrize("kind,key,value", [("soft", "plate.stop", "limit"), ("rigid", "plate.stop_stiffness", 5.0),
+                                            ("origami", "plate.rigid_as", "welds")])
+def test_a_plate_key_its_kind_has_not_is_refused(capsys, kind, key, value):
+    # the origami stop is no part of a soft or rigid plate, nor are welds of a hinged one: they ran unchanged
+    assert main(["drag", "--distance", "5", "--plate", kind, "--set", f"{key}={value}"]) == 2
+    err = capsys.readouterr().err
+    assert f"{key} is used by kind = " in err and len(err.splitlines()) == 1
+
+
+def test_a_plate_kind_set_drops_the_presets_stop():
+    # the preset's origami stop goes with --plate soft; a stop given beside it is still refused
+    assert preset("physical").replace(**{"plate.kind": "soft"}).plate.kind == "soft"
+    with pytest.raises(SceneError, match="plate.stop is used by kind = 'origami' only"):
+        preset("physical").replace(**{"plate.kind": "soft", "plate.stop": "limit"})
+
+
+@pytest.mark.parametrize("angles,said", [("", "--angles expects comma-separated degrees"),
+                                         (",", "--angles expects comma-separated degrees"),
+                                         ("30,30", "--angles: an angle is given twice")])
+def test_intrude_angles_name_what_is_wrong(capsys, angles, said):
+    # an empty list was "each angle must be within -90..90 degrees"; an angle given twice ran twice
+    assert main(["intrude", "--angles", angles]) == 2
+    err = capsys.readouterr().err
+    assert said in err and len(err.splitlines()) == 1
+
+
+def test_the_robot_template_with_robot_says_which_flag_to_drop(capsys):
+    # was "unknown preset 'robot': use one of paper, physical", though --dump robot is a template
+    assert main(["scene", "--robot", "--dump", "robot"]) == 2
+    err = capsys.readouterr().err
+    assert "leave out --robot" in err and len(err.splitlines()) == 1
+    assert main(["scene", "--dump", "robot"]) == 0
+
+
+def test_ctrl_c_while_the_commands_load_is_one_line_and_130(monkeypatch, capsys):
+    # was a KeyboardInterrupt traceback from the commands' imports and death by SIGINT (-2)
+    import finrft.cli as cli
+
+    def interrupted():
+        raise KeyboardInterrupt
+    monkeypatch.setattr(cli, "build_parser", interrupted)
+    assert main(["drag", "--distance", "5"]) == 130
+    assert capsys.readouterr().err == "finrft: interrupted\n"
+
+
+@pytest.mark.parametrize("override", ["plate.segment_length=33", "plate.rod_length=7", "medium.depth=10",
+                                      "medium.height=55"])
+def test_a_chain_length_in_mm_is_refused(capsys, override):
+    # 33 m segments and a 10 m depth ran with exit 0; a 55 m tall plate failed as "give the driven body more mass"
+    assert main(["drag", "--distance", "20", "--set", override]) == 2
+    err = capsys.readouterr().err
+    assert "must be <= 1 m (scene lengths are in metres; a value in mm is 1000 times larger" in err
+    assert len(err.splitlines()) == 1
+    assert main(["swim", "--arm-length", "65000"]) == 2  # the flag is in mm: a 65 m arm
+    assert "arm.length must be <= 1 m" in capsys.readouterr().err

@@ -2,12 +2,19 @@
 
 from pathlib import Path
 
+import mujoco
 import pytest
 
 from finrft.cli import main
 from finrft.errors import SceneError
 from finrft.experiments.swim import RobotScene
 from finrft.scene import preset
+
+
+def _box() -> mujoco.MjSpec:
+    """A free box to attach the medium to."""
+    return mujoco.MjSpec.from_string("<mujoco><worldbody><body name='b'><freejoint/><geom type='box' "
+                                     "size='.05 .05 .01'/></body></worldbody></mujoco>")
 
 
 @pytest.mark.parametrize("override", ["sim.max_step=1", "sim.tolerance=1e-3"])
@@ -48,30 +55,24 @@ def test_bounds_name_a_unit_of_the_wrong_dimension():
 
 def test_a_zeta_in_newtons_per_cubic_metre_is_refused_not_run():
     # 6e5 (the literature's 0.6 N/cm^3 in N/m^3) ran into "Newton's method did not converge ... reduce sim.dt"
-    import mujoco
     from finrft import UserScene, attach, load_scene
-    xml = ("<mujoco><worldbody><body name='b'><freejoint/><geom type='box' size='.05 .05 .01'/></body></worldbody>"
-           "</mujoco>")
     with pytest.raises(SceneError, match="zeta = 600000 N/cm\\^3 is more than 100 N/cm\\^3"):
-        attach(mujoco.MjSpec.from_string(xml), "b", zeta=6e5)
+        attach(_box(), "b", zeta=6e5)
     with pytest.raises(SceneError, match="medium.zeta = 600000 N/cm\\^3 .* give zeta in N/cm\\^3"):
         load_scene(Path(__file__).parents[1] / "mjcf" / "hexapod.toml", cls=UserScene,
                    overrides={"medium.law": "li2013", "medium.name": "", "medium.zeta": 6e5})
-    attach(mujoco.MjSpec.from_string(xml), "b", zeta=3.05)  # the hardest catalogued medium
+    attach(_box(), "b", zeta=3.05)  # the hardest catalogued medium
 
 
 def test_a_density_that_no_term_uses_is_refused():
     # li2013 reads no density: bulk_density there feeds DRFT's term alone, and with the term off it changed nothing
-    import mujoco
     from finrft import UserScene, attach, load_scene
-    xml = ("<mujoco><worldbody><body name='b'><freejoint/><geom type='box' size='.05 .05 .01'/></body></worldbody>"
-           "</mujoco>")
     with pytest.raises(SceneError, match="attach: bulk_density is used by drft_lambda > 0"):
-        attach(mujoco.MjSpec.from_string(xml), "b", bulk_density=1500.0)
+        attach(_box(), "b", bulk_density=1500.0)
     with pytest.raises(SceneError, match="medium.bulk_density is used by drft_lambda > 0"):
         load_scene(Path(__file__).parents[1] / "mjcf" / "hexapod.toml", cls=UserScene,
                    overrides={"medium.law": "li2013", "medium.name": "", "medium.bulk_density": 1500.0})
-    assert attach(mujoco.MjSpec.from_string(xml), "b", bulk_density=1500.0, drft_lambda=1.0).bulk_density == 1500.0
+    assert attach(_box(), "b", bulk_density=1500.0, drft_lambda=1.0).bulk_density == 1500.0
 
 
 def test_a_step_far_longer_than_the_stroke_is_one_line(capsys):

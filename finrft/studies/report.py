@@ -23,7 +23,7 @@ from ..drive import Drive
 from ..experiment import Result
 from ..experiments.plate import plate_points
 from .bounds import unit_of
-from .fit import DragData, fit, read_drag, resolve_params, simulated_angles
+from .fit import DEFAULT_BOUNDS, DragData, fit, read_drag, resolve_params, simulated_angles
 from .optimize import optimize
 from ..experiments.swim import RobotScene
 from ..scene import Scene, SceneError, preset, resolution
@@ -166,16 +166,28 @@ def measurements(data_dir: str | Path | None = None) -> list[DragData]:
     return [read_drag(p) for p in files]
 
 
+# The coefficients of a segment law that the report fits beside k and b: normal, then tangential (positive both).
+COEFFICIENTS = {"paper": ("f_perp", "f_par"), "sandswim": ("c_s", "c_f")}
+
+
 def experiment(out: Path, quick: bool, workers: int | None, data: list[DragData], scene: Scene) -> str:
     """Figure 3: segment angles against displacement, measured and simulated, and the MSE per speed and segment,
-    for the paper's procedure (damping only) and for a fit of k, b, f_perp and f_par on two speeds."""
+    for the paper's procedure (damping only) and for a fit of k, b and the law's normal and tangential
+    coefficients (`COEFFICIENTS`) on two speeds."""
+    if scene.rft.law not in COEFFICIENTS:
+        raise SceneError(f"the report fits the segment law's two coefficients, which rft.law = {scene.rft.law!r} "
+                         f"has not: use a plate scene of law {' or '.join(map(repr, COEFFICIENTS))}")
+    coefficients = [f"rft.{name}" for name in COEFFICIENTS[scene.rft.law]]
+    # around the scene's own values, a decade either way (the paper law's keys have their default bounds)
+    bounds = {key: (getattr(scene.rft, key[4:]) / 10, 10 * getattr(scene.rft, key[4:])) for key in coefficients
+              if key not in DEFAULT_BOUNDS}
     budget = 20 if quick else 300
     fits = {"paper procedure: b only, all speeds": fit(scene, data, resolve_params(["b"]), budget=budget,
                                                        workers=workers)}
     train = [data[0], data[-1]] if len(data) > 2 else data
     validate = [d for d in data if d not in train]
-    fits[f"k, b, f_perp, f_par on {', '.join(d.name for d in train)}"] = fit(
-        scene, train, resolve_params(["k", "b", "f_perp", "f_par"]), budget=budget, workers=workers,
+    fits[f"k, b, {', '.join(k[4:] for k in coefficients)} on {', '.join(d.name for d in train)}"] = fit(
+        scene, train, resolve_params(["k", "b", *coefficients], bounds), budget=budget, workers=workers,
         validate=validate)
     plt = _pyplot()
     fig, axes = plt.subplots(len(fits), 2, figsize=(13, 4.5 * len(fits)), squeeze=False,

@@ -124,11 +124,7 @@ def figure_difference(a: Any, b: Any) -> Any:
     transport where the other run does not move), the defined one's size: the estimate cannot be smaller."""
     if a is None or b is None:
         return None if a is None else abs(magnitude(a))
-    if isinstance(a, dict):
-        return {key: figure_difference(value, b.get(key)) for key, value in a.items()}
-    if isinstance(a, (list, tuple)):
-        return [figure_difference(x, y) for x, y in zip(a, b)]
-    return abs(float(a) - float(b))
+    return figure_map(lambda x, y: abs(x - y), a, b)
 
 
 def figure_map(function: Callable[..., float], *figures: Any) -> Any:

@@ -489,8 +489,8 @@ class UserModel:
     coarse_companion = False
 
     def figures(self, scene: UserScene) -> tuple[str, ...]:
-        return ("com_velocity_m_s", "com_speed_m_s", "com_position_m", "medium_force_N", "body_medium_force_N", "drive_load",
-                "actuator_power_W", "positive_power_W", "cost_of_transport")
+        return ("com_velocity_m_s", "com_speed_m_s", "com_position_m", "medium_force_N", "body_medium_force_N",
+                "drive_load", "actuator_power_W", "positive_power_W", "cost_of_transport")
 
     def start(self, scene: UserScene, built: AttachedModel, d: mujoco.MjData, companion: bool) -> RobotTrial:
         return RobotTrial(self, scene, built, d, companion)

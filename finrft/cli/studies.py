@@ -11,7 +11,9 @@ from ..experiments.flags import (add_force, add_json, add_max_error, add_quiet, 
                                  preset_name)
 from ..experiments.swim import add_robot, resolve_robot
 from ..experiments.user_model import EXAMPLES
-from .common import check_output, check_output_dir, print_json, progress, said_written, say
+from .. import methods
+from ..errors import SceneError
+from .common import check_output, check_output_dir, print_json, progress, said_written, say, write_text
 
 
 def add_table(sub: Any) -> None:
@@ -126,6 +128,25 @@ def _add_robots(kinds: Any) -> argparse.ArgumentParser:
     p.add_argument("--robot", action="append", choices=EXAMPLES, help="only this example (repeatable; default: all)")
     p.add_argument("--duration", type=number("s", minimum=0.0, inclusive=False), default=0.0, metavar="S",
                    help="simulate S seconds instead of each example's duration (its settle scaled alike)")
+    frontier = p.add_argument_group(
+        "speed-accuracy frontier", "With --scene or --battery: run each robot scene with every method (--method) "
+        "over a range of steps (--dt; default: the scene's step times 2, 1, 1/2 and 1/4) and its default setting "
+        "(the method auto where it exists, else the scene's own), and measure each whole run's wall time (its error "
+        "estimate's companion included) and the error of every figure it reports against a converged run (newton "
+        "at half the finest step, its own error stated: its difference from newton at the finest step). Writes "
+        "DIR/NAME.csv (one row per run), DIR/NAME.png (wall time against error, one panel per headline figure "
+        "and one for each run's worst figure, the default's run ringed) and DIR/frontier.md (one table row per "
+        "robot).")
+    frontier.add_argument("--scene", action="append", metavar="FILE.toml", help="a robot scene (the format of "
+                          "finrft run --scene), or the name of an example or battery robot (repeatable)")
+    frontier.add_argument("--battery", action="store_true", help="every robot of the battery shipped with finrft "
+                          "(finrft/mjcf/battery), then the three examples")
+    frontier.add_argument("--method", action="append", choices=[m for m in methods.names() if m != "auto"],
+                          help="only this method (repeatable; default: all)")
+    frontier.add_argument("--dt", action="append", type=number("s", minimum=0.0, inclusive=False), metavar="S",
+                          help="a step to sweep, s (repeatable); an adaptive method's largest step")
+    frontier.add_argument("--out", default="frontier", metavar="DIR", help="output folder (default: %(default)s)")
+    add_force(frontier)
     return p
 
 
@@ -174,9 +195,52 @@ def _bench_figures(args: argparse.Namespace, log: Any, tick: Any) -> dict[str, A
                            log=log, progress=tick)
     if args.bench == "backends":
         return bench.backends(batch_size=args.batch, workers=args.workers, log=log, progress=tick)
+    if args.bench == "robots" and (args.scene or args.battery):
+        return _frontier(args, log, tick)
     if args.bench == "robots":
         return bench.robots(tuple(args.robot or ()), duration=args.duration, log=log, progress=tick)
     return bench.modelling(log=log, progress=tick)
+
+
+def _frontier_scenes(args: argparse.Namespace) -> list[tuple[str, Any]]:
+    """The robots the frontier runs, (name, scene): --battery's, then each --scene (a file, or a robot's name)."""
+    from pathlib import Path
+    from ..experiments.user_model import example
+    from ..scene import UserScene, load_scene
+    from ..studies.frontier import BATTERY, battery_scene
+    paths = [(n, battery_scene(n)) for n in BATTERY] + [(n, example(n)) for n in EXAMPLES] if args.battery else []
+    for item in args.scene or ():
+        if Path(item).is_file():
+            paths.append((Path(item).stem, item))
+        elif item in BATTERY or item in EXAMPLES:
+            paths.append((item, battery_scene(item) if item in BATTERY else example(item)))
+        else:
+            raise SceneError(f"--scene {item}: no such file, nor a robot of the battery ({', '.join(BATTERY)}) "
+                                    f"or an example ({', '.join(EXAMPLES)})")
+    return [(name, load_scene(path, cls=UserScene)) for name, path in paths]
+
+
+def _frontier(args: argparse.Namespace, log: Any, tick: Any) -> dict[str, Any]:
+    """`frontier.frontier` of each robot: its CSV and chart in --out, and a table row for each in frontier.md."""
+    from pathlib import Path
+    from ..studies import frontier
+    robots = _frontier_scenes(args)
+    check_output_dir(args.out, "--out", args.force)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    summaries, rows = {}, []
+    for i, (name, scene) in enumerate(robots):
+        result = frontier.frontier(scene, name=name, method_names=tuple(args.method or ()) or None,
+                                   steps=tuple(args.dt or ()) or None, duration=args.duration, log=log,
+                                   progress=tick and (lambda done, total: tick(i + done / total, len(robots))))
+        frontier.write_csv(out / f"{name}.csv", result)
+        frontier.chart(out / f"{name}.png", result)
+        summaries[name] = result["summary"]
+        rows.append(frontier.markdown_row(result["summary"]))
+        log(rows[-1])
+        write_text(str(out / "frontier.md"), frontier.MARKDOWN_HEADER + "\n" + "\n".join(rows) + "\n")
+    said_written(args, [("table", str(out / "frontier.md"))] + [(f"{n} runs", str(out / f"{n}.csv")) for n in summaries])
+    return {"robots": summaries}
 
 
 def run_bench(args: argparse.Namespace) -> int:

@@ -1,0 +1,312 @@
+"""A robot's speed-accuracy frontier (`finrft bench robots --scene FILE.toml`): every method over a range of steps,
+each run's wall time against the error of each figure it reports, measured against a converged run.
+
+Each run is the whole run as `finrft run` makes it, in this process: the run and its error estimate's companion
+(`finrft.convergence`), timed together, with no limit on its error (`max_error=None`). A figure's error is the norm
+of its difference from the converged run's, relative to the norm of the converged figure (as `--max-error
+NAME=X%` bounds it), never over less than the headline limit's floor (the speed's 0.1 mm/s). The converged run is
+`newton` at half the finest step swept; its own error is stated beside it: first order in the step, it is about its
+difference from `newton` at the finest step swept (Richardson), which the summary reports as
+``reference_error``.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+from .. import methods
+from ..convergence import ROBOT_HEADLINE, figure_difference, magnitude
+from ..errors import SceneError, SimulationFailed
+from ..experiments.user_model import STILL_SPEED
+
+# The robots of the battery, shipped in finrft.mjcf under battery/ (each NAME.xml and NAME.toml), and what each is.
+BATTERY = {
+    "sandfish": "six 10 g links undulating in glass beads (li2013 3D), swimming",
+    "eel": "eight 40 g links undulating in the 3D-RFT code's sand (rft3d), swimming",
+    "diver": "five 15 g links pitched nose down in poppy seeds (li2013 3D), burrowing",
+    "screw_probe": "a 300 g spinning screw pushed into glass beads on a stand (li2013 3D), burrowing",
+    "whegs": "a 0.96 kg four-wheg walker on the 3D-RFT code's sand (rft3d), legged",
+    "spoke_hexapod": "a 0.78 kg hexapod with straight rotating legs in glass beads (li2013 3D), legged",
+    "quadruped": "a 1.9 kg trotting quadruped with plate feet in the wheel experiments' sand (li2013 3D), legged",
+    "rover": "a 2.6 kg four-wheeled rover with a 2 kg chassis in the wheel experiments' sand (li2013 3D), wheeled",
+    "paddle_sled": "a 1.4 kg sled pushed by two paddle wheels on the 3D-RFT code's sand (rft3d), wheeled",
+}
+# The accuracy a run is held to against the converged run, relative: the default's, and the one the fastest run of
+# the sweep must reach (or the default's own, where that is worse).
+ACCURACY = 0.02
+# The steps swept, as multiples of the scene's step: twice it down to a quarter.
+STEP_FACTORS = (2.0, 1.0, 0.5, 0.25)
+
+
+def battery_scene(name: str) -> str:
+    """The TOML scene of a battery robot (`BATTERY`), as a path `load_scene` reads."""
+    from ..models import mjcf_path
+    if name not in BATTERY:
+        raise SceneError(f"no battery robot named {name!r} (the battery: {', '.join(BATTERY)})")
+    return str(mjcf_path(f"battery/{name}.toml"))
+
+
+def headline_keys() -> tuple[str, ...]:
+    return tuple(f.key for f in ROBOT_HEADLINE)
+
+
+def relative_error(value: Any, reference: Any, floor: float = 0.0) -> float | None:
+    """|value - reference| over |reference| (norms of all components), the denominator never below ``floor``; None
+    where the reference is 0 (or not reported) and the floor 0. A run that does not report a figure the reference
+    does (a cost of transport where the run does not move) is off by its whole size."""
+    scale = max(magnitude(reference), floor)
+    if scale == 0:
+        return None
+    return (magnitude(reference) if value is None else magnitude(figure_difference(value, reference))) / scale
+
+
+def relative_estimate(estimate: Any, reference: Any, floor: float = 0.0) -> float | None:
+    """An error estimate (in the figure's unit and shape) on the same scale as `relative_error`."""
+    scale = max(magnitude(reference), floor)
+    if scale == 0 or estimate is None:
+        return None
+    return magnitude(estimate) / scale
+
+
+# The scale no figure's error is measured against less than: the headline limits' floors, and the speed's for the
+# velocity too (a robot that stays where it is has a mean velocity of ~0, which no run matches relatively).
+FLOORS = {f.key: f.floor for f in ROBOT_HEADLINE} | {"com_velocity_m_s": STILL_SPEED}
+
+
+@dataclass
+class Run:
+    """One run of the sweep."""
+
+    method: str
+    dt: float                    # the step (an adaptive method: its largest step, sim.max_step)
+    default: bool = False        # the scene's own setting (`auto`'s choice where that method exists)
+    wall_s: float = math.nan     # the whole run, its error estimate's companion included
+    companion_wall_s: float = math.nan
+    steps: int = 0
+    failed: str = ""             # why the run stopped, one line; "" where it finished
+    chosen: str = ""             # what `auto` chose, where it ran
+    figures: dict[str, Any] = field(default_factory=dict)
+    estimates: dict[str, Any] = field(default_factory=dict)
+    errors: dict[str, float | None] = field(default_factory=dict)
+    estimated: dict[str, float | None] = field(default_factory=dict)
+
+    def compare(self, reference: dict[str, Any]) -> None:
+        """Each figure's relative error against the converged run's figures, and its estimate's."""
+        for key, ref in reference.items():
+            if key in self.figures:
+                self.errors[key] = relative_error(self.figures[key], ref, FLOORS.get(key, 0.0))
+                self.estimated[key] = relative_estimate(self.estimates.get(key), ref, FLOORS.get(key, 0.0))
+
+    def headline_error(self) -> float | None:
+        """The largest error of the headline figures the run reports (`ROBOT_HEADLINE`)."""
+        values = [e for k in headline_keys() if (e := self.errors.get(k)) is not None]
+        return max(values) if values else None
+
+    def worst(self) -> tuple[str, float] | None:
+        """The figure furthest from the converged run, and its error."""
+        values = [(k, e) for k, e in self.errors.items() if e is not None]
+        return max(values, key=lambda item: item[1]) if values else None
+
+
+def _scene_for(scene: Any, method: str, dt: float) -> Any:
+    if methods.get(method).adaptive:
+        return scene.replace(**{"sim.method": method, "sim.max_step": dt})
+    return scene.replace(**{"sim.method": method, "sim.dt": dt})
+
+
+def measure(scene: Any, method: str, dt: float, *, estimate: bool = True) -> tuple[Run, Any]:
+    """One whole run of the scene at ``method`` and ``dt`` (its companion too, with ``estimate``), timed in this
+    process; a run that fails is returned with ``failed`` saying why."""
+    from ..experiment import run
+    from ..experiments.user_model import UserModel
+    s = _scene_for(scene, method, dt)
+    row = Run(method, dt)
+    start = time.perf_counter()
+    try:
+        result = run(UserModel.of(s), s, estimate_error=estimate, max_error=None)
+    except SimulationFailed as exc:
+        row.wall_s = time.perf_counter() - start
+        row.failed = f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"
+        return row, None
+    row.wall_s = time.perf_counter() - start
+    row.companion_wall_s = float(result.error_wall_s)
+    row.steps = int(result.steps)
+    row.figures = result.figure_values()
+    row.estimates = {k: v for k, v in (result.error_estimate or {}).items() if k in row.figures}
+    summary = result.summary()
+    if "method_choice" in summary:
+        row.chosen = str(summary["method_choice"].get("text", summary["method_choice"])) \
+            if isinstance(summary["method_choice"], dict) else str(summary["method_choice"])
+    return row, result
+
+
+def frontier(scene: Any, *, name: str = "robot", method_names: tuple[str, ...] | None = None,
+             steps: tuple[float, ...] | None = None, duration: float = 0.0, accuracy: float = ACCURACY,
+             log: Callable[[str], None] = print, progress: Callable[[int, int], None] | None = None) -> dict[str, Any]:
+    """Sweep a robot scene (a `UserScene`) over ``method_names`` (default: every method but `auto`) and ``steps``
+    (s; default: the scene's step times `STEP_FACTORS`), and run its default setting (the scene's method, or `auto`
+    where that method exists); compare every run's figures with the converged run's (`newton` at half the finest
+    step). ``duration`` > 0: that long instead of the scene's, its settle scaled alike. Returns the rows (`Run`), the
+    reference and the summary (`summarise`)."""
+    if duration > 0:
+        scene = scene.replace(**{"sim.duration": duration,
+                                 "sim.settle": scene.sim.settle * duration / scene.sim.duration})
+    names = tuple(method_names or (m for m in methods.names() if m != "auto"))
+    steps = tuple(sorted(steps or tuple(scene.sim.dt * f for f in STEP_FACTORS), reverse=True))
+    default_method = "auto" if "auto" in methods.names() else scene.sim.method
+    total = (len(names) * len(steps) + 1 + (default_method not in names or scene.sim.dt not in steps)
+             + ("newton" not in names))
+    done = 0
+
+    def tick(row: Run) -> None:
+        nonlocal done
+        done += 1
+        what = row.failed or f"{row.wall_s:.2f} s"
+        log(f"{name}: {row.method} at {row.dt:g} s{' (default)' if row.default else ''}: {what}")
+        if progress is not None:
+            progress(done, total)
+
+    rows: list[Run] = []
+    for method in names:
+        for dt in steps:
+            row, _ = measure(scene, method, dt)
+            row.default = method == default_method and math.isclose(dt, scene.sim.dt)
+            rows.append(row)
+            tick(row)
+    if not any(r.default for r in rows):
+        row, _ = measure(scene, default_method, scene.sim.dt)
+        row.default = True
+        rows.append(row)
+        tick(row)
+    reference_dt = min(steps) / 2
+    reference, _ = measure(scene, "newton", reference_dt, estimate=False)
+    tick(reference)
+    if reference.failed:
+        raise SimulationFailed(f"{name}: the converged run (newton at {reference_dt:g} s) failed: {reference.failed}")
+    check = next((r for r in rows if r.method == "newton" and math.isclose(r.dt, 2 * reference_dt)), None)
+    if check is None:
+        check, _ = measure(scene, "newton", 2 * reference_dt, estimate=False)
+        tick(check)
+    for row in rows + [check]:
+        if not row.failed:
+            row.compare(reference.figures)
+    return {"name": name, "rows": rows, "reference": reference, "check": check,
+            "summary": summarise(name, rows, reference, check, accuracy)}
+
+
+def summarise(name: str, rows: list[Run], reference: Run, check: Run, accuracy: float) -> dict[str, Any]:
+    """The default run's wall time, headline errors and estimate/error ratios; the fastest run whose headline
+    figures are within the accuracy asked for (or the default's own, where that is worse), and the default's wall
+    time over that run's."""
+    default = next(r for r in rows if r.default)
+    out: dict[str, Any] = {
+        "robot": name, "reference": {"method": "newton", "dt": reference.dt, "wall_s": reference.wall_s},
+        "reference_error": {k: check.errors.get(k) for k in reference.figures},
+        "default": {"method": default.method, "dt": default.dt, "wall_s": default.wall_s, "failed": default.failed,
+                    "chosen": default.chosen}}
+    if default.failed:
+        return out
+    out["default"].update(
+        errors={k: default.errors.get(k) for k in headline_keys() if k in default.errors},
+        estimate_over_error={k: (default.estimated.get(k) / e if e and default.estimated.get(k) is not None
+                                 else None) for k in headline_keys() if (e := default.errors.get(k)) is not None},
+        worst=default.worst())
+    target = max(accuracy, default.headline_error() or 0.0)
+    reaching = [r for r in rows if not r.failed and r.headline_error() is not None and r.headline_error() <= target]
+    out["target"] = target
+    if reaching:
+        fastest = min(reaching, key=lambda r: r.wall_s)
+        out["fastest"] = {"method": fastest.method, "dt": fastest.dt, "wall_s": fastest.wall_s,
+                          "headline_error": fastest.headline_error()}
+        out["default_over_fastest"] = default.wall_s / fastest.wall_s
+    return out
+
+
+def csv_rows(result: dict[str, Any]) -> list[dict[str, Any]]:
+    """One row per run: method, step, whether it is the default, its wall time, each figure's relative error and
+    relative estimate, and why it failed."""
+    keys = list(result["reference"].figures)
+    out = []
+    for r in result["rows"]:
+        row: dict[str, Any] = {"robot": result["name"], "method": r.method, "dt_s": r.dt, "default": int(r.default),
+                               "wall_s": r.wall_s, "companion_wall_s": r.companion_wall_s, "steps": r.steps}
+        for k in keys:
+            row[f"{k}_error"] = r.errors.get(k)
+            row[f"{k}_estimate"] = r.estimated.get(k)
+        worst = r.worst()
+        row.update(headline_error=r.headline_error(), worst_figure=worst[0] if worst else "",
+                   worst_error=worst[1] if worst else None, failed=r.failed, chosen=r.chosen)
+        out.append(row)
+    return out
+
+
+def write_csv(path: str | Path, result: dict[str, Any]) -> None:
+    rows = csv_rows(result)
+    with open(path, "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows({k: "" if v is None else v for k, v in row.items()} for row in rows)
+
+
+def chart(path: str | Path, result: dict[str, Any], accuracy: float = ACCURACY) -> None:
+    """Wall time against error, one panel per headline figure and one for each run's worst figure, one marker per
+    method (a line through its steps), the default's run ringed; failed runs are left out."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    panels = [*headline_keys(), "worst figure"]
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 3.8), sharey=True)
+    markers = dict(zip(methods.names(), "osD^v<>ph*"))
+    for ax, panel in zip(axes, panels):
+        for method in dict.fromkeys(r.method for r in result["rows"]):
+            points = [(e, r.wall_s, r.default) for r in result["rows"] if r.method == method and not r.failed
+                      and (e := (r.worst() or (None, None))[1] if panel == "worst figure" else r.errors.get(panel))
+                      is not None]
+            if not points:
+                continue
+            points.sort(key=lambda p: p[1])
+            line, = ax.plot([max(p[0], 1e-7) for p in points], [p[1] for p in points], marker=markers.get(method, "o"),
+                            label=method, alpha=0.85)
+            for e, wall, default in points:
+                if default:
+                    ax.plot(max(e, 1e-7), wall, "o", ms=16, mfc="none", mec="k", mew=1.5,
+                            label="default" if ax is axes[0] else None)
+        ax.axvline(accuracy, color="0.5", ls="--", lw=1)
+        ax.set(xscale="log", yscale="log", xlabel=f"relative error of {panel}", title=panel)
+    axes[0].set_ylabel("wall time of the whole run (s)")
+    axes[0].legend(fontsize=7)
+    fig.suptitle(f"{result['name']}: wall time against error (reference: newton at {result['reference'].dt:g} s)",
+                 fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def markdown_row(summary: dict[str, Any]) -> str:
+    """The robot's row of the results page's table."""
+    d = summary["default"]
+    setting = f"{d['method']}, {1e3 * d['dt']:g} ms"
+    if d["failed"]:
+        return f"| {summary['robot']} | {setting} | {d['wall_s']:.2f} | failed: {d['failed']} | | | | |"
+
+    def pct(v: float | None) -> str:
+        return "—" if v is None else f"{100 * v:.2g} %"
+    errors = ", ".join(f"{k.split('_m_s')[0]} {pct(v)}" for k, v in d["errors"].items())
+    ratios = ", ".join(f"{'—' if v is None else f'{v:.2g}'}" for v in d["estimate_over_error"].values())
+    worst = f"{d['worst'][0]} {pct(d['worst'][1])}" if d.get("worst") else "—"
+    fastest = summary.get("fastest")
+    fast = f"{fastest['method']}, {1e3 * fastest['dt']:g} ms ({fastest['wall_s']:.2f} s)" if fastest else "none"
+    ratio = f"{summary['default_over_fastest']:.2f}" if fastest else "—"
+    ref = max((v for v in summary["reference_error"].values() if v is not None), default=None)
+    return (f"| {summary['robot']} | {setting} | {d['wall_s']:.2f} | {errors} | {ratios} | {worst} | {fast} | {ratio} | "
+            f"{pct(ref)} |")
+
+
+MARKDOWN_HEADER = ("| robot | default | wall s | headline error vs converged | estimate / error | worst figure | "
+                   "fastest at the same accuracy (wall s) | default / fastest | reference's own error (worst) |\n"
+                   "|---|---|---:|---|---|---|---|---:|---:|")

@@ -1,0 +1,168 @@
+"""`finrft bench robots --scene`: a robot's speed-accuracy frontier, and the battery of robots it runs on."""
+
+import csv
+import json
+import math
+
+import mujoco
+import numpy as np
+import pytest
+
+from finrft.cli import main
+from finrft.experiments.user_model import UserModel
+from finrft.scene import UserScene, load_scene
+from finrft.studies import frontier
+from finrft.studies.frontier import BATTERY, Run, battery_scene, relative_error
+
+BOX = """<mujoco model="box">
+  <option integrator="implicitfast"><flag contact="disable"/></option>
+  <worldbody>
+    <body name="box" pos="0 0 -0.005">
+      <freejoint/>
+      <geom type="box" size="0.02 0.02 0.005" mass="0.05" contype="0" conaffinity="0"/>
+    </body>
+  </worldbody>
+</mujoco>
+"""
+# A 50 g plate 10 mm thick, its top at the surface, settling into the sand for 0.1 s.
+BOX_SCENE = """[model]
+path = "box.xml"
+bodies = ["box"]
+[medium]
+law = "li2013"
+zeta = 1.0
+element_size = 0.005
+[sim]
+dt = 0.001
+method = "newton"
+duration = 0.1
+settle = 0.05
+"""
+
+
+@pytest.fixture
+def box(tmp_path):
+    (tmp_path / "box.xml").write_text(BOX)
+    (tmp_path / "box.toml").write_text(BOX_SCENE)
+    return tmp_path / "box.toml"
+
+
+def test_relative_error_is_the_norm_of_the_difference_over_the_reference():
+    # (3, 4) against (0, 5): the difference (3, -1), sqrt(10) over 5
+    assert relative_error([3.0, 4.0], [0.0, 5.0]) == pytest.approx(math.sqrt(10) / 5)
+    # a dict of per-body figures is one vector: (1, 0, 2) against (1, 1, 1): sqrt(2) / sqrt(3)
+    assert relative_error({"a": [1.0, 0.0], "b": 2.0}, {"a": [1.0, 1.0], "b": 1.0}) == pytest.approx(
+        math.sqrt(2) / math.sqrt(3))
+    # a speed near 0 is measured against the floor, not against itself
+    assert relative_error(3e-5, 1e-6, floor=1e-4) == pytest.approx(2.9e-5 / 1e-4)
+    # a figure the reference does not report (a cost of transport where it stands still) has no relative error
+    assert relative_error(0.7, None, floor=0.0) is None
+    # a run that does not report one the reference does is off by its whole size
+    assert relative_error(None, 0.5) == pytest.approx(1.0)
+
+
+def _first_order(monkeypatch, walls):
+    """`frontier.measure` replaced by runs whose speed is v0 (1 + c dt) (first order in the step), estimated at
+    2 c dt v0, taking ``walls[method] / dt`` seconds; explicit fails above 1 ms."""
+    v0, c = 0.1, 20.0
+
+    def measure(scene, method, dt, *, estimate=True):
+        row = Run(method, dt, wall_s=walls[method] / dt)
+        if method == "explicit" and dt > 1e-3:
+            row.failed = "Chatter: at the step"
+            return row, None
+        row.figures = {"com_speed_m_s": v0 * (1 + c * dt), "cost_of_transport": 2.0}
+        row.estimates = {"com_speed_m_s": 2 * c * dt * v0, "cost_of_transport": 0.0}
+        return row, None
+    monkeypatch.setattr(frontier, "measure", measure)
+    return v0, c
+
+
+def test_errors_against_the_reference_have_the_known_answer(monkeypatch, box):
+    walls = {"newton": 1e-3, "explicit": 1e-4}
+    v0, c = _first_order(monkeypatch, walls)
+    scene = load_scene(str(box), cls=UserScene)
+    result = frontier.frontier(scene, method_names=("newton", "explicit"), steps=(2e-3, 1e-3, 5e-4), log=lambda s: None)
+    reference = v0 * (1 + c * 2.5e-4)  # newton at half the finest step
+    assert result["reference"].dt == pytest.approx(2.5e-4)
+    for row in result["rows"]:
+        if row.failed:
+            assert row.method == "explicit" and row.dt > 1e-3
+            continue
+        exact = v0 * c * abs(row.dt - 2.5e-4) / reference
+        assert row.errors["com_speed_m_s"] == pytest.approx(exact)
+        assert row.estimated["com_speed_m_s"] == pytest.approx(2 * c * row.dt * v0 / reference)
+        assert row.errors["cost_of_transport"] == 0
+    summary = result["summary"]
+    # the reference's own error: its difference from newton at the finest step, c (5e-4 - 2.5e-4) v0 / reference
+    assert summary["reference_error"]["com_speed_m_s"] == pytest.approx(v0 * c * 2.5e-4 / reference)
+    default = summary["default"]
+    assert (default["method"], default["dt"]) == ("newton", 1e-3)
+    assert default["errors"]["com_speed_m_s"] == pytest.approx(v0 * c * 7.5e-4 / reference)
+    # the estimate 2 c dt v0 over the error c (dt - dt_ref) v0: 2 dt / (dt - dt_ref) = 8/3
+    assert default["estimate_over_error"]["com_speed_m_s"] == pytest.approx(8 / 3)
+    # within 2 %, the cheapest: explicit at 1 ms (0.1 s, 1.5 %), against newton at 1 ms (1 s)
+    assert summary["fastest"]["method"] == "explicit" and summary["fastest"]["dt"] == pytest.approx(1e-3)
+    assert summary["default_over_fastest"] == pytest.approx(10.0)
+
+
+def test_the_cli_writes_one_row_per_run_and_a_chart(box, tmp_path, capsys):
+    out = tmp_path / "out"
+    assert main(["bench", "robots", "--scene", str(box), "--method", "newton", "--method", "implicit",
+                 "--dt", "0.001", "--dt", "0.0005", "--out", str(out), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)["robots"]["box"]
+    with open(out / "box.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert [(r["method"], float(r["dt_s"])) for r in rows] == [("newton", 1e-3), ("newton", 5e-4),
+                                                                ("implicit", 1e-3), ("implicit", 5e-4)]
+    assert [r["default"] for r in rows] == ["1", "0", "0", "0"]
+    for r in rows:
+        assert not r["failed"] and float(r["wall_s"]) > float(r["companion_wall_s"]) > 0
+        assert float(r["com_position_m_error"]) < 0.01 and r["com_position_m_estimate"] != ""
+    assert (out / "box.png").stat().st_size > 10_000
+    assert "| box | newton, 1 ms |" in (out / "frontier.md").read_text()
+    assert summary["default"]["method"] == "newton" and summary["reference"]["dt"] == pytest.approx(2.5e-4)
+
+
+def test_a_scene_that_is_not_there_is_one_line_and_exit_2(tmp_path, capsys):
+    assert main(["bench", "robots", "--scene", str(tmp_path / "none.toml"), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "--scene" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("name", BATTERY)
+def test_battery_robot_compiles_and_its_scene_validates(name):
+    scene = load_scene(battery_scene(name), cls=UserScene)
+    experiment = UserModel.of(scene)
+    built = experiment.build(scene)
+    assert sum(built.attached.elements.values()) > 0
+    data = mujoco.MjData(built.model)
+    mujoco.mj_forward(built.model, data)
+    assert np.isfinite(data.qacc).all()
+    # a lab's numerics: an implicit step of 1 ms or longer, a few seconds simulated
+    assert scene.sim.dt >= 1e-3 and 1.0 <= scene.sim.duration <= 5.0
+
+
+def test_the_battery_spans_10_g_to_2_kg_links_and_both_laws():
+    masses, laws = [], set()
+    for name in BATTERY:
+        scene = load_scene(battery_scene(name), cls=UserScene)
+        model = UserModel.of(scene).build(scene).model
+        masses += [model.body_mass[model.body(b).id] for b in UserModel.of(scene).bodies]
+        masses.append(max(model.body_mass))
+        laws.add(scene.medium.law)
+    assert min(masses) == pytest.approx(0.01, rel=0.05) and max(masses) == pytest.approx(2.0, rel=0.05)
+    assert laws == {"li2013", "rft3d"}
+    kinds = " ".join(BATTERY.values())
+    assert all(kind in kinds for kind in ("legged", "wheeled", "swimming", "burrowing"))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", BATTERY)
+def test_battery_robot_runs_at_its_defaults(name, capsys):
+    """`finrft run --scene FILE` at the scene's defaults: exit 0, its error estimate within the default limits."""
+    assert main(["run", "--scene", battery_scene(name), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["sim_time_s"] == pytest.approx(load_scene(battery_scene(name), cls=UserScene).sim.duration,
+                                                  abs=0.01)

@@ -28,7 +28,6 @@ from ..experiments.user_model import STILL_SPEED
 BATTERY = {
     "sandfish": "six 10 g links undulating in glass beads (li2013 3D), swimming",
     "eel": "eight 40 g links undulating in the 3D-RFT code's sand (rft3d), swimming",
-    "diver": "five 15 g links pitched nose down in poppy seeds (li2013 3D), burrowing",
     "screw_probe": "a 300 g spinning screw pushed into glass beads on a stand (li2013 3D), burrowing",
     "whegs": "a 0.96 kg four-wheg walker on the 3D-RFT code's sand (rft3d), legged",
     "spoke_hexapod": "a 0.78 kg hexapod with straight rotating legs in glass beads (li2013 3D), legged",

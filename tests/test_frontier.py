@@ -120,6 +120,7 @@ def test_the_cli_writes_one_row_per_run_and_a_chart(box, tmp_path, capsys):
         assert not r["failed"] and float(r["wall_s"]) > float(r["companion_wall_s"]) > 0
         assert float(r["com_position_m_error"]) < 0.01 and r["com_position_m_estimate"] != ""
     assert (out / "box.png").stat().st_size > 10_000
+    assert json.loads((out / "box.json").read_text())["default"]["method"] == "newton"
     assert "| box | newton, 1 ms |" in (out / "frontier.md").read_text()
     assert summary["default"]["method"] == "newton" and summary["reference"]["dt"] == pytest.approx(2.5e-4)
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 from typing import Any
 
 from .. import scene as scenes
@@ -134,9 +135,9 @@ def _add_robots(kinds: Any) -> argparse.ArgumentParser:
         "(the method auto where it exists, else the scene's own), and measure each whole run's wall time (its error "
         "estimate's companion included) and the error of every figure it reports against a converged run (newton "
         "at half the finest step, its own error stated: its difference from newton at the finest step). Writes "
-        "DIR/NAME.csv (one row per run), DIR/NAME.png (wall time against error, one panel per headline figure "
-        "and one for each run's worst figure, the default's run ringed) and DIR/frontier.md (one table row per "
-        "robot).")
+        "DIR/NAME.csv (one row per run), DIR/NAME.json (its summary), DIR/NAME.png (wall time against error, one "
+        "panel per headline figure and one for each run's worst figure, the default's run ringed) and "
+        "DIR/frontier.md (one table row per robot).")
     frontier.add_argument("--scene", action="append", metavar="FILE.toml", help="a robot scene (the format of "
                           "finrft run --scene), or the name of an example or battery robot (repeatable)")
     frontier.add_argument("--battery", action="store_true", help="every robot of the battery shipped with finrft "
@@ -236,10 +237,12 @@ def _frontier(args: argparse.Namespace, log: Any, tick: Any) -> dict[str, Any]:
         frontier.write_csv(out / f"{name}.csv", result)
         frontier.chart(out / f"{name}.png", result)
         summaries[name] = result["summary"]
+        write_text(str(out / f"{name}.json"), json.dumps(result["summary"], indent=1) + "\n")
         rows.append(frontier.markdown_row(result["summary"]))
         log(rows[-1])
         write_text(str(out / "frontier.md"), frontier.MARKDOWN_HEADER + "\n" + "\n".join(rows) + "\n")
-    said_written(args, [("table", str(out / "frontier.md"))] + [(f"{n} runs", str(out / f"{n}.csv")) for n in summaries])
+    said_written(args, [("table", str(out / "frontier.md"))]
+                 + [(f"{n} runs", str(out / f"{n}.csv")) for n in summaries])
     return {"robots": summaries}
 
 

@@ -240,7 +240,7 @@ def _frontier(args: argparse.Namespace, log: Any, tick: Any) -> dict[str, Any]:
         write_text(str(out / f"{name}.json"), json.dumps(result["summary"], indent=1) + "\n")
         rows.append(frontier.markdown_row(result["summary"]))
         log(rows[-1])
-        write_text(str(out / "frontier.md"), frontier.MARKDOWN_HEADER + "\n" + "\n".join(rows) + "\n")
+    write_text(str(out / "frontier.md"), frontier.MARKDOWN_HEADER + "\n" + "\n".join(rows) + "\n")
     said_written(args, [("table", str(out / "frontier.md"))]
                  + [(f"{n} runs", str(out / f"{n}.csv")) for n in summaries])
     return {"robots": summaries}

@@ -279,8 +279,9 @@ def chart(path: str | Path, result: dict[str, Any], accuracy: float = ACCURACY) 
         ax.set(xscale="log", yscale="log", xlabel=f"relative error of {panel}", title=panel)
     axes[0].set_ylabel("wall time of the whole run (s)")
     axes[0].legend(fontsize=7)
-    fig.suptitle(f"{result['name']}: wall time against error (reference: newton at {result['reference'].dt:g} s)",
-                 fontsize=10)
+    own = result["check"].headline_error()
+    fig.suptitle(f"{result['name']}: wall time against error (reference: newton at {result['reference'].dt:g} s"
+                 + ("" if own is None else f", its own headline error about {100 * own:.2g} %") + ")", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)

@@ -167,3 +167,12 @@ def test_battery_robot_runs_at_its_defaults(name, capsys):
     summary = json.loads(capsys.readouterr().out)
     assert summary["sim_time_s"] == pytest.approx(load_scene(battery_scene(name), cls=UserScene).sim.duration,
                                                   abs=0.01)
+
+
+@pytest.mark.parametrize("argv", [["--dt", "0.001"], ["--method", "newton"],
+                                  ["--scene", "hexapod", "--robot", "hexapod"]])
+def test_frontier_flags_without_a_scene_are_refused(argv, capsys):
+    """--method, --dt and --out belong to the frontier, --robot to the examples' benchmark: mixed, exit 2, one line."""
+    assert main(["bench", "robots", *argv]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1

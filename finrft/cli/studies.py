@@ -13,7 +13,7 @@ from ..experiments.flags import (add_force, add_json, add_max_error, add_quiet, 
 from ..experiments.swim import add_robot, resolve_robot
 from ..experiments.user_model import EXAMPLES
 from .. import methods
-from ..errors import SceneError
+from ..errors import SceneError, UsageError
 from .common import check_output, check_output_dir, print_json, progress, said_written, say, write_text
 
 
@@ -146,7 +146,7 @@ def _add_robots(kinds: Any) -> argparse.ArgumentParser:
                           help="only this method (repeatable; default: all)")
     frontier.add_argument("--dt", action="append", type=number("s", minimum=0.0, inclusive=False), metavar="S",
                           help="a step to sweep, s (repeatable); an adaptive method's largest step")
-    frontier.add_argument("--out", default="frontier", metavar="DIR", help="output folder (default: %(default)s)")
+    frontier.add_argument("--out", metavar="DIR", help="output folder (default: frontier)")
     add_force(frontier)
     return p
 
@@ -197,7 +197,13 @@ def _bench_figures(args: argparse.Namespace, log: Any, tick: Any) -> dict[str, A
     if args.bench == "backends":
         return bench.backends(batch_size=args.batch, workers=args.workers, log=log, progress=tick)
     if args.bench == "robots" and (args.scene or args.battery):
+        if args.robot:
+            raise UsageError("--robot names an example for the examples' benchmark: with --scene or --battery, give "
+                             "the example as --scene NAME")
         return _frontier(args, log, tick)
+    if args.bench == "robots" and (args.method or args.dt or args.out):
+        raise UsageError("--method, --dt and --out chart a robot's speed against accuracy: give the robot as "
+                         "--scene FILE.toml (or --battery)")
     if args.bench == "robots":
         return bench.robots(tuple(args.robot or ()), duration=args.duration, log=log, progress=tick)
     return bench.modelling(log=log, progress=tick)
@@ -226,6 +232,7 @@ def _frontier(args: argparse.Namespace, log: Any, tick: Any) -> dict[str, Any]:
     from pathlib import Path
     from ..studies import frontier
     robots = _frontier_scenes(args)
+    args.out = args.out or "frontier"
     check_output_dir(args.out, "--out", args.force)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

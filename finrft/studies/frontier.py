@@ -263,15 +263,15 @@ def chart(path: str | Path, result: dict[str, Any], accuracy: float = ACCURACY) 
     markers = dict(zip(methods.names(), "osD^v<>ph*"))
     for ax, panel in zip(axes, panels):
         for method in dict.fromkeys(r.method for r in result["rows"]):
-            points = [(e, r.wall_s, r.default) for r in result["rows"] if r.method == method and not r.failed
+            points = [(e, r.wall_s, r.default, r.dt) for r in result["rows"] if r.method == method and not r.failed
                       and (e := (r.worst() or (None, None))[1] if panel == "worst figure" else r.errors.get(panel))
                       is not None]
             if not points:
                 continue
-            points.sort(key=lambda p: p[1])
-            line, = ax.plot([max(p[0], 1e-7) for p in points], [p[1] for p in points], marker=markers.get(method, "o"),
-                            label=method, alpha=0.85)
-            for e, wall, default in points:
+            points.sort(key=lambda p: p[3])  # a method's line runs through its steps in order
+            ax.plot([max(p[0], 1e-7) for p in points], [p[1] for p in points], marker=markers.get(method, "o"),
+                    color=f"C{list(markers).index(method) if method in markers else 9}", label=method, alpha=0.85)
+            for e, wall, default, _ in points:
                 if default:
                     ax.plot(max(e, 1e-7), wall, "o", ms=16, mfc="none", mec="k", mew=1.5,
                             label="default" if ax is axes[0] else None)

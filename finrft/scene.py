@@ -18,12 +18,12 @@ import dataclasses
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, ClassVar, Mapping
 
 from . import laws, media, methods, schema
 from .errors import SceneError
 from .files import read_text, read_toml
-from .laws import drft
+from .laws import drft, sandswim
 from .schema import field as _f
 # Importable from here as before; their homes are the schema engine, the errors and the file reader.
 from .schema import field_of, split_key, to_toml  # noqa: F401
@@ -257,6 +257,12 @@ class Scene(Sections):
     rft: RFT = field(default_factory=RFT)
     medium: Immersion = field(default_factory=Immersion)
     sim: Sim = field(default_factory=Sim)
+
+    # A plate's [medium] gives its segment law's coefficients only under sandswim with its own left out (a robot's
+    # feeds its arms and body too): under any other, the medium's values were silently ignored.
+    USED_BY: ClassVar[dict[str, dict[str, tuple]]] = {"medium": dict.fromkeys(
+        ("bulk_density", "internal_friction", "surface_friction"),
+        ("rft.law", ("sandswim",), tuple(key for key, _, _ in sandswim.KEYS)))}
 
     def __post_init__(self) -> None:
         super().__post_init__()

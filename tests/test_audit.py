@@ -137,3 +137,23 @@ def test_a_chain_length_in_mm_is_refused(capsys, override):
     assert len(err.splitlines()) == 1
     assert main(["swim", "--arm-length", "65000"]) == 2  # the flag is in mm: a 65 m arm
     assert "arm.length must be <= 1 m" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("preset_name,key", [("paper", "medium.bulk_density=1500"),
+                                             ("paper", "medium.internal_friction=0.4"),
+                                             ("physical", "medium.surface_friction=0.3")])
+def test_a_plate_medium_its_law_does_not_read_is_refused(capsys, preset_name, key):
+    # the paper law, and sandswim with its own c_s, c_f, gamma0, never read the medium's properties: they ran unchanged
+    assert main(["drag", "--distance", "5", "--preset", preset_name, "--set", key]) == 2
+    err = capsys.readouterr().err
+    assert f"{key.split('=')[0]} is used by rft.law = 'sandswim'" in err and len(err.splitlines()) == 1
+    with pytest.raises(SceneError, match="leave rft.c_s, c_f, gamma0 out to derive them from"):
+        preset("physical").replace(**{key.split("=")[0]: float(key.split("=")[1])})
+    # the robot's arms and body read them under any fin law: kept there
+    robot = preset("paper", RobotScene).replace(**{"medium.bulk_density": 1500.0, "medium.internal_friction": 0.4,
+                                                   "body.drag_law": "velocity"})
+    assert robot.medium.bulk_density == 1500.0
+    # and sandswim left to the medium reads them
+    derived = preset("physical").replace(**{"rft.c_s": 0.0, "rft.c_f": 0.0, "rft.gamma0": 0.0, "medium.name": "",
+                                            "medium.bulk_density": 1500.0, "medium.internal_friction": 0.4})
+    assert derived.medium.internal_friction == 0.4

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any, ClassVar, Mapping
 
 from . import laws, media, methods, schema
+from .attach import MAX_ELEMENT_SIZE
 from .errors import SceneError
 from .files import read_text, read_toml
 from .laws import drft, sandswim
@@ -125,7 +126,8 @@ Medium = schema.section("Medium", (
                      "its own coefficients, rft3d's bulk density and internal friction; empty: li2013's generic "
                      "coefficients scaled by zeta")),
     ("surface_z", float, _f(0.0, "m", "height of the free surface (gravity along -z); the medium lies below")),
-    ("element_size", float, _f(0.005, "m", "size of the surface elements", minimum=0.0)),
+    ("element_size", float, _f(0.005, "m", "size of the surface elements", minimum=0.0,
+                               maximum=MAX_ELEMENT_SIZE, why_maximum=IN_MM)),
     ("v_reg", float, _f(laws.SURFACE_V_REG, "m/s", "every element's force times tanh(max(n.v, 0) / v_reg): the "
                         "smooth onset of the leading-face switch and of the speed (finrft.laws.regularised); 0: "
                         "none, the law's step as published", minimum=0.0, exclusive=False,

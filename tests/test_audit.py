@@ -157,3 +157,14 @@ def test_a_plate_medium_its_law_does_not_read_is_refused(capsys, preset_name, ke
     derived = preset("physical").replace(**{"rft.c_s": 0.0, "rft.c_f": 0.0, "rft.gamma0": 0.0, "medium.name": "",
                                             "medium.bulk_density": 1500.0, "medium.internal_friction": 0.4})
     assert derived.medium.internal_friction == 0.4
+
+
+def test_an_element_size_in_mm_is_refused(capsys):
+    # 5 m elements (5 mm meant) ran, one element per face
+    assert main(["run", "--example", "sand_swimmer", "--set", "medium.element_size=5"]) == 2
+    err = capsys.readouterr().err
+    assert "medium.element_size must be <= 1 m (scene lengths are in metres" in err and len(err.splitlines()) == 1
+    from finrft import attach
+    with pytest.raises(SceneError, match="attach: element_size = 5 m is more than 1 m: it is in metres"):
+        attach(_box(), "b", element_size=5.0)
+    assert attach(_box(), "b", element_size=0.02).element_size == 0.02

@@ -297,6 +297,9 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str = (), law: str = "li
     _check(names, law, surface_z, element_size, backend)
     if not (math.isfinite(v_reg) and v_reg >= 0):
         raise SceneError(f"attach: v_reg must be >= 0 m/s, got {v_reg!r}")
+    if v_reg > laws.LARGEST_V_REG:
+        raise SceneError(f"attach: v_reg must be <= {laws.LARGEST_V_REG:g} m/s ({laws.WHY_LARGEST_V_REG}), got "
+                         f"{v_reg!r}")
     module = laws.module(law, laws.SURFACE)
     # one vocabulary with the scene files: their names of rft3d's parameters are taken as its own
     rho_c = _either(rho_c, bulk_density if module.DENSITY else None, "rho_c", "bulk_density")

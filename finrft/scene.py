@@ -85,7 +85,7 @@ class Plate(Chain):
 RFT = schema.section("RFT", (
     ("law", str, _f("paper", "", laws.described(), choices=laws.names)),
     ("v_reg", float, _f(0.001, "m/s", "speed below which the rate-independent force fades out (tanh)",
-                        minimum=0.0)),
+                        minimum=0.0, maximum=laws.LARGEST_V_REG, why_maximum=laws.WHY_LARGEST_V_REG)),
     *laws.keys()), __name__,
     "The segment law of a chain's segments: its name, its regularisation speed, and the keys every segment law "
     "declares (``KEYS`` in its module, `finrft.laws`); a law reads its own.")
@@ -131,6 +131,7 @@ Medium = schema.section("Medium", (
     ("v_reg", float, _f(laws.SURFACE_V_REG, "m/s", "every element's force times tanh(max(n.v, 0) / v_reg): the "
                         "smooth onset of the leading-face switch and of the speed (finrft.laws.regularised); 0: "
                         "none, the law's step as published", minimum=0.0, exclusive=False,
+                        maximum=laws.LARGEST_V_REG, why_maximum=laws.WHY_LARGEST_V_REG,
                         least=laws.LEAST_V_REG, why_least=f"Newton's method settles velocities to 1e-10 m/s; a "
                         f"ramp narrower than {laws.LEAST_V_REG:g} m/s leaves a resting body's force wherever it "
                         f"stopped")),

@@ -168,3 +168,17 @@ def test_an_element_size_in_mm_is_refused(capsys):
     with pytest.raises(SceneError, match="attach: element_size = 5 m is more than 1 m: it is in metres"):
         attach(_box(), "b", element_size=5.0)
     assert attach(_box(), "b", element_size=0.02).element_size == 0.02
+
+
+def test_a_regularisation_speed_beyond_rfts_speeds_is_refused(capsys):
+    # rft.v_reg = 5 m/s ran a 30 mm/s drag at tanh(0.006), 1 % of the law's force, with exit 0
+    assert main(["drag", "--distance", "5", "--set", "rft.v_reg=5"]) == 2
+    err = capsys.readouterr().err
+    assert "rft.v_reg must be <= 1 m/s (RFT's force is rate-independent" in err and len(err.splitlines()) == 1
+    from finrft import UserScene, attach
+    from finrft.scene import scene_from_dict
+    with pytest.raises(SceneError, match="medium.v_reg must be <= 1 m/s"):
+        scene_from_dict({"medium": {"v_reg": 30.0}}, UserScene)
+    with pytest.raises(SceneError, match="attach: v_reg must be <= 1 m/s"):
+        attach(_box(), "b", v_reg=5.0)
+    assert preset("paper").replace(**{"rft.v_reg": 0.01}).rft.v_reg == 0.01  # the accuracy study's widest

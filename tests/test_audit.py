@@ -182,3 +182,16 @@ def test_a_regularisation_speed_beyond_rfts_speeds_is_refused(capsys):
     with pytest.raises(SceneError, match="attach: v_reg must be <= 1 m/s"):
         attach(_box(), "b", v_reg=5.0)
     assert preset("paper").replace(**{"rft.v_reg": 0.01}).rft.v_reg == 0.01  # the accuracy study's widest
+
+
+def test_a_rotate_stroke_past_a_turn_names_its_unit(capsys):
+    # Drive(kind='rotate', stroke=90) turned the plate 90 rad (14 turns), the 90 degrees meant taken as radians
+    from finrft.drive import Drive
+    with pytest.raises(SceneError, match="a rotate drive's stroke is in radians, and 90 looks like degrees: give "
+                                         "math.radians\\(90\\) = 1.571 rad"):
+        Drive(kind="rotate", stroke=90.0)
+    assert Drive(kind="rotate", stroke=6.28).stroke == 6.28
+    assert Drive(kind="drag", stroke=2.0).stroke == 2.0  # metres: no turn
+    assert main(["rotate", "--amplitude", "720", "--omega", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "--amplitude 720 deg is more than one turn" in err and len(err.splitlines()) == 1

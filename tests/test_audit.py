@@ -195,3 +195,14 @@ def test_a_rotate_stroke_past_a_turn_names_its_unit(capsys):
     assert main(["rotate", "--amplitude", "720", "--omega", "1"]) == 2
     err = capsys.readouterr().err
     assert "--amplitude 720 deg is more than one turn" in err and len(err.splitlines()) == 1
+
+
+def test_a_drive_too_slow_to_hold_names_its_speed_and_stroke(capsys):
+    # a 15-minute stroke let the load drift the armature; the advice was "give the driven body more mass", though
+    # the plate's mass is the scene's and the drift grows with the stroke's time
+    assert main(["rotate", "--amplitude", "90", "--omega", "0.1", "--set", "sim.dt=0.03"]) == 1
+    err = capsys.readouterr().err
+    assert "its stroke of 90 deg at 0.1 deg/s lasts 900 s" in err and "drive faster or over a shorter stroke" in err
+    assert "more mass" not in err and len(err.splitlines()) == 1
+    # ten times faster holds: the cause was the drive's rate
+    assert main(["rotate", "--amplitude", "90", "--omega", "1", "--set", "sim.dt=0.03", "--quiet"]) == 0

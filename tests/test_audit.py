@@ -206,3 +206,16 @@ def test_a_drive_too_slow_to_hold_names_its_speed_and_stroke(capsys):
     assert "more mass" not in err and len(err.splitlines()) == 1
     # ten times faster holds: the cause was the drive's rate
     assert main(["rotate", "--amplitude", "90", "--omega", "1", "--set", "sim.dt=0.03", "--quiet"]) == 0
+
+
+@pytest.mark.parametrize("argv,form", [
+    (["wheel", "--slip", "0.2", "--sinkage", "10", "--set", "sim.dt=0.01", "--max-error", "Fx_N=0.1%"],
+     "--max-error Fx_N=X%"),
+    (["drag", "--distance", "5", "--max-error", "1e-4"], "--max-error angle_deg=X")])
+def test_an_error_over_its_limit_shows_how_to_raise_it(capsys, argv, form):
+    # "raise the limit (--max-error)": a robot's figure stayed over after a bare --max-error 1000, which bounds
+    # angles, eta and positions alone; the message now shows the NAME=X% form of what is over
+    assert main(argv) == 1
+    err = capsys.readouterr().err
+    assert f"raise the limit ({form}; a bare --max-error X bounds angles, eta and positions only" in err
+    assert len(err.splitlines()) == 1

@@ -219,3 +219,15 @@ def test_an_error_over_its_limit_shows_how_to_raise_it(capsys, argv, form):
     err = capsys.readouterr().err
     assert f"raise the limit ({form}; a bare --max-error X bounds angles, eta and positions only" in err
     assert len(err.splitlines()) == 1
+
+
+def test_a_record_interval_longer_than_the_run_is_refused(capsys):
+    # 100 s between samples of a 0.17 s drag recorded its start and end alone, with exit 0
+    assert main(["drag", "--distance", "5", "--set", "sim.record_dt=100"]) == 2
+    err = capsys.readouterr().err
+    assert "sim.record_dt = 100 s is longer than the run (0.1667 s)" in err and len(err.splitlines()) == 1
+    import finrft
+    with pytest.raises(SceneError, match="sim.record_dt = 1 s is longer than the run"):
+        finrft.simulate(preset("paper").replace(**{"sim.record_dt": 1.0}), finrft.Drive(stroke=0.005))
+    # the default interval on a run shorter than it is no one's choice: it runs
+    assert len(finrft.simulate(preset("paper"), finrft.Drive(stroke=0.0003, speed=0.03)).time) == 2

@@ -185,11 +185,13 @@ class Result(Estimated):
     def figure_values(self) -> dict[str, Any]:
         """The figures of the summary the error estimate covers one by one (the experiment's ``figures(scene)``,
         keys of `convergence.FIGURES`), by key."""
-        figures = getattr(self.experiment, "figures", None)
-        if figures is None:
-            return {}
-        summary = self.experiment.summary(self)
-        return {key: summary[key] for key in figures(self.scene) if key in summary}
+        # Once per result: the error check takes them for each companion's differences and for the limits.
+        if "_figure_values" not in self.__dict__:
+            figures = getattr(self.experiment, "figures", None)
+            summary = {} if figures is None else self.experiment.summary(self)
+            self.__dict__["_figure_values"] = {key: summary[key] for key in (figures(self.scene) if figures else ())
+                                               if key in summary}
+        return self.__dict__["_figure_values"]
 
     @property
     def coarse_companion(self) -> bool:

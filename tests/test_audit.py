@@ -231,3 +231,20 @@ def test_a_record_interval_longer_than_the_run_is_refused(capsys):
         finrft.simulate(preset("paper").replace(**{"sim.record_dt": 1.0}), finrft.Drive(stroke=0.005))
     # the default interval on a run shorter than it is no one's choice: it runs
     assert len(finrft.simulate(preset("paper"), finrft.Drive(stroke=0.0003, speed=0.03)).time) == 2
+
+
+def test_a_robot_runs_summary_is_taken_once_for_its_error_check(monkeypatch):
+    # the error check computed the run's summary twice per companion (its differences, then its limits) and the
+    # companion's once: each a walk over the run's means; once each now
+    import finrft
+    from finrft.experiments import user_model
+    from finrft.scene import load_scene
+    calls = []
+    summary = user_model.robot_summary
+    monkeypatch.setattr(user_model, "robot_summary", lambda experiment, run: calls.append(run) or summary(experiment,
+                                                                                                          run))
+    scene = load_scene(Path(__file__).parents[1] / "mjcf" / "sand_swimmer.toml", cls=finrft.UserScene,
+                       overrides={"sim.duration": 0.6, "sim.settle": 0.3})
+    run = finrft.run_robot(scene, max_error=None)
+    assert len(calls) == 2 and len({id(r) for r in calls}) == 2  # the run's and its one companion's
+    assert run.figure_values() == {key: run.summary()[key] for key in run.figure_values()}

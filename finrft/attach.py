@@ -297,6 +297,9 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str = (), law: str = "li
     _check(names, law, surface_z, element_size, backend)
     if not (math.isfinite(v_reg) and v_reg >= 0):
         raise SceneError(f"attach: v_reg must be >= 0 m/s, got {v_reg!r}")
+    if v_reg > laws.LARGEST_V_REG:
+        raise SceneError(f"attach: v_reg must be <= {laws.LARGEST_V_REG:g} m/s ({laws.WHY_LARGEST_V_REG}), got "
+                         f"{v_reg!r}")
     module = laws.module(law, laws.SURFACE)
     # one vocabulary with the scene files: their names of rft3d's parameters are taken as its own
     rho_c = _either(rho_c, bulk_density if module.DENSITY else None, "rho_c", "bulk_density")
@@ -394,6 +397,11 @@ def _check_types(spec: object, bodies: object, geoms: object, texts: dict[str, o
         raise SceneError(f"attach: cull must be True or False, got {type(cull).__name__} {cull!r:.60}")
 
 
+# The largest surface element, m: a body granular RFT acts on is centimetres to decimetres across, and a larger
+# element is a size in mm (the command line's unit) written where metres belong (5 for 5 mm: one element per face).
+MAX_ELEMENT_SIZE = 1.0
+
+
 def _check(names: list[str], law: str, surface_z: float, element_size: float, backend: str) -> None:
     if law not in laws.names(laws.SURFACE):
         raise SceneError(f"attach: law must be one of {', '.join(laws.names(laws.SURFACE))}, got {law!r}")
@@ -407,6 +415,9 @@ def _check(names: list[str], law: str, surface_z: float, element_size: float, ba
         raise SceneError(f"attach: surface_z must be finite, got {surface_z!r}")
     if not (math.isfinite(element_size) and element_size > 0):
         raise SceneError(f"attach: element_size must be > 0 m, got {element_size!r}")
+    if element_size > MAX_ELEMENT_SIZE:
+        raise SceneError(f"attach: element_size = {element_size:g} m is more than {MAX_ELEMENT_SIZE:g} m: it is in "
+                         f"metres (a value in mm is 1000 times larger): give 5 mm as 0.005")
 
 
 def _bind(spec: mujoco.MjSpec, attached: Attached, surface: Surface) -> None:

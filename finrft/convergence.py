@@ -343,8 +343,17 @@ def checked(build: Callable[[Any], M], run_once: Callable[[Any, M, Callable[[flo
     run.error_wall_s = time.perf_counter() - start
     if over:
         raise InaccurateResult(f"the estimated discretisation error is too large ({', '.join(over)}; from a "
-                               f"companion run at {label}): {advice(scene)}, or raise the limit (--max-error)")
+                               f"companion run at {label}): {advice(scene)}, or raise the limit ({raising(over)})")
     return run
+
+
+def raising(over: list[str]) -> str:
+    """How --max-error raises the limits ``over`` names ('name = value > limit', `ErrorLimits.exceeded`): a reported
+    figure's only by its name, which a bare number does not bound."""
+    names = dict.fromkeys(item.split(" = ")[0] for item in over)
+    forms = " ".join(f"--max-error {name}=X%" if name in FIGURES else f"--max-error {name}=X" for name in names)
+    return (f"{forms}; a bare --max-error X bounds angles, eta and positions only, a reported figure NAME=X% in "
+            f"percent of it or NAME=X in its unit")
 
 
 def paired(time: np.ndarray, other: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -16,6 +16,9 @@ import numpy as np
 from .errors import SceneError
 
 KINDS = ("drag", "rotate")
+# The longest rotate stroke (rad): one turn. The plate's rotate tests turn it by up to 180 deg, and a stroke past
+# a full turn is one in degrees (the command line's unit) given where radians belong.
+TURN = 2 * math.pi
 
 
 @dataclass(frozen=True)
@@ -42,6 +45,10 @@ class Drive:
             value = getattr(self, name)
             if not value > 0:
                 raise SceneError(f"drive {name} must be > 0 {units[name]}, got {value!r}")
+        if not linear and self.stroke > TURN:
+            raise SceneError(f"drive stroke = {self.stroke:g} rad is more than one turn (2 pi rad): a rotate drive's "
+                             f"stroke is in radians, and {self.stroke:g} looks like degrees: give "
+                             f"math.radians({self.stroke:g}) = {math.radians(self.stroke):.4g} rad")
         if self.cycles is not None:
             if isinstance(self.cycles, bool) or not isinstance(self.cycles, numbers.Integral):
                 raise SceneError(f"drive cycles must be a whole number (or None: one stroke), got {self.cycles!r}")

@@ -11,7 +11,7 @@ holds the named series; `record.write_h5` and `record.write_rrd` write any resul
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any, Callable, Protocol
 
 import mujoco
@@ -185,11 +185,13 @@ class Result(Estimated):
     def figure_values(self) -> dict[str, Any]:
         """The figures of the summary the error estimate covers one by one (the experiment's ``figures(scene)``,
         keys of `convergence.FIGURES`), by key."""
-        figures = getattr(self.experiment, "figures", None)
-        if figures is None:
-            return {}
-        summary = self.experiment.summary(self)
-        return {key: summary[key] for key in figures(self.scene) if key in summary}
+        # Once per result: the error check takes them for each companion's differences and for the limits.
+        if "_figure_values" not in self.__dict__:
+            figures = getattr(self.experiment, "figures", None)
+            summary = {} if figures is None else self.experiment.summary(self)
+            self.__dict__["_figure_values"] = {key: summary[key] for key in (figures(self.scene) if figures else ())
+                                               if key in summary}
+        return self.__dict__["_figure_values"]
 
     @property
     def coarse_companion(self) -> bool:
@@ -241,6 +243,13 @@ def run(experiment: Experiment, scene: Any, *, progress: Callable[[float], None]
     if not isinstance(estimate_error, (bool, np.bool_)):
         raise SceneError(f"run: estimate_error must be True or False, got {type(estimate_error).__name__} "
                          f"{estimate_error!r:.60}")
+    # A record_dt given longer than the run would record its start and end alone (the default on a short run does,
+    # and passes: the user gave none)
+    duration = experiment.drive_for(scene).duration
+    given = scene.sim.record_dt != next(f.default_factory() for f in fields(scene) if f.name == "sim").record_dt
+    if given and scene.sim.record_dt > duration:
+        raise SceneError(f"sim.record_dt = {scene.sim.record_dt:g} s is longer than the run ({duration:.4g} s): set "
+                         f"sim.record_dt <= {duration:.4g} s (s, not ms?)")
     laws.warn_if_feeds_energy(geometry.segment_law(scene))
     # A companion on the run's model (the adaptive methods') steps the run's MjData again, reset: a new one costs
     # a tenth of a physical gait's companion (the bindings' wrappers).

@@ -18,12 +18,13 @@ import dataclasses
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, ClassVar, Mapping
 
 from . import laws, media, methods, schema
+from .attach import MAX_ELEMENT_SIZE
 from .errors import SceneError
 from .files import read_text, read_toml
-from .laws import drft
+from .laws import drft, sandswim
 from .schema import field as _f
 # Importable from here as before; their homes are the schema engine, the errors and the file reader.
 from .schema import field_of, split_key, to_toml  # noqa: F401
@@ -84,7 +85,7 @@ class Plate(Chain):
 RFT = schema.section("RFT", (
     ("law", str, _f("paper", "", laws.described(), choices=laws.names)),
     ("v_reg", float, _f(0.001, "m/s", "speed below which the rate-independent force fades out (tanh)",
-                        minimum=0.0)),
+                        minimum=0.0, maximum=laws.LARGEST_V_REG, why_maximum=laws.WHY_LARGEST_V_REG)),
     *laws.keys()), __name__,
     "The segment law of a chain's segments: its name, its regularisation speed, and the keys every segment law "
     "declares (``KEYS`` in its module, `finrft.laws`); a law reads its own.")
@@ -125,10 +126,12 @@ Medium = schema.section("Medium", (
                      "its own coefficients, rft3d's bulk density and internal friction; empty: li2013's generic "
                      "coefficients scaled by zeta")),
     ("surface_z", float, _f(0.0, "m", "height of the free surface (gravity along -z); the medium lies below")),
-    ("element_size", float, _f(0.005, "m", "size of the surface elements", minimum=0.0)),
+    ("element_size", float, _f(0.005, "m", "size of the surface elements", minimum=0.0,
+                               maximum=MAX_ELEMENT_SIZE, why_maximum=IN_MM)),
     ("v_reg", float, _f(laws.SURFACE_V_REG, "m/s", "every element's force times tanh(max(n.v, 0) / v_reg): the "
                         "smooth onset of the leading-face switch and of the speed (finrft.laws.regularised); 0: "
                         "none, the law's step as published", minimum=0.0, exclusive=False,
+                        maximum=laws.LARGEST_V_REG, why_maximum=laws.WHY_LARGEST_V_REG,
                         least=laws.LEAST_V_REG, why_least=f"Newton's method settles velocities to 1e-10 m/s; a "
                         f"ramp narrower than {laws.LEAST_V_REG:g} m/s leaves a resting body's force wherever it "
                         f"stopped")),
@@ -257,6 +260,12 @@ class Scene(Sections):
     rft: RFT = field(default_factory=RFT)
     medium: Immersion = field(default_factory=Immersion)
     sim: Sim = field(default_factory=Sim)
+
+    # A plate's [medium] gives its segment law's coefficients only under sandswim with its own left out (a robot's
+    # feeds its arms and body too): under any other, the medium's values were silently ignored.
+    USED_BY: ClassVar[dict[str, dict[str, tuple]]] = {"medium": dict.fromkeys(
+        ("bulk_density", "internal_friction", "surface_friction"),
+        ("rft.law", ("sandswim",), tuple(key for key, _, _ in sandswim.KEYS)))}
 
     def __post_init__(self) -> None:
         super().__post_init__()

@@ -37,7 +37,8 @@ def field(default: Any, unit: str, doc: str, *, choices: tuple[str, ...] | Calla
     ``why_maximum``, the reason shown when it is exceeded; ``least``, the smallest magnitude a value other than 0
     may have, with ``why_least`` (a value below it is a slip of units, not a medium). ``used_by``: (the section's
     key that selects, the values that use this key), e.g. ``("kind", ("sine",))``: an entry whose selector is
-    another value refuses this key at any value but its default (`unused`)."""
+    another value refuses this key at any value but its default (`unused`); a scene class's ``USED_BY`` gives such
+    rules for a section it shares, their selector another section's key (`check_sections`)."""
     return dataclasses.field(default=default, metadata={"unit": unit, "doc": doc, "choices": choices,
                                                         "minimum": minimum, "exclusive": exclusive,
                                                         "maximum": maximum, "why_maximum": why_maximum,
@@ -213,22 +214,36 @@ def check(section_name: str, f: dataclasses.Field, value: Any) -> Any:
     return value
 
 
-def unused(where: str, entry: Any, default: Any) -> None:
+def unused(where: str, entry: Any, default: Any, rules: Mapping[str, tuple] | None = None,
+           scene: Any = None) -> None:
     """SceneError for a key of a section's ``entry`` (named ``where``) that its selector does not use (`field`'s
-    ``used_by``) yet holds a value other than in ``default``, the scene's default section: a key given that would
-    be silently ignored (a default, or a value set back to it, passes)."""
+    ``used_by``, or ``rules``: the scene's own for a section it shares, `check_sections`) yet holds a value other
+    than in ``default``, the scene's default section: a key given that would be silently ignored (a default, or a
+    value set back to it, passes). A selector ``"section.key"`` is another section's key of ``scene``; a rule's
+    third entry, keys of the selector's section that replace this key where any of them is given."""
     for f in dataclasses.fields(entry):
-        rule = f.metadata.get("used_by")
+        rule = (rules or {}).get(f.name) or f.metadata.get("used_by")
         if rule is None or getattr(entry, f.name) == getattr(default, f.name):
             continue
-        selector, values = rule
-        chosen = getattr(entry, selector)
-        if chosen not in values:
-            default = next(g.default for g in dataclasses.fields(entry) if g.name == selector)
-            told = " (its default)" if chosen == default else ""
-            raise SceneError(f"{where}.{f.name} is used by {selector} = {' or '.join(map(repr, values))} only, and "
-                             f"this entry's {selector} is {chosen!r}{told}: set {where}.{selector}"
-                             + (f" = {values[0]!r}" if len(values) == 1 else "") + f", or leave {f.name} out")
+        selector, values, *rest = rule
+        owner_name, _, key = selector.rpartition(".")
+        owner = getattr(scene, owner_name) if owner_name else entry
+        chosen, shown = getattr(owner, key), selector if owner_name else f"{where}.{selector}"
+        replacing = [k for k in (rest[0] if rest else ()) if getattr(owner, k) != next(
+            g.default for g in dataclasses.fields(owner) if g.name == k)]
+        if chosen in values and not replacing:
+            continue
+        if chosen in values:
+            left = f"{owner_name}.{', '.join(rest[0])}" if owner_name else ", ".join(rest[0])
+            raise SceneError(f"{where}.{f.name} is used by {selector} = {chosen!r} with {left} left out only, and "
+                             f"this scene gives {owner_name + '.' if owner_name else ''}{replacing[0]}: leave "
+                             f"{where}.{f.name} out, or leave {left} out to derive them from [{where}]")
+        selector_default = next(g.default for g in dataclasses.fields(owner) if g.name == key)
+        told = " (its default)" if chosen == selector_default else ""
+        whose = "this scene's" if owner_name else "this entry's"
+        raise SceneError(f"{where}.{f.name} is used by {selector} = {' or '.join(map(repr, values))} only, and "
+                         f"{whose} {selector} is {chosen!r}{told}: set {shown}"
+                         + (f" = {values[0]!r}" if len(values) == 1 else "") + f", or leave {f.name} out")
 
 
 def check_sections(scene: Any) -> None:
@@ -249,6 +264,12 @@ def check_sections(scene: Any) -> None:
         else:
             value = _checked(section_name, section_cls, value, defaults.get(section_name, section_cls))
         object.__setattr__(scene, section_name, value)
+    # A section two scenes share whose keys one of them reads only under another section's choice (a plate's
+    # [medium] feeds its law's coefficients under one law alone, a robot's its arms and body too): the scene's own
+    # rules, ``USED_BY`` of its class, {section: {key: rule}}, a rule as `field`'s ``used_by`` with a dotted selector.
+    for section_name, rules in getattr(cls, "USED_BY", {}).items():
+        unused(section_name, getattr(scene, section_name), defaults.get(section_name, sections(cls)[section_name])(),
+               rules, scene)
 
 
 def _checked(where: str, section_cls: type, value: Any, default: Callable[[], Any]) -> Any:

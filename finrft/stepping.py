@@ -17,7 +17,7 @@ from .drive import Drive
 from .errors import Chatter, NotConverged, SceneError, SimulationFailed, SimulationUnstable, StepUnderflow
 from .attach import Attached
 from .integrate import SURFACE_SPEED, LoadPeak, Stepper
-from .models import ARMATURE_RATIO, ForceGroup
+from .models import ForceGroup
 from .native import Code, captured_warnings
 from .scene import ExplicitSim
 
@@ -109,13 +109,18 @@ class Prescribed:
         lag = float(np.max(np.abs(d.qpos[self.qpos] - q0 - self.drive.stroke_velocity(self._stroke) *
                                   (d.time - start))))
         if lag > DRIVE_LAG * self.drive.stroke:
-            rotary = self.drive.kind == "rotate"
+            # The load moves the armature by load x time^2 / armature: a slow drive's long stroke drifts, though the
+            # armature is already `models.ARMATURE_RATIO` times what it moves.
+            rotary, drive = self.drive.kind == "rotate", self.drive
+            scale, unit = (math.degrees(1), "deg") if rotary else (1e3, "mm")
+            flags = "--omega, --amplitude" if rotary else "--speed, --distance"
             raise SimulationFailed(
-                f"the drive ended stroke {self._stroke + 1} {np.degrees(lag) if rotary else 1e3 * lag:.3g} "
-                f"{'deg' if rotary else 'mm'} off its prescribed motion ({100 * lag / self.drive.stroke:.2g} % of "
-                f"the stroke; at most {100 * DRIVE_LAG:g} %): the load outweighs the drive's armature "
-                f"({self.armature:.3g} {'kg m^2' if rotary else 'kg'}, {ARMATURE_RATIO:g} times what it moves), so "
-                f"the reported travel would be wrong: give the driven body more mass, or lighten the load")
+                f"the drive ended stroke {self._stroke + 1} {scale * lag:.3g} {unit} off its prescribed motion "
+                f"({100 * lag / drive.stroke:.2g} % of the stroke; at most {100 * DRIVE_LAG:g} %): its stroke of "
+                f"{scale * drive.stroke:.4g} {unit} at {scale * drive.speed:.4g} {unit}/s lasts "
+                f"{drive.stroke_time:.4g} s, long enough for the load to move the drive's armature "
+                f"({self.armature:.3g} {'kg m^2' if rotary else 'kg'}; the lag grows as load x time^2 / armature), so the reported travel "
+                f"would be wrong: drive faster or over a shorter stroke ({flags}), or lighten the load")
 
 
 

@@ -14,6 +14,7 @@ import finrft
 from finrft.errors import Chatter
 from finrft.experiments.user_model import example
 from finrft.scene import UserScene, load_scene
+from conftest import physics_run
 
 BLOCK = """<mujoco model="block">
   <option><flag contact="disable"/></option>
@@ -90,8 +91,8 @@ def test_chatter_that_leaves_the_figures_is_reported_not_refused():
     after (6 % of the probes): its speed lies within 1 % of the implicit run's at its default numerics, so it runs
     through, and reports the chatter it saw."""
     base = load_scene(example("hexapod"), cls=UserScene, overrides={"sim.duration": 2.0})
-    explicit = finrft.run_robot(base.replace(**{"sim.method": "explicit", "sim.dt": 2e-4}), max_error=None).summary()
-    implicit = finrft.run_robot(base, max_error=None).summary()
+    explicit = physics_run(base.replace(**{"sim.method": "explicit", "sim.dt": 2e-4})).summary()
+    implicit = physics_run(base).summary()
     speed = [math.hypot(*s["com_velocity_m_s"][:2]) for s in (explicit, implicit)]
     assert speed[0] == pytest.approx(speed[1], rel=0.01)
     assert 0 < explicit["chatter"]["share"] < 0.5 and explicit["chatter"]["first_s"] < 0.3

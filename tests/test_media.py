@@ -238,8 +238,11 @@ def test_a_sandswim_law_left_at_zero_takes_its_coefficients_from_the_medium(cls,
     assert deeper["c_s"] == pytest.approx(ratio * found.c_s, rel=1e-5)
     assert deeper["c_f"] == pytest.approx(ratio * found.c_f, rel=1e-5)
     assert deeper["gamma0"] == pytest.approx(found.gamma0, rel=1e-5)
-    # coefficients set explicitly are kept, per unit area and depth
-    explicit = scene.replace(**{"rft.c_s": 1000.0, "rft.c_f": 500.0, "rft.gamma0": 0.3})
+    # coefficients set explicitly are kept, per unit area and depth (a plate's medium then gives nothing: its values
+    # are refused beside them, tests/test_audit.py; a robot's still gives its arms and body)
+    unread = {key: 0.0 for key in MEDIUM_SET if key.endswith("_density") or key.endswith("_friction")}
+    explicit = scene.replace(**{"rft.c_s": 1000.0, "rft.c_f": 500.0, "rft.gamma0": 0.3,
+                                **(unread if cls is Scene else {})})
     size = getattr(scene, chain).segment_length * 0.03 * (0.02 + 0.015)
     assert geometry.resolve(explicit).chain.parameters["c_s"] == pytest.approx(1000.0 * size, rel=1e-12)
 

@@ -117,7 +117,8 @@ def test_native_explicit_steps_take_the_peak_at_every_step_without_python(paper,
     assert np.abs(run.drive_force).max() < run.peak_drive_force
 
 
-@pytest.mark.parametrize("method", ["explicit", "newton", "adaptive-newton"])
+# the adaptive methods' Python twin takes the longest: with the slow studies
+@pytest.mark.parametrize("method", ["explicit", "newton", pytest.param("adaptive-newton", marks=pytest.mark.slow)])
 def test_native_and_numpy_steppers_take_the_same_peak(method):
     # The authors' plate turned out and back (a reversal, its stop engaging after it): each stroke's peak and its
     # change to the neighbouring steps, kept in C by the native steppers and in Python by their numpy twins.

@@ -89,7 +89,11 @@ def _signal_mid_run(argv: list[str], log: Path, sig: int, group: bool = False) -
     return proc, err.decode()
 
 
-@pytest.mark.parametrize("sig,group", [(signal.SIGKILL, False), (signal.SIGTERM, False), (signal.SIGHUP, False),
+# SIGHUP takes SIGTERM's path, and SIGTERM to the parent alone ends its workers as SIGTERM to the whole group
+# does: those two run with the slow studies
+@pytest.mark.parametrize("sig,group", [(signal.SIGKILL, False),
+                                       pytest.param(signal.SIGTERM, False, marks=pytest.mark.slow),
+                                       pytest.param(signal.SIGHUP, False, marks=pytest.mark.slow),
                                        (signal.SIGTERM, True)])
 def test_optimize_workers_end_with_their_parent(tmp_path, sig, group, errors_only):
     log = tmp_path / "run.h5"
@@ -111,7 +115,7 @@ def test_fit_workers_end_with_their_parent(tmp_path, errors_only):
     assert proc.returncode == -signal.SIGKILL and errors_only(err) == ""
 
 
-@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP])
+@pytest.mark.parametrize("sig", [signal.SIGTERM, pytest.param(signal.SIGHUP, marks=pytest.mark.slow)])
 def test_resume_after_sigterm_and_sighup_is_bit_identical(tmp_path, capsys, sig):
     reference = tmp_path / "reference.h5"
     budget = ["--budget", "34", "--workers", "1"]

@@ -14,6 +14,7 @@ import finrft
 from finrft.cli import main
 from finrft.experiments.user_model import run_robot, window_mean
 from finrft.scene import SceneError, UserScene, load_scene, to_toml
+from conftest import physics_run
 
 # The 4 cm x 6 cm plate of the guide on a slide along x, 10 kg (its drag: 0.370 N/cm^3 x 4 cm x (6 cm)^2 / 2).
 PLATE = """<mujoco><option gravity="0 0 -9.81"/><worldbody><body name="plate">
@@ -99,7 +100,7 @@ def test_a_position_actuator_on_a_sine_gives_the_second_order_response(tmp_path)
                                    "control.0.kind": "sine", "control.0.amplitude": 0.2, "control.0.frequency": f,
                                    "control.0.ramp": 0.2, "sim.duration": 2.0, "sim.settle": 1.6,
                                    "sim.dt": 1e-4, "sim.record_dt": 1e-3})
-    run = finrft.run_robot(scene)
+    run = physics_run(scene)
     w = 2 * math.pi * f
     expected = 0.2 * kp / abs(kp - I_ROD * w ** 2 + 1j * kv * w)  # transients decay as exp(-kv t / 2I): e^-24
     late = run.time >= 1.6
@@ -118,7 +119,7 @@ def test_actuator_power_is_torque_times_speed_against_a_damper(tmp_path):
     scene = UserScene().replace(**{"model.path": str(path), "model.bodies": ["rod"], "control.0.actuator": "motor",
                                    "control.0.value": 2.0, "sim.duration": 1.0, "sim.settle": 0.5,
                                    "sim.dt": 1e-4, "sim.record_dt": 0.01})
-    s = finrft.run_robot(scene).summary()
+    s = physics_run(scene).summary()
     w = kv * 2 / (kv + b)  # transients decay as exp(-(kv + b) t / I): e^-200 by the settle
     assert s["actuator_power_W"] == pytest.approx(b * w ** 2, rel=1e-6)
     assert s["positive_power_W"] == pytest.approx(b * w ** 2, rel=1e-6)

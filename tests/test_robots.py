@@ -24,7 +24,7 @@ from finrft.laws import li2013
 from finrft.models import mjcf_path
 from finrft.experiments import wheel
 from finrft.experiments.attached_model import medium_forces
-from finrft.experiments.user_model import example
+from finrft.experiments.user_model import UserModel, example
 from finrft.scene import Medium, Sim, UserScene, load_scene
 
 SAND = dict(law="rft3d", medium="sand_3d_rft_code", mu_surf=0.1806)  # the hexapod's sand (mjcf/hexapod.toml)
@@ -109,9 +109,10 @@ def test_swimmer_joint_lag_makes_a_serpenoid_of_a_over_lambda_0_2():
 
 
 def robot_run(name: str, **overrides) -> dict:
-    """The example's run (finrft run --example NAME) at its default numerics (newton-midpoint, 1 ms), its summary."""
+    """The example's run (finrft run --example NAME) at its default numerics, its summary; without the companion run
+    of its error estimate, as these tests check the physics, not the step."""
     scene = load_scene(example(name), overrides=overrides, cls=UserScene)
-    return finrft.run_robot(scene, max_error=None).summary()
+    return finrft.run(UserModel.of(scene), scene, max_error=None, estimate_error=False).summary()
 
 
 # The swimmer's wave: lambda = 6 links' arc wavelength along the travel (test above), 1 Hz.
@@ -275,9 +276,8 @@ def test_wheel_rigs_carriage_load_balances_the_sands_drawbar_pull():
     load its drive applies is minus the sand's mean force along x, and at the rig's step both are within 1 % of a
     run at a tenth of it. Read at the state after each step rather than where the step took them, both came out
     7.6 % short at 10 ms on the wheel sinking from the surface."""
-    scene = load_scene(example("wheel_rig"), cls=UserScene)  # 10 s from the keyframe, averaged over 4-10 s
-    coarse = finrft.run_robot(scene).summary()
-    fine = finrft.run_robot(scene.replace(**{"sim.dt": scene.sim.dt / 10})).summary()
+    dt = load_scene(example("wheel_rig"), cls=UserScene).sim.dt  # 10 s from the keyframe, averaged over 4-10 s
+    coarse, fine = robot_run("wheel_rig"), robot_run("wheel_rig", **{"sim.dt": dt / 10})
     for s in (coarse, fine):
         assert s["drive_load"][0] == pytest.approx(-s["medium_force_N"][0], rel=1e-4)
     assert coarse["drive_load"][0] == pytest.approx(fine["drive_load"][0], rel=0.01)

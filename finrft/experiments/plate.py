@@ -601,10 +601,12 @@ class RotateCommand(_PlateCommand):
 
     def add_flags(self, p: argparse.ArgumentParser) -> None:
         p.add_argument("--amplitude", type=number("degrees"), default=120.0, metavar="DEG",
-                       help="stroke angle in degrees (default: %(default)s)")
+                       help="stroke angle in degrees, at most 360 (default: %(default)s)")
         p.add_argument("--omega", type=number("deg/s"), default=60.0, metavar="DEG_S",
                        help="angular speed in degrees/s (default: %(default)s)")
         super().add_flags(p)
 
     def drive(self, args: argparse.Namespace) -> Drive:
+        if args.amplitude > 360.0:  # the Drive would speak of radians
+            raise UsageError(f"--amplitude {args.amplitude:g} deg is more than one turn: give at most 360 degrees")
         return Drive("rotate", math.radians(args.omega), math.radians(args.amplitude), args.cycles)

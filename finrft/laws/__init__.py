@@ -135,6 +135,12 @@ WHY_LEAST = ("granular resistance is of order rho g, >= 1e4 N/m^3 for any grains
 # of the velocity (finrft.integrate.NEWTON_TOLERANCE); a ramp 1000 times wider keeps the force a body at rest
 # takes from it within 0.1 % (a narrower one leaves the rest force wherever Newton's method stopped in the ramp).
 LEAST_V_REG = 1e-7
+# The largest (m/s): granular RFT is the rate-independent law of slow motion through grains, below about 1 m/s; a
+# wider ramp leaves every force at those speeds below tanh(1) = 76 % of the law's and growing with the speed, a
+# viscous drag rather than the law (a value in mm/s, the command line's unit, lands here).
+LARGEST_V_REG = 1.0
+WHY_LARGEST_V_REG = ("RFT's force is rate-independent at the speeds it holds at, below about 1 m/s; a wider ramp "
+                     "scales it down with the speed there, a viscous drag: is the value in mm/s?")
 
 
 def check(rft: Any, medium: tuple[float, float, float] | None) -> None:

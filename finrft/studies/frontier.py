@@ -118,7 +118,7 @@ def _scene_for(scene: Any, method: str, dt: float) -> Any:
     return scene.replace(**{"sim.method": method, "sim.dt": dt})
 
 
-def measure(scene: Any, method: str, dt: float, *, estimate: bool = True) -> tuple[Run, Any]:
+def measure(scene: Any, method: str, dt: float, *, estimate: bool = True) -> Run:
     """One whole run of the scene at ``method`` and ``dt`` (its companion too, with ``estimate``), timed in this
     process; a run that fails is returned with ``failed`` saying why."""
     from ..experiment import run
@@ -131,17 +131,14 @@ def measure(scene: Any, method: str, dt: float, *, estimate: bool = True) -> tup
     except SimulationFailed as exc:
         row.wall_s = time.perf_counter() - start
         row.failed = f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"
-        return row, None
+        return row
     row.wall_s = time.perf_counter() - start
     row.companion_wall_s = float(result.error_wall_s)
     row.steps = int(result.steps)
     row.figures = result.figure_values()
     row.estimates = {k: v for k, v in (result.error_estimate or {}).items() if k in row.figures}
-    summary = result.summary()
-    if "method_choice" in summary:
-        row.chosen = str(summary["method_choice"].get("text", summary["method_choice"])) \
-            if isinstance(summary["method_choice"], dict) else str(summary["method_choice"])
-    return row, result
+    row.chosen = str(result.summary().get("method_choice") or "")  # what `auto` chose, where it ran
+    return row
 
 
 def frontier(scene: Any, *, name: str = "robot", method_names: tuple[str, ...] | None = None,
@@ -158,8 +155,8 @@ def frontier(scene: Any, *, name: str = "robot", method_names: tuple[str, ...] |
     names = tuple(method_names or (m for m in methods.names() if m != "auto"))
     steps = tuple(sorted(steps or tuple(scene.sim.dt * f for f in STEP_FACTORS), reverse=True))
     default_method = "auto" if "auto" in methods.names() else scene.sim.method
-    total = (len(names) * len(steps) + 1 + (default_method not in names or scene.sim.dt not in steps)
-             + ("newton" not in names))
+    default_swept = default_method in names and any(math.isclose(dt, scene.sim.dt) for dt in steps)
+    total = len(names) * len(steps) + 1 + (not default_swept) + ("newton" not in names)
     done = 0
 
     def tick(row: Run) -> None:
@@ -173,23 +170,23 @@ def frontier(scene: Any, *, name: str = "robot", method_names: tuple[str, ...] |
     rows: list[Run] = []
     for method in names:
         for dt in steps:
-            row, _ = measure(scene, method, dt)
+            row = measure(scene, method, dt)
             row.default = method == default_method and math.isclose(dt, scene.sim.dt)
             rows.append(row)
             tick(row)
-    if not any(r.default for r in rows):
-        row, _ = measure(scene, default_method, scene.sim.dt)
+    if not default_swept:
+        row = measure(scene, default_method, scene.sim.dt)
         row.default = True
         rows.append(row)
         tick(row)
     reference_dt = min(steps) / 2
-    reference, _ = measure(scene, "newton", reference_dt, estimate=False)
+    reference = measure(scene, "newton", reference_dt, estimate=False)
     tick(reference)
     if reference.failed:
         raise SimulationFailed(f"{name}: the converged run (newton at {reference_dt:g} s) failed: {reference.failed}")
     check = next((r for r in rows if r.method == "newton" and math.isclose(r.dt, 2 * reference_dt)), None)
     if check is None:
-        check, _ = measure(scene, "newton", 2 * reference_dt, estimate=False)
+        check = measure(scene, "newton", 2 * reference_dt, estimate=False)
         tick(check)
     for row in rows + [check]:
         if not row.failed:

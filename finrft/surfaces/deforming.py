@@ -41,6 +41,9 @@ TOLERANCE = 1e-3   # slope (tan) above tan(repose) that relaxation leaves
 MAX_ITERATIONS = 100_000
 # An element moving horizontally slower than this share of its speed pushes its sand to all four sides.
 STRAIGHT_DOWN = 1e-9
+# An element this close above the surface (m) is on it, under the body: an element resting in its own rut would
+# otherwise be on or off it by rounding, and sand pushed onto it or not.
+TOUCH = 1e-9
 
 
 def depth(points: Any, gravity: Any, heights: Any, size: Any, centre: Any = (0.0, 0.0, 0.0), frame: Any = None,
@@ -100,7 +103,7 @@ def sweep(heights: Any, points: Any, areas: Any, velocities: Any, gravity: Any, 
         lower = p[e, 2] < target[rows, cols]
         target[rows[lower], cols[lower]] = p[e, 2]
         direction[rows[lower], cols[lower]] = d
-    occupied = target <= h
+    occupied = target <= h + TOUCH
     removed = np.where(target < h, h - target, 0.0)
     h = np.where(target < h, target, h)
     for r, c in zip(*np.nonzero(removed)):

@@ -8,6 +8,7 @@
 
 #define RELAX_RATE 0.25      // finrft.surfaces.deforming.RELAX_RATE
 #define STRAIGHT_DOWN 1e-9   // finrft.surfaces.deforming.STRAIGHT_DOWN
+#define TOUCH 1e-9           // finrft.surfaces.deforming.TOUCH
 
 static FinrftGrid make_grid(int nrow, int ncol, const double* heights, const double size[2], const double centre[3],
                             const double frame[9]) {
@@ -113,7 +114,7 @@ int finrft_deforming_sweep(int nrow, int ncol, double* heights, const double siz
   }
   double* removed = target;  // reused in place: the height each point loses
   for (int i = 0; i < cells; i++) {
-    occupied[i] = target[i] <= heights[i];
+    occupied[i] = target[i] <= heights[i] + TOUCH;
     double lost = target[i] < heights[i] ? heights[i] - target[i] : 0;
     if (target[i] < heights[i]) heights[i] = target[i];
     removed[i] = lost;

@@ -230,3 +230,13 @@ def test_c_twin_of_the_deforming_surface_agrees_over_many_updates(library):
     assert np.abs(heights).max() > 0.01  # a rut and a berm were made
     assert np.abs(twin - heights).max() < 1e-6
     assert abs(twin.sum()) <= 1e-6 * np.abs(twin).sum() and abs(heights.sum()) <= 1e-6 * np.abs(heights).sum()
+
+
+def test_the_surfaces_are_installed_with_finrft():
+    import tomllib
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parent.parent
+    packages = tomllib.loads((root / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"]
+    assert "finrft.surfaces" in packages
+    assert sorted(Path(root, "plugins", "surfaces").glob("*.c"))  # compiled by setup.py's source list

@@ -92,6 +92,10 @@ def test_bad_surfaces_are_refused():
         hfield.depth(_points(3), G, np.zeros((3, 3)), SIZE, frame=_rotation(0))
     with pytest.raises(SceneError, match="nonzero gravity"):
         plane.depth(_points(3), [0, 0, 0])
+    with pytest.raises(SceneError, match="one area and one velocity per point"):
+        deforming.sweep(np.zeros((3, 3)), _points(3), [1e-4], np.zeros((3, 3)), G, SIZE)
+    with pytest.raises(SceneError, match="angle of repose"):
+        deforming.relax(np.zeros((3, 3)), SIZE, np.radians(95))
     with pytest.raises(SceneError, match="unknown surface 'slope'"):
         surfaces.module("slope")
 
@@ -148,13 +152,15 @@ def _slopes(h, size=SIZE):
 
 
 def test_relaxation_conserves_sand_and_ends_at_the_angle_of_repose():
-    h = np.zeros((33, 41))
-    h[16, 20] = 0.05  # a spike of sand, far steeper than repose
-    relaxed = deforming.relax(h, SIZE, REPOSE)
-    assert relaxed.converged
-    assert abs(relaxed.heights.sum() - h.sum()) <= 1e-6 * h.sum()
-    assert _slopes(relaxed.heights) <= np.tan(REPOSE) + deforming.TOLERANCE
-    assert relaxed.heights.max() < 0.05 / 4  # it did spread
+    spike = np.zeros((33, 41))
+    spike[16, 20] = 0.05  # a spike of sand, far steeper than repose
+    rough = np.random.default_rng(7).uniform(0.0, 0.02, (33, 41))  # slopes up to 3, every cell
+    for h in (spike, rough):
+        relaxed = deforming.relax(h, SIZE, REPOSE)
+        assert relaxed.converged
+        assert abs(relaxed.heights.sum() - h.sum()) <= 1e-6 * np.abs(relaxed.heights - h).sum()
+        assert _slopes(h) > 2 * np.tan(REPOSE) and _slopes(relaxed.heights) <= np.tan(REPOSE) + deforming.TOLERANCE
+    assert deforming.relax(spike, SIZE, REPOSE).heights.max() < 0.05 / 4  # the spike did spread
 
 
 def test_a_slope_below_repose_is_left_unchanged():

@@ -10,7 +10,7 @@ A kind's module provides
   the local surface, positive below it; 0 or less above it, where an element gets no force.
 
 `surface_depth` gives that depth and the direction the laws take their angles against: up, against gravity, the
-same for every element (RFT's angles are measured against gravity, not against a tilted surface). A laws never
+same for every element (RFT's angles are measured against gravity, not against a tilted surface). A law never
 learns about the surface: it gets a depth and this direction.
 
 Gravity is the model's (``option.gravity``), any direction. Bad input raises `finrft.errors.SceneError`.

@@ -80,7 +80,10 @@ def sweep(heights: Any, points: Any, areas: Any, velocities: Any, gravity: Any, 
     if not 0.0 <= front_share <= 1.0:
         raise SceneError(f"front_share {front_share!r} must be between 0 and 1")
     p, v = _local_motion(g, points, velocities)
-    a = np.asarray(areas, dtype=float).reshape(len(p))
+    a = np.asarray(areas, dtype=float)
+    if a.shape != (len(p),) or v.shape != p.shape:
+        raise SceneError(f"sweep needs one area and one velocity per point: {len(p)} points, areas of shape "
+                         f"{a.shape}, velocities of shape {v.shape}")
     h = g.heights.copy()
     nrow, ncol = h.shape
     dx, dy = g.spacing
@@ -157,6 +160,8 @@ def relax(heights: Any, size: Any, repose: float, blocked: Any = None, tolerance
         raise SceneError(f"heights must be a grid of at least 2 x 2, got shape {h.shape}")
     if not 0.0 < repose < np.pi / 2:
         raise SceneError(f"angle of repose {repose!r} rad must be between 0 and pi/2")
+    if not (np.isfinite(size).all() and (np.asarray(size, dtype=float) > 0).all()):
+        raise SceneError(f"grid size {list(size)} must be two positive half-extents, m")
     nrow, ncol = h.shape
     dx, dy = 2 * float(size[0]) / (ncol - 1), 2 * float(size[1]) / (nrow - 1)
     free = np.ones(h.shape, bool) if blocked is None else ~np.asarray(blocked, dtype=bool)

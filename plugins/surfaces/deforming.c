@@ -141,7 +141,10 @@ int finrft_deforming_sweep(int nrow, int ncol, double* heights, const double siz
 
 int finrft_deforming_relax(int nrow, int ncol, double* heights, const double size[2], double repose,
                            const unsigned char* blocked, double tolerance, int max_iterations) {
-  if (nrow < 2 || ncol < 2 || !(repose > 0 && repose < M_PI / 2)) return FINRFT_SURFACE_BAD_INPUT;
+  if (nrow < 2 || ncol < 2 || !(repose > 0 && repose < M_PI / 2) || !(size[0] > 0 && size[1] > 0) ||
+      !isfinite(size[0]) || !isfinite(size[1])) {
+    return FINRFT_SURFACE_BAD_INPUT;
+  }
   double dx = 2 * size[0] / (ncol - 1), dy = 2 * size[1] / (nrow - 1), slope = tan(repose);
   int nx = nrow * (ncol - 1), ny = (nrow - 1) * ncol;
   double* flow = malloc(sizeof(double) * (nx + ny));

@@ -160,6 +160,8 @@ def relax(heights: Any, size: Any, repose: float, blocked: Any = None, tolerance
         raise SceneError(f"heights must be a grid of at least 2 x 2, got shape {h.shape}")
     if not 0.0 < repose < np.pi / 2:
         raise SceneError(f"angle of repose {repose!r} rad must be between 0 and pi/2")
+    if not tolerance > 0:
+        raise SceneError(f"relaxation tolerance {tolerance!r} must be a positive slope")
     if not (np.isfinite(size).all() and (np.asarray(size, dtype=float) > 0).all()):
         raise SceneError(f"grid size {list(size)} must be two positive half-extents, m")
     nrow, ncol = h.shape

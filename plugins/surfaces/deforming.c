@@ -139,33 +139,49 @@ int finrft_deforming_sweep(int nrow, int ncol, double* heights, const double siz
   return 0;
 }
 
+// Only edges next to a point that changed in the last iteration can have sand to move (one that did not change
+// kept its excess, and one with excess moved sand), so each iteration looks at the box of the points that changed,
+// one point wider: the same heights as the twin's sweep over the whole grid, at the cost of the disturbed region.
 int finrft_deforming_relax(int nrow, int ncol, double* heights, const double size[2], double repose,
                            const unsigned char* blocked, double tolerance, int max_iterations) {
   if (nrow < 2 || ncol < 2 || !(repose > 0 && repose < M_PI / 2) || !(size[0] > 0 && size[1] > 0) ||
-      !isfinite(size[0]) || !isfinite(size[1])) {
+      !isfinite(size[0]) || !isfinite(size[1]) || !(tolerance > 0)) {
     return FINRFT_SURFACE_BAD_INPUT;
   }
   double dx = 2 * size[0] / (ncol - 1), dy = 2 * size[1] / (nrow - 1), slope = tan(repose);
-  int nx = nrow * (ncol - 1), ny = (nrow - 1) * ncol;
-  double* flow = malloc(sizeof(double) * (nx + ny));
+  int nx = nrow * (ncol - 1);
+  double* flow = malloc(sizeof(double) * (nx + (nrow - 1) * ncol));
   if (!flow) return FINRFT_SURFACE_BAD_INPUT;
-  int result = -1;
+  int result = -1, r0 = 0, r1 = nrow - 1, c0 = 0, c1 = ncol - 1;  // the box of points to look at
   for (int iteration = 0; iteration <= max_iterations; iteration++) {
     double worst = -INFINITY;
-    for (int r = 0; r < nrow; r++) {
-      for (int c = 0; c + 1 < ncol; c++) {
+    int cr0 = nrow, cr1 = -1, cc0 = ncol, cc1 = -1;  // the box of points that change
+    for (int r = r0; r <= r1; r++) {
+      for (int c = c0; c < c1; c++) {
         int i = r * ncol + c, free_edge = !blocked || (!blocked[i] && !blocked[i + 1]);
         double step = heights[i + 1] - heights[i], excess = free_edge ? fabs(step) - slope * dx : 0;
         if (excess / dx > worst) worst = excess / dx;
         flow[r * (ncol - 1) + c] = excess > 0 ? -copysign(RELAX_RATE * excess, step) : 0;
+        if (excess > 0) {
+          if (r < cr0) cr0 = r;
+          if (r > cr1) cr1 = r;
+          if (c < cc0) cc0 = c;
+          if (c + 1 > cc1) cc1 = c + 1;
+        }
       }
     }
-    for (int r = 0; r + 1 < nrow; r++) {
-      for (int c = 0; c < ncol; c++) {
+    for (int r = r0; r < r1; r++) {
+      for (int c = c0; c <= c1; c++) {
         int i = r * ncol + c, free_edge = !blocked || (!blocked[i] && !blocked[i + ncol]);
         double step = heights[i + ncol] - heights[i], excess = free_edge ? fabs(step) - slope * dy : 0;
         if (excess / dy > worst) worst = excess / dy;
         flow[nx + i] = excess > 0 ? -copysign(RELAX_RATE * excess, step) : 0;
+        if (excess > 0) {
+          if (r < cr0) cr0 = r;
+          if (r + 1 > cr1) cr1 = r + 1;
+          if (c < cc0) cc0 = c;
+          if (c > cc1) cc1 = c;
+        }
       }
     }
     if (worst <= tolerance) {
@@ -173,17 +189,24 @@ int finrft_deforming_relax(int nrow, int ncol, double* heights, const double siz
       break;
     }
     if (iteration == max_iterations) break;
-    for (int r = 0; r < nrow; r++) {
-      for (int c = 0; c + 1 < ncol; c++) {
+    for (int r = r0; r <= r1; r++) {
+      for (int c = c0; c < c1; c++) {
         double f = flow[r * (ncol - 1) + c];
         heights[r * ncol + c] -= f;
         heights[r * ncol + c + 1] += f;
       }
     }
-    for (int i = 0; i < ny; i++) {
-      heights[i] -= flow[nx + i];
-      heights[i + ncol] += flow[nx + i];
+    for (int r = r0; r < r1; r++) {
+      for (int c = c0; c <= c1; c++) {
+        int i = r * ncol + c;
+        heights[i] -= flow[nx + i];
+        heights[i + ncol] += flow[nx + i];
+      }
     }
+    r0 = cr0 > 0 ? cr0 - 1 : 0;
+    r1 = cr1 < nrow - 1 ? cr1 + 1 : nrow - 1;
+    c0 = cc0 > 0 ? cc0 - 1 : 0;
+    c1 = cc1 < ncol - 1 ? cc1 + 1 : ncol - 1;
   }
   free(flow);
   return result;

@@ -96,6 +96,8 @@ def test_bad_surfaces_are_refused():
         deforming.sweep(np.zeros((3, 3)), _points(3), [1e-4], np.zeros((3, 3)), G, SIZE)
     with pytest.raises(SceneError, match="angle of repose"):
         deforming.relax(np.zeros((3, 3)), SIZE, np.radians(95))
+    with pytest.raises(SceneError, match="tolerance"):
+        deforming.relax(np.zeros((3, 3)), SIZE, REPOSE, tolerance=0.0)
     with pytest.raises(SceneError, match="unknown surface 'slope'"):
         surfaces.module("slope")
 

@@ -110,16 +110,19 @@ def plugin_linker(python_linker: list[str]) -> list[str]:
 
 def plugin_extension() -> Extension:
     """The library: the segment plugin, the steppers (and peaks.c, those that keep a drive's peak load), every
-    segment law in plugins/laws/ (which the plugin finds by the list of names given as FINRFT_LAWS), the surface
+    segment law in plugins/laws/ (which the plugin finds by the list of names given as FINRFT_LAWS), every kind of
+    free surface in plugins/surfaces/ (finrft.surfaces' twins), the surface
     plugin of finrft.attach and the guard of its Python backend; the steppers' return codes come from
     finrft/native.py."""
     laws = sorted(Path("plugins", "laws").glob("*.c"))
+    surfaces = sorted(Path("plugins", "surfaces").glob("*.c"))
     macros = [("FINRFT_LAWS", "".join(f"X({law.stem})" for law in laws))]
     macros += [(f"FINRFT_{code.name}", str(int(code))) for code in native.Code]
     return Extension("finrft.libfinrft_rft", sources=["plugins/finrft_rft.c", "plugins/steppers.c", "plugins/peaks.c",
                                                       "plugins/finrft_surface.c", "plugins/finrft_guard.c",
-                                                      *(law.as_posix() for law in laws)],
-                     depends=["plugins/finrft.h"], define_macros=macros)
+                                                      *(law.as_posix() for law in laws),
+                                                      *(surface.as_posix() for surface in surfaces)],
+                     depends=["plugins/finrft.h", "plugins/surfaces/surfaces.h"], define_macros=macros)
 
 
 setup(

@@ -1,0 +1,196 @@
+"""A heightfield whose heights are state (`finrft.surfaces.hfield`'s grid): sand the body sweeps is pushed into a
+berm in front of it and to its sides, and the surface then relaxes to the medium's angle of repose.
+
+`update` does one step: `sweep` then `relax`. Each grid point stands for a cell of the grid's spacing dx x dy, so
+the sand's volume is dx dy times the sum of the heights; both conserve it (to rounding).
+
+- `sweep`: every grid point within an element's footprint (a disc of the element's area, and always the point
+  nearest to it), where the element is below the surface, is lowered to the element; what it loses goes to the
+  first grid point not under the body along the element's horizontal velocity (``front_share`` of it) and across it
+  on either side (half the rest each), or equally to the four directions of the grid for an element moving
+  straight down. An element coarser than the grid leaves points between footprints untouched.
+- `relax`: between neighbouring grid points (along x and along y) whose slope is steeper than the angle of repose,
+  sand flows from the higher to the lower, a quarter of the excess height per iteration (the explicit diffusion
+  limit), until no slope exceeds tan(repose) + ``tolerance``. Points under the body (``blocked``) neither give nor
+  take.
+
+`depth` measures from the deformed surface; with ``pile_factor`` it follows the wheel group's rule instead
+(qishuny/3D-RFT-wheel, RFT3D/SandDeformation.m): an element in raised sand (below the deformed surface, above the
+original) takes its depth below the deformed surface times the factor, and one below the original surface the
+lesser of its depths below the two. `WHEEL_GROUP_PILE_FACTOR` is their fitted factor.
+"""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from ..errors import SceneError
+from . import points3
+from .hfield import Grid, grid
+
+SUMMARY = "a heightfield that the body displaces and that relaxes to the angle of repose"
+
+# The wheel group's factor on the depth of elements in raised sand, fitted to their smooth wheel's forces
+# (qishuny/3D-RFT-wheel @cdd8f8f, RFT3D/SandDeformation.m: depthList(pile) = ... * 0.2843).
+WHEEL_GROUP_PILE_FACTOR = 0.2843
+FRONT_SHARE = 0.5  # of the sand an element sweeps, the share pushed ahead of it; half the rest to each side
+RELAX_RATE = 0.25  # of an edge's excess height moved per iteration: the explicit diffusion limit on a square grid
+TOLERANCE = 1e-3   # slope (tan) above tan(repose) that relaxation leaves
+MAX_ITERATIONS = 100_000
+# An element moving horizontally slower than this share of its speed pushes its sand to all four sides.
+STRAIGHT_DOWN = 1e-9
+# An element this close above the surface (m) is on it, under the body: an element resting in its own rut would
+# otherwise be on or off it by rounding, and sand pushed onto it or not.
+TOUCH = 1e-9
+
+
+def depth(points: Any, gravity: Any, heights: Any, size: Any, centre: Any = (0.0, 0.0, 0.0), frame: Any = None,
+          original: Any = None, pile_factor: float | None = None) -> np.ndarray:
+    """Each point's depth (m) along gravity below the deformed surface ``heights``; with ``pile_factor`` (and the
+    ``original`` heights), the wheel group's pile rule (see the module's docstring)."""
+    g = grid(heights, size, gravity, centre, frame)
+    local = g.local(points3(points))
+    deformed = g.height(local[:, 0], local[:, 1]) - local[:, 2]
+    if pile_factor is None:
+        return deformed
+    if not (np.isfinite(pile_factor) and pile_factor > 0):
+        raise SceneError(f"pile_factor {pile_factor!r} must be a positive number (the wheel group's: "
+                         f"{WHEEL_GROUP_PILE_FACTOR})")
+    if original is None:
+        raise SceneError("the pile rule needs the original heights (original=) to tell raised sand")
+    below_original = g.height(local[:, 0], local[:, 1], np.asarray(original, dtype=float)) - local[:, 2]
+    pile = (deformed > 0) & (below_original <= 0)
+    return np.where(pile, pile_factor * deformed, np.minimum(deformed, below_original))
+
+
+def _local_motion(g: Grid, points: Any, velocities: Any) -> tuple[np.ndarray, np.ndarray]:
+    p = g.local(points3(points))
+    v = points3(velocities) @ g.frame
+    return p, v
+
+
+def sweep(heights: Any, points: Any, areas: Any, velocities: Any, gravity: Any, size: Any,
+          centre: Any = (0.0, 0.0, 0.0), frame: Any = None,
+          front_share: float = FRONT_SHARE) -> tuple[np.ndarray, np.ndarray]:
+    """The heights after the elements at ``points`` (N, 3, m), of ``areas`` (N, m^2), moving at ``velocities``
+    (N, 3, m/s) have pushed the sand they are under into a berm, and the grid points under the body (bool grid)."""
+    g = grid(heights, size, gravity, centre, frame)
+    if not 0.0 <= front_share <= 1.0:
+        raise SceneError(f"front_share {front_share!r} must be between 0 and 1")
+    p, v = _local_motion(g, points, velocities)
+    a = np.asarray(areas, dtype=float)
+    if a.shape != (len(p),) or v.shape != p.shape:
+        raise SceneError(f"sweep needs one area and one velocity per point: {len(p)} points, areas of shape "
+                         f"{a.shape}, velocities of shape {v.shape}")
+    h = g.heights.copy()
+    nrow, ncol = h.shape
+    dx, dy = g.spacing
+    target = np.full(h.shape, np.inf)
+    direction = np.zeros(h.shape + (2,))
+    for e in range(len(p)):
+        radius = np.sqrt(max(a[e], 0.0) / np.pi)
+        u, w = (p[e, 0] + g.size[0]) / dx, (p[e, 1] + g.size[1]) / dy
+        cn, rn = int(np.clip(np.floor(u + 0.5), 0, ncol - 1)), int(np.clip(np.floor(w + 0.5), 0, nrow - 1))
+        c0, c1 = max(int(np.ceil(u - radius / dx)), 0), min(int(np.floor(u + radius / dx)), ncol - 1)
+        r0, r1 = max(int(np.ceil(w - radius / dy)), 0), min(int(np.floor(w + radius / dy)), nrow - 1)
+        rows, cols = np.meshgrid(np.arange(r0, r1 + 1), np.arange(c0, c1 + 1), indexing="ij")
+        inside = ((cols * dx - g.size[0] - p[e, 0]) ** 2 + (rows * dy - g.size[1] - p[e, 1]) ** 2 <= radius ** 2)
+        inside |= (rows == rn) & (cols == cn)
+        rows, cols = rows[inside], cols[inside]
+        if not ((rows == rn) & (cols == cn)).any():
+            rows, cols = np.append(rows, rn), np.append(cols, cn)
+        speed, horizontal = np.linalg.norm(v[e]), np.hypot(v[e, 0], v[e, 1])
+        d = v[e, :2] / horizontal if horizontal > STRAIGHT_DOWN * speed and horizontal > 0 else np.zeros(2)
+        lower = p[e, 2] < target[rows, cols]
+        target[rows[lower], cols[lower]] = p[e, 2]
+        direction[rows[lower], cols[lower]] = d
+    occupied = target <= h + TOUCH
+    removed = np.where(target < h, h - target, 0.0)
+    h = np.where(target < h, target, h)
+    for r, c in zip(*np.nonzero(removed)):
+        for share, (sx, sy) in _berm(direction[r, c], front_share):
+            rr, cc = _march(occupied, r, c, sx, sy, dx, dy)
+            h[rr, cc] += share * removed[r, c]
+    return h, occupied
+
+
+def _berm(d: np.ndarray, front_share: float) -> list[tuple[float, tuple[float, float]]]:
+    """Where an element moving horizontally along ``d`` (unit, or 0 for straight down) puts its sand: shares and
+    directions."""
+    if not d.any():
+        return [(0.25, (1.0, 0.0)), (0.25, (-1.0, 0.0)), (0.25, (0.0, 1.0)), (0.25, (0.0, -1.0))]
+    side = 0.5 * (1.0 - front_share)
+    return [(front_share, (d[0], d[1])), (side, (-d[1], d[0])), (side, (d[1], -d[0]))]
+
+
+def _march(occupied: np.ndarray, r: int, c: int, sx: float, sy: float, dx: float, dy: float) -> tuple[int, int]:
+    """The first grid point not under the body from (r, c) along (sx, sy), in steps of the finer spacing; the last
+    one on the grid should the march leave it first."""
+    nrow, ncol = occupied.shape
+    step = min(dx, dy)
+    last = (r, c)
+    for s in range(1, nrow + ncol + 1):
+        cf, rf = c + s * step * sx / dx, r + s * step * sy / dy
+        cc, rr = int(np.floor(cf + 0.5)), int(np.floor(rf + 0.5))
+        if not (0 <= cc < ncol and 0 <= rr < nrow):
+            return last
+        if (rr, cc) != (r, c):
+            last = (rr, cc)
+            if not occupied[rr, cc]:
+                return last
+    return last
+
+
+class Relaxed(NamedTuple):
+    """Heights after relaxation, the iterations it took and whether it got within its tolerance."""
+
+    heights: np.ndarray
+    iterations: int
+    converged: bool
+
+
+def relax(heights: Any, size: Any, repose: float, blocked: Any = None, tolerance: float = TOLERANCE,
+          max_iterations: int = MAX_ITERATIONS) -> Relaxed:
+    """The heights (nrow, ncol) on a grid of half-extents ``size`` relaxed until no slope between neighbours (of
+    points not ``blocked``) exceeds tan(``repose``, rad) + ``tolerance``."""
+    h = np.array(heights, dtype=float)
+    if h.ndim != 2 or min(h.shape) < 2:
+        raise SceneError(f"heights must be a grid of at least 2 x 2, got shape {h.shape}")
+    if not 0.0 < repose < np.pi / 2:
+        raise SceneError(f"angle of repose {repose!r} rad must be between 0 and pi/2")
+    if not tolerance > 0:
+        raise SceneError(f"relaxation tolerance {tolerance!r} must be a positive slope")
+    if not (np.isfinite(size).all() and (np.asarray(size, dtype=float) > 0).all()):
+        raise SceneError(f"grid size {list(size)} must be two positive half-extents, m")
+    nrow, ncol = h.shape
+    dx, dy = 2 * float(size[0]) / (ncol - 1), 2 * float(size[1]) / (nrow - 1)
+    free = np.ones(h.shape, bool) if blocked is None else ~np.asarray(blocked, dtype=bool)
+    free_x, free_y = free[:, 1:] & free[:, :-1], free[1:, :] & free[:-1, :]
+    slope = np.tan(repose)
+    for iteration in range(max_iterations + 1):
+        step_x, step_y = h[:, 1:] - h[:, :-1], h[1:, :] - h[:-1, :]
+        excess_x = np.where(free_x, np.abs(step_x) - slope * dx, 0.0)
+        excess_y = np.where(free_y, np.abs(step_y) - slope * dy, 0.0)
+        worst = max(float(excess_x.max()) / dx, float(excess_y.max()) / dy)
+        if worst <= tolerance:
+            return Relaxed(h, iteration, True)
+        if iteration == max_iterations:
+            break
+        # moved from the higher point to the lower, along + (up the index) where the step is negative
+        flow_x = -np.sign(step_x) * RELAX_RATE * np.maximum(excess_x, 0.0)
+        flow_y = -np.sign(step_y) * RELAX_RATE * np.maximum(excess_y, 0.0)
+        h[:, :-1] -= flow_x
+        h[:, 1:] += flow_x
+        h[:-1, :] -= flow_y
+        h[1:, :] += flow_y
+    return Relaxed(h, max_iterations, False)
+
+
+def update(heights: Any, points: Any, areas: Any, velocities: Any, gravity: Any, size: Any, repose: float,
+           centre: Any = (0.0, 0.0, 0.0), frame: Any = None, front_share: float = FRONT_SHARE,
+           tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATIONS) -> Relaxed:
+    """One step of the deforming surface: `sweep`, then `relax` with the points under the body blocked."""
+    swept, occupied = sweep(heights, points, areas, velocities, gravity, size, centre, frame, front_share)
+    return relax(swept, size, repose, occupied, tolerance, max_iterations)

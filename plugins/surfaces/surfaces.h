@@ -1,0 +1,66 @@
+// The free surfaces of the medium, the twins of finrft/surfaces/NAME.py: each point's depth (m) along gravity
+// below the surface, positive below it. Not yet used by the plugin's forces.
+//
+// Points, gravity and vectors are world-frame double[3]; `points` and `depth` hold n points. A grid is MuJoCo's
+// <hfield> layout: heights[r * ncol + c] (m) at x = -size[0] + 2 size[0] c / (ncol - 1), y = -size[1] +
+// 2 size[1] r / (nrow - 1) of its frame, `frame` row-major with the grid's axes as columns, `centre` its origin.
+// Functions return 0, or FINRFT_SURFACE_BAD_INPUT where the Python twin raises SceneError.
+
+#ifndef FINRFT_SURFACES_H_
+#define FINRFT_SURFACES_H_
+
+#if defined(_WIN32)
+#define FINRFT_SURFACE_EXPORT __declspec(dllexport)
+#else
+#define FINRFT_SURFACE_EXPORT __attribute__((visibility("default")))
+#endif
+
+#ifndef M_PI
+#define M_PI 3.14159265358979323846  // not in strict C99's math.h
+#endif
+
+#define FINRFT_SURFACE_BAD_INPUT (-1)
+#define FINRFT_FRAME_TOLERANCE 1e-9  // finrft.surfaces.hfield.FRAME_TOLERANCE
+
+// The unit vector against gravity; FINRFT_SURFACE_BAD_INPUT for a zero or non-finite gravity.
+int finrft_surface_up(const double g[3], double up[3]);
+
+FINRFT_SURFACE_EXPORT int finrft_flat_depth(double surface_z, const double g[3], int n, const double* points,
+                                            double* depth);
+FINRFT_SURFACE_EXPORT int finrft_plane_depth(const double point[3], const double normal[3], const double g[3],
+                                             int n, const double* points, double* depth);
+
+// A heightfield's grid; finrft_grid_check: FINRFT_SURFACE_BAD_INPUT unless it is at least 2 x 2, its size
+// positive and its frame a rotation whose z axis is against gravity (finrft.surfaces.hfield.grid).
+typedef struct {
+  int nrow, ncol;
+  const double* heights;
+  double size[2], centre[3], frame[9];
+} FinrftGrid;
+
+int finrft_grid_check(const FinrftGrid* grid, const double g[3]);
+void finrft_grid_local(const FinrftGrid* grid, const double p[3], double local[3]);
+double finrft_grid_height(const FinrftGrid* grid, const double* heights, double x, double y);
+
+FINRFT_SURFACE_EXPORT int finrft_hfield_depth(int nrow, int ncol, const double* heights, const double size[2],
+                                              const double centre[3], const double frame[9], const double g[3],
+                                              int n, const double* points, double* depth);
+
+// The deforming surface (finrft.surfaces.deforming): depth from the deformed heights, with pile_factor > 0 the
+// wheel group's pile rule against `original` (pile_factor 0: none, `original` may be NULL).
+FINRFT_SURFACE_EXPORT int finrft_deforming_depth(int nrow, int ncol, const double* heights, const double* original,
+                                                 double pile_factor, const double size[2], const double centre[3],
+                                                 const double frame[9], const double g[3], int n,
+                                                 const double* points, double* depth);
+// Sweep: heights updated in place, occupied[nrow * ncol] set to 1 under the body.
+FINRFT_SURFACE_EXPORT int finrft_deforming_sweep(int nrow, int ncol, double* heights, const double size[2],
+                                                 const double centre[3], const double frame[9], const double g[3],
+                                                 int n, const double* points, const double* areas,
+                                                 const double* velocities, double front_share,
+                                                 unsigned char* occupied);
+// Relax in place; blocked may be NULL. The iterations taken, or -1 when max_iterations did not reach tolerance.
+FINRFT_SURFACE_EXPORT int finrft_deforming_relax(int nrow, int ncol, double* heights, const double size[2],
+                                                 double repose, const unsigned char* blocked, double tolerance,
+                                                 int max_iterations);
+
+#endif  // FINRFT_SURFACES_H_

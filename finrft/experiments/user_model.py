@@ -32,7 +32,7 @@ from ..scene import Control, JointDrive, SceneError, UserScene, drive_timing, lo
 from ..stepping import DRIVE_LAG, jump_velocities
 from .attached_model import (DRIVEN, AttachedModel, applied_state, build_attached, driven_joint, medium_forces,
                              read_spec, record_forward)
-from .command import Command, register, steps_line
+from .command import Command, choice_lines, register, steps_line
 from .flags import add_max_error, add_result_files, add_scene_flags
 
 # ---------------------------------------------------------------------------------------------------------
@@ -705,6 +705,7 @@ class RunCommand(Command):
                  f"{mm(f'{1e3 * v:+.3f}' for v in s['com_velocity_m_s'])}; at the end (mm) "
                  f"{mm(f'{1e3 * v:.2f}' for v in s['com_position_m'])}",
                  f"medium's mean force (N) {mm(f'{v:+.4g}' for v in s['medium_force_N'])}"]
+        lines[1:1] = choice_lines(run)
         for body, force in s["body_medium_force_N"].items():
             lines.append(f"  on {body} (N) " + mm(f"{v:+.4g}" for v in force))
         for joint, load, unit, q in zip(s["drives"], s["drive_load"], s["drive_load_units"],

@@ -6,7 +6,7 @@ No method wins everywhere: the implicit steps win on light links, whose explicit
 2 m v_reg / F (the example sand-swimmer's 10 g links chatter down to 6.6 µs), and MuJoCo's explicit step wins
 2.5-5 times on heavy, slow robots, as an implicit step costs about ten explicit ones. Which one a robot is shows
 in its first moments, so the choice is measured, not predicted: pilot runs over the run's first `window` (a tenth
-of it, at least 16 steps and the controls' ramp-in, whole strokes), each candidate at its step and at half of it,
+of it, past the controls' ramp-in, at least a sine's period and 16 steps, whole strokes), each candidate at its step and at half of it,
 their reported figures compared as the run's companion compares them (`convergence.companion_estimate`):
 
 - the implicit methods, ``newton-midpoint`` (second order for a robot's quasi-static motion) and ``newton`` (at a
@@ -29,10 +29,10 @@ from typing import Any, Callable
 
 from . import methods
 from .convergence import FINER, ErrorLimits, companion_estimate, magnitude
-from .errors import SceneError, SimulationFailed
+from .errors import InaccurateResult, SceneError, SimulationFailed
 
-# The pilots' window (`window`): the controls' ramp-in and this share of the rest of the run, at least
-# PILOT_STEPS steps of sim.dt.
+# The pilots' window (`window`): the controls' ramp-in and this share of the rest of the run (or a sine's
+# period), at least PILOT_STEPS steps of sim.dt.
 PILOT_SHARE = 0.1
 PILOT_STEPS = 16
 IMPLICIT = ("newton-midpoint", "newton")
@@ -103,11 +103,14 @@ class MethodChoice:
 
 def window(scene: Any, duration: float, stroke_time: float, strokes: int) -> tuple[float, float]:
     """The pilots' run and the start of the window their figures average over (s): past the controls' longest
-    ramp-in (a run's start is a transient unlike its gait: the sand-swimmer at the explicit 0.5 ms is within 0.4 %
-    over its ramp and 9 % off after it), `PILOT_SHARE` of the rest, at least `PILOT_STEPS` steps of sim.dt;
-    whole strokes where the run has several."""
+    ramp-in (a run's start is a transient unlike its gait), one period of the slowest sine control or drive (the
+    sand-swimmer's explicit step chatters from 1.46 s on, a second after its ramp, and its speed is then 2-4 %
+    off at 0.25 ms, where its first 0.65 s were within 0.4 %), and at least `PILOT_SHARE` of the rest and
+    `PILOT_STEPS` steps of sim.dt; whole strokes where the run has several."""
     ramp = max((c.ramp for c in getattr(scene, "control", ())), default=0.0)
-    span = ramp + max(PILOT_SHARE * (duration - ramp), PILOT_STEPS * scene.sim.dt)
+    sines = [c.frequency for c in getattr(scene, "control", ()) if c.kind == "sine"]
+    sines += [j.frequency for j in getattr(scene, "drive", ()) if j.profile == "sine"]
+    span = ramp + max(PILOT_SHARE * (duration - ramp), PILOT_STEPS * scene.sim.dt, 1 / min(sines, default=math.inf))
     if strokes > 1:
         span = math.ceil(span / stroke_time - 1e-9) * stroke_time
     span = min(span, duration)
@@ -273,8 +276,8 @@ def run_auto(scene: Any, limits: ErrorLimits | None, pilot: Pilot, full: Callabl
         try:
             return _chosen(full, scene, chosen, passed, chooser, fell_back)
         except SimulationFailed as exc:
-            fell_back.append(f"{chosen.method} at {chosen.dt:g} s was refused over the whole run "
-                             f"({_first_line(exc)})")
+            why = "its estimate exceeded the limits" if isinstance(exc, InaccurateResult) else _first_line(exc)
+            fell_back.append(f"{chosen.method} at {chosen.dt:g} s, run whole, was refused: {why}")
     return _chosen(full, scene, passed[-1], passed, chooser, fell_back)
 
 

@@ -248,18 +248,21 @@ def choose(scene: Any, limits: ErrorLimits | None, pilot: Pilot, duration: float
     return passed, chooser
 
 
-def reason(chosen: Candidate, passed: list[Candidate], chooser: Chooser, fell_back: list[str]) -> str:
-    """Why this candidate, in words."""
-    others = [c for c in chooser.candidates if c is not chosen and c.measured and c.passed]
+def reason(chosen: Candidate, chooser: Chooser, fell_back: list[str]) -> str:
+    """Why this candidate, in words: what it was predicted to cost, the cheapest other that met the limits, and why
+    the cheaper ones did not."""
     if not chosen.passed:
         why = "no candidate's pilot met the limits: the closest"
-    elif others or len(passed) > 1:
-        why = f"the cheapest that met the limits (predicted {chosen.cost_s:.3g} s)"
     else:
-        why = f"the only one that met the limits (predicted {chosen.cost_s:.3g} s)"
-    lighter = [c for c in chooser.candidates if c.method == "explicit" and not c.passed and c.dt > chosen.dt]
-    if chosen.method != "explicit" and lighter:
-        why += f"; explicit: {lighter[-1].why_not} at dt {lighter[-1].dt:g} s"
+        why = f"the cheapest that met the limits, predicted {chosen.cost_s:.3g} s"
+    others = sorted((c for c in chooser.candidates if c is not chosen and c.passed), key=lambda c: c.cost_s)
+    if others:
+        why += f", against {others[0].method} at {others[0].dt:g} s, {others[0].cost_s:.3g} s"
+    cheaper = [c for c in chooser.candidates
+              if not c.passed and (c.failed or c.measured) and not c.cost_s >= chosen.cost_s]
+    if cheaper:
+        c = max(cheaper, key=lambda c: c.dt)
+        why += f"; {c.method} at {c.dt:g} s: {c.why_not[:120]}"
     if fell_back:
         why += "; " + "; ".join(fell_back)
     return why
@@ -274,17 +277,17 @@ def run_auto(scene: Any, limits: ErrorLimits | None, pilot: Pilot, full: Callabl
     fell_back: list[str] = []
     for chosen in passed[:-1]:
         try:
-            return _chosen(full, scene, chosen, passed, chooser, fell_back)
+            return _chosen(full, scene, chosen, chooser, fell_back)
         except SimulationFailed as exc:
             why = "its estimate exceeded the limits" if isinstance(exc, InaccurateResult) else _first_line(exc)
             fell_back.append(f"{chosen.method} at {chosen.dt:g} s, run whole, was refused: {why}")
-    return _chosen(full, scene, passed[-1], passed, chooser, fell_back)
+    return _chosen(full, scene, passed[-1], chooser, fell_back)
 
 
-def _chosen(full: Callable[[Any], Any], scene: Any, chosen: Candidate, passed: list[Candidate], chooser: Chooser,
+def _chosen(full: Callable[[Any], Any], scene: Any, chosen: Candidate, chooser: Chooser,
             fell_back: list[str]) -> Any:
     result = full(scene.replace(**{"sim.method": chosen.method, "sim.dt": chosen.dt}))
-    result.method_choice = MethodChoice(chosen.method, chosen.dt, reason(chosen, passed, chooser, fell_back),
+    result.method_choice = MethodChoice(chosen.method, chosen.dt, reason(chosen, chooser, fell_back),
                                         chooser.candidates, chooser.window, chooser.wall)
     result.wall_s += chooser.wall
     return result

@@ -66,7 +66,8 @@ def chooses(name: str) -> bool:
 def get(name: str) -> Method:
     """The entry of a method named in a validated scene (not `AUTO`, which the run resolves first)."""
     if chooses(name):
-        raise ValueError(f"sim.method = {AUTO!r} is resolved by the run (finrft.choice) before a method's entry is read")
+        raise ValueError(f"sim.method = {AUTO!r} is resolved by the run (finrft.choice) before a method's entry is "
+                         f"read")
     return METHODS[name]
 
 

@@ -5,12 +5,14 @@ least cost, and says what it chose and why (`MethodChoice`, ``method_choice`` in
 No method wins everywhere: the implicit steps win on light links, whose explicit step must stay below about
 2 m v_reg / F (the example sand-swimmer's 10 g links chatter down to 6.6 µs), and MuJoCo's explicit step wins
 2.5-5 times on heavy, slow robots, as an implicit step costs about ten explicit ones. Which one a robot is shows
-in its first moments, so the choice is measured, not predicted: pilot runs over the run's first `window` (a tenth
-of it, past the controls' ramp-in, at least a sine's period and 16 steps, whole strokes), each candidate at its step and at half of it,
-their reported figures compared as the run's companion compares them (`convergence.companion_estimate`):
+in its first moments, so the choice is measured, not predicted: pilot runs over the run's first `window` (past
+the controls' ramp-in, a tenth of the rest or a sine's period, whole strokes), each candidate at its step and at
+half of it, their reported figures compared as the run's companion compares them
+(`convergence.companion_estimate`):
 
-- the implicit methods, ``newton-midpoint`` (second order for a robot's quasi-static motion) and ``newton`` (at a
-  step where it costs visibly less), at sim.dt, halved up to `HALVINGS` times until one meets the limits;
+- the implicit methods, ``newton-midpoint`` (second order for a robot's quasi-static motion) and ``newton`` (where
+  its step costs visibly less) at sim.dt; where neither meets the limits, the closer one at the step its error
+  asks for, at most `HALVINGS` halvings down;
 - ``explicit`` from sim.dt down, halving while it chatters, goes unstable or misses the limits, for as long as its
   cost, predicted from its cost per step so far, stays below the implicit one's.
 
@@ -27,7 +29,6 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
-from . import methods
 from .convergence import FINER, ErrorLimits, companion_estimate, magnitude
 from .errors import InaccurateResult, SceneError, SimulationFailed
 
@@ -60,6 +61,7 @@ class Candidate:
     error: dict[str, float] = field(default_factory=dict)
     over: list[str] = field(default_factory=list)
     failed: str = ""
+    skipped: str = ""         # why its pilot at half the step did not run
     excess: float = math.inf  # the largest estimate over its limit (below 1: within the limits)
 
     @property
@@ -72,10 +74,10 @@ class Candidate:
             return self.failed
         if self.over:
             return "; ".join(self.over)
-        return "" if self.measured else "predicted to cost more than the cheapest that met the limits"
+        return self.skipped
 
     def to_json(self) -> dict[str, Any]:
-        return {"method": self.method, "dt": self.dt, "predicted_wall_s": None if math.isnan(self.cost_s)
+        return {"method": self.method, "dt": self.dt, "predicted_cost_s": None if math.isnan(self.cost_s)
                 else self.cost_s, "measured": self.measured, "pilot_wall_s": self.pilot_wall_s,
                 "error_estimate": dict(self.error), "within_limits": self.passed, "why_not": self.why_not}
 
@@ -122,17 +124,18 @@ Pilot = Callable[[Any, bool, Callable[[float], None]], Any]
 
 class Chooser:
     """The pilots of one run: ``pilot(scene, companion, progress)`` runs a scene without an estimate (a companion
-    records the state only), each candidate's figures judged by ``limits``."""
+    records the state only) on the model ``prepare(scene)`` built, each candidate's figures judged by ``limits``;
+    its cost is measured in CPU seconds (`cost`)."""
 
-    def __init__(self, scene: Any, limits: ErrorLimits, pilot: Pilot, duration: float, stroke_time: float,
-                 strokes: int) -> None:
-        self.scene, self.limits, self.pilot = scene, limits, pilot
+    def __init__(self, scene: Any, limits: ErrorLimits, pilot: Pilot, prepare: Callable[[Any], Any],
+                 duration: float, stroke_time: float, strokes: int) -> None:
+        self.scene, self.limits, self.pilot, self.prepare = scene, limits, pilot, prepare
         self.duration = duration
         self.window, self.settle = window(scene, duration, stroke_time, strokes)
         self.candidates: list[Candidate] = []
         self.wall = 0.0
         self._runs: dict[tuple[str, float], Any] = {}    # each pilot that ran (or its failure), for reuse
-        self._rates: dict[tuple[str, float], float] = {}  # its wall time per simulated second, as far as it got
+        self._rates: dict[tuple[str, float], float] = {}  # its CPU time per simulated second, as far as it got
 
     def at(self, method: str, dt: float) -> Any:
         """The scene of a candidate's pilot."""
@@ -144,22 +147,29 @@ class Chooser:
         if key not in self._runs:
             reached = [0.0]
             start = time.perf_counter()
+            scene = self.at(method, dt)
+            self.prepare(scene)  # the model's build, outside the cost of a step
+            # CPU time, not wall time: the choice must not follow the load of other processes on the machine
+            cpu = time.process_time()
             try:
-                self._runs[key] = self.pilot(self.at(method, dt), companion, lambda f: reached.__setitem__(0, f))
+                self._runs[key] = self.pilot(scene, companion, lambda f: reached.__setitem__(0, f))
                 reached[0] = 1.0
             except (SimulationFailed, SceneError) as exc:
                 self._runs[key] = exc
-            wall = time.perf_counter() - start
-            self.wall += wall
-            self._rates[key] = wall / (reached[0] * self.window) if reached[0] > 0 else math.nan
+            cpu = time.process_time() - cpu
+            self.wall += time.perf_counter() - start
+            self._rates[key] = cpu / (reached[0] * self.window) if reached[0] > 0 else math.nan
         return self._runs[key]
 
     def cost(self, method: str, dt: float) -> float:
-        """The predicted wall time of the whole run with its companion, from the pilot at dt (NaN: none got far)."""
+        """The predicted time of the whole run with its companion (CPU s, the wall time of an idle machine), from the
+        pilot at dt (NaN: none got far)."""
         return self._rates.get((method, dt), math.nan) * self.duration * COMPANION_COST
 
-    def try_step(self, method: str, dt: float, cheaper_than: float = math.inf) -> Candidate:
-        """A candidate's pilot at dt and, where it runs through and costs less than ``cheaper_than``, at dt / 2."""
+    def try_step(self, method: str, dt: float, cheaper_than: float = math.inf,
+                 dearer: str = "predicted to cost more than the cheapest that met the limits") -> Candidate:
+        """A candidate's pilot at dt and, where it runs through and costs less than ``cheaper_than``, at dt / 2
+        (else it is not measured, ``dearer`` says why)."""
         candidate = Candidate(method, dt)
         self.candidates.append(candidate)
         start = self.wall
@@ -167,7 +177,9 @@ class Chooser:
         candidate.cost_s = self.cost(method, dt)
         if isinstance(run, Exception):
             candidate.failed = _first_line(run)
-        elif candidate.cost_s < cheaper_than:
+        elif not candidate.cost_s < cheaper_than:
+            candidate.skipped = dearer
+        else:
             fine = self._run(method, dt * FINER, True)
             if isinstance(fine, Exception):
                 candidate.failed = f"its pilot at half the step failed: {_first_line(fine)}"
@@ -195,7 +207,8 @@ class Chooser:
         tried = [self.try_step(allowed[0], dt)]
         for method in allowed[1:]:
             tried.append(self.try_step(method, dt, NEWTON_SAVING * tried[0].cost_s if tried[0].measured
-                                       else math.inf))
+                                       else math.inf, f"its step costs more than {NEWTON_SAVING:.0%} of "
+                                       f"{tried[0].method}'s"))
         halvings = 0
         while True:
             passed = [c for c in tried if c.passed]
@@ -214,7 +227,8 @@ class Chooser:
         dt, per_step = self.scene.sim.dt, math.nan  # the whole run's predicted cost times its step
         for _ in range(EXPLICIT_HALVINGS + 1):
             if per_step / dt >= bound:
-                self.candidates.append(Candidate("explicit", dt, cost_s=per_step / dt))
+                self.candidates.append(Candidate("explicit", dt, cost_s=per_step / dt, skipped="not run: predicted "
+                                                 "from its cost per step to cost more than the implicit one"))
                 return None
             candidate = self.try_step("explicit", dt, bound)
             if candidate.passed:
@@ -230,11 +244,11 @@ def _first_line(exc: Exception) -> str:
     return str(exc).splitlines()[0] if str(exc) else type(exc).__name__
 
 
-def choose(scene: Any, limits: ErrorLimits | None, pilot: Pilot, duration: float, stroke_time: float,
-           strokes: int) -> tuple[list[Candidate], Chooser]:
+def choose(scene: Any, limits: ErrorLimits | None, pilot: Pilot, prepare: Callable[[Any], Any], duration: float,
+           stroke_time: float, strokes: int) -> tuple[list[Candidate], Chooser]:
     """The candidates that met the limits, cheapest first (the most accurate of the others where none did), and the
     chooser that measured them."""
-    chooser = Chooser(scene, limits or ErrorLimits(), pilot, duration, stroke_time, strokes)
+    chooser = Chooser(scene, limits or ErrorLimits(), pilot, prepare, duration, stroke_time, strokes)
     allowed = IMPLICIT if scene.sim.integrator == "implicitfast" else ()
     implicit = chooser.implicit(allowed) if allowed else None
     bound = implicit.cost_s if implicit is not None else math.inf
@@ -268,12 +282,12 @@ def reason(chosen: Candidate, chooser: Chooser, fell_back: list[str]) -> str:
     return why
 
 
-def run_auto(scene: Any, limits: ErrorLimits | None, pilot: Pilot, full: Callable[[Any], Any], duration: float,
-             stroke_time: float, strokes: int) -> Any:
+def run_auto(scene: Any, limits: ErrorLimits | None, pilot: Pilot, prepare: Callable[[Any], Any],
+             full: Callable[[Any], Any], duration: float, stroke_time: float, strokes: int) -> Any:
     """Choose (`choose`), then run the choice at the whole length with ``full(scene)`` (its companion estimate
     included); where that refuses it, the next candidate that met the limits. The result carries
     ``method_choice``, and the pilots' wall time in its ``wall_s``."""
-    passed, chooser = choose(scene, limits, pilot, duration, stroke_time, strokes)
+    passed, chooser = choose(scene, limits, pilot, prepare, duration, stroke_time, strokes)
     fell_back: list[str] = []
     for chosen in passed[:-1]:
         try:

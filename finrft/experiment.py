@@ -269,7 +269,7 @@ def run(experiment: Experiment, scene: Any, *, progress: Callable[[float], None]
     with interrupts.deferred():
         if methods.chooses(scene.sim.method):
             drive = experiment.drive_for(scene)
-            return run_auto(scene, max_error, lambda s, companion, p: once(s, build(s), p, companion),
+            return run_auto(scene, max_error, lambda s, companion, p: once(s, build(s), p, companion), build,
                             lambda s: checked(build, once, s, progress, max_error, estimate_error),
                             drive.duration, drive.stroke_time, drive.strokes)
         return checked(build, once, scene, progress, max_error, estimate_error)

@@ -64,7 +64,7 @@ def test_a_heavy_slow_sled_gets_the_explicit_step_and_says_why(tmp_path, capsys)
     assert {"explicit", "newton-midpoint"} <= weighed
     chosen, = [c for c in choice["candidates"] if c["method"] == "explicit" and c["dt"] == choice["dt"]]
     implicit = [c for c in choice["candidates"] if c["method"] != "explicit" and c["within_limits"]]
-    assert implicit and all(c["predicted_wall_s"] > chosen["predicted_wall_s"] for c in implicit)
+    assert implicit and all(c["predicted_cost_s"] > chosen["predicted_cost_s"] for c in implicit)
     assert s["wall_s"] >= choice["pilot_wall_s"] > 0
 
 

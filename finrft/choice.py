@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable
 
 from .convergence import FINER, ErrorLimits, companion_estimate, magnitude
-from .errors import InaccurateResult, SceneError, SimulationFailed
+from .errors import InaccurateResult, SimulationUnstable
 
 # The pilots' window (`window`): the controls' ramp-in and this share of the rest of the run (or a sine's
 # period), at least PILOT_STEPS steps of sim.dt.
@@ -132,6 +132,11 @@ class Chooser:
         self.scene, self.limits, self.pilot, self.prepare = scene, limits, pilot, prepare
         self.duration = duration
         self.window, self.settle = window(scene, duration, stroke_time, strokes)
+        # A run of one stroke is cut short by shortening its stroke (the same motion up to the window's end); one
+        # of several keeps its whole strokes (`window`).
+        cut = self.window / stroke_time if strokes == 1 else 1.0
+        self.strokes = {f"drive.{i}.stroke": j.stroke * cut for i, j in enumerate(getattr(scene, "drive", ()))
+                        if j.profile == "constant" and j.stroke > 0 and cut < 1}
         self.candidates: list[Candidate] = []
         self.wall = 0.0
         self._runs: dict[tuple[str, float], Any] = {}    # each pilot that ran (or its failure), for reuse
@@ -140,7 +145,7 @@ class Chooser:
     def at(self, method: str, dt: float) -> Any:
         """The scene of a candidate's pilot."""
         return self.scene.replace(**{"sim.method": method, "sim.dt": dt, "sim.duration": self.window,
-                                     "sim.settle": self.settle})
+                                     "sim.settle": self.settle, **self.strokes})
 
     def _run(self, method: str, dt: float, companion: bool) -> Any:
         key = (method, dt)
@@ -154,7 +159,7 @@ class Chooser:
             try:
                 self._runs[key] = self.pilot(scene, companion, lambda f: reached.__setitem__(0, f))
                 reached[0] = 1.0
-            except (SimulationFailed, SceneError) as exc:
+            except SimulationUnstable as exc:  # the step's failure; any other is the scene's, at every step
                 self._runs[key] = exc
             cpu = time.process_time() - cpu
             self.wall += time.perf_counter() - start
@@ -169,10 +174,14 @@ class Chooser:
     def try_step(self, method: str, dt: float, cheaper_than: float = math.inf,
                  dearer: str = "predicted to cost more than the cheapest that met the limits") -> Candidate:
         """A candidate's pilot at dt and, where it runs through and costs less than ``cheaper_than``, at dt / 2
-        (else it is not measured, ``dearer`` says why)."""
-        candidate = Candidate(method, dt)
-        self.candidates.append(candidate)
-        start = self.wall
+        (else it is not measured, ``dearer`` says why); a candidate tried before and not measured is tried again."""
+        known = [c for c in self.candidates if (c.method, c.dt) == (method, dt)]
+        if known and (known[0].measured or known[0].failed):
+            return known[0]
+        candidate = known[0] if known else Candidate(method, dt)
+        if not known:
+            self.candidates.append(candidate)
+        start = self.wall - candidate.pilot_wall_s
         run = self._run(method, dt, False)
         candidate.cost_s = self.cost(method, dt)
         if isinstance(run, Exception):
@@ -180,6 +189,7 @@ class Chooser:
         elif not candidate.cost_s < cheaper_than:
             candidate.skipped = dearer
         else:
+            candidate.skipped = ""
             fine = self._run(method, dt * FINER, True)
             if isinstance(fine, Exception):
                 candidate.failed = f"its pilot at half the step failed: {_first_line(fine)}"
@@ -199,16 +209,16 @@ class Chooser:
         candidate.excess = max((error / limits[key].allowed(figures[key]) for key, error in candidate.error.items()
                                 if figures.get(key) is not None), default=0.0)
 
-    def implicit(self, allowed: tuple[str, ...]) -> Candidate | None:
-        """The cheapest implicit candidate that meets the limits (None: none did), from sim.dt down: each method at
-        sim.dt, then the more accurate one at the step its error asks for (first order: the step times the limit
-        over the estimate, at most `HALVINGS` halvings in all)."""
+    def implicit(self, allowed: tuple[str, ...], bound: float) -> Candidate | None:
+        """The cheapest implicit candidate that meets the limits and costs less than ``bound`` (s; None: none did),
+        from sim.dt down: each method at sim.dt, then the more accurate one at the step its error asks for (first
+        order: the step times the limit over the estimate, at most `HALVINGS` halvings in all)."""
         dt = self.scene.sim.dt
-        tried = [self.try_step(allowed[0], dt)]
+        tried = [self.try_step(allowed[0], dt, bound)]
         for method in allowed[1:]:
-            tried.append(self.try_step(method, dt, NEWTON_SAVING * tried[0].cost_s if tried[0].measured
-                                       else math.inf, f"its step costs more than {NEWTON_SAVING:.0%} of "
-                                       f"{tried[0].method}'s"))
+            saving = NEWTON_SAVING * tried[0].cost_s if tried[0].cost_s > 0 else math.inf
+            tried.append(self.try_step(method, dt, min(bound, saving), f"its step costs more than "
+                                       f"{NEWTON_SAVING:.0%} of {tried[0].method}'s, or than the explicit one"))
         halvings = 0
         while True:
             passed = [c for c in tried if c.passed]
@@ -219,7 +229,9 @@ class Chooser:
             if halvings + max(1, need) > HALVINGS:
                 return None
             halvings += max(1, need)
-            tried = [self.try_step(best.method, self.scene.sim.dt * FINER ** halvings)]
+            if best.cost_s / FINER ** halvings >= bound:  # dearer than the explicit step that met the limits
+                return None
+            tried = [self.try_step(best.method, self.scene.sim.dt * FINER ** halvings, bound)]
 
     def explicit(self, bound: float) -> Candidate | None:
         """The explicit step from sim.dt down, while its predicted cost (from the cost of a step so far) stays below
@@ -227,8 +239,11 @@ class Chooser:
         dt, per_step = self.scene.sim.dt, math.nan  # the whole run's predicted cost times its step
         for _ in range(EXPLICIT_HALVINGS + 1):
             if per_step / dt >= bound:
-                self.candidates.append(Candidate("explicit", dt, cost_s=per_step / dt, skipped="not run: predicted "
-                                                 "from its cost per step to cost more than the implicit one"))
+                known = [c for c in self.candidates if (c.method, c.dt) == ("explicit", dt)]
+                if not known:
+                    self.candidates.append(Candidate("explicit", dt, cost_s=per_step / dt, skipped="not run: "
+                                                     "predicted from its cost per step to cost more than the "
+                                                     "implicit one"))
                 return None
             candidate = self.try_step("explicit", dt, bound)
             if candidate.passed:
@@ -246,16 +261,24 @@ def _first_line(exc: Exception) -> str:
 
 def choose(scene: Any, limits: ErrorLimits | None, pilot: Pilot, prepare: Callable[[Any], Any], duration: float,
            stroke_time: float, strokes: int) -> tuple[list[Candidate], Chooser]:
-    """The candidates that met the limits, cheapest first (the most accurate of the others where none did), and the
-    chooser that measured them."""
+    """The candidates that met the limits, cheapest first (the closest to them where none did), and the chooser that
+    measured them. The implicit step's cost at sim.dt bounds the explicit ladder, which runs first: where the
+    explicit step meets the limits for less, the implicit ones are measured only where they could cost less
+    still; where the implicit step needs a finer step than sim.dt, the explicit ladder goes on below its cost."""
     chooser = Chooser(scene, limits or ErrorLimits(), pilot, prepare, duration, stroke_time, strokes)
     allowed = IMPLICIT if scene.sim.integrator == "implicitfast" else ()
-    implicit = chooser.implicit(allowed) if allowed else None
-    bound = implicit.cost_s if implicit is not None else math.inf
-    if implicit is None and allowed:
-        ran = [c.cost_s for c in chooser.candidates if not math.isnan(c.cost_s)]
-        bound = 2 * max(ran) if ran else math.inf  # no implicit step met the limits: the explicit one may
+    bound = math.inf
+    if allowed:
+        first = chooser.try_step(allowed[0], scene.sim.dt, 0.0, "measured after the explicit step")
+        bound = first.cost_s if first.cost_s > 0 else math.inf  # NaN (it failed at once): no bound
     explicit = chooser.explicit(bound)
+    implicit = chooser.implicit(allowed, math.inf if explicit is None else explicit.cost_s) if allowed else None
+    if explicit is None and allowed:
+        costs = [c.cost_s for c in chooser.candidates if c.method != "explicit" and c.cost_s > 0]
+        # below the implicit step that met the limits, or, where none did, twice the dearest one tried
+        again = implicit.cost_s if implicit is not None else 2 * max(costs, default=math.inf)
+        if again > bound:
+            explicit = chooser.explicit(again)
     passed = sorted((c for c in (implicit, explicit) if c is not None), key=lambda c: c.cost_s)
     if not passed:  # the closest: the smallest excess, then the finest step
         passed = [min(chooser.candidates, key=lambda c: (c.excess, c.dt))]
@@ -285,14 +308,15 @@ def reason(chosen: Candidate, chooser: Chooser, fell_back: list[str]) -> str:
 def run_auto(scene: Any, limits: ErrorLimits | None, pilot: Pilot, prepare: Callable[[Any], Any],
              full: Callable[[Any], Any], duration: float, stroke_time: float, strokes: int) -> Any:
     """Choose (`choose`), then run the choice at the whole length with ``full(scene)`` (its companion estimate
-    included); where that refuses it, the next candidate that met the limits. The result carries
+    included); where its estimate refuses it or it goes unstable, the next candidate that met the limits (a
+    failure of the scene's own, a drive that cannot hold its profile, is raised as it comes). The result carries
     ``method_choice``, and the pilots' wall time in its ``wall_s``."""
     passed, chooser = choose(scene, limits, pilot, prepare, duration, stroke_time, strokes)
     fell_back: list[str] = []
     for chosen in passed[:-1]:
         try:
             return _chosen(full, scene, chosen, chooser, fell_back)
-        except SimulationFailed as exc:
+        except (InaccurateResult, SimulationUnstable) as exc:
             why = "its estimate exceeded the limits" if isinstance(exc, InaccurateResult) else _first_line(exc)
             fell_back.append(f"{chosen.method} at {chosen.dt:g} s, run whole, was refused: {why}")
     return _chosen(full, scene, passed[-1], chooser, fell_back)

@@ -138,6 +138,8 @@ class Chooser:
         self.strokes = {f"drive.{i}.stroke": j.stroke * cut for i, j in enumerate(getattr(scene, "drive", ()))
                         if j.profile == "constant" and j.stroke > 0 and cut < 1}
         self.candidates: list[Candidate] = []
+        # the implicit methods extend MuJoCo's implicitfast integrator; with another, the explicit step alone
+        self.allowed = IMPLICIT if scene.sim.integrator == "implicitfast" else ()
         self.wall = 0.0
         self._runs: dict[tuple[str, float], Any] = {}    # each pilot that ran (or its failure), for reuse
         self._rates: dict[tuple[str, float], float] = {}  # its CPU time per simulated second, as far as it got
@@ -266,7 +268,7 @@ def choose(scene: Any, limits: ErrorLimits | None, pilot: Pilot, prepare: Callab
     explicit step meets the limits for less, the implicit ones are measured only where they could cost less
     still; where the implicit step needs a finer step than sim.dt, the explicit ladder goes on below its cost."""
     chooser = Chooser(scene, limits or ErrorLimits(), pilot, prepare, duration, stroke_time, strokes)
-    allowed = IMPLICIT if scene.sim.integrator == "implicitfast" else ()
+    allowed = chooser.allowed
     bound = math.inf
     if allowed:
         first = chooser.try_step(allowed[0], scene.sim.dt, 0.0, "measured after the explicit step")
@@ -295,8 +297,8 @@ def reason(chosen: Candidate, chooser: Chooser, fell_back: list[str]) -> str:
     others = sorted((c for c in chooser.candidates if c is not chosen and c.passed), key=lambda c: c.cost_s)
     if others:
         why += f", against {others[0].method} at {others[0].dt:g} s, {others[0].cost_s:.3g} s"
-    cheaper = [c for c in chooser.candidates
-              if not c.passed and (c.failed or c.measured) and not c.cost_s >= chosen.cost_s]
+    cheaper = [c for c in chooser.candidates if not c.passed and (c.failed or c.measured)
+               and not c.cost_s >= chosen.cost_s and not c.failed.startswith("run whole")]  # those: `fell_back`
     if cheaper:
         c = max(cheaper, key=lambda c: c.dt)
         why += f"; {c.method} at {c.dt:g} s: {c.why_not[:120]}"
@@ -308,18 +310,26 @@ def reason(chosen: Candidate, chooser: Chooser, fell_back: list[str]) -> str:
 def run_auto(scene: Any, limits: ErrorLimits | None, pilot: Pilot, prepare: Callable[[Any], Any],
              full: Callable[[Any], Any], duration: float, stroke_time: float, strokes: int) -> Any:
     """Choose (`choose`), then run the choice at the whole length with ``full(scene)`` (its companion estimate
-    included); where its estimate refuses it or it goes unstable, the next candidate that met the limits (a
-    failure of the scene's own, a drive that cannot hold its profile, is raised as it comes). The result carries
-    ``method_choice``, and the pilots' wall time in its ``wall_s``."""
+    included); where its estimate refuses it or it goes unstable, the next candidate that met the limits, or, after
+    the explicit step, the implicit one measured then (a failure of the scene's own, a drive that cannot hold its
+    profile, is raised as it comes). The result carries ``method_choice``, and the pilots' wall time in its
+    ``wall_s``."""
     passed, chooser = choose(scene, limits, pilot, prepare, duration, stroke_time, strokes)
     fell_back: list[str] = []
-    for chosen in passed[:-1]:
+    while True:
+        chosen, *passed = passed
         try:
             return _chosen(full, scene, chosen, chooser, fell_back)
         except (InaccurateResult, SimulationUnstable) as exc:
-            why = "its estimate exceeded the limits" if isinstance(exc, InaccurateResult) else _first_line(exc)
+            why = ("its estimate exceeded the limits" if isinstance(exc, InaccurateResult)
+                   else _first_line(exc).split(" (")[0])
+            chosen.failed = f"run whole, it was refused: {why}"
             fell_back.append(f"{chosen.method} at {chosen.dt:g} s, run whole, was refused: {why}")
-    return _chosen(full, scene, passed[-1], chooser, fell_back)
+            if not passed and chosen.method == "explicit" and chooser.allowed:
+                implicit = chooser.implicit(chooser.allowed, math.inf)
+                passed = [] if implicit is None else [implicit]
+            if not passed:
+                raise
 
 
 def _chosen(full: Callable[[Any], Any], scene: Any, chosen: Candidate, chooser: Chooser,

@@ -81,3 +81,16 @@ def test_a_method_named_runs_as_named_and_auto_is_a_robots_default_only(tmp_path
     assert UserScene().sim.method == "auto"
     with pytest.raises(SceneError):
         load_scene(preset_name="physical", overrides={"sim.method": "auto"})
+
+
+def test_an_explicit_choice_its_whole_run_refuses_falls_back_to_an_implicit_step():
+    # The wheel rig free under 21 N at 10 ms: the explicit step runs through the pilots' 0.16 s and chatters on its
+    # vertical axis from 0.09 s on, which the whole run's probe sees; the implicit steps are measured then.
+    from finrft.experiments import wheel
+    scene = wheel.default_scene(**{"sim.method": "auto", "sim.duration": 1.0, "sim.settle": 0.5, "wheel.slip": 0.3,
+                                   "wheel.load": 21.0})
+    run = experiment.run(wheel.Wheel.of(scene), scene)
+    choice = run.method_choice
+    assert methods.get(choice.method).implicit and "run whole, was refused" in choice.reason
+    assert any(c.method == "explicit" and c.failed.startswith("run whole") for c in choice.candidates)
+    assert run.summary()["Fz_N"] == pytest.approx(21.0, rel=1e-3)  # the medium carries the load

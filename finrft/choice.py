@@ -204,10 +204,9 @@ class Chooser:
     def _judge(self, candidate: Candidate, run: Any, fine: Any) -> None:
         estimate = companion_estimate(run, fine, FINER)
         figures, headline = run.figure_values(), run.headline()
-        bounded = [f.key for f in (headline if self.limits.figures is None else self.limits.figures)]
-        candidate.error = {key: magnitude(estimate[key]) for key in bounded if estimate.get(key) is not None}
-        candidate.over = self.limits.exceeded(estimate, figures, headline)
         limits = {f.key: f for f in (headline if self.limits.figures is None else self.limits.figures)}
+        candidate.error = {key: magnitude(estimate[key]) for key in limits if estimate.get(key) is not None}
+        candidate.over = self.limits.exceeded(estimate, figures, headline)
         candidate.excess = max((error / limits[key].allowed(figures[key]) for key, error in candidate.error.items()
                                 if figures.get(key) is not None), default=0.0)
 

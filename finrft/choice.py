@@ -10,11 +10,13 @@ the controls' ramp-in, a tenth of the rest or a sine's period, whole strokes), e
 half of it, their reported figures compared as the run's companion compares them
 (`convergence.companion_estimate`):
 
-- the implicit methods, ``newton-midpoint`` (second order for a robot's quasi-static motion) and ``newton`` (where
-  its step costs visibly less) at sim.dt; where neither meets the limits, the closer one at the step its error
-  asks for, at most `HALVINGS` halvings down;
+- ``newton-midpoint`` at sim.dt runs once, which prices the implicit step;
 - ``explicit`` from sim.dt down, halving while it chatters, goes unstable or misses the limits, for as long as its
-  cost, predicted from its cost per step so far, stays below the implicit one's.
+  cost, predicted from its cost per step so far, stays below that price;
+- the implicit methods where they could cost less than the explicit step that met the limits:
+  ``newton-midpoint`` (second order for a robot's quasi-static motion) and ``newton`` (where its step costs
+  visibly less) at sim.dt; where neither meets the limits, the closer one at the step its error asks for, at most
+  `HALVINGS` halvings down (and the explicit ladder goes on below that step's cost).
 
 The cheapest candidate whose pilot met the limits runs, with its companion estimate as every run has; should that
 estimate refuse it (a pilot's window is not the whole run), the next one runs. The pilots' wall time counts in

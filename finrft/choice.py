@@ -143,6 +143,7 @@ class Chooser:
         # the implicit methods extend MuJoCo's implicitfast integrator; with another, the explicit step alone
         self.allowed = IMPLICIT if scene.sim.integrator == "implicitfast" else ()
         self.wall = 0.0
+        self.found: Candidate | None = None  # the explicit step that met the limits, once found
         self._runs: dict[tuple[str, float], Any] = {}    # each pilot that ran (or its failure), for reuse
         self._rates: dict[tuple[str, float], float] = {}  # its CPU time per simulated second, as far as it got
 
@@ -232,8 +233,13 @@ class Chooser:
             if halvings + max(1, need) > HALVINGS:
                 return None
             halvings += max(1, need)
-            if best.cost_s / FINER ** halvings >= bound:  # dearer than the explicit step that met the limits
+            finer = best.cost_s / FINER ** halvings
+            if finer >= bound:  # dearer than the explicit step that met the limits
                 return None
+            if self.found is None and finer > 0:  # the explicit ladder, below what the finer step will cost
+                self.found = self.explicit(finer)
+                if self.found is not None:
+                    return None
             tried = [self.try_step(best.method, self.scene.sim.dt * FINER ** halvings, bound)]
 
     def explicit(self, bound: float) -> Candidate | None:
@@ -274,8 +280,10 @@ def choose(scene: Any, limits: ErrorLimits | None, pilot: Pilot, prepare: Callab
     if allowed:
         first = chooser.try_step(allowed[0], scene.sim.dt, 0.0, "measured after the explicit step")
         bound = first.cost_s if first.cost_s > 0 else math.inf  # NaN (it failed at once): no bound
-    explicit = chooser.explicit(bound)
-    implicit = chooser.implicit(allowed, math.inf if explicit is None else explicit.cost_s) if allowed else None
+    chooser.found = chooser.explicit(bound)
+    implicit = chooser.implicit(allowed, math.inf if chooser.found is None else chooser.found.cost_s) \
+        if allowed else None
+    explicit = chooser.found
     if explicit is None and allowed:
         costs = [c.cost_s for c in chooser.candidates if c.method != "explicit" and c.cost_s > 0]
         # below the implicit step that met the limits, or, where none did, twice the dearest one tried

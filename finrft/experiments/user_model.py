@@ -586,7 +586,9 @@ def run_robot(scene: UserScene, *, control: Controller | None = None, progress: 
               max_error: ErrorLimits | None = ErrorLimits()) -> Result:
     """Run a user's model as a robot (`UserModel`): ``control(t, data) -> ctrl`` (one value per actuator, called
     at every step) drives its actuators instead of the scene's [[control]]. The result carries its error
-    estimate as every run (`finrft.run`); `robot_summary` says what ``result.summary()`` reports."""
+    estimate as every run (`finrft.run`); `robot_summary` says what ``result.summary()`` reports. Under
+    ``sim.method = "auto"`` (the default) the run chooses its method and step first (`finrft.choice`:
+    ``result.method_choice``)."""
     if not isinstance(scene, UserScene):
         raise SceneError(f"run_robot: the scene must be a finrft.UserScene (finrft.load_scene(path, cls=UserScene)), "
                          f"got {type(scene).__name__} {scene!r:.60}")

@@ -279,6 +279,16 @@ def record_every(dt: float, record_dt: float) -> int:
     return max(1, round(record_dt / dt))
 
 
+def companion_estimate(run: Checked, other: Checked, ratio: float) -> dict[str, Any]:
+    """The error estimate of ``run`` from a companion at ``ratio`` times its step: Richardson's, SAFETY |run -
+    companion| / |ratio - 1| for each difference, never below what the run knows of its own resolution."""
+    estimate = {key: figure_map(lambda v: SAFETY * v / abs(ratio - 1), value)
+                for key, value in run.differences(other).items()}
+    for key, floor in run.resolution().items():
+        estimate[key] = max(estimate.get(key, 0.0), floor)
+    return estimate
+
+
 def checked(build: Callable[[Any], M], run_once: Callable[[Any, M, Callable[[float], None] | None, bool], R],
             scene: Any, progress: Callable[[float], None] | None = None,
             limits: ErrorLimits | None = ErrorLimits(), estimate: bool = True) -> R:
@@ -321,10 +331,7 @@ def checked(build: Callable[[Any], M], run_once: Callable[[Any, M, Callable[[flo
             if n < len(ratios):
                 continue
             raise
-        estimate = {key: figure_map(lambda v: SAFETY * v / abs(ratio - 1), value)
-                    for key, value in run.differences(other).items()}
-        for key, floor in run.resolution().items():
-            estimate[key] = max(estimate.get(key, 0.0), floor)
+        estimate = companion_estimate(run, other, ratio)
         if kept is not None:
             estimate = {key: value if kept[0].get(key) is None else figure_map(max, value, kept[0][key])
                         for key, value in estimate.items()}

@@ -17,7 +17,8 @@ from typing import Any, Callable, Protocol
 import mujoco
 import numpy as np
 
-from . import geometry, interrupts, laws, native
+from . import geometry, interrupts, laws, methods, native
+from .choice import run_auto
 from .convergence import (ErrorLimits, Estimated, FigureLimit, checked, figure_difference, max_difference, paired,
                           require_finite)
 from .callbacks import controlled, installed
@@ -138,10 +139,11 @@ class Result(Estimated):
     series: dict[str, np.ndarray]
     values: dict[str, float]
     steps: int                       # steps taken (the adaptive method's accepted steps)
-    wall_s: float
+    wall_s: float                    # the run's own, with sim.method = "auto" its pilots' too (not the companion's)
     backend: str = "python"
     steps_rejected: int = 0          # the adaptive method's rejected steps, and newton's halved ones
     chattering: Any = None           # what the chatter probe saw of chatter that came and went (`Chattering`)
+    method_choice: Any = None        # what sim.method = "auto" chose and why (`choice.MethodChoice`); None: not auto
 
     def __getattr__(self, name: str) -> Any:
         # Only for names that are not fields; the guard keeps unpickling (no fields yet) from recursing.
@@ -220,6 +222,8 @@ class Result(Estimated):
                    dt=float(self.scene.sim.dt))
         if self.error_estimate is not None:
             out.update(error_estimate=dict(self.error_estimate), error_companion=self.error_companion)
+        if self.method_choice is not None:
+            out["method_choice"] = self.method_choice.to_json()
         return out
 
 
@@ -262,9 +266,22 @@ def run(experiment: Experiment, scene: Any, *, progress: Callable[[float], None]
         else:
             mujoco.mj_resetData(built.model, d)
         return _once(experiment, s, built, d, p, companion)
+    # The model depends on the numerics only through the step (`convergence.checked`): sim.method = "auto"'s pilots
+    # and the run share their models.
+    models: dict[float, Any] = {}
+
+    def build(s: Any) -> Any:
+        if s.sim.dt not in models:
+            models[s.sim.dt] = experiment.build(s)
+        return models[s.sim.dt]
     # A signal is raised between the run's steps (`interrupts.check` in step_through), never inside MuJoCo's calls.
     with interrupts.deferred():
-        return checked(experiment.build, once, scene, progress, max_error, estimate_error)
+        if methods.chooses(scene.sim.method):
+            drive = experiment.drive_for(scene)
+            return run_auto(scene, max_error, lambda s, companion, p: once(s, build(s), p, companion), build,
+                            lambda s: checked(build, once, s, progress, max_error, estimate_error),
+                            drive.duration, drive.stroke_time, drive.strokes)
+        return checked(build, once, scene, progress, max_error, estimate_error)
 
 
 def python_forces(built: Any) -> Callable[[mujoco.MjModel, mujoco.MjData], None]:

@@ -46,13 +46,28 @@ METHODS: dict[str, Method] = {m.name: m for m in (
 )}
 
 
+# ``sim.method = "auto"``, a robot's default (`scene.RobotSim`): no method of its own but a choice among these, with
+# its step, that each run makes before it steps (`finrft.choice`); past that point every scene names a method.
+AUTO = "auto"
+AUTO_DOC = ("auto: the run chooses the method and step that meet the error limits at the least cost, by short pilot "
+            "runs (explicit at its largest accurate step, newton and newton-midpoint at sim.dt or finer)")
+
+
 def names() -> tuple[str, ...]:
     """Every method, by name, in the table's order."""
     return tuple(METHODS)
 
 
+def chooses(name: str) -> bool:
+    """Whether ``sim.method`` asks the run to choose its method (`AUTO`)."""
+    return name == AUTO
+
+
 def get(name: str) -> Method:
-    """The entry of a method named in a validated scene."""
+    """The entry of a method named in a validated scene (not `AUTO`, which the run resolves first)."""
+    if chooses(name):
+        raise ValueError(f"sim.method = {AUTO!r} is resolved by the run (finrft.choice) before a method's entry is "
+                         f"read")
     return METHODS[name]
 
 

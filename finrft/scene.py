@@ -225,6 +225,8 @@ def check_medium(m: Any) -> None:
 def resolution(sim: Any) -> str:
     """A scene's method and what sets its steps, in words: the tolerance and largest step of an adaptive method
     (its dt is only the grid of reversals and samples), else the step."""
+    if methods.chooses(sim.method):
+        return f"{sim.method} method (the run chooses), from dt {sim.dt:g} s"
     if methods.get(sim.method).adaptive:
         return f"{sim.method} method, tolerance {sim.tolerance:g}, steps up to {sim.max_step:g} s"
     return f"{sim.method} method, dt {sim.dt:g} s"
@@ -247,7 +249,7 @@ class Sections:
 
 
 def check_sim(sim: Sim) -> None:
-    if methods.get(sim.method).implicit and sim.integrator != "implicitfast":
+    if not methods.chooses(sim.method) and methods.get(sim.method).implicit and sim.integrator != "implicitfast":
         raise SceneError(f"sim.method = {sim.method!r} extends MuJoCo's implicitfast integrator: set "
                          f"sim.integrator = 'implicitfast' (got {sim.integrator!r}) or use sim.method = 'explicit'")
 
@@ -281,8 +283,11 @@ class ExplicitSim(Sim):
 
 @dataclass(frozen=True)
 class RobotSim(Sim):
-    # MuJoCo's usual step: the newton method takes the attached surfaces' stiff forces implicitly there
-    dt: float = _f(1.0e-3, "s", "time step", minimum=0.0)
+    # MuJoCo's usual step: the newton method takes the attached surfaces' stiff forces implicitly there; auto
+    # starts its pilots from it
+    dt: float = _f(1.0e-3, "s", "time step (auto: the implicit methods' first step)", minimum=0.0)
+    method: str = _f(methods.AUTO, "", f"{methods.AUTO_DOC}; {methods.described()}",
+                     choices=(methods.AUTO, *methods.names()))
     duration: float = _f(0.0, "s", "length of the run; 0: the constant drives' own (one stroke, or their cycles)",
                          minimum=0.0, exclusive=False)
     settle: float = _f(0.0, "s", "the summaries average over [settle, duration]", minimum=0.0, exclusive=False)

@@ -157,12 +157,13 @@ def test_a_table_control_interpolates_its_csv_relative_to_the_scene(tmp_path):
 
 
 def test_a_free_body_resting_on_the_sand_runs_and_does_not_move(tmp_path):
-    # A 0.5 kg box on a free joint, no floor, at the default numerics (newton, 1 ms): the medium alone holds it.
+    # A 0.5 kg box on a free joint, no floor, newton at 1 ms: the medium alone holds it.
     (tmp_path / "box.xml").write_text("""<mujoco><option gravity="0 0 -9.81"/><worldbody>
       <body name="box" pos="0 0 0.01"><freejoint/><geom type="box" size="0.05 0.05 0.01" mass="0.5"/></body>
       </worldbody></mujoco>""")
     scene = UserScene().replace(**{"model.path": str(tmp_path / "box.xml"), "model.bodies": ["box"],
-                                   "medium.law": "li2013-planar", "sim.duration": 1.0, "sim.settle": 0.5})
+                                   "medium.law": "li2013-planar", "sim.duration": 1.0, "sim.settle": 0.5,
+                                   "sim.method": "newton"})
     s = finrft.run_robot(scene).summary()
     # resting: it creeps at about v_reg atanh(m g / F) < v_reg, far below 0.1 mm/s; the medium carries the weight
     assert s["com_velocity_m_s"] == pytest.approx([0, 0, 0], abs=1e-4)

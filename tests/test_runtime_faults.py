@@ -228,6 +228,6 @@ def test_newton_does_not_take_a_root_whose_residual_it_never_made_small(tmp_path
     attached = finrft.attach(spec, ["box"], law="li2013-planar", surface_z=1e10, backend=backend)
     model = spec.compile()
     data = mujoco.MjData(model)
-    advance = stepper(model, UserScene().sim, backend, [], attached)
+    advance = stepper(model, UserScene().replace(**{"sim.method": "newton"}).sim, backend, [], attached)
     with attached.installed(model):
         assert advance(data, 1) == Code.NOT_CONVERGED

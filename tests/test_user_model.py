@@ -211,7 +211,8 @@ def test_the_guide_scene_runs_the_guide_plate(tmp_path, capsys):
     assert force == pytest.approx(CLOSED_FORM, rel=0.03)
 
 
-@pytest.mark.parametrize("scene", [UserScene(), IntrusionScene()])
+# A robot's sim.method = "auto" is resolved before it steps: its messages are those of the method it chose.
+@pytest.mark.parametrize("scene", [UserScene().replace(**{"sim.method": "newton"}), IntrusionScene()])
 def test_failures_advise_only_what_the_scene_allows(scene):
     # A user's model steps explicitly only: its messages must not send the user to a method it refuses.
     from finrft.convergence import advice

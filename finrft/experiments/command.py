@@ -90,6 +90,11 @@ def steps_line(summary: dict[str, Any]) -> str:
     return f"{summary['steps']} steps taken ({summary['steps_rejected']} rejected)"
 
 
+def choice_lines(run: Result) -> list[str]:
+    """What sim.method = "auto" chose and why, in one line (none where the scene named its method)."""
+    return [] if run.method_choice is None else [run.method_choice.line()]
+
+
 def error_line(run: Result) -> str:
     # Any experiment's keys name their unit last (`experiment.Compared`): angle_deg, torque_Nm, eta_points, ...
     return (f"estimated discretisation error (companion run at {run.error_companion}): "

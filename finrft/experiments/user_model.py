@@ -32,7 +32,7 @@ from ..scene import Control, JointDrive, SceneError, UserScene, drive_timing, lo
 from ..stepping import DRIVE_LAG, jump_velocities
 from .attached_model import (DRIVEN, AttachedModel, applied_state, build_attached, driven_joint, medium_forces,
                              read_spec, record_forward)
-from .command import Command, register, steps_line
+from .command import Command, choice_lines, register, steps_line
 from .flags import add_max_error, add_result_files, add_scene_flags
 
 # ---------------------------------------------------------------------------------------------------------
@@ -586,7 +586,9 @@ def run_robot(scene: UserScene, *, control: Controller | None = None, progress: 
               max_error: ErrorLimits | None = ErrorLimits()) -> Result:
     """Run a user's model as a robot (`UserModel`): ``control(t, data) -> ctrl`` (one value per actuator, called
     at every step) drives its actuators instead of the scene's [[control]]. The result carries its error
-    estimate as every run (`finrft.run`); `robot_summary` says what ``result.summary()`` reports."""
+    estimate as every run (`finrft.run`); `robot_summary` says what ``result.summary()`` reports. Under
+    ``sim.method = "auto"`` (the default) the run chooses its method and step first (`finrft.choice`:
+    ``result.method_choice``)."""
     if not isinstance(scene, UserScene):
         raise SceneError(f"run_robot: the scene must be a finrft.UserScene (finrft.load_scene(path, cls=UserScene)), "
                          f"got {type(scene).__name__} {scene!r:.60}")
@@ -705,6 +707,7 @@ class RunCommand(Command):
                  f"{mm(f'{1e3 * v:+.3f}' for v in s['com_velocity_m_s'])}; at the end (mm) "
                  f"{mm(f'{1e3 * v:.2f}' for v in s['com_position_m'])}",
                  f"medium's mean force (N) {mm(f'{v:+.4g}' for v in s['medium_force_N'])}"]
+        lines[1:1] = choice_lines(run)
         for body, force in s["body_medium_force_N"].items():
             lines.append(f"  on {body} (N) " + mm(f"{v:+.4g}" for v in force))
         for joint, load, unit, q in zip(s["drives"], s["drive_load"], s["drive_load_units"],

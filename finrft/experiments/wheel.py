@@ -40,7 +40,7 @@ from ..scene import (JointDrive, Medium, Model, RobotSim, Sections, UserScene, c
                      load_scene, parse_override, register_scene)
 from ..schema import field as _f
 from .attached_model import AttachedModel, build_attached, medium_forces, read_spec
-from .command import Command, Output, register, result_files, steps_line
+from .command import Command, Output, choice_lines, register, result_files, steps_line
 from .flags import add_max_error, add_result_files, add_scene_flags, number
 from .user_model import RobotTrial, Schedule, UserModel, window_mean
 
@@ -758,6 +758,7 @@ class WheelCommand(Command):
                 f"wheel, radius {s['radius_mm']:.4g} mm, slip {s['slip']:+.3f}, slip angle {s['slip_angle_deg']:g} "
                 f"deg, hub {s['speed_mm_s']:g} mm/s, rim {s['rim_speed_mm_s']:.4g} mm/s ({run.scene.medium.law}; "
                 f"{run.scene.sim.method}, dt {run.scene.sim.dt:g} s): {steps_line(s)} in {run.wall_s:.2f} s",
+                *choice_lines(run),
                 f"over {s['window_s'][0]:g}..{s['window_s'][1]:.4g} s, {mode}",
                 f"sand on the wheel (N): Fx {s['Fx_N']:+.3f} (heading), Fy {s['Fy_N']:+.3f} (axle, left), "
                 f"Fz {s['Fz_N']:+.3f} (up); axle torque {s['axle_torque_Nm']:+.4g} N m",

@@ -1,0 +1,96 @@
+"""sim.method = "auto", a robot's default: the light-linked sand-swimmer gets an implicit method, a heavy, slow sled
+MuJoCo's explicit step, each says what it chose and why, and the choice's figures are within their limits of a run
+at 1/8 of its step."""
+
+import json
+
+import pytest
+
+from finrft import experiment, methods
+from finrft.cli import main
+from finrft.convergence import ErrorLimits, FigureLimit
+from finrft.experiments.user_model import UserModel, example, run_robot
+from finrft.scene import SceneError, UserScene, load_scene
+
+# A 2 kg sled on the sand (a 10 x 10 x 2 cm box, 9 mm deep, free to sink) pushed at 20 mm/s: its explicit step holds
+# where dt < 2 m v_reg / F = 2 x 2 kg x 10 mm/s / ~22 N = 1.8 ms, and an implicit step costs several explicit ones.
+SLED = """<mujoco><option gravity="0 0 -9.81"/><worldbody><body name="carriage">
+  <joint name="push" type="slide" axis="1 0 0"/><geom type="sphere" size="0.005" mass="0.1"/>
+  <body name="sled" pos="0 0 0.0008"><joint name="lift" type="slide" axis="0 0 1"/>
+  <geom type="box" size="0.05 0.05 0.01" mass="2.0"/></body></body></worldbody></mujoco>"""
+SLED_SCENE = """[model]\npath = "sled.xml"\nbodies = ["sled"]
+[medium]\nlaw = "li2013"\nelement_size = 0.005\nv_reg = 0.01
+[[drive]]\njoint = "push"\nspeed = 0.02\nstroke = 0.0
+[sim]\nduration = 0.6\nsettle = 0.3\n"""
+SPEED = ErrorLimits(figures=(FigureLimit("com_speed_m_s", 2.0, floor=1e-4),))
+
+
+def _sled(tmp_path) -> str:
+    (tmp_path / "sled.xml").write_text(SLED)
+    (tmp_path / "sled.toml").write_text(SLED_SCENE)
+    return str(tmp_path / "sled.toml")
+
+
+def _converged(run, limits: ErrorLimits) -> None:
+    """The run's bounded figures are within their limits of the chosen method at 1/8 of the chosen step."""
+    choice = run.method_choice
+    scene = run.scene.replace(**{"sim.method": choice.method, "sim.dt": choice.dt / 8})
+    fine = experiment.run(UserModel.of(scene), scene, estimate_error=False)
+    ours, theirs = run.summary(), fine.summary()
+    for limit in limits.figures or run.headline():
+        if theirs[limit.key] is not None:
+            assert abs(ours[limit.key] - theirs[limit.key]) <= limit.allowed(theirs[limit.key]), limit.key
+
+
+def test_the_sand_swimmer_gets_an_implicit_method():
+    # Its 10 g links: the explicit step chatters or misses the speed at every step cheaper than the implicit one.
+    over = {"sim.method": "auto", "sim.duration": 0.6, "sim.settle": 0.3,
+            **{f"control.{i}.{key}": value for i in range(6) for key, value in (("ramp", 0.1), ("frequency", 2.0))}}
+    run = run_robot(load_scene(example("sand_swimmer"), cls=UserScene, overrides=over), max_error=SPEED)
+    choice = run.method_choice
+    assert methods.get(choice.method).implicit and run.scene.sim.method == choice.method
+    assert any(c.method == "explicit" and not c.passed for c in choice.candidates)
+    assert run.error_estimate["com_speed_m_s"] <= SPEED.figures[0].allowed(run.summary()["com_speed_m_s"])
+
+
+def test_a_heavy_slow_sled_gets_the_explicit_step_and_says_why(tmp_path, capsys):
+    assert main(["run", "--scene", _sled(tmp_path), "--json"]) == 0
+    out, err = capsys.readouterr()
+    s = json.loads(out)
+    choice = s["method_choice"]
+    assert choice["method"] == "explicit" and s["dt"] == choice["dt"]
+    assert "method auto: explicit" in err and choice["reason"]
+    weighed = {c["method"] for c in choice["candidates"]}
+    assert {"explicit", "newton-midpoint"} <= weighed
+    chosen, = [c for c in choice["candidates"] if c["method"] == "explicit" and c["dt"] == choice["dt"]]
+    implicit = [c for c in choice["candidates"] if c["method"] != "explicit"]
+    assert implicit and all(c["predicted_cost_s"] > chosen["predicted_cost_s"] for c in implicit)
+    assert all(c["why_not"] for c in choice["candidates"] if c is not chosen)
+    assert s["wall_s"] >= choice["pilot_wall_s"] > 0
+
+
+def test_the_sleds_choice_is_within_its_limits_of_a_converged_run(tmp_path):
+    run = run_robot(load_scene(_sled(tmp_path), cls=UserScene))
+    assert run.method_choice.method == "explicit"
+    _converged(run, ErrorLimits())
+
+
+def test_a_method_named_runs_as_named_and_auto_is_a_robots_default_only(tmp_path):
+    run = run_robot(load_scene(_sled(tmp_path), cls=UserScene, overrides={"sim.method": "newton"}))
+    assert run.method_choice is None and run.scene.sim.method == "newton" and "method_choice" not in run.summary()
+    assert UserScene().sim.method == "auto"
+    with pytest.raises(SceneError):
+        load_scene(preset_name="physical", overrides={"sim.method": "auto"})
+
+
+def test_an_explicit_choice_its_whole_run_refuses_falls_back_to_an_implicit_step():
+    # The wheel rig free under 21 N at 10 ms: the explicit step runs through the pilots' 0.16 s and chatters on its
+    # vertical axis from 0.09 s on, which the whole run's probe sees; the implicit steps are measured then.
+    from finrft.experiments import wheel
+    scene = wheel.default_scene(**{"sim.method": "auto", "sim.duration": 1.0, "sim.settle": 0.5, "wheel.slip": 0.3,
+                                   "wheel.load": 21.0})
+    run = experiment.run(wheel.Wheel.of(scene), scene)
+    choice = run.method_choice
+    assert methods.get(choice.method).implicit and "run whole, was refused" in choice.reason
+    assert any(c.method == "explicit" and c.failed.startswith("run whole") for c in choice.candidates)
+    assert run.summary()["Fz_N"] == pytest.approx(21.0, rel=1e-3)  # the medium carries the load

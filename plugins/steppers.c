@@ -18,11 +18,12 @@
 // "implicit" method) overshoots on light segments and bodies; the "newton" method
 // iterates, with a backtracking line search on |G|, to the root, the penalty stops taken at the new positions.
 // dF_i/dv comes from central differences of the same law (forward ones in Newton's method, whose root does not
-// depend on it), so no law needs a derivative of its own. dW_b/dtwist is assembled from its elements: element e at
-// arm a_e moves at v_e = A_e t, A_e = [-[a_e]x | I], and W_b = sum_e A_e^T F_e(v_e), so dW_b/dtwist =
-// sum_e A_e^T (dF_e/dv_e) A_e, each 3 x 3 dF_e/dv_e differenced from the element's law alone (across v_e only
-// where it leads: leading_slope), only for the elements below the surface (taken once per step) that lead the
-// motion at v_e or at a probe. Then, as
+// depend on it), so no segment law needs a derivative of its own. dW_b/dtwist is assembled from its elements:
+// element e at arm a_e moves at v_e = A_e t, A_e = [-[a_e]x | I], and W_b = sum_e A_e^T F_e(v_e), so dW_b/dtwist =
+// sum_e A_e^T (dF_e/dv_e) A_e over the elements below the surface (taken once per step) that lead the motion, each
+// 3 x 3 dF_e/dv_e the law's own analytic one where it has one (li2013, rft3d: finrft_surface_element_slope, one
+// call), else differenced from the element's law alone (across v_e only where it leads: leading_slope), also for
+// the elements that lead only at a probe. Then, as
 // MuJoCo's implicitfast: activations, qvel += dv, positions, time. The newton-midpoint method takes the
 // Jacobians and elements at the positions half a step ahead at v (F there, f at the start): see integrate.py for
 // when that is second order and when it damps.
@@ -388,12 +389,15 @@ static int probed_slope(const FinrftSurface* p, const mjtNum* element, const mjt
   return 1;
 }
 
-// dW/dtwist (6 x 6, row-major) of body j at twist t, sum_e A_e^T (dF_e/dv_e) A_e: each element's 3 x 3 in steps
-// h = 1e-6 (|v_e| + SURFACE_SPEED), by forward differences from its force at t (kept by body_wrench at t) when
-// `forward`, else central ones (probed_slope); forward, an element leading at v_e (its force not 0) with no DRFT
-// term by leading_slope's two probes. An element trailing at v_e and at every probe adds nothing.
+// dW/dtwist (6 x 6, row-major) of body j at twist t, sum_e A_e^T (dF_e/dv_e) A_e: each element's 3 x 3 the law's
+// own (finrft_surface_element_slope) where it has one, exact whatever `forward` says, and nothing for an element
+// trailing at v_e; else in steps h = 1e-6 (|v_e| + SURFACE_SPEED), by forward differences from its force at t
+// (kept by body_wrench at t) when `forward`, else central ones (probed_slope); forward, an element leading at v_e
+// (its force not 0) with no DRFT term by leading_slope's two probes. An element trailing at v_e and at every probe
+// adds nothing.
 static void body_slope(const Items* s, int j, const mjtNum t[6], int forward, mjtNum dw[36]) {
   const FinrftSurface* p = s->surface[j];
+  int analytic = finrft_surface_has_slope(p);
   mju_zero(dw, 36);
   for (int e = s->first[j]; e < s->first[j + 1]; e++) {
     const mjtNum* element = s->element + FINRFT_SUBMERGED * (size_t)e;
@@ -401,7 +405,12 @@ static void body_slope(const Items* s, int j, const mjtNum t[6], int forward, mj
     mjtNum v[3], k[9], a[18], ka[18];
     element_velocity(t, element, v);
     mjtNum h = 1e-6 * (sqrt(finrft_dot3(v, v)) + SURFACE_SPEED);
-    if (forward && p->drft_lambda == 0 && (f0[0] != 0 || f0[1] != 0 || f0[2] != 0)) {
+    if (analytic) {
+      // the law's own Jacobian: nothing for an element that trails (n . v <= 0, where every surface law is 0)
+      mjtNum f[3];
+      if (!(finrft_dot3(element + 3, v) > 0)) continue;
+      finrft_surface_element_slope(p, element + 3, v, element[6], element[7], f, k);
+    } else if (forward && p->drft_lambda == 0 && (f0[0] != 0 || f0[1] != 0 || f0[2] != 0)) {
       leading_slope(p, element, v, f0, h, k);
     } else if (!probed_slope(p, element, v, f0, h, forward, k)) {
       continue;

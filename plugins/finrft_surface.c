@@ -47,8 +47,8 @@ static inline double norm2(double x, double y) { return sqrt(x * x + y * y); }
 // finrft/laws/li2013.py for the signs and the folding. The series' terms come from cos 2beta and sin 2beta by the
 // angle-sum formulas, so a call costs no trigonometric function: the laws are called several times per element per
 // Newton step, and sin, cos and atan2 were a third of a wheel's step.
-static void alpha_unit(const double coef[NCOEF], double zeta, double cb, double sb, double cg, double sg,
-                       double out[2]) {
+static inline void alpha_unit(const double coef[NCOEF], double zeta, double cb, double sb, double cg, double sg,
+                              double out[2]) {
   // gamma beyond +-pi/2 (cos gamma < 0) is folded to pi - gamma with beta to -beta: cos gamma and sin 2beta change
   // sign
   int mirrored = cg < 0;
@@ -117,10 +117,12 @@ FINRFT_EXPORT void finrft_li2013_planar_element_force(const double coef[NCOEF], 
 }
 
 // Treers et al.'s weights of the two parts of a unit velocity, as F1_FIT, F23_FIT in li2013.py: f1 = a (tanh(b s -
-// c) + tanh(c)) / d and f23 = a (atanh(b s - c) + atanh(c)) / d, each sum in one closed form of u = b s (one expm1,
-// one log1p where the two tanh or atanh calls were half a call of the law):
-//   tanh(u - c) + tanh(c) = sinh(u) / (cosh(u - c) cosh c) = E / (cosh c (e^-c E + 2 cosh c)), E = expm1(2 u),
-//   atanh(u - c) + atanh(c) = log1p(2 u / ((1 + c - u) (1 - c))) / 2.
+// c) + tanh(c)) / d and f23 = a (atanh(b s - c) + atanh(c)) / d, each sum in one closed form of u = b s (one exp,
+// one log where the two tanh or atanh calls were half a call of the law; expm1 and log1p, whose precision near 0
+// only the weights' own 1e-16 would see, cost twice glibc's exp and log):
+//   tanh(u - c) + tanh(c) = sinh(u) / (cosh(u - c) cosh c) = E / (cosh c (e^-c E + 2 cosh c)), E = e^(2 u) - 1,
+//   atanh(u - c) + atanh(c) = log(1 + 2 u / ((1 + c - u) (1 - c))) / 2.
+// Each returns the weight and, into *slope when not NULL, its derivative in s.
 #define F1_A 0.440850096954369
 #define F1_B 3.62263982880971
 #define F1_C 1.60910808139526
@@ -130,14 +132,16 @@ FINRFT_EXPORT void finrft_li2013_planar_element_force(const double coef[NCOEF], 
 #define F23_C 0.973746396532650
 #define F23_D 5.81083560370960
 
-static double weight_across(double size) {
-  double grow = expm1(2 * F1_B * size);
-  return F1_A / (F1_D * cosh(F1_C)) * grow / (exp(-F1_C) * grow + 2 * cosh(F1_C));
+static double weight_across(double size, double* slope) {
+  double grow = exp(2 * F1_B * size), below = exp(-F1_C) * (grow - 1) + 2 * cosh(F1_C);
+  if (slope) *slope = F1_A / (F1_D * cosh(F1_C)) * 2 * cosh(F1_C) * 2 * F1_B * grow / (below * below);
+  return F1_A / (F1_D * cosh(F1_C)) * (grow - 1) / below;
 }
 
-static double weight_within(double size) {
-  double u = F23_B * size;
-  return F23_A / (2 * F23_D) * log1p(2 / (1 - F23_C) * u / (1 + F23_C - u));
+static double weight_within(double size, double* slope) {
+  double u = F23_B * size, rest = 1 + F23_C - u, q = 2 / (1 - F23_C) * u / rest;
+  if (slope) *slope = F23_A / (2 * F23_D) * F23_B * 2 / (1 - F23_C) * (1 + F23_C) / (rest * rest) / (1 + q);
+  return F23_A / (2 * F23_D) * log(1 + q);
 }
 
 // The unit horizontal direction of a, else of b, else x (as _horizontal_unit in li2013.py).
@@ -157,54 +161,59 @@ static void horizontal_unit(const double a[3], const double b[3], double e[2]) {
   }
 }
 
-// Treers et al.'s stress per unit depth on an element of unit normal n moving along u (unit or zero), in the
-// vertical plane of the horizontal unit vector e2 (as _stress in li2013.py).
-static void li2013_stress(const double coef[NCOEF], double zeta, const double n[3], const double u[3],
-                          const double e2[2], double stress[3]) {
-  double e1[2] = {e2[1], -e2[0]};
-  double across = u[0] * e1[0] + u[1] * e1[1];
-  double along = u[0] * e2[0] + u[1] * e2[1];
-  double within = norm2(along, u[2]);
-  double f1 = weight_across(fabs(across)), f23 = weight_within(within);
-  // Li's angles in the (e2, z) plane: the face's beta = atan2(-n.e2, n_z) and the motion's gamma = atan2(-u_z,
-  // along), whose size is `within`
-  double a[2], cb, sb, cg = 1, sg = 0;
-  unit_angle(-(n[0] * e2[0] + n[1] * e2[1]), n[2], &cb, &sb);
-  if (within > 0) {
-    double inverse = 1 / within;
-    cg = along * inverse;
-    sg = -u[2] * inverse;
-  }
-  alpha_unit(coef, zeta, cb, sb, cg, sg, a);
+// Treers et al.'s stress per unit depth in the vertical plane of the horizontal unit vector e2 (as _stress in
+// li2013.py): `side` is f1(|v1|) sign(v^.e1) of the unit velocity's part across the plane, f23 the weight of its
+// part within it, beta the face's angle and gamma the motion's there, given by their cosines and sines.
+static void plane_stress(const double coef[NCOEF], double zeta, const double e2[2], double side, double f23,
+                         double cb, double sb, double cg, double sg, double stress[3]) {
+  double a[2], e1[2] = {e2[1], -e2[0]};
   // alpha_1 = alpha_x(0, 0), alpha_unit's sum at beta = gamma = 0 without its call
-  double alpha_1 = zeta * (coef[5] + coef[6] + coef[7]);
-  double side = f1 * alpha_1 * (across > 0 ? 1 : across < 0 ? -1 : 0);
+  side *= zeta * (coef[5] + coef[6] + coef[7]);
+  alpha_unit(coef, zeta, cb, sb, cg, sg, a);
   for (int i = 0; i < 2; i++) stress[i] = -side * e1[i] - f23 * a[0] * e2[i];
   stress[2] = f23 * a[1];
 }
 
 // The force on one element (world frame, z up) of Li's law in 3D (Treers, Cao & Stuart 2021): outward unit normal
 // n, velocity v, depth below the surface, area. As element_forces in li2013.py, the blend of nearly horizontal
-// faces included.
+// faces included, by algebra on n and v: the law depends on the direction of v alone, so its ratios are taken on v
+// as it is, with as few divisions as possible (a call was a chain of three square roots, six divisions, an exp and
+// a log, the law's price on a robot's step).
+//   In the normal's plane, e2 = n_h / |n_h|: with P = |n_h| |v|, v^.e1 = (v_h x n_h)_z / P and the size of v^'s
+//   part within the plane is |(v_h.n_h, v_z |n_h|)| / P; gamma's cosine and sine are that vector's over its size,
+//   and beta = atan2(-|n_h|, n_z) has cosine n_z and sine -|n_h| (|n| = 1).
+//   In the velocity's own plane, e2 = v_h / |v_h| (n's or x when v is vertical): v has no part across it and all
+//   of it within (f1's weight 0, f23's f23(1)), and gamma's cosine and sine are |v_h| / |v| and -v_z / |v|.
 FINRFT_EXPORT void finrft_li2013_element_force(const double coef[NCOEF], double zeta, const double n[3],
                                                const double v[3], double depth, double area,
                                                double force[3]) {
   force[0] = force[1] = force[2] = 0;
   if (!(depth > 0) || !(n[0] * v[0] + n[1] * v[1] + n[2] * v[2] > 0)) return;
-  double inverse = 1 / sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
-  double u[3] = {v[0] * inverse, v[1] * inverse, v[2] * inverse};
-  double tilt = norm2(n[0], n[1]) / sqrt(1 - (1 - 1e-3) * (1 - 1e-3));
+  double speed = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+  // (a product: the constant's inverse is folded, where a division by it cost one of the call's divisions)
+  double sideways = norm2(n[0], n[1]), tilt = sideways * (1 / sqrt(1 - (1 - 1e-3) * (1 - 1e-3)));
   if (tilt > 1) tilt = 1;
   double w = tilt * tilt * (3 - 2 * tilt);
-  double e2[2], stress[3] = {0, 0, 0};
+  double stress[3] = {0, 0, 0};
   if (w > 0) {
-    horizontal_unit(n, v, e2);
-    li2013_stress(coef, zeta, n, u, e2, stress);
+    double inverse = 1 / (sideways * speed);
+    double across = (v[0] * n[1] - v[1] * n[0]) * inverse, along = v[0] * n[0] + v[1] * n[1];
+    double lift = v[2] * sideways, within = norm2(along, lift), cg = 1, sg = 0;
+    if (within > 0) {
+      double scale = 1 / within;
+      cg = along * scale;
+      sg = -lift * scale;
+    }
+    double e2[2] = {n[0] * speed * inverse, n[1] * speed * inverse};
+    double side = weight_across(fabs(across), NULL) * (across > 0 ? 1 : across < 0 ? -1 : 0);
+    plane_stress(coef, zeta, e2, side, weight_within(within * inverse, NULL), n[2], -sideways, cg, sg, stress);
   }
   if (w < 1) {
-    double own[3];
+    double own[3], e2[2], cb, sb, inverse = 1 / speed;
     horizontal_unit(v, n, e2);
-    li2013_stress(coef, zeta, n, u, e2, own);
+    unit_angle(-(n[0] * e2[0] + n[1] * e2[1]), n[2], &cb, &sb);
+    plane_stress(coef, zeta, e2, 0, weight_within(1, NULL), cb, sb, (v[0] * e2[0] + v[1] * e2[1]) * inverse,
+                 -v[2] * inverse, own);
     for (int i = 0; i < 3; i++) stress[i] = w * stress[i] + (1 - w) * own[i];
   }
   for (int i = 0; i < 3; i++) force[i] = area * depth * stress[i];
@@ -235,20 +244,9 @@ static void alpha_unit_slope(const double coef[NCOEF], double zeta, double cb, d
   out[1] = zeta * az;
 }
 
-// The derivatives of weight_across and weight_within in the sizes of the parts.
-static double weight_across_slope(double size) {
-  double grow = expm1(2 * F1_B * size), below = exp(-F1_C) * grow + 2 * cosh(F1_C);
-  return F1_A / (F1_D * cosh(F1_C)) * 2 * cosh(F1_C) * 2 * F1_B * (grow + 1) / (below * below);
-}
-
-static double weight_within_slope(double size) {
-  double u = F23_B * size, rest = 1 + F23_C - u;
-  double q = 2 / (1 - F23_C) * u / rest;
-  return F23_A / (2 * F23_D) * F23_B * 2 / (1 - F23_C) * (1 + F23_C) / (rest * rest) / (1 + q);
-}
-
-// li2013_stress and its derivative ds (3 x 3, row-major: ds[3 i + k] = d stress_i / d u_k) in the unit velocity,
-// e2's own derivative being de2 (2 x 3; NULL: e2 is the normal's, fixed). As _stress_slope in li2013.py.
+// The stress per unit depth of _stress in li2013.py (plane_stress's, on any plane) and its derivative ds (3 x 3,
+// row-major: ds[3 i + k] = d stress_i / d u_k) in the unit velocity u, e2's own derivative being de2 (2 x 3; NULL:
+// e2 is the normal's, fixed). As _stress_slope in li2013.py.
 static void li2013_stress_slope(const double coef[NCOEF], double zeta, const double n[3], const double u[3],
                                 const double e2[2], const double de2[2][3], double stress[3], double ds[9]) {
   static const double fixed[2][3] = {{0, 0, 0}, {0, 0, 0}};
@@ -269,8 +267,7 @@ static void li2013_stress_slope(const double coef[NCOEF], double zeta, const dou
   double across = u[0] * e1[0] + u[1] * e1[1];
   double along = u[0] * e2[0] + u[1] * e2[1];
   double within = norm2(along, u[2]);
-  double f1 = weight_across(fabs(across)), f23 = weight_within(within);
-  double df1 = weight_across_slope(fabs(across)), df23 = weight_within_slope(within);
+  double df1, df23, f1 = weight_across(fabs(across), &df1), f23 = weight_within(within, &df23);
   double y = -(n[0] * e2[0] + n[1] * e2[1]), size = norm2(n[2], y);
   double cb = 1, sb = 0, cg = 1, sg = 0, d_cb[3] = {0, 0, 0}, d_sb[3] = {0, 0, 0}, d_cg[3] = {0, 0, 0},
          d_sg[3] = {0, 0, 0};

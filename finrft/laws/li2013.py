@@ -117,15 +117,15 @@ SUMMARY = "Li 2013 in 3D (Treers, Cao & Stuart 2021: lateral and swimming forces
 def weights(across, within) -> tuple[np.ndarray, np.ndarray]:
     """Treers et al.'s f1(|v1|) and f23(|v23|) of the sizes of the two parts of a unit velocity (each in [0, 1]):
     f1 = a (tanh(b s - c) + tanh(c)) / d and f23 = a (atanh(b s - c) + atanh(c)) / d, each sum in one closed form
-    of u = b s, as weight_across and weight_within in finrft_surface.c (one expm1, one log1p per element):
-    tanh(u - c) + tanh(c) = E / (cosh c (e^-c E + 2 cosh c)), E = expm1(2 u), and atanh(u - c) + atanh(c) =
-    log1p(2 u / ((1 + c - u) (1 - c))) / 2."""
+    of u = b s, as weight_across and weight_within in finrft_surface.c (one exp, one log per element):
+    tanh(u - c) + tanh(c) = E / (cosh c (e^-c E + 2 cosh c)), E = e^(2 u) - 1, and atanh(u - c) + atanh(c) =
+    log(1 + 2 u / ((1 + c - u) (1 - c))) / 2."""
     a, b, c, d = F1_FIT
-    grow = np.expm1(2 * b * np.asarray(across, dtype=float))
+    grow = np.exp(2 * b * np.asarray(across, dtype=float)) - 1
     f1 = a / (d * math.cosh(c)) * grow / (math.exp(-c) * grow + 2 * math.cosh(c))
     a, b, c, d = F23_FIT
     u = b * np.asarray(within, dtype=float)
-    f23 = a / (2 * d) * np.log1p(2 / (1 - c) * u / (1 + c - u))
+    f23 = a / (2 * d) * np.log(1 + 2 / (1 - c) * u / (1 + c - u))
     return f1, f23
 
 
@@ -224,9 +224,9 @@ def _alpha_slope(cb, sb, cg, sg, zeta: float, coefficients: Coefficients) -> tup
 def _weight_slopes(across, within) -> tuple[np.ndarray, np.ndarray]:
     """The derivatives of `weights`' f1 and f23 in the sizes of the two parts."""
     a, b, c, d = F1_FIT
-    grow = np.expm1(2 * b * np.asarray(across, dtype=float))
-    df1 = (a / (d * math.cosh(c)) * 2 * math.cosh(c) * 2 * b * (grow + 1)
-           / (math.exp(-c) * grow + 2 * math.cosh(c)) ** 2)
+    grow = np.exp(2 * b * np.asarray(across, dtype=float))
+    df1 = (a / (d * math.cosh(c)) * 2 * math.cosh(c) * 2 * b * grow
+           / (math.exp(-c) * (grow - 1) + 2 * math.cosh(c)) ** 2)
     a, b, c, d = F23_FIT
     u = b * np.asarray(within, dtype=float)
     q = 2 / (1 - c) * u / (1 + c - u)

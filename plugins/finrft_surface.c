@@ -397,14 +397,13 @@ FINRFT_EXPORT void finrft_rft3d_element_force(const double coef[NCOEF_RFT3D], do
   for (int i = 0; i < 3; i++) force[i] = scale * (normal_part[i] + kept * tangential[i]);
 }
 
-// The derivatives of rft3d_terms in p1 and in p3 (p2, the face's, does not move with the velocity).
-static void rft3d_term_slopes(double p1, double p2, double p3, double d1[NTERMS], double d3[NTERMS]) {
-  const double by1[NTERMS] = {0, 1, 0, 0, 2 * p1, 0, 0, p2, 0, p3, 3 * p1 * p1, 0, 0, p2 * p2, 2 * p1 * p2, 0, 0,
-                              2 * p1 * p3, p3 * p3, p2 * p3};
-  const double by3[NTERMS] = {0, 0, 0, 1, 0, 0, 2 * p3, 0, p2, p1, 0, 0, 3 * p3 * p3, 0, 0, 2 * p2 * p3, p2 * p2,
-                              p1 * p1, 2 * p1 * p3, p1 * p2};
-  memcpy(d1, by1, sizeof(by1));
-  memcpy(d3, by3, sizeof(by3));
+// The derivatives of sum_i c_i T_i (rft3d_terms' order) in p1 and in p3, c one of c1, c2, c3: only the terms that
+// hold p1 (p3), each written out (a product by a zero derivative is not skipped where it could be a NaN's).
+static void rft3d_term_slopes(const double c[NTERMS], double p1, double p2, double p3, double* d1, double* d3) {
+  *d1 = c[1] + 2 * p1 * c[4] + p2 * c[7] + p3 * c[9] + 3 * p1 * p1 * c[10] + p2 * p2 * c[13] + 2 * p1 * p2 * c[14] +
+        2 * p1 * p3 * c[17] + p3 * p3 * c[18] + p2 * p3 * c[19];
+  *d3 = c[3] + 2 * p3 * c[6] + p2 * c[8] + p1 * c[9] + 3 * p3 * p3 * c[12] + 2 * p2 * p3 * c[15] + p2 * p2 * c[16] +
+        p1 * p1 * c[17] + 2 * p1 * p3 * c[18] + p1 * p2 * c[19];
 }
 
 // finrft_rft3d_element_force and its derivative in the velocity, slope (3 x 3, row-major: slope[3 i + k] =
@@ -420,15 +419,11 @@ FINRFT_EXPORT void finrft_rft3d_element_slope(const double coef[NCOEF_RFT3D], do
   double side = n[2] < 0 ? 1 : -1;
   double low[3] = {side * n[0], side * n[1], side * n[2]};
   double p1 = -u[2], p2 = -low[2], p3 = low[0] * u[0] + low[1] * u[1] + low[2] * u[2];
-  double t[NTERMS], d1[NTERMS], d3[NTERMS], f[3] = {0, 0, 0}, a[3] = {0, 0, 0}, b[3] = {0, 0, 0};
+  double t[NTERMS], f[3] = {0, 0, 0}, a[3], b[3];
   rft3d_terms(p1, p2, p3, t);
-  rft3d_term_slopes(p1, p2, p3, d1, d3);
   for (int k = 0; k < 3; k++) {
-    for (int i = 0; i < NTERMS; i++) {
-      f[k] += coef[NTERMS * k + i] * t[i];
-      a[k] += coef[NTERMS * k + i] * d1[i];
-      b[k] += coef[NTERMS * k + i] * d3[i];
-    }
+    for (int i = 0; i < NTERMS; i++) f[k] += coef[NTERMS * k + i] * t[i];
+    rft3d_term_slopes(coef + NTERMS * k, p1, p2, p3, a + k, b + k);
   }
   // d f_k / du = -a_k z + b_k low; stress = f_0 low + f_1 u - f_2 z
   double df[3][3], stress[3], ds[9];

@@ -91,6 +91,20 @@ class Attached:
             force = force + drft.element_forces(normal, velocity, depth, area, self.drft_lambda, self.bulk_density)
         return laws.regularised(force, normal, velocity, self.v_reg)
 
+    def element_slopes(self, normal: np.ndarray, velocity: np.ndarray, depth: np.ndarray, area: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray] | None:
+        """`element_forces` and their analytic derivatives in the velocity (N, 3, 3; row: the force's component),
+        as finrft_surface_element_slope computes them; None for a law without its own (its ``element_slopes``),
+        whose derivative the implicit steps take by differences."""
+        own = getattr(laws.module(self.law, laws.SURFACE), "element_slopes", None)
+        if own is None:
+            return None
+        force, slope = own(normal, velocity, depth, area, coefficients=self.coefficients, **self.parameters)
+        if self.drft_lambda > 0:
+            force = force + drft.element_forces(normal, velocity, depth, area, self.drft_lambda, self.bulk_density)
+            slope = slope + drft.element_slopes(normal, velocity, depth, area, self.drft_lambda, self.bulk_density)
+        return laws.regularised_slopes(force, slope, normal, velocity, self.v_reg)
+
     @property
     def elements(self) -> dict[str, int]:
         """The number of elements per body."""

@@ -47,11 +47,13 @@ segments are: F(u) sums, besides J_i^T F_i(J_i u) over the segments, J_b^T W_b(J
 6 x nv Jacobian of body b's origin (angular rows, then linear: its twist t) and W_b its wrench (torque about the
 origin, force) at the positions of the step's start, summed over the elements below the surface there (taken once
 per step). Element e at arm a_e moves at v_e = A_e t, A_e = [-[a_e]x | I], and W_b = sum_e A_e^T F_e(v_e), so
-dW/dtwist = sum_e A_e^T (dF_e/dv_e) A_e, each element's 3 x 3 by differences of its own law in steps
-1e-6 (|v_e| + SURFACE_SPEED): three law calls per element (forward differences), none for an element that trails
-(n . v <= 0, where every surface law is 0) at v_e and at every probe; two for one that leads, whose law depends on
-the direction of v_e alone, so that only the directions across v_e need probing (`_leading_slope`; not with DRFT's
-term, which grows with the speed). Both backends apply the surfaces' forces among MuJoCo's passive forces at v;
+dW/dtwist = sum_e A_e^T (dF_e/dv_e) A_e, each element's 3 x 3 its law's own analytic one where the law has one
+(li2013 and rft3d: `Attached.element_slopes`, finrft_surface_element_slope; the ramp and DRFT's term included), none
+for an element that trails (n . v <= 0, where every surface law is 0). A law without one (li2013-planar) is
+differenced in steps 1e-6 (|v_e| + SURFACE_SPEED): three law calls per element (forward differences), none for an
+element that trails at v_e and at every probe; two for one that leads, whose law depends on the direction of v_e
+alone, so that only the directions across v_e need probing (`_leading_slope`; not with DRFT's term, which grows
+with the speed). Both backends apply the surfaces' forces among MuJoCo's passive forces at v;
 the step takes them out there (``other``; the native stepper leaves them out of its forward pass) and back at
 v + dv, as the segments'.
 
@@ -492,7 +494,10 @@ class PythonImplicit:
             v = twist[3:] + np.cross(twist[:3], arm)
             f = law(normal, v, depth, area)
             force += jac.T @ np.concatenate([np.cross(arm, f).sum(axis=0), f.sum(axis=0)])
-            if slope and len(area):
+            analytic = attached.element_slopes(normal, v, depth, area) if slope and len(area) else None
+            if analytic is not None:
+                dfdv = analytic[1]  # each element's own, as body_slope takes it from finrft_surface_element_slope
+            elif slope and len(area):
                 # each element's dF/dv (as body_slope): forward, those leading with no DRFT term by
                 # `_leading_slope`; the others by probes (element, probe, 3), the law on all of them at once
                 h = 1e-6 * (np.linalg.norm(v, axis=1) + SURFACE_SPEED)
@@ -507,6 +512,7 @@ class PythonImplicit:
                 down = f[rest, None] if forward else law(each[0], (v[rest, None] - probe).reshape(-1, 3),
                                                          *each[1:]).reshape(-1, 3, 3)
                 dfdv[rest] = np.swapaxes((up - down) / (h[rest] * (1 if forward else 2))[:, None, None], 1, 2)
+            if slope and len(area):
                 # A_e = [-[arm]x | I]: v_e = A_e twist, and the wrench is sum_e A_e^T F_e
                 a = np.zeros((len(area), 3, 6))
                 a[:, :, :3] = -_cross_matrices(arm)

@@ -16,7 +16,8 @@ class Method:
     name: str
     doc: str
     implicit: bool  # takes the RFT forces implicitly (the segment laws', differenced on the scale of rft.v_reg, and
-                    # the attached surfaces' wrench on each body, differenced in its twist); such a method extends
+                    # the attached surfaces' wrench on each body, its slope in the twist assembled from each
+                    # element's analytic Jacobian, or differenced for a law without one); such a method extends
                     # MuJoCo's implicitfast integrator; every other force is MuJoCo's, as implicitfast takes it
     newton: bool    # solves the step by Newton's method at the new velocity (else one linearised iteration)
     adaptive: bool  # sizes its steps by an error estimate (sim.tolerance, sim.max_step); sim.dt is then only the

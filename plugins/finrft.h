@@ -149,6 +149,14 @@ void finrft_surface_wrench(const FinrftSurface* p, const mjData* d, const mjtNum
 void finrft_surface_element_force(const FinrftSurface* p, const mjtNum normal[3], const mjtNum v[3], mjtNum depth,
                                   mjtNum area, mjtNum f[3]);
 
+// Whether the instance's law has an analytic velocity Jacobian (finrft_surface_element_slope): li2013 and rft3d.
+int finrft_surface_has_slope(const FinrftSurface* p);
+
+// finrft_surface_element_force into f and its derivative in v into k (3 x 3, row-major: k[3 i + j] = df_i/dv_j),
+// analytic; only for an instance whose law has one (finrft_surface_has_slope).
+void finrft_surface_element_slope(const FinrftSurface* p, const mjtNum normal[3], const mjtNum v[3], mjtNum depth,
+                                  mjtNum area, mjtNum f[3], mjtNum k[9]);
+
 // The instance's law alone on one element (no DRFT term, no ramp), as finrft_surface_element_force's arguments:
 // every surface law is rate-independent, a function of the direction of v alone.
 void finrft_surface_law_force(const FinrftSurface* p, const mjtNum normal[3], const mjtNum v[3], mjtNum depth,

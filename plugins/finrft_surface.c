@@ -47,8 +47,8 @@ static inline double norm2(double x, double y) { return sqrt(x * x + y * y); }
 // finrft/laws/li2013.py for the signs and the folding. The series' terms come from cos 2beta and sin 2beta by the
 // angle-sum formulas, so a call costs no trigonometric function: the laws are called several times per element per
 // Newton step, and sin, cos and atan2 were a third of a wheel's step.
-static void alpha_unit(const double coef[NCOEF], double zeta, double cb, double sb, double cg, double sg,
-                       double out[2]) {
+static inline void alpha_unit(const double coef[NCOEF], double zeta, double cb, double sb, double cg, double sg,
+                              double out[2]) {
   // gamma beyond +-pi/2 (cos gamma < 0) is folded to pi - gamma with beta to -beta: cos gamma and sin 2beta change
   // sign
   int mirrored = cg < 0;
@@ -117,10 +117,12 @@ FINRFT_EXPORT void finrft_li2013_planar_element_force(const double coef[NCOEF], 
 }
 
 // Treers et al.'s weights of the two parts of a unit velocity, as F1_FIT, F23_FIT in li2013.py: f1 = a (tanh(b s -
-// c) + tanh(c)) / d and f23 = a (atanh(b s - c) + atanh(c)) / d, each sum in one closed form of u = b s (one expm1,
-// one log1p where the two tanh or atanh calls were half a call of the law):
-//   tanh(u - c) + tanh(c) = sinh(u) / (cosh(u - c) cosh c) = E / (cosh c (e^-c E + 2 cosh c)), E = expm1(2 u),
-//   atanh(u - c) + atanh(c) = log1p(2 u / ((1 + c - u) (1 - c))) / 2.
+// c) + tanh(c)) / d and f23 = a (atanh(b s - c) + atanh(c)) / d, each sum in one closed form of u = b s (one exp,
+// one log where the two tanh or atanh calls were half a call of the law; expm1 and log1p, whose precision near 0
+// only the weights' own 1e-16 would see, cost twice glibc's exp and log):
+//   tanh(u - c) + tanh(c) = sinh(u) / (cosh(u - c) cosh c) = E / (cosh c (e^-c E + 2 cosh c)), E = e^(2 u) - 1,
+//   atanh(u - c) + atanh(c) = log(1 + 2 u / ((1 + c - u) (1 - c))) / 2.
+// Each returns the weight and, into *slope when not NULL, its derivative in s.
 #define F1_A 0.440850096954369
 #define F1_B 3.62263982880971
 #define F1_C 1.60910808139526
@@ -130,14 +132,16 @@ FINRFT_EXPORT void finrft_li2013_planar_element_force(const double coef[NCOEF], 
 #define F23_C 0.973746396532650
 #define F23_D 5.81083560370960
 
-static double weight_across(double size) {
-  double grow = expm1(2 * F1_B * size);
-  return F1_A / (F1_D * cosh(F1_C)) * grow / (exp(-F1_C) * grow + 2 * cosh(F1_C));
+static double weight_across(double size, double* slope) {
+  double grow = exp(2 * F1_B * size), below = exp(-F1_C) * (grow - 1) + 2 * cosh(F1_C);
+  if (slope) *slope = F1_A / (F1_D * cosh(F1_C)) * 2 * cosh(F1_C) * 2 * F1_B * grow / (below * below);
+  return F1_A / (F1_D * cosh(F1_C)) * (grow - 1) / below;
 }
 
-static double weight_within(double size) {
-  double u = F23_B * size;
-  return F23_A / (2 * F23_D) * log1p(2 / (1 - F23_C) * u / (1 + F23_C - u));
+static double weight_within(double size, double* slope) {
+  double u = F23_B * size, rest = 1 + F23_C - u, q = 2 / (1 - F23_C) * u / rest;
+  if (slope) *slope = F23_A / (2 * F23_D) * F23_B * 2 / (1 - F23_C) * (1 + F23_C) / (rest * rest) / (1 + q);
+  return F23_A / (2 * F23_D) * log(1 + q);
 }
 
 // The unit horizontal direction of a, else of b, else x (as _horizontal_unit in li2013.py).
@@ -157,57 +161,199 @@ static void horizontal_unit(const double a[3], const double b[3], double e[2]) {
   }
 }
 
-// Treers et al.'s stress per unit depth on an element of unit normal n moving along u (unit or zero), in the
-// vertical plane of the horizontal unit vector e2 (as _stress in li2013.py).
-static void li2013_stress(const double coef[NCOEF], double zeta, const double n[3], const double u[3],
-                          const double e2[2], double stress[3]) {
-  double e1[2] = {e2[1], -e2[0]};
-  double across = u[0] * e1[0] + u[1] * e1[1];
-  double along = u[0] * e2[0] + u[1] * e2[1];
-  double within = norm2(along, u[2]);
-  double f1 = weight_across(fabs(across)), f23 = weight_within(within);
-  // Li's angles in the (e2, z) plane: the face's beta = atan2(-n.e2, n_z) and the motion's gamma = atan2(-u_z,
-  // along), whose size is `within`
-  double a[2], cb, sb, cg = 1, sg = 0;
-  unit_angle(-(n[0] * e2[0] + n[1] * e2[1]), n[2], &cb, &sb);
-  if (within > 0) {
-    double inverse = 1 / within;
-    cg = along * inverse;
-    sg = -u[2] * inverse;
-  }
-  alpha_unit(coef, zeta, cb, sb, cg, sg, a);
+// Treers et al.'s stress per unit depth in the vertical plane of the horizontal unit vector e2 (as _stress in
+// li2013.py): `side` is f1(|v1|) sign(v^.e1) of the unit velocity's part across the plane, f23 the weight of its
+// part within it, beta the face's angle and gamma the motion's there, given by their cosines and sines.
+static void plane_stress(const double coef[NCOEF], double zeta, const double e2[2], double side, double f23,
+                         double cb, double sb, double cg, double sg, double stress[3]) {
+  double a[2], e1[2] = {e2[1], -e2[0]};
   // alpha_1 = alpha_x(0, 0), alpha_unit's sum at beta = gamma = 0 without its call
-  double alpha_1 = zeta * (coef[5] + coef[6] + coef[7]);
-  double side = f1 * alpha_1 * (across > 0 ? 1 : across < 0 ? -1 : 0);
+  side *= zeta * (coef[5] + coef[6] + coef[7]);
+  alpha_unit(coef, zeta, cb, sb, cg, sg, a);
   for (int i = 0; i < 2; i++) stress[i] = -side * e1[i] - f23 * a[0] * e2[i];
   stress[2] = f23 * a[1];
 }
 
 // The force on one element (world frame, z up) of Li's law in 3D (Treers, Cao & Stuart 2021): outward unit normal
 // n, velocity v, depth below the surface, area. As element_forces in li2013.py, the blend of nearly horizontal
-// faces included.
+// faces included, by algebra on n and v: the law depends on the direction of v alone, so its ratios are taken on v
+// as it is, with as few divisions as possible (a call was a chain of three square roots, six divisions, an exp and
+// a log, the law's price on a robot's step).
+//   In the normal's plane, e2 = n_h / |n_h|: with P = |n_h| |v|, v^.e1 = (v_h x n_h)_z / P and the size of v^'s
+//   part within the plane is |(v_h.n_h, v_z |n_h|)| / P; gamma's cosine and sine are that vector's over its size,
+//   and beta = atan2(-|n_h|, n_z) has cosine n_z and sine -|n_h| (|n| = 1).
+//   In the velocity's own plane, e2 = v_h / |v_h| (n's or x when v is vertical): v has no part across it and all
+//   of it within (f1's weight 0, f23's f23(1)), and gamma's cosine and sine are |v_h| / |v| and -v_z / |v|.
 FINRFT_EXPORT void finrft_li2013_element_force(const double coef[NCOEF], double zeta, const double n[3],
                                                const double v[3], double depth, double area,
                                                double force[3]) {
   force[0] = force[1] = force[2] = 0;
   if (!(depth > 0) || !(n[0] * v[0] + n[1] * v[1] + n[2] * v[2] > 0)) return;
-  double inverse = 1 / sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+  double speed = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+  // (a product: the constant's inverse is folded, where a division by it cost one of the call's divisions)
+  double sideways = norm2(n[0], n[1]), tilt = sideways * (1 / sqrt(1 - (1 - 1e-3) * (1 - 1e-3)));
+  if (tilt > 1) tilt = 1;
+  double w = tilt * tilt * (3 - 2 * tilt);
+  double stress[3] = {0, 0, 0};
+  if (w > 0) {
+    double inverse = 1 / (sideways * speed);
+    double across = (v[0] * n[1] - v[1] * n[0]) * inverse, along = v[0] * n[0] + v[1] * n[1];
+    double lift = v[2] * sideways, within = norm2(along, lift), cg = 1, sg = 0;
+    if (within > 0) {
+      double scale = 1 / within;
+      cg = along * scale;
+      sg = -lift * scale;
+    }
+    double e2[2] = {n[0] * speed * inverse, n[1] * speed * inverse};
+    double side = weight_across(fabs(across), NULL) * (across > 0 ? 1 : across < 0 ? -1 : 0);
+    plane_stress(coef, zeta, e2, side, weight_within(within * inverse, NULL), n[2], -sideways, cg, sg, stress);
+  }
+  if (w < 1) {
+    double own[3], e2[2], cb, sb, inverse = 1 / speed;
+    horizontal_unit(v, n, e2);
+    unit_angle(-(n[0] * e2[0] + n[1] * e2[1]), n[2], &cb, &sb);
+    plane_stress(coef, zeta, e2, 0, weight_within(1, NULL), cb, sb, (v[0] * e2[0] + v[1] * e2[1]) * inverse,
+                 -v[2] * inverse, own);
+    for (int i = 0; i < 3; i++) stress[i] = w * stress[i] + (1 - w) * own[i];
+  }
+  for (int i = 0; i < 3; i++) force[i] = area * depth * stress[i];
+}
+
+// alpha_unit and its partial derivatives d[a][j] of alpha_x (a = 0), alpha_z (a = 1) in (cb, sb, cg, sg), from
+// the angle-sum forms regrouped by c2 = cos 2beta and s2 = sin 2beta (as _alpha_slope in li2013.py).
+static void alpha_unit_slope(const double coef[NCOEF], double zeta, double cb, double sb, double cg, double sg,
+                             double out[2], double d[2][4]) {
+  double m = cg < 0 ? -1 : 1;
+  sb *= m;
+  cg *= m;
+  double c2 = cb * cb - sb * sb, s2 = 2 * sb * cb;
+  double bp = coef[2] + coef[4], bm = coef[2] - coef[4], cp = coef[5] + coef[7], cm = coef[7] - coef[5];
+  double ax = cp * c2 * cg + cm * s2 * sg + coef[6] * cg + coef[8] * s2;
+  double az = coef[0] + coef[1] * c2 + bm * s2 * cg + bp * c2 * sg + coef[3] * sg;
+  double x_c2 = cp * cg, x_s2 = cm * sg + coef[8], z_c2 = coef[1] + bp * sg, z_s2 = bm * cg;
+  // back to the unfolded angles: alpha_x = m alpha_x', sin beta' = m sin beta, cos gamma' = m cos gamma
+  d[0][0] = zeta * m * 2 * (x_c2 * cb + x_s2 * sb);
+  d[0][1] = zeta * 2 * (x_s2 * cb - x_c2 * sb);
+  d[0][2] = zeta * (cp * c2 + coef[6]);
+  d[0][3] = zeta * m * cm * s2;
+  d[1][0] = zeta * 2 * (z_c2 * cb + z_s2 * sb);
+  d[1][1] = zeta * m * 2 * (z_s2 * cb - z_c2 * sb);
+  d[1][2] = zeta * m * bm * s2;
+  d[1][3] = zeta * (bp * c2 + coef[3]);
+  out[0] = zeta * m * ax;
+  out[1] = zeta * az;
+}
+
+// The stress per unit depth of _stress in li2013.py (plane_stress's, on any plane) and its derivative ds (3 x 3,
+// row-major: ds[3 i + k] = d stress_i / d u_k) in the unit velocity u, e2's own derivative being de2 (2 x 3; NULL:
+// e2 is the normal's, fixed). As _stress_slope in li2013.py.
+static void li2013_stress_slope(const double coef[NCOEF], double zeta, const double n[3], const double u[3],
+                                const double e2[2], const double de2[2][3], double stress[3], double ds[9]) {
+  static const double fixed[2][3] = {{0, 0, 0}, {0, 0, 0}};
+  if (!de2) de2 = fixed;
+  double e1[2] = {e2[1], -e2[0]};
+  double de1[2][3], d_across[3], d_along[3], d_within[3] = {0, 0, 0}, dy[3];
+  for (int k = 0; k < 3; k++) {
+    de1[0][k] = de2[1][k];
+    de1[1][k] = -de2[0][k];
+    d_across[k] = u[0] * de1[0][k] + u[1] * de1[1][k];
+    d_along[k] = u[0] * de2[0][k] + u[1] * de2[1][k];
+    dy[k] = -(n[0] * de2[0][k] + n[1] * de2[1][k]);
+  }
+  d_across[0] += e1[0];
+  d_across[1] += e1[1];
+  d_along[0] += e2[0];
+  d_along[1] += e2[1];
+  double across = u[0] * e1[0] + u[1] * e1[1];
+  double along = u[0] * e2[0] + u[1] * e2[1];
+  double within = norm2(along, u[2]);
+  double df1, df23, f1 = weight_across(fabs(across), &df1), f23 = weight_within(within, &df23);
+  double y = -(n[0] * e2[0] + n[1] * e2[1]), size = norm2(n[2], y);
+  double cb = 1, sb = 0, cg = 1, sg = 0, d_cb[3] = {0, 0, 0}, d_sb[3] = {0, 0, 0}, d_cg[3] = {0, 0, 0},
+         d_sg[3] = {0, 0, 0};
+  if (size > 0) {
+    double inverse = 1 / size;
+    cb = n[2] * inverse;
+    sb = y * inverse;
+    for (int k = 0; k < 3; k++) {
+      d_cb[k] = -cb * sb * inverse * dy[k];
+      d_sb[k] = cb * cb * inverse * dy[k];
+    }
+  }
+  if (within > 0) {
+    double inverse = 1 / within;
+    cg = along * inverse;
+    sg = -u[2] * inverse;
+    for (int k = 0; k < 3; k++) d_within[k] = (along * d_along[k] + (k == 2 ? u[2] : 0)) * inverse;
+    for (int k = 0; k < 3; k++) {
+      d_cg[k] = (d_along[k] - cg * d_within[k]) * inverse;
+      d_sg[k] = ((k == 2 ? -1 : 0) - sg * d_within[k]) * inverse;
+    }
+  }
+  double a[2], partial[2][4], da[2][3];
+  alpha_unit_slope(coef, zeta, cb, sb, cg, sg, a, partial);
+  for (int i = 0; i < 2; i++) {
+    for (int k = 0; k < 3; k++) {
+      da[i][k] = partial[i][0] * d_cb[k] + partial[i][1] * d_sb[k] + partial[i][2] * d_cg[k] +
+                 partial[i][3] * d_sg[k];
+    }
+  }
+  double alpha_1 = zeta * (coef[5] + coef[6] + coef[7]);
+  double side = f1 * alpha_1 * (across > 0 ? 1 : across < 0 ? -1 : 0);
+  for (int i = 0; i < 2; i++) stress[i] = -side * e1[i] - f23 * a[0] * e2[i];
+  stress[2] = f23 * a[1];
+  // f1(|a|) sign(a) is odd: its slope is f1'(|a|)
+  for (int k = 0; k < 3; k++) {
+    double d_side = df1 * alpha_1 * d_across[k], d_f23 = df23 * d_within[k];
+    for (int i = 0; i < 2; i++) {
+      ds[3 * i + k] = -d_side * e1[i] - side * de1[i][k] - (d_f23 * a[0] + f23 * da[0][k]) * e2[i] -
+                      f23 * a[0] * de2[i][k];
+    }
+    ds[6 + k] = d_f23 * a[1] + f23 * da[1][k];
+  }
+}
+
+// out = scale s (I - u u^T) / speed: a rate-independent law's derivative in v from the one in its direction u.
+static void direction_slope(const double s[9], const double u[3], double speed, double scale, double out[9]) {
+  for (int i = 0; i < 3; i++) {
+    double su = s[3 * i] * u[0] + s[3 * i + 1] * u[1] + s[3 * i + 2] * u[2];
+    for (int k = 0; k < 3; k++) out[3 * i + k] = scale * (s[3 * i + k] - su * u[k]) / speed;
+  }
+}
+
+// finrft_li2013_element_force and its derivative in the velocity, slope (3 x 3, row-major: slope[3 i + k] =
+// dF_i / dv_k), analytic (as element_slopes in li2013.py): 0 where the force is.
+FINRFT_EXPORT void finrft_li2013_element_slope(const double coef[NCOEF], double zeta, const double n[3],
+                                               const double v[3], double depth, double area, double force[3],
+                                               double slope[9]) {
+  for (int i = 0; i < 9; i++) slope[i] = 0;
+  force[0] = force[1] = force[2] = 0;
+  if (!(depth > 0) || !(n[0] * v[0] + n[1] * v[1] + n[2] * v[2] > 0)) return;
+  double speed = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]), inverse = 1 / speed;
   double u[3] = {v[0] * inverse, v[1] * inverse, v[2] * inverse};
   double tilt = norm2(n[0], n[1]) / sqrt(1 - (1 - 1e-3) * (1 - 1e-3));
   if (tilt > 1) tilt = 1;
   double w = tilt * tilt * (3 - 2 * tilt);
-  double e2[2], stress[3] = {0, 0, 0};
+  double e2[2], stress[3] = {0, 0, 0}, ds[9] = {0};
   if (w > 0) {
     horizontal_unit(n, v, e2);
-    li2013_stress(coef, zeta, n, u, e2, stress);
+    li2013_stress_slope(coef, zeta, n, u, e2, NULL, stress, ds);
   }
   if (w < 1) {
-    double own[3];
+    // the velocity's own plane turns with it: e2 = u_h / |u_h|, de2/du_h = (I - e2 e2^T) / |u_h|
+    double own[3], own_slope[9], turning[2][3] = {{0, 0, 0}, {0, 0, 0}}, size = norm2(u[0], u[1]);
     horizontal_unit(v, n, e2);
-    li2013_stress(coef, zeta, n, u, e2, own);
+    if (size > 0) {
+      for (int i = 0; i < 2; i++) {
+        for (int k = 0; k < 2; k++) turning[i][k] = ((i == k) - e2[i] * e2[k]) / size;
+      }
+    }
+    li2013_stress_slope(coef, zeta, n, u, e2, turning, own, own_slope);
     for (int i = 0; i < 3; i++) stress[i] = w * stress[i] + (1 - w) * own[i];
+    for (int i = 0; i < 9; i++) ds[i] = w * ds[i] + (1 - w) * own_slope[i];
   }
   for (int i = 0; i < 3; i++) force[i] = area * depth * stress[i];
+  direction_slope(ds, u, speed, area * depth, slope);
 }
 
 // The 20 monomials of the 3D-RFT fit, in the order of terms() in rft3d.py.
@@ -249,6 +395,72 @@ FINRFT_EXPORT void finrft_rft3d_element_force(const double coef[NCOEF_RFT3D], do
   double kept = size > cap ? cap / size : 1;
   double scale = xi * area * depth;
   for (int i = 0; i < 3; i++) force[i] = scale * (normal_part[i] + kept * tangential[i]);
+}
+
+// The derivatives of sum_i c_i T_i (rft3d_terms' order) in p1 and in p3, c one of c1, c2, c3: only the terms that
+// hold p1 (p3), each written out (a product by a zero derivative is not skipped where it could be a NaN's).
+static void rft3d_term_slopes(const double c[NTERMS], double p1, double p2, double p3, double* d1, double* d3) {
+  *d1 = c[1] + 2 * p1 * c[4] + p2 * c[7] + p3 * c[9] + 3 * p1 * p1 * c[10] + p2 * p2 * c[13] + 2 * p1 * p2 * c[14] +
+        2 * p1 * p3 * c[17] + p3 * p3 * c[18] + p2 * p3 * c[19];
+  *d3 = c[3] + 2 * p3 * c[6] + p2 * c[8] + p1 * c[9] + 3 * p3 * p3 * c[12] + 2 * p2 * p3 * c[15] + p2 * p2 * c[16] +
+        p1 * p1 * c[17] + 2 * p1 * p3 * c[18] + p1 * p2 * c[19];
+}
+
+// finrft_rft3d_element_force and its derivative in the velocity, slope (3 x 3, row-major: slope[3 i + k] =
+// dF_i / dv_k), analytic (as element_slopes in rft3d.py): 0 where the force is.
+FINRFT_EXPORT void finrft_rft3d_element_slope(const double coef[NCOEF_RFT3D], double xi, double mu_surf,
+                                              const double n[3], const double v[3], double depth, double area,
+                                              double force[3], double slope[9]) {
+  for (int i = 0; i < 9; i++) slope[i] = 0;
+  force[0] = force[1] = force[2] = 0;
+  if (!(depth > 0) || !(n[0] * v[0] + n[1] * v[1] + n[2] * v[2] > 0)) return;
+  double speed = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+  double u[3] = {v[0] / speed, v[1] / speed, v[2] / speed};
+  double side = n[2] < 0 ? 1 : -1;
+  double low[3] = {side * n[0], side * n[1], side * n[2]};
+  double p1 = -u[2], p2 = -low[2], p3 = low[0] * u[0] + low[1] * u[1] + low[2] * u[2];
+  double t[NTERMS], f[3] = {0, 0, 0}, a[3], b[3];
+  rft3d_terms(p1, p2, p3, t);
+  for (int k = 0; k < 3; k++) {
+    for (int i = 0; i < NTERMS; i++) f[k] += coef[NTERMS * k + i] * t[i];
+    rft3d_term_slopes(coef + NTERMS * k, p1, p2, p3, a + k, b + k);
+  }
+  // d f_k / du = -a_k z + b_k low; stress = f_0 low + f_1 u - f_2 z
+  double df[3][3], stress[3], ds[9];
+  for (int k = 0; k < 3; k++) {
+    for (int j = 0; j < 3; j++) df[k][j] = b[k] * low[j] - (j == 2 ? a[k] : 0);
+  }
+  for (int i = 0; i < 3; i++) {
+    stress[i] = f[0] * low[i] + f[1] * u[i];
+    for (int j = 0; j < 3; j++) {
+      ds[3 * i + j] = low[i] * df[0][j] + u[i] * df[1][j] + (i == j ? f[1] : 0) - (i == 2 ? df[2][j] : 0);
+    }
+  }
+  stress[2] -= f[2];
+  double along = stress[0] * n[0] + stress[1] * n[1] + stress[2] * n[2], tangential[3], d_along[3], td[3];
+  for (int i = 0; i < 3; i++) tangential[i] = stress[i] - along * n[i];
+  for (int j = 0; j < 3; j++) {
+    d_along[j] = n[0] * ds[j] + n[1] * ds[3 + j] + n[2] * ds[6 + j];
+    td[j] = tangential[0] * ds[j] + tangential[1] * ds[3 + j] + tangential[2] * ds[6 + j];
+  }
+  double cap = mu_surf * fabs(along);
+  double size = sqrt(finrft_dot3(tangential, tangential));
+  double kept = size > cap ? cap / size : 1, d_kept[3] = {0, 0, 0};
+  if (size > cap) {
+    // d kept = (mu_surf sign(s_n) d s_n - kept t . d s / |t|) / |t|, t being across n
+    double sign = along > 0 ? 1 : along < 0 ? -1 : 0;
+    for (int j = 0; j < 3; j++) d_kept[j] = (mu_surf * sign * d_along[j] - kept * td[j] / size) / size;
+  }
+  double d_out[9];
+  for (int i = 0; i < 3; i++) {
+    for (int j = 0; j < 3; j++) {
+      double d_normal = n[i] * d_along[j];
+      d_out[3 * i + j] = d_normal + kept * (ds[3 * i + j] - d_normal) + tangential[i] * d_kept[j];
+    }
+  }
+  double scale = xi * area * depth;
+  for (int i = 0; i < 3; i++) force[i] = scale * (along * n[i] + kept * tangential[i]);
+  direction_slope(d_out, u, speed, scale, slope);
 }
 
 // DRFT's dynamic inertial force on one element (world frame): -lambda rho_c (n . v)^2 n area on a leading element
@@ -331,16 +543,29 @@ static void rft3d_force(const FinrftSurface* p, const double n[3], const double 
   finrft_rft3d_element_force(p->coef, p->xi, p->mu_surf, n, v, depth, area, f);
 }
 
-// The surface laws by name (the registry finrft.laws of KIND "surface"): coefficient count, scale keys, force.
+static void li2013_slope(const FinrftSurface* p, const double n[3], const double v[3], double depth, double area,
+                         double f[3], double k[9]) {
+  finrft_li2013_element_slope(p->coef, p->zeta, n, v, depth, area, f, k);
+}
+
+static void rft3d_slope(const FinrftSurface* p, const double n[3], const double v[3], double depth, double area,
+                        double f[3], double k[9]) {
+  finrft_rft3d_element_slope(p->coef, p->xi, p->mu_surf, n, v, depth, area, f, k);
+}
+
+// The surface laws by name (the registry finrft.laws of KIND "surface"): coefficient count, scale keys, force,
+// and the force with its analytic velocity Jacobian (NULL: the implicit steps difference the force instead).
 static const struct {
   const char* name;
   int ncoef;
   int (*read)(const mjModel* m, int instance, FinrftSurface* p);
   void (*force)(const FinrftSurface* p, const double n[3], const double v[3], double depth, double area,
                 double f[3]);
-} kLaws[] = {{"li2013", NCOEF, read_zeta, li2013_force},
-             {"li2013-planar", NCOEF, read_zeta, li2013_planar_force},
-             {"rft3d", NCOEF_RFT3D, read_xi, rft3d_force}};
+  void (*slope)(const FinrftSurface* p, const double n[3], const double v[3], double depth, double area,
+                double f[3], double k[9]);
+} kLaws[] = {{"li2013", NCOEF, read_zeta, li2013_force, li2013_slope},
+             {"li2013-planar", NCOEF, read_zeta, li2013_planar_force, NULL},
+             {"rft3d", NCOEF_RFT3D, read_xi, rft3d_force, rft3d_slope}};
 #define NLAWS ((int)(sizeof(kLaws) / sizeof(kLaws[0])))
 
 static int surface_init(const mjModel* m, mjData* d, int instance) {
@@ -508,6 +733,42 @@ void finrft_surface_element_force(const FinrftSurface* p, const mjtNum normal[3]
     // tanh is 1 in double from 19.1 on: the same number without the call, for an element well above v_reg
     mjtNum ratio = fmax(mju_dot3(normal, v), 0) / p->v_reg;
     if (ratio < 20) mju_scl3(f, f, tanh(ratio));
+  }
+}
+
+int finrft_surface_has_slope(const FinrftSurface* p) {
+  return kLaws[p->law].slope != NULL;
+}
+
+// finrft_surface_element_force and its derivative in v, k (3 x 3, row-major), analytic (as
+// Attached.element_slopes): d(r F)/dv = r dF/dv + r'(n . v) F n^T, DRFT's term's -2 lambda rho (n . v) area n n^T
+// in F's.
+void finrft_surface_element_slope(const FinrftSurface* p, const mjtNum normal[3], const mjtNum v[3], mjtNum depth,
+                                  mjtNum area, mjtNum f[3], mjtNum k[9]) {
+  mjtNum v_n = mju_dot3(normal, v);
+  if (p->v_reg > 0 && !(v_n > FINRFT_RAMP_FLOOR * p->v_reg)) {
+    f[0] = f[1] = f[2] = 0;
+    for (int i = 0; i < 9; i++) k[i] = 0;
+    return;
+  }
+  kLaws[p->law].slope(p, normal, v, depth, area, f, k);
+  if (p->drft_lambda > 0 && depth > 0 && v_n > 0) {
+    mjtNum inertial[3], rate = 2 * p->drft_lambda * p->bulk_density * v_n * area;
+    finrft_drft_element_force(p->drft_lambda, p->bulk_density, normal, v, depth, area, inertial);
+    mju_addTo3(f, inertial);
+    for (int i = 0; i < 3; i++) {
+      for (int j = 0; j < 3; j++) k[3 * i + j] -= rate * normal[i] * normal[j];
+    }
+  }
+  if (p->v_reg > 0) {
+    mjtNum ratio = fmax(v_n, 0) / p->v_reg;
+    if (ratio < 20) {
+      mjtNum ramp = tanh(ratio), rate = (1 - ramp * ramp) / p->v_reg;
+      for (int i = 0; i < 3; i++) {
+        for (int j = 0; j < 3; j++) k[3 * i + j] = ramp * k[3 * i + j] + rate * f[i] * normal[j];
+      }
+      mju_scl3(f, f, ramp);
+    }
   }
 }
 

@@ -18,11 +18,12 @@
 // "implicit" method) overshoots on light segments and bodies; the "newton" method
 // iterates, with a backtracking line search on |G|, to the root, the penalty stops taken at the new positions.
 // dF_i/dv comes from central differences of the same law (forward ones in Newton's method, whose root does not
-// depend on it), so no law needs a derivative of its own. dW_b/dtwist is assembled from its elements: element e at
-// arm a_e moves at v_e = A_e t, A_e = [-[a_e]x | I], and W_b = sum_e A_e^T F_e(v_e), so dW_b/dtwist =
-// sum_e A_e^T (dF_e/dv_e) A_e, each 3 x 3 dF_e/dv_e differenced from the element's law alone (across v_e only
-// where it leads: leading_slope), only for the elements below the surface (taken once per step) that lead the
-// motion at v_e or at a probe. Then, as
+// depend on it), so no segment law needs a derivative of its own. dW_b/dtwist is assembled from its elements:
+// element e at arm a_e moves at v_e = A_e t, A_e = [-[a_e]x | I], and W_b = sum_e A_e^T F_e(v_e), so dW_b/dtwist =
+// sum_e A_e^T (dF_e/dv_e) A_e over the elements below the surface (taken once per step) that lead the motion, each
+// 3 x 3 dF_e/dv_e the law's own analytic one where it has one (li2013, rft3d: finrft_surface_element_slope, one
+// call), else differenced from the element's law alone (across v_e only where it leads: leading_slope), also for
+// the elements that lead only at a probe. Then, as
 // MuJoCo's implicitfast: activations, qvel += dv, positions, time. The newton-midpoint method takes the
 // Jacobians and elements at the positions half a step ahead at v (F there, f at the start): see integrate.py for
 // when that is second order and when it damps.
@@ -118,6 +119,7 @@ typedef struct {
   int has_applied;
   mjtNum* applied;
   mjtNum newton_tolerance;  // Newton's method stops when the change is below this times (1 + |qvel|)
+  mjtNum* body_slopes;      // 36 per body: dW/dtwist at the start's velocity, taken with its wrench (rft_force)
 } Workspace;
 
 // Item i's dofs (its body's chain, ascending) from `last`, the last dof of the nearest body up the tree that has
@@ -159,7 +161,8 @@ static int workspace_make(const mjModel* m, mjData* d, Workspace* ws, int extra,
   int items = s->n + s->nbody;
   size_t rows = 3 * (size_t)s->n + 6 * (size_t)s->nbody;
   size_t numbers = rows * nv + 6 * (size_t)s->n + 2 * rows + (FINRFT_SUBMERGED + 3) * (size_t)nelement +
-                   2 * (size_t)s->nstop + 5 * (size_t)nv * nv + 14 * (size_t)nv + m->nq + (size_t)s->nstop + extra;
+                   2 * (size_t)s->nstop + 5 * (size_t)nv * nv + 14 * (size_t)nv + m->nq + (size_t)s->nstop + extra +
+                   36 * (size_t)s->nbody;
   size_t ints = (size_t)items * (nv + 1) + s->n + s->nbody + 1 + s->nstop;
   size_t pointers = s->ninst + s->n + s->nbody;
   size_t bytes = numbers * sizeof(mjtNum) + pointers * sizeof(void*) + ints * sizeof(int) + 1024;
@@ -213,6 +216,7 @@ static int workspace_make(const mjModel* m, mjData* d, Workspace* ws, int extra,
   ws->has_applied = 0;
   ws->qpos_start = mj_stackAllocNum(d, m->nq + 1);
   ws->stop_start = mj_stackAllocNum(d, s->nstop + 1);
+  ws->body_slopes = mj_stackAllocNum(d, 36 * (size_t)s->nbody + 1);
   if (extra_out) *extra_out = mj_stackAllocNum(d, extra);
   ws->counts = NULL;
   ws->newton_tolerance = NEWTON_TOLERANCE;
@@ -297,16 +301,50 @@ static void element_force(const FinrftSurface* p, const mjtNum* element, const m
   }
 }
 
+// Add A_e^T k A_e to dw (6 x 6, row-major), A_e = [-[arm]x | I] (3 x 6) mapping a twist to the element's velocity,
+// k (3 x 3) the element's dF/dv: its share of dW/dtwist.
+static void add_element_slope(const mjtNum arm[3], const mjtNum k[9], mjtNum dw[36]) {
+  mjtNum a[18], ka[18];
+  mjtNum cross[9] = {0, -arm[2], arm[1], arm[2], 0, -arm[0], -arm[1], arm[0], 0};
+  for (int r = 0; r < 3; r++) {
+    for (int c = 0; c < 3; c++) {
+      a[6 * r + c] = -cross[3 * r + c];
+      a[6 * r + 3 + c] = r == c;
+    }
+  }
+  // K A_e, and its rows added as A_e^T (K A_e) = ([arm]x K A_e ; K A_e)
+  for (int r = 0; r < 3; r++) {
+    for (int c = 0; c < 6; c++) {
+      ka[6 * r + c] = k[3 * r] * a[c] + k[3 * r + 1] * a[6 + c] + k[3 * r + 2] * a[12 + c];
+    }
+  }
+  for (int c = 0; c < 6; c++) {
+    for (int r = 0; r < 3; r++) {
+      dw[6 * r + c] += cross[3 * r] * ka[c] + cross[3 * r + 1] * ka[6 + c] + cross[3 * r + 2] * ka[12 + c];
+      dw[6 * (3 + r) + c] += ka[6 * r + c];
+    }
+  }
+}
+
 // Body j's wrench (torque about its origin, force) at twist t: the sum over its submerged elements, whose forces
-// it keeps for body_slope.
-static void body_wrench(const Items* s, int j, const mjtNum t[6], mjtNum w[6]) {
+// it keeps for body_slope. Given dw (not NULL) and a law with its own Jacobian, its slope dW/dtwist too (as
+// body_slope), each leading element's force and Jacobian from one call (finrft_surface_element_slope): the step's
+// start wants both at one velocity, where the force's call and then the slope's took the law twice.
+static void body_wrench(const Items* s, int j, const mjtNum t[6], mjtNum w[6], mjtNum* dw) {
   const FinrftSurface* p = s->surface[j];
+  int analytic = dw && finrft_surface_has_slope(p);
   mju_zero(w, 6);
+  if (analytic) mju_zero(dw, 36);
   for (int e = s->first[j]; e < s->first[j + 1]; e++) {
     const mjtNum* element = s->element + FINRFT_SUBMERGED * (size_t)e;
-    mjtNum v[3], moment[3], *f = s->element_force + 3 * (size_t)e;
+    mjtNum v[3], moment[3], k[9], *f = s->element_force + 3 * (size_t)e;
     element_velocity(t, element, v);
-    element_force(p, element, v, f);
+    if (analytic && finrft_dot3(element + 3, v) > 0) {
+      finrft_surface_element_slope(p, element + 3, v, element[6], element[7], f, k);
+      add_element_slope(element, k, dw);
+    } else {
+      element_force(p, element, v, f);
+    }
     for (int r = 0; r < 3; r++) w[3 + r] += f[r];
     finrft_cross(moment, element, f);
     for (int r = 0; r < 3; r++) w[r] += moment[r];
@@ -388,50 +426,40 @@ static int probed_slope(const FinrftSurface* p, const mjtNum* element, const mjt
   return 1;
 }
 
-// dW/dtwist (6 x 6, row-major) of body j at twist t, sum_e A_e^T (dF_e/dv_e) A_e: each element's 3 x 3 in steps
-// h = 1e-6 (|v_e| + SURFACE_SPEED), by forward differences from its force at t (kept by body_wrench at t) when
-// `forward`, else central ones (probed_slope); forward, an element leading at v_e (its force not 0) with no DRFT
-// term by leading_slope's two probes. An element trailing at v_e and at every probe adds nothing.
+// dW/dtwist (6 x 6, row-major) of body j at twist t, sum_e A_e^T (dF_e/dv_e) A_e: each element's 3 x 3 the law's
+// own (finrft_surface_element_slope) where it has one, exact whatever `forward` says, and nothing for an element
+// trailing at v_e; else in steps h = 1e-6 (|v_e| + SURFACE_SPEED), by forward differences from its force at t
+// (kept by body_wrench at t) when `forward`, else central ones (probed_slope); forward, an element leading at v_e
+// (its force not 0) with no DRFT term by leading_slope's two probes. An element trailing at v_e and at every probe
+// adds nothing.
 static void body_slope(const Items* s, int j, const mjtNum t[6], int forward, mjtNum dw[36]) {
   const FinrftSurface* p = s->surface[j];
+  int analytic = finrft_surface_has_slope(p);
   mju_zero(dw, 36);
   for (int e = s->first[j]; e < s->first[j + 1]; e++) {
     const mjtNum* element = s->element + FINRFT_SUBMERGED * (size_t)e;
     const mjtNum* f0 = s->element_force + 3 * (size_t)e;
-    mjtNum v[3], k[9], a[18], ka[18];
+    mjtNum v[3], k[9];
     element_velocity(t, element, v);
     mjtNum h = 1e-6 * (sqrt(finrft_dot3(v, v)) + SURFACE_SPEED);
-    if (forward && p->drft_lambda == 0 && (f0[0] != 0 || f0[1] != 0 || f0[2] != 0)) {
+    if (analytic) {
+      // the law's own Jacobian: nothing for an element that trails (n . v <= 0, where every surface law is 0)
+      mjtNum f[3];
+      if (!(finrft_dot3(element + 3, v) > 0)) continue;
+      finrft_surface_element_slope(p, element + 3, v, element[6], element[7], f, k);
+    } else if (forward && p->drft_lambda == 0 && (f0[0] != 0 || f0[1] != 0 || f0[2] != 0)) {
       leading_slope(p, element, v, f0, h, k);
     } else if (!probed_slope(p, element, v, f0, h, forward, k)) {
       continue;
     }
-    // A_e = [-[arm]x | I], 3 x 6; then K A_e, and its rows added as A_e^T (K A_e) = ([arm]x K A_e ; K A_e)
-    const mjtNum* arm = element;
-    mjtNum cross[9] = {0, -arm[2], arm[1], arm[2], 0, -arm[0], -arm[1], arm[0], 0};
-    for (int r = 0; r < 3; r++) {
-      for (int c = 0; c < 3; c++) {
-        a[6 * r + c] = -cross[3 * r + c];
-        a[6 * r + 3 + c] = r == c;
-      }
-    }
-    for (int r = 0; r < 3; r++) {
-      for (int c = 0; c < 6; c++) {
-        ka[6 * r + c] = k[3 * r] * a[c] + k[3 * r + 1] * a[6 + c] + k[3 * r + 2] * a[12 + c];
-      }
-    }
-    for (int c = 0; c < 6; c++) {
-      for (int r = 0; r < 3; r++) {
-        dw[6 * r + c] += cross[3 * r] * ka[c] + cross[3 * r + 1] * ka[6 + c] + cross[3 * r + 2] * ka[12 + c];
-        dw[6 * (3 + r) + c] += ka[6 * r + c];
-      }
-    }
+    add_element_slope(element, k, dw);
   }
 }
 
 // The RFT force at generalised velocity u (nv), each item's velocity and force (and each submerged element's
-// force) kept for rft_slope: segments' J^T F(J u), bodies' J^T W(J u).
-static void rft_force(const Items* s, const mjtNum* u, mjtNum* force) {
+// force) kept for rft_slope: segments' J^T F(J u), bodies' J^T W(J u). Given body_slopes (36 per body, or NULL),
+// the slope dW/dtwist of each body whose law has its own Jacobian goes there, for rft_slope at the same u.
+static void rft_force(const Items* s, const mjtNum* u, mjtNum* force, mjtNum* body_slopes) {
   int nv = s->nv;
   mju_zero(force, nv);
   for (int i = 0; i < s->n + s->nbody; i++) {
@@ -446,7 +474,7 @@ static void rft_force(const Items* s, const mjtNum* u, mjtNum* force) {
     if (i < s->n) {
       s->law[i]->law->force(s->law[i]->params, s->law[i]->v_reg, v, s->axes + 6 * i, s->axes + 6 * i + 3, f);
     } else {
-      body_wrench(s, i - s->n, v, f);
+      body_wrench(s, i - s->n, v, f, body_slopes ? body_slopes + 36 * (size_t)(i - s->n) : NULL);
     }
     for (int c = 0; c < s->ncol[i]; c++) {
       int k = col[c];
@@ -458,8 +486,9 @@ static void rft_force(const Items* s, const mjtNum* u, mjtNum* force) {
 }
 
 // The derivative of the RFT force (nv x nv) at the velocity of the last rft_force, J^T (dF/dv) J summed over the
-// items, the laws' by forward differences when `forward`, else central ones.
-static void rft_slope(const Items* s, mjtNum* slope, int forward) {
+// items, the laws' by forward differences when `forward`, else central ones; a body's from body_slopes where that
+// rft_force put it there (not NULL, the law with its own Jacobian).
+static void rft_slope(const Items* s, mjtNum* slope, int forward, const mjtNum* body_slopes) {
   int nv = s->nv;
   mju_zero(slope, nv * nv);
   for (int i = 0; i < s->n + s->nbody; i++) {
@@ -471,6 +500,8 @@ static void rft_slope(const Items* s, mjtNum* slope, int forward) {
     if (i < s->n) {
       segment_jacobian(s->law[i], s->vel + at, s->axes + 6 * i, s->axes + 6 * i + 3,
                        forward ? s->out + at : NULL, s->moves[i], c);
+    } else if (body_slopes && finrft_surface_has_slope(s->surface[i - s->n])) {
+      mju_copy(c, body_slopes + 36 * (size_t)(i - s->n), 36);
     } else {
       body_slope(s, i - s->n, s->vel + at, forward, c);
     }
@@ -532,7 +563,7 @@ static mjtNum newton_residual(const Items* s, Newton* w, const mjtNum* qvel, con
                               mjtNum* out) {
   int nv = s->nv;
   for (int i = 0; i < nv; i++) w->u[i] = qvel[i] + dv[i];
-  rft_force(s, w->u, w->force);
+  rft_force(s, w->u, w->force, NULL);
   stops_add(s, w->u, dt, w->force, NULL);
   mju_mulMatVec(out, w->matrix, dv, nv, nv);
   for (int i = 0; i < nv; i++) out[i] -= dt * (w->other[i] + w->force[i]);
@@ -561,8 +592,8 @@ static int newton_solve(Workspace* ws, const mjtNum* qvel, mjtNum dt, int iterat
   mjtNum ahead = iterations > 1 ? dt : 0, tolerance = ws->newton_tolerance;
   const mjtNum* rhs = ws->rhs;
   if (!ws->start_ready) {
-    rft_force(s, qvel, ws->start_force);
-    rft_slope(s, ws->start_slope, iterations > 1);
+    rft_force(s, qvel, ws->start_force, ws->body_slopes);
+    rft_slope(s, ws->start_slope, iterations > 1, ws->body_slopes);
     ws->start_ready = 1;
   }
   mju_copy(w->force, ws->start_force, nv);
@@ -629,7 +660,7 @@ static int newton_solve(Workspace* ws, const mjtNum* qvel, mjtNum dt, int iterat
     fresh = !(lean && alpha == 1 && trial_norm <= SURFACE_DECREASE * before);
     if (!fresh) continue;
     // the search's last residual was taken at the accepted iterate: rft_force's segments are there
-    rft_slope(s, w->slope, 1);
+    rft_slope(s, w->slope, 1, NULL);
     stops_add(s, w->u, dt, NULL, w->slope);
   }
   return FINRFT_NOT_CONVERGED;
@@ -675,7 +706,7 @@ static void step_prepare(const mjModel* m, mjData* d, Workspace* ws, mjtNum midp
   items_update(m, d, s);
   ws->start_ready = 0;
   ws->midpoint = midpoint;
-  if (ws->has_applied) rft_force(s, d->qvel, ws->applied);
+  if (ws->has_applied) rft_force(s, d->qvel, ws->applied, NULL);
   if (midpoint > 0) {
     mju_copy(ws->qpos_start, d->qpos, m->nq);
     mju_copy(ws->stop_start, s->stop_q, s->nstop);

@@ -279,6 +279,22 @@ def regularised(force: np.ndarray, normal: np.ndarray, velocity: np.ndarray, v_r
     return force * np.where(v_n > RAMP_FLOOR * v_reg, np.tanh(np.maximum(v_n, 0.0) / v_reg), 0.0)[..., None]
 
 
+def regularised_slopes(force: np.ndarray, slope: np.ndarray, normal: np.ndarray, velocity: np.ndarray,
+                       v_reg: float) -> tuple[np.ndarray, np.ndarray]:
+    """`regularised` forces (N, 3) and their derivatives in the velocity (N, 3, 3), given the unramped ones:
+    d(r F)/dv = r dF/dv + r'(n . v) F n^T, r = tanh(n . v / v_reg), r' = (1 - r^2) / v_reg."""
+    force, slope = np.asarray(force, dtype=float), np.asarray(slope, dtype=float)
+    if v_reg == 0:
+        return force, slope
+    normal = np.asarray(normal, dtype=float)
+    v_n = np.einsum("...i,...i", normal, np.asarray(velocity, dtype=float))
+    on = v_n > RAMP_FLOOR * v_reg
+    ramp = np.where(on, np.tanh(np.maximum(v_n, 0.0) / v_reg), 0.0)
+    rate = np.where(on, (1 - ramp * ramp) / v_reg, 0.0)
+    return (ramp[..., None] * force,
+            ramp[..., None, None] * slope + rate[..., None, None] * force[..., :, None] * normal[..., None, :])
+
+
 _cautioned: set[str] = set()  # the laws whose CAVEAT this process has warned of
 
 

@@ -49,6 +49,17 @@ def element_forces(normal: np.ndarray, velocity: np.ndarray, depth: np.ndarray, 
     return -pressure[..., None] * normal
 
 
+def element_slopes(normal: np.ndarray, velocity: np.ndarray, depth: np.ndarray, area: np.ndarray,
+                   drft_lambda: float, rho_c: float) -> np.ndarray:
+    """The derivative of `element_forces` in the velocity (N, 3, 3): -2 drft_lambda rho_c (n . v) area n n^T on a
+    leading element below the surface, else 0."""
+    normal = np.asarray(normal, dtype=float)
+    v_n = np.einsum("...i,...i", normal, np.asarray(velocity, dtype=float))
+    leading = (v_n > 0) & (np.asarray(depth) > 0)
+    rate = np.where(leading, 2 * drft_lambda * rho_c * v_n * np.asarray(area), 0.0)
+    return -rate[..., None, None] * normal[..., :, None] * normal[..., None, :]
+
+
 def density(drft_lambda: float, given: float | None, catalogued: float | None, key: str, where: str) -> float:
     """The density the term uses (kg/m^3; 0 when none is known and the term is off): ``given`` if set, else
     the catalogued medium's. Bad values, or drft_lambda > 0 without a density: SceneError beginning with

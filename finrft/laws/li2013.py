@@ -117,15 +117,15 @@ SUMMARY = "Li 2013 in 3D (Treers, Cao & Stuart 2021: lateral and swimming forces
 def weights(across, within) -> tuple[np.ndarray, np.ndarray]:
     """Treers et al.'s f1(|v1|) and f23(|v23|) of the sizes of the two parts of a unit velocity (each in [0, 1]):
     f1 = a (tanh(b s - c) + tanh(c)) / d and f23 = a (atanh(b s - c) + atanh(c)) / d, each sum in one closed form
-    of u = b s, as weight_across and weight_within in finrft_surface.c (one expm1, one log1p per element):
-    tanh(u - c) + tanh(c) = E / (cosh c (e^-c E + 2 cosh c)), E = expm1(2 u), and atanh(u - c) + atanh(c) =
-    log1p(2 u / ((1 + c - u) (1 - c))) / 2."""
+    of u = b s, as weight_across and weight_within in finrft_surface.c (one exp, one log per element):
+    tanh(u - c) + tanh(c) = E / (cosh c (e^-c E + 2 cosh c)), E = e^(2 u) - 1, and atanh(u - c) + atanh(c) =
+    log(1 + 2 u / ((1 + c - u) (1 - c))) / 2."""
     a, b, c, d = F1_FIT
-    grow = np.expm1(2 * b * np.asarray(across, dtype=float))
+    grow = np.exp(2 * b * np.asarray(across, dtype=float)) - 1
     f1 = a / (d * math.cosh(c)) * grow / (math.exp(-c) * grow + 2 * math.cosh(c))
     a, b, c, d = F23_FIT
     u = b * np.asarray(within, dtype=float)
-    f23 = a / (2 * d) * np.log1p(2 / (1 - c) * u / (1 + c - u))
+    f23 = a / (2 * d) * np.log(1 + 2 / (1 - c) * u / (1 + c - u))
     return f1, f23
 
 
@@ -197,6 +197,125 @@ def element_forces(normal: np.ndarray, velocity: np.ndarray, depth: np.ndarray, 
     leading = (np.einsum("...i,...i", normal, velocity) > 0) & (np.asarray(depth) > 0)
     scale = np.where(leading, np.asarray(area) * np.asarray(depth), 0.0)
     return scale[..., None] * stress
+
+
+def _alpha_slope(cb, sb, cg, sg, zeta: float, coefficients: Coefficients) -> tuple[np.ndarray, np.ndarray]:
+    """(alpha_x, alpha_z) (..., 2) at the angles given by their cosines and sines, and their partial derivatives
+    (..., 2, 4) in (cos beta, sin beta, cos gamma, sin gamma), by the angle-sum forms of alpha_unit in
+    finrft_surface.c (gamma beyond +-pi/2 folded as `alpha` folds it)."""
+    a00, a10, b11, b01, b_11, c11, c01, c_11, d10 = coefficients.values()
+    m = np.where(cg < 0, -1.0, 1.0)
+    sb, cg = m * sb, m * cg
+    c2, s2 = cb * cb - sb * sb, 2 * sb * cb
+    alpha_x = (c11 + c_11) * c2 * cg + (c_11 - c11) * s2 * sg + c01 * cg + d10 * s2
+    alpha_z = a00 + a10 * c2 + (b11 - b_11) * s2 * cg + (b11 + b_11) * c2 * sg + b01 * sg
+    # by c2, s2, cos gamma, sin gamma; then c2 and s2 by cos beta and sin beta
+    x_c2, x_s2 = (c11 + c_11) * cg, (c_11 - c11) * sg + d10
+    z_c2, z_s2 = a10 + (b11 + b_11) * sg, (b11 - b_11) * cg
+    dx = [2 * (x_c2 * cb + x_s2 * sb), 2 * (x_s2 * cb - x_c2 * sb), (c11 + c_11) * c2 + c01, (c_11 - c11) * s2]
+    dz = [2 * (z_c2 * cb + z_s2 * sb), 2 * (z_s2 * cb - z_c2 * sb), (b11 - b_11) * s2, (b11 + b_11) * c2 + b01]
+    # back to the unfolded angles: alpha_x = m alpha_x', sin beta' = m sin beta, cos gamma' = m cos gamma
+    dx = [m * dx[0], dx[1], dx[2], m * dx[3]]
+    dz = [dz[0], m * dz[1], m * dz[2], dz[3]]
+    return (zeta * np.stack([m * alpha_x, alpha_z], axis=-1),
+            zeta * np.stack([np.stack(dx, axis=-1), np.stack(dz, axis=-1)], axis=-2))
+
+
+def _weight_slopes(across, within) -> tuple[np.ndarray, np.ndarray]:
+    """The derivatives of `weights`' f1 and f23 in the sizes of the two parts."""
+    a, b, c, d = F1_FIT
+    grow = np.exp(2 * b * np.asarray(across, dtype=float))
+    df1 = (a / (d * math.cosh(c)) * 2 * math.cosh(c) * 2 * b * grow
+           / (math.exp(-c) * (grow - 1) + 2 * math.cosh(c)) ** 2)
+    a, b, c, d = F23_FIT
+    u = b * np.asarray(within, dtype=float)
+    q = 2 / (1 - c) * u / (1 + c - u)
+    df23 = a / (2 * d) * b * 2 / (1 - c) * (1 + c) / (1 + c - u) ** 2 / (1 + q)
+    return df1, df23
+
+
+def _stress_slope(normal: np.ndarray, unit: np.ndarray, e2: np.ndarray, de2: np.ndarray, zeta: float,
+                  coefficients: Coefficients) -> tuple[np.ndarray, np.ndarray]:
+    """`_stress` (..., 3) and its derivative (..., 3, 3) in the unit velocity, e2's derivative in it being de2
+    (..., 2, 3): 0 for the normal's plane, the velocity's own plane turning with it."""
+    e1 = np.stack([e2[..., 1], -e2[..., 0]], axis=-1)
+    de1 = np.stack([de2[..., 1, :], -de2[..., 0, :]], axis=-2)
+    horizontal = unit[..., :2]
+    across = np.einsum("...i,...i", horizontal, e1)
+    along = np.einsum("...i,...i", horizontal, e2)
+    d_across = np.einsum("...i,...ik->...k", horizontal, de1)
+    d_along = np.einsum("...i,...ik->...k", horizontal, de2)
+    d_across[..., :2] += e1
+    d_along[..., :2] += e2
+    within = np.hypot(along, unit[..., 2])
+    moving = within > 0
+    safe = np.where(moving, within, 1.0)
+    z = np.array([0.0, 0.0, 1.0])
+    d_within = np.where(moving[..., None], (along[..., None] * d_along + unit[..., 2, None] * z) / safe[..., None],
+                        0.0)
+    f1, f23 = weights(np.abs(across), within)
+    df1, df23 = _weight_slopes(np.abs(across), within)
+    # beta = atan2(y, x), y = -n.e2, x = n_z; gamma = atan2(-u_z, along), of size `within`
+    y, x = -np.einsum("...i,...i", normal[..., :2], e2), normal[..., 2]
+    dy = -np.einsum("...i,...ik->...k", normal[..., :2], de2)
+    size = np.hypot(x, y)
+    has = size > 0
+    r = np.where(has, size, 1.0)
+    cb, sb = np.where(has, x / r, 1.0), y / r
+    d_cb = np.where(has, -cb * sb / r, 0.0)[..., None] * dy
+    d_sb = np.where(has, cb * cb / r, 0.0)[..., None] * dy
+    cg, sg = np.where(moving, along / safe, 1.0), -unit[..., 2] / safe
+    d_cg = np.where(moving[..., None], (d_along - cg[..., None] * d_within) / safe[..., None], 0.0)
+    d_sg = np.where(moving[..., None], (-z - sg[..., None] * d_within) / safe[..., None], 0.0)
+    alpha, partial = _alpha_slope(cb, sb, cg, sg, zeta, coefficients)
+    d_alpha = np.einsum("...aj,...jk->...ak", partial, np.stack([d_cb, d_sb, d_cg, d_sg], axis=-2))
+    alpha_1 = zeta * (coefficients.C11 + coefficients.C01 + coefficients.C_11)
+    side = f1 * alpha_1 * np.sign(across)
+    d_side = (df1 * alpha_1)[..., None] * d_across  # f1(|a|) sign(a) is odd: its slope is f1'(|a|)
+    d_f23 = df23[..., None] * d_within
+    stress = np.empty(normal.shape)
+    slope = np.empty(normal.shape + (3,))
+    stress[..., :2] = -side[..., None] * e1 - (f23 * alpha[..., 0])[..., None] * e2
+    stress[..., 2] = f23 * alpha[..., 1]
+    d_within_plane = d_f23 * alpha[..., 0, None] + f23[..., None] * d_alpha[..., 0, :]  # of f23 alpha_x
+    slope[..., :2, :] = (-e1[..., :, None] * d_side[..., None, :] - side[..., None, None] * de1
+                         - e2[..., :, None] * d_within_plane[..., None, :]
+                         - (f23 * alpha[..., 0])[..., None, None] * de2)
+    slope[..., 2, :] = d_f23 * alpha[..., 1, None] + f23[..., None] * d_alpha[..., 1, :]
+    return stress, slope
+
+
+def element_slopes(normal: np.ndarray, velocity: np.ndarray, depth: np.ndarray, area: np.ndarray,
+                   zeta: float = 1.0, coefficients: Coefficients = GENERIC) -> tuple[np.ndarray, np.ndarray]:
+    """`element_forces` (N, 3) and each force's derivative in the velocity, dF/dv (N, 3, 3; row: the force's
+    component), analytic: the twin of finrft_li2013_element_slope. The law depends on the direction u = v / |v|
+    alone, so dF/dv = dF/du (I - u u^T) / |v|; in the blend of nearly horizontal faces the velocity's own plane
+    turns with it, e2 = u_h / |u_h|, de2/du_h = (I - e2 e2^T) / |u_h|."""
+    normal = np.asarray(normal, dtype=float)
+    velocity = np.asarray(velocity, dtype=float)
+    speed = np.linalg.norm(velocity, axis=-1)
+    safe = np.where(speed > 0, speed, 1.0)
+    unit = velocity / safe[..., None]
+    tilt = np.clip(np.hypot(normal[..., 0], normal[..., 1]) / HORIZONTAL, 0.0, 1.0)
+    w = tilt * tilt * (3 - 2 * tilt)
+    fixed = np.zeros(normal.shape[:-1] + (2, 3))
+    stress, slope = _stress_slope(normal, unit, _horizontal_unit(normal, velocity), fixed, zeta, coefficients)
+    flat = w < 1
+    if flat.any():
+        e2 = _horizontal_unit(velocity, normal)
+        size = np.hypot(unit[..., 0], unit[..., 1])
+        turning = np.zeros_like(fixed)
+        turning[..., :2] = ((np.eye(2) - e2[..., :, None] * e2[..., None, :])
+                            / np.where(size > 0, size, 1.0)[..., None, None])
+        turning[size == 0] = 0.0
+        own, own_slope = _stress_slope(normal, unit, e2, turning, zeta, coefficients)
+        stress = np.where(flat[..., None], w[..., None] * stress + (1 - w)[..., None] * own, stress)
+        slope = np.where(flat[..., None, None], w[..., None, None] * slope + (1 - w)[..., None, None] * own_slope,
+                         slope)
+    leading = (np.einsum("...i,...i", normal, velocity) > 0) & (np.asarray(depth) > 0)
+    scale = np.where(leading, np.asarray(area) * np.asarray(depth), 0.0)
+    across = (np.eye(3) - unit[..., :, None] * unit[..., None, :]) / safe[..., None, None]
+    return scale[..., None] * stress, scale[..., None, None] * (slope @ across)
 
 
 def medium_parameters(medium) -> tuple[float, Coefficients]:

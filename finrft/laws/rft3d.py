@@ -181,6 +181,62 @@ def element_forces(normal: np.ndarray, velocity: np.ndarray, depth: np.ndarray, 
     return scale[..., None] * stress
 
 
+def term_slopes(p1, p2, p3) -> tuple[np.ndarray, np.ndarray]:
+    """The derivatives of `terms` (..., 20) in p1 and in p3 (p2, the face's, does not move with the velocity)."""
+    p1, p2, p3 = np.broadcast_arrays(*(np.asarray(p, dtype=float) for p in (p1, p2, p3)))
+    zero, one = np.zeros_like(p1), np.ones_like(p1)
+    d1 = np.stack([zero, one, zero, zero, 2 * p1, zero, zero, p2, zero, p3, 3 * p1 * p1, zero, zero, p2 * p2,
+                   2 * p1 * p2, zero, zero, 2 * p1 * p3, p3 * p3, p2 * p3], axis=-1)
+    d3 = np.stack([zero, zero, zero, one, zero, zero, 2 * p3, zero, p2, p1, zero, zero, 3 * p3 * p3, zero, zero,
+                   2 * p2 * p3, p2 * p2, p1 * p1, 2 * p1 * p3, p1 * p2], axis=-1)
+    return d1, d3
+
+
+def element_slopes(normal: np.ndarray, velocity: np.ndarray, depth: np.ndarray, area: np.ndarray, rho_c: float,
+                   mu_int: float, mu_surf: float, coefficients: Coefficients = AGARWAL_2023
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """`element_forces` (N, 3) and each force's derivative in the velocity, dF/dv (N, 3, 3; row: the force's
+    component), analytic: the twin of finrft_rft3d_element_slope. With u = v / |v|, p1 = -u_z and p3 = n_low . u
+    move with it, so d f_k / du = -(dT/dp1 . c_k) z + (dT/dp3 . c_k) n_low; the friction cap's factor
+    kept = mu_surf |s_n| / |s_t| moves with the stress; dF/dv = dF/du (I - u u^T) / |v|."""
+    normal = np.asarray(normal, dtype=float)
+    velocity = np.asarray(velocity, dtype=float)
+    speed = np.linalg.norm(velocity, axis=-1)
+    safe = np.where(speed > 0, speed, 1.0)
+    unit = velocity / safe[..., None]
+    lower = np.where((normal[..., 2] < 0)[..., None], normal, -normal)
+    p1, p2, p3 = -unit[..., 2], -lower[..., 2], np.einsum("...i,...i", lower, unit)
+    matrix = coefficients.matrix()
+    f = terms(p1, p2, p3) @ matrix
+    d1, d3 = term_slopes(p1, p2, p3)
+    z = np.array([0.0, 0.0, 1.0])
+    df = -(d1 @ matrix)[..., :, None] * z + (d3 @ matrix)[..., :, None] * lower[..., None, :]  # (..., k, 3)
+    stress = f[..., :1] * lower + f[..., 1:2] * unit
+    stress[..., 2] -= f[..., 2]
+    d_stress = (lower[..., :, None] * df[..., 0, None, :] + unit[..., :, None] * df[..., 1, None, :]
+                + f[..., 1, None, None] * np.eye(3) - z[:, None] * df[..., 2, None, :])
+    along = np.einsum("...i,...i", stress, normal)
+    d_along = np.einsum("...i,...ik->...k", normal, d_stress)
+    normal_part = along[..., None] * normal
+    tangential = stress - normal_part
+    d_normal = normal[..., :, None] * d_along[..., None, :]
+    cap = mu_surf * np.abs(along)
+    size = np.linalg.norm(tangential, axis=-1)
+    capped = size > cap
+    kept = np.where(capped, cap / np.where(size > 0, size, 1.0), 1.0)
+    # d kept = (mu_surf sign(s_n) d s_n - kept t . d s / |t|) / |t|, t being across n
+    d_kept = np.where(capped[..., None], (mu_surf * np.sign(along)[..., None] * d_along
+                                          - (kept / np.where(size > 0, size, 1.0))[..., None]
+                                          * np.einsum("...i,...ik->...k", tangential, d_stress))
+                      / np.where(size > 0, size, 1.0)[..., None], 0.0)
+    out = normal_part + kept[..., None] * tangential
+    d_out = d_normal + kept[..., None, None] * (d_stress - d_normal) + tangential[..., :, None] * d_kept[..., None, :]
+    leading = (np.einsum("...i,...i", normal, velocity) > 0) & (np.asarray(depth) > 0)
+    scale = np.where(leading, xi(rho_c, mu_int) * np.asarray(area) * np.asarray(depth), 0.0)
+    across = (np.eye(3) - unit[..., :, None] * unit[..., None, :]) / safe[..., None, None]
+    return scale[..., None] * out, scale[..., None, None] * (d_out @ across)
+
+
 def given(section: Any) -> dict[str, float | None]:
     """The law's parameters a scene's ``[medium]`` gives (None: not given, the named medium's): surface_friction =
     0 beside a medium.name is the medium's, without one frictionless (one meaning, as a chain's [medium])."""

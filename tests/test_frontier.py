@@ -108,13 +108,14 @@ def test_errors_against_the_reference_have_the_known_answer(monkeypatch, box):
 
 def test_the_cli_writes_one_row_per_run_and_a_chart(box, tmp_path, capsys):
     out = tmp_path / "out"
-    assert main(["bench", "robots", "--scene", str(box), "--method", "newton", "--method", "implicit",
+    assert main(["bench", "robots", "--scene", str(box), "--method", "newton", "--method", "newton-midpoint",
                  "--dt", "0.001", "--dt", "0.0005", "--out", str(out), "--json"]) == 0
     summary = json.loads(capsys.readouterr().out)["robots"]["box"]
     with open(out / "box.csv") as f:
         rows = list(csv.DictReader(f))
     assert [(r["method"], float(r["dt_s"])) for r in rows] == [("newton", 1e-3), ("newton", 5e-4),
-                                                                ("implicit", 1e-3), ("implicit", 5e-4)]
+                                                                ("newton-midpoint", 1e-3),
+                                                                ("newton-midpoint", 5e-4)]
     assert [r["default"] for r in rows] == ["1", "0", "0", "0"]
     for r in rows:
         assert not r["failed"] and float(r["wall_s"]) > float(r["companion_wall_s"]) > 0

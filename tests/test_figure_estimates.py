@@ -24,7 +24,7 @@ def _summaries(scene):
 
 
 @pytest.mark.parametrize("name, method, dt", [("sand_swimmer", "newton-midpoint", 1e-3),
-                                               ("hexapod", "explicit", 1e-4)])
+                                               pytest.param("hexapod", "explicit", 1e-4, marks=pytest.mark.slow)])
 def test_means_do_not_depend_on_record_dt_and_are_the_integral_over_every_step(name, method, dt, monkeypatch):
     # the explicit step's means are read without a forward pass of their own (`RobotTrial.after_step`); the chatter
     # probe, which a hexapod's feet resting in the sand trip at 0.1 ms, is not what is tested here

@@ -106,6 +106,7 @@ def test_newton_halvings_count_as_rejected_and_taken(backend):
     assert run.steps_rejected == 2 and run.steps == nominal + run.steps_rejected
 
 
+@pytest.mark.slow  # four drags, one at a tolerance of 1e-8 (the accuracy study sweeps the tolerances too)
 def test_adaptive_error_falls_with_the_tolerance():
     scene = preset("paper").replace(**{"sim.method": "adaptive", "plate.segment_inertia": 1e-3, "sim.dt": 1e-3})
     drive = Drive(stroke=0.1)

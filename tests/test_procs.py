@@ -109,13 +109,16 @@ def test_optimize_workers_end_with_their_parent(tmp_path, sig, group, errors_onl
     searchlog.read(log, searchlog.OPTIMIZE)  # a complete log, its digest intact
 
 
+@pytest.mark.slow  # the optimisation's workers end with their parent in the fast suite; the fit's pool is the same
 def test_fit_workers_end_with_their_parent(tmp_path, errors_only):
     log = tmp_path / "fit.h5"
     proc, err = _signal_mid_run([*FIT, "--budget", "1000", "--data", str(DATA)], log, signal.SIGKILL)
     assert proc.returncode == -signal.SIGKILL and errors_only(err) == ""
 
 
-@pytest.mark.parametrize("sig", [signal.SIGTERM, pytest.param(signal.SIGHUP, marks=pytest.mark.slow)])
+# two searches each; the fast suite resumes after SIGINT bit for bit (test_logs), and SIGTERM and SIGHUP take its path
+@pytest.mark.slow
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP])
 def test_resume_after_sigterm_and_sighup_is_bit_identical(tmp_path, capsys, sig):
     reference = tmp_path / "reference.h5"
     budget = ["--budget", "34", "--workers", "1"]

@@ -74,8 +74,14 @@ def commands(body: str) -> list[str]:
     return found
 
 
+def _slow(block: Block) -> bool:
+    """Whether a block runs with the slow studies: marked so, or on a page other than the README (the guides' and
+    results' blocks, a few minutes in all, run in CI beside the fast suite)."""
+    return block.mark == "slow" or block.page.name != "README.md"
+
+
 def _params(lang: str, slow: bool) -> list:
-    chosen = [b for b in ALL if b.lang == lang and b.mark != "not run" and (b.mark == "slow") == slow]
+    chosen = [b for b in ALL if b.lang == lang and b.mark != "not run" and _slow(b) == slow]
     marks = [pytest.mark.slow] if slow else []
     return [pytest.param(b, id=b.name, marks=marks) for b in chosen]
 

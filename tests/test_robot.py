@@ -138,7 +138,9 @@ def test_dask_executor_gives_the_local_result(paper):
     # a unit suffix of another quantity: 3:5 deg read as 52..87 mm of arm
     (["optimize", "--bounds", "arm.length=3:5deg"], "deg is no unit of arm.length, whose unit is m"),
     (["optimize", "--bounds", "gait.theta1=10:80mm"], "mm is no unit of gait.theta1"),
-    (["optimize", "--executor", "dask", "--address", "tcp://127.0.0.1:9"], "127.0.0.1:9"),
+    # a scheduler that does not answer: seconds of Dask's connection timeout, with the slow studies
+    pytest.param(["optimize", "--executor", "dask", "--address", "tcp://127.0.0.1:9"], "127.0.0.1:9",
+                 marks=pytest.mark.slow),
 ])
 def test_robot_bad_input(capsys, argv, named):
     assert main(argv) == 2

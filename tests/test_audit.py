@@ -197,6 +197,7 @@ def test_a_rotate_stroke_past_a_turn_names_its_unit(capsys):
     assert "--amplitude 720 deg is more than one turn" in err and len(err.splitlines()) == 1
 
 
+@pytest.mark.slow  # a stroke long enough to drift; test_user_model stops a drifting drive in the fast suite
 def test_a_drive_too_slow_to_hold_names_its_speed_and_stroke(capsys):
     # a 15-minute stroke let the load drift the armature; the advice was "give the driven body more mass", though
     # the plate's mass is the scene's and the drift grows with the stroke's time

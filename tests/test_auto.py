@@ -42,6 +42,7 @@ def _converged(run, limits: ErrorLimits) -> None:
             assert abs(ours[limit.key] - theirs[limit.key]) <= limit.allowed(theirs[limit.key]), limit.key
 
 
+@pytest.mark.slow  # its pilots and its run at an eighth of a millisecond: ten seconds
 def test_the_sand_swimmer_gets_an_implicit_method():
     # Its 10 g links: the explicit step chatters or misses the speed at every step cheaper than the implicit one.
     over = {"sim.method": "auto", "sim.duration": 0.6, "sim.settle": 0.3,

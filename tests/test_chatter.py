@@ -86,6 +86,7 @@ def test_a_block_hopping_at_rest_is_caught_and_a_resolved_rest_carries_its_weigh
     assert s["chatter"] is None
 
 
+@pytest.mark.slow  # two hexapod runs of 2 s, one at 0.2 ms
 def test_chatter_that_leaves_the_figures_is_reported_not_refused():
     """The hexapod at MuJoCo's explicit step of 0.2 ms chatters as its legs land (the first 0.3 s) and at some strikes
     after (6 % of the probes): its speed lies within 1 % of the implicit run's at its default numerics, so it runs

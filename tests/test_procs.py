@@ -89,12 +89,12 @@ def _signal_mid_run(argv: list[str], log: Path, sig: int, group: bool = False) -
     return proc, err.decode()
 
 
-# SIGHUP takes SIGTERM's path, and SIGTERM to the parent alone ends its workers as SIGTERM to the whole group
-# does: those two run with the slow studies
+# SIGTERM and SIGHUP take Ctrl-C's path, which test_logs sends to the whole group in the fast suite: those three run
+# with the slow studies, SIGKILL (no handler at all) here
 @pytest.mark.parametrize("sig,group", [(signal.SIGKILL, False),
                                        pytest.param(signal.SIGTERM, False, marks=pytest.mark.slow),
                                        pytest.param(signal.SIGHUP, False, marks=pytest.mark.slow),
-                                       (signal.SIGTERM, True)])
+                                       pytest.param(signal.SIGTERM, True, marks=pytest.mark.slow)])
 def test_optimize_workers_end_with_their_parent(tmp_path, sig, group, errors_only):
     log = tmp_path / "run.h5"
     proc, err = _signal_mid_run([*OPTIMIZE, "--budget", "1000"], log, sig, group)

@@ -178,7 +178,7 @@ def test_data_in_the_wrong_units_is_refused(tmp_path, capsys, scales, named):
 def test_bounds_by_short_name_are_used(tmp_path, capsys):
     # The paper's procedure would put b at its lower bound 0.01 (README): bounded to 1..5 it must stay inside.
     assert resolve_params(["b"], {"b": (1.0, 5.0)}) == resolve_params(["b"], {"plate.damping": (1.0, 5.0)})
-    assert main(["fit", "--data", str(DATA / "origami_v30.csv"), "--bounds", "b=1:5", "--budget", "8",
+    assert main(["fit", "--data", str(DATA / "origami_v30.csv"), "--bounds", "b=1:5", "--budget", "4",
                  "--json", "--quiet"]) == 0
     out = capsys.readouterr().out.strip().splitlines()
     assert len(out) == 1 and 1.0 <= json.loads(out[0])["params"]["plate.damping"] <= 5.0

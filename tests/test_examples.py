@@ -5,6 +5,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
 
@@ -47,6 +49,7 @@ def test_scene_from_toml_writes_h5(tmp_path):
     assert (tmp_path / "soft.h5").stat().st_size > 0
 
 
+@pytest.mark.slow  # a figure of several drags
 def test_plate_shapes_draws_the_picture(tmp_path):
     run("plate_shapes.py", "shapes.png", cwd=tmp_path)
     assert (tmp_path / "shapes.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

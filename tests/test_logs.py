@@ -139,6 +139,7 @@ def test_fit_resumes_after_sigkill_bit_for_bit(tmp_path, capsys, drag_data):
         np.testing.assert_array_equal(f["data/0/angles"][()], read_drag(drag_data).angles)
 
 
+@pytest.mark.slow  # a search on two worker processes beside its parent: all cores for seconds
 def test_ctrl_c_reaches_no_worker(tmp_path, errors_only):
     # Ctrl-C in a terminal signals the whole process group: the pool's workers stay quiet, the parent reports.
     log = tmp_path / "run.h5"

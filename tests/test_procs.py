@@ -140,6 +140,7 @@ def test_resume_after_sigterm_and_sighup_is_bit_identical(tmp_path, capsys, sig)
             np.testing.assert_array_equal(a[name][()], b[name][()], strict=True)
 
 
+@pytest.mark.slow  # two searches at once; a log in use is refused in the fast suite (below)
 def test_two_runs_on_one_new_log_one_refuses(tmp_path):
     log = tmp_path / "l.h5"
     runs = [_start([*OPTIMIZE, "--budget", "21", "--workers", "1", "--out", str(log)], tmp_path) for _ in range(2)]

@@ -105,6 +105,7 @@ def watched(on_timeout: Callable[[int], None]) -> Iterator[None]:
     sys.unraisablehook = dropped
     reader, writer = os.pipe()
     os.set_blocking(writer, False)
+    _state["depth"] += 1  # a signal while the handlers and the watcher are set up is raised once the block begins
     before = {number: signal.signal(number, handler) for number in SIGNALS}
     wakeup = signal.set_wakeup_fd(writer, warn_on_full_buffer=False)
     done = threading.Event()
@@ -128,6 +129,8 @@ def watched(on_timeout: Callable[[int], None]) -> Iterator[None]:
     thread = threading.Thread(target=watch, name="finrft-signal-watch", daemon=True)
     thread.start()
     try:
+        _state["depth"] -= 1
+        check()
         yield
     finally:
         done.set()

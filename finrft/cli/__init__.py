@@ -71,7 +71,19 @@ def _print_version_if_asked(argv: Sequence[str]) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:  # Ctrl-C before the handlers were in place
+        _report("finrft: interrupted")
+        return 128 + interrupts.received()
+
+
+def _main(argv: Sequence[str] | None) -> int:
     _print_version_if_asked(sys.argv[1:] if argv is None else argv)
+    # The command line renders nothing with MuJoCo: without this, importing it imports GLFW, which starts a Python
+    # process to read the library's version (a tenth of a second, and tracebacks of its own on Ctrl-C). A user's
+    # choice of MUJOCO_GL is kept.
+    os.environ.setdefault("MUJOCO_GL", "disable")
     if sys.stderr is None:  # started with stderr closed: its one-line reports go nowhere rather than to stdout
         sys.stderr = open(os.devnull, "w")
     if sys.stdout is None:
@@ -82,20 +94,23 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     # SIGTERM (a scheduler's pre-emption) and SIGHUP (a lost terminal) stop as Ctrl-C does, so that a search leaves
     # a valid log, says how to continue it and shuts its workers down.
-    with warnings.catch_warnings(), interrupts.watched(_killed_in_native_code):
-        warnings.showwarning = one_line_warning
-        try:
-            # the commands' imports too: a signal during them is an interrupt as any other
-            status = _dispatch(build_parser(), argv)
+    try:
+        with warnings.catch_warnings(), interrupts.watched(_killed_in_native_code):
+            warnings.showwarning = one_line_warning
+            # The commands' imports take a signal when they are done: raised inside a C extension's initialisation
+            # (MuJoCo's) it became an ImportError. Past GRACE the watcher ends the process as interrupted.
+            with interrupts.deferred():
+                parser = build_parser()
+            status = _dispatch(parser, argv)
             sys.stdout.flush()  # a reader that went away shows here, not as a traceback at exit
             return status
-        except BrokenPipeError:
-            # stdout was closed early (finrft swim --json | head): stop quietly, as Unix tools do on SIGPIPE.
-            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-            return 141
-        except KeyboardInterrupt:
-            _report("finrft: interrupted")
-            return 128 + interrupts.received()
+    except BrokenPipeError:
+        # stdout was closed early (finrft swim --json | head): stop quietly, as Unix tools do on SIGPIPE.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
+    except KeyboardInterrupt:
+        _report("finrft: interrupted")
+        return 128 + interrupts.received()
 
 
 def _killed_in_native_code(signum: int) -> None:

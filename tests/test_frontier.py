@@ -63,10 +63,15 @@ def test_relative_error_is_the_norm_of_the_difference_over_the_reference():
 
 def _first_order(monkeypatch, walls):
     """`frontier.measure` replaced by runs whose speed is v0 (1 + c dt) (first order in the step), estimated at
-    2 c dt v0, taking ``walls[method] / dt`` seconds; explicit fails above 1 ms."""
+    2 c dt v0, taking ``walls[method] / dt`` seconds; explicit fails above 1 ms. `auto` chooses explicit at 1 ms
+    and takes ``walls["auto"]`` seconds."""
     v0, c = 0.1, 20.0
 
     def measure(scene, method, dt, *, estimate=True):
+        if method == "auto":
+            row = measure(scene, "explicit", 1e-3)
+            row.method, row.dt, row.wall_s, row.chosen = "auto", dt, walls["auto"], "explicit, 1 ms"
+            return row
         row = Run(method, dt, wall_s=walls[method] / dt)
         if method == "explicit" and dt > 1e-3:
             row.failed = "Chatter: at the step"
@@ -79,12 +84,13 @@ def _first_order(monkeypatch, walls):
 
 
 def test_errors_against_the_reference_have_the_known_answer(monkeypatch, box):
-    walls = {"newton": 1e-3, "explicit": 1e-4}
+    walls = {"newton": 1e-3, "explicit": 1e-4, "auto": 0.05}
     v0, c = _first_order(monkeypatch, walls)
     scene = load_scene(str(box), cls=UserScene)
     result = frontier.frontier(scene, method_names=("newton", "explicit"), steps=(2e-3, 1e-3, 5e-4), log=lambda s: None)
     reference = v0 * (1 + c * 2.5e-4)  # newton at half the finest step
     assert result["reference"].dt == pytest.approx(2.5e-4)
+    assert [r.method for r in result["rows"]].count("auto") == 1  # beside the scene's own method, at its step
     for row in result["rows"]:
         if row.failed:
             assert row.method == "explicit" and row.dt > 1e-3
@@ -104,6 +110,9 @@ def test_errors_against_the_reference_have_the_known_answer(monkeypatch, box):
     # within 2 %, the cheapest: explicit at 1 ms (0.1 s, 1.5 %), against newton at 1 ms (1 s)
     assert summary["fastest"]["method"] == "explicit" and summary["fastest"]["dt"] == pytest.approx(1e-3)
     assert summary["default_over_fastest"] == pytest.approx(10.0)
+    # auto's run is not a setting of the sweep: the fastest is still explicit at 1 ms, though auto's wall is less
+    assert summary["auto"]["chosen"] == "explicit, 1 ms" and summary["auto_over_fastest"] == pytest.approx(0.5)
+    assert summary["auto"]["errors"]["com_speed_m_s"] == pytest.approx(v0 * c * 7.5e-4 / reference)
 
 
 def test_the_cli_writes_one_row_per_run_and_a_chart(box, tmp_path, capsys):
@@ -115,8 +124,9 @@ def test_the_cli_writes_one_row_per_run_and_a_chart(box, tmp_path, capsys):
         rows = list(csv.DictReader(f))
     assert [(r["method"], float(r["dt_s"])) for r in rows] == [("newton", 1e-3), ("newton", 5e-4),
                                                                 ("newton-midpoint", 1e-3),
-                                                                ("newton-midpoint", 5e-4)]
-    assert [r["default"] for r in rows] == ["1", "0", "0", "0"]
+                                                                ("newton-midpoint", 5e-4), ("auto", 1e-3)]
+    assert [r["default"] for r in rows] == ["1", "0", "0", "0", "0"]
+    assert rows[-1]["chosen"] and rows[-1]["chosen"] == summary["auto"]["chosen"]
     for r in rows:
         assert not r["failed"] and float(r["wall_s"]) > float(r["companion_wall_s"]) > 0
         assert float(r["com_position_m_error"]) < 0.01 and r["com_position_m_estimate"] != ""

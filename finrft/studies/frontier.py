@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from .. import methods
-from ..convergence import ROBOT_HEADLINE, figure_difference, magnitude
+from ..convergence import ROBOT_HEADLINE, ErrorLimits, figure_difference, magnitude
 from ..errors import SceneError, SimulationFailed
 from ..experiments.user_model import STILL_SPEED
 
@@ -83,7 +83,7 @@ class Run:
 
     method: str
     dt: float                    # the step (an adaptive method: its largest step, sim.max_step)
-    default: bool = False        # the scene's own setting (`auto`'s choice where that method exists)
+    default: bool = False        # the scene's own setting
     wall_s: float = math.nan     # the whole run, its error estimate's companion included
     companion_wall_s: float = math.nan
     steps: int = 0
@@ -113,21 +113,23 @@ class Run:
 
 
 def _scene_for(scene: Any, method: str, dt: float) -> Any:
-    if methods.get(method).adaptive:
+    if not methods.chooses(method) and methods.get(method).adaptive:
         return scene.replace(**{"sim.method": method, "sim.max_step": dt})
     return scene.replace(**{"sim.method": method, "sim.dt": dt})
 
 
 def measure(scene: Any, method: str, dt: float, *, estimate: bool = True) -> Run:
     """One whole run of the scene at ``method`` and ``dt`` (its companion too, with ``estimate``), timed in this
-    process; a run that fails is returned with ``failed`` saying why."""
+    process; a run that fails is returned with ``failed`` saying why. `auto` chooses under the default limits (the
+    headline figures', as `finrft run` does), its pilots timed with the run; any other method runs unlimited."""
     from ..experiment import run
     from ..experiments.user_model import UserModel
     s = _scene_for(scene, method, dt)
     row = Run(method, dt)
     start = time.perf_counter()
     try:
-        result = run(UserModel.of(s), s, estimate_error=estimate, max_error=None)
+        limits = ErrorLimits() if methods.chooses(method) else None
+        result = run(UserModel.of(s), s, estimate_error=estimate, max_error=limits)
     except SimulationFailed as exc:
         row.wall_s = time.perf_counter() - start
         row.failed = f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}"
@@ -137,33 +139,37 @@ def measure(scene: Any, method: str, dt: float, *, estimate: bool = True) -> Run
     row.steps = int(result.steps)
     row.figures = result.figure_values()
     row.estimates = {k: v for k, v in (result.error_estimate or {}).items() if k in row.figures}
-    row.chosen = str(result.summary().get("method_choice") or "")  # what `auto` chose, where it ran
+    choice = result.method_choice
+    if choice is not None:
+        row.chosen = f"{choice.method}, {1e3 * choice.dt:g} ms"
     return row
 
 
 def frontier(scene: Any, *, name: str = "robot", method_names: tuple[str, ...] | None = None,
              steps: tuple[float, ...] | None = None, duration: float = 0.0, accuracy: float = ACCURACY,
              log: Callable[[str], None] = print, progress: Callable[[int, int], None] | None = None) -> dict[str, Any]:
-    """Sweep a robot scene (a `UserScene`) over ``method_names`` (default: every method but `auto`) and ``steps``
-    (s; default: the scene's step times `STEP_FACTORS`), and run its default setting (the scene's method, or `auto`
-    where that method exists); compare every run's figures with the converged run's (`newton` at half the finest
-    step). ``duration`` > 0: that long instead of the scene's, its settle scaled alike. Returns the rows (`Run`), the
-    reference and the summary (`summarise`)."""
+    """Sweep a robot scene (a `UserScene`) over ``method_names`` (default: every method) and ``steps`` (s; default:
+    the scene's step times `STEP_FACTORS`), and run its default setting (the scene's own method and step) and `auto`
+    from the scene's step, where the scene's method is not `auto` itself; compare every run's figures with the
+    converged run's (`newton` at half the finest step). ``duration`` > 0: that long instead of the scene's, its settle
+    scaled alike. Returns the rows (`Run`), the reference and the summary (`summarise`)."""
     if duration > 0:
         scene = scene.replace(**{"sim.duration": duration,
                                  "sim.settle": scene.sim.settle * duration / scene.sim.duration})
-    names = tuple(method_names or (m for m in methods.names() if m != "auto"))
+    names = tuple(method_names or methods.names())
     steps = tuple(sorted(steps or tuple(scene.sim.dt * f for f in STEP_FACTORS), reverse=True))
-    default_method = "auto" if "auto" in methods.names() else scene.sim.method
+    default_method = scene.sim.method
     default_swept = default_method in names and any(math.isclose(dt, scene.sim.dt) for dt in steps)
-    total = len(names) * len(steps) + 1 + (not default_swept) + ("newton" not in names)
+    auto_extra = not methods.chooses(default_method)
+    total = len(names) * len(steps) + 1 + (not default_swept) + auto_extra + ("newton" not in names)
     done = 0
 
     def tick(row: Run) -> None:
         nonlocal done
         done += 1
         what = row.failed or f"{row.wall_s:.2f} s"
-        log(f"{name}: {row.method} at {row.dt:g} s{' (default)' if row.default else ''}: {what}")
+        chose = f" (chose {row.chosen})" if row.chosen else ""
+        log(f"{name}: {row.method} at {row.dt:g} s{' (default)' if row.default else ''}{chose}: {what}")
         if progress is not None:
             progress(done, total)
 
@@ -177,6 +183,10 @@ def frontier(scene: Any, *, name: str = "robot", method_names: tuple[str, ...] |
     if not default_swept:
         row = measure(scene, default_method, scene.sim.dt)
         row.default = True
+        rows.append(row)
+        tick(row)
+    if auto_extra:
+        row = measure(scene, methods.AUTO, scene.sim.dt)
         rows.append(row)
         tick(row)
     reference_dt = min(steps) / 2
@@ -196,30 +206,44 @@ def frontier(scene: Any, *, name: str = "robot", method_names: tuple[str, ...] |
 
 
 def summarise(name: str, rows: list[Run], reference: Run, check: Run, accuracy: float) -> dict[str, Any]:
-    """The default run's wall time, headline errors and estimate/error ratios; the fastest run whose headline
-    figures are within the accuracy asked for (or the default's own, where that is worse), and the default's wall
+    """The default run's and `auto`'s wall time, headline errors and estimate/error ratios (``default``, ``auto``:
+    one and the same where the scene's method is `auto`); the fastest run of the sweep whose headline figures are
+    within the accuracy asked for (or the default's own, where that is worse), and the default's and `auto`'s wall
     time over that run's."""
     default = next(r for r in rows if r.default)
+    auto = next((r for r in rows if methods.chooses(r.method)), None)
     out: dict[str, Any] = {
         "robot": name, "reference": {"method": "newton", "dt": reference.dt, "wall_s": reference.wall_s},
         "reference_error": {k: check.errors.get(k) for k in reference.figures},
-        "default": {"method": default.method, "dt": default.dt, "wall_s": default.wall_s, "failed": default.failed,
-                    "chosen": default.chosen}}
+        "default": _described(default)}
+    if auto is not None:
+        out["auto"] = _described(auto)
     if default.failed:
         return out
-    out["default"].update(
-        errors={k: default.errors.get(k) for k in headline_keys() if k in default.errors},
-        estimate_over_error={k: (default.estimated.get(k) / e if e and default.estimated.get(k) is not None
-                                 else None) for k in headline_keys() if (e := default.errors.get(k)) is not None},
-        worst=default.worst())
     target = max(accuracy, default.headline_error() or 0.0)
-    reaching = [r for r in rows if not r.failed and r.headline_error() is not None and r.headline_error() <= target]
+    swept = [r for r in rows if not methods.chooses(r.method)]
+    reaching = [r for r in swept if not r.failed and r.headline_error() is not None and r.headline_error() <= target]
     out["target"] = target
     if reaching:
         fastest = min(reaching, key=lambda r: r.wall_s)
         out["fastest"] = {"method": fastest.method, "dt": fastest.dt, "wall_s": fastest.wall_s,
                           "headline_error": fastest.headline_error()}
         out["default_over_fastest"] = default.wall_s / fastest.wall_s
+        if auto is not None and not auto.failed:
+            out["auto_over_fastest"] = auto.wall_s / fastest.wall_s
+    return out
+
+
+def _described(row: Run) -> dict[str, Any]:
+    """A run's setting, wall time, what `auto` chose, and where it finished its headline errors, their estimates
+    over them and its worst figure."""
+    out: dict[str, Any] = {"method": row.method, "dt": row.dt, "wall_s": row.wall_s, "failed": row.failed,
+                           "chosen": row.chosen}
+    if not row.failed:
+        out.update(errors={k: row.errors.get(k) for k in headline_keys() if k in row.errors},
+                   estimate_over_error={k: (row.estimated.get(k) / e if e and row.estimated.get(k) is not None
+                                            else None) for k in headline_keys() if (e := row.errors.get(k)) is not None},
+                   worst=row.worst())
     return out
 
 
@@ -251,13 +275,14 @@ def write_csv(path: str | Path, result: dict[str, Any]) -> None:
 
 def chart(path: str | Path, result: dict[str, Any], accuracy: float = ACCURACY) -> None:
     """Wall time against error, one panel per headline figure and one for each run's worst figure, one marker per
-    method (a line through its steps), the default's run ringed; failed runs are left out."""
+    method (a line through its steps; `auto` a star, labelled with its choice), the default's run ringed; failed runs
+    are left out."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     panels = [*headline_keys(), "worst figure"]
     fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 3.8), sharey=True)
-    markers = dict(zip(methods.names(), "osD^v<>ph*"))
+    markers = dict(zip(methods.names(), "osD^v<>ph")) | {methods.AUTO: "*"}
     for ax, panel in zip(axes, panels):
         for method in dict.fromkeys(r.method for r in result["rows"]):
             points = [(e, r.wall_s, r.default, r.dt) for r in result["rows"] if r.method == method and not r.failed
@@ -267,7 +292,9 @@ def chart(path: str | Path, result: dict[str, Any], accuracy: float = ACCURACY) 
                 continue
             points.sort(key=lambda p: p[3])  # a method's line runs through its steps in order
             ax.plot([max(p[0], 1e-7) for p in points], [p[1] for p in points], marker=markers.get(method, "o"),
-                    color=f"C{list(markers).index(method) if method in markers else 9}", label=method, alpha=0.85)
+                    color=f"C{list(markers).index(method) if method in markers else 9}", alpha=0.85,
+                    label=method if not methods.chooses(method) else
+                    f"auto: {next(r.chosen for r in result['rows'] if r.method == method)}")
             for e, wall, default, _ in points:
                 if default:
                     ax.plot(max(e, 1e-7), wall, "o", ms=16, mfc="none", mec="k", mew=1.5,
@@ -284,27 +311,41 @@ def chart(path: str | Path, result: dict[str, Any], accuracy: float = ACCURACY) 
     plt.close(fig)
 
 
+def _pct(v: float | None) -> str:
+    return "—" if v is None else f"{100 * v:.2g} %"
+
+
+def _headline(run: dict[str, Any]) -> str:
+    return ", ".join(f"{k.split('_m_s')[0]} {_pct(v)}" for k, v in run["errors"].items())
+
+
 def markdown_row(summary: dict[str, Any]) -> str:
     """The robot's row of the results page's table."""
     d = summary["default"]
     setting = f"{d['method']}, {1e3 * d['dt']:g} ms"
     if d["failed"]:
-        return f"| {summary['robot']} | {setting} | {d['wall_s']:.2f} | failed: {d['failed']} | | | | |"
-
-    def pct(v: float | None) -> str:
-        return "—" if v is None else f"{100 * v:.2g} %"
-    errors = ", ".join(f"{k.split('_m_s')[0]} {pct(v)}" for k, v in d["errors"].items())
+        return f"| {summary['robot']} | {setting} | {d['wall_s']:.2f} | failed: {d['failed']} |" + " |" * 7
+    errors = _headline(d)
     ratios = ", ".join(f"{'—' if v is None else f'{v:.2g}'}" for v in d["estimate_over_error"].values())
-    worst = f"{d['worst'][0]} {pct(d['worst'][1])}" if d.get("worst") else "—"
+    worst = f"{d['worst'][0]} {_pct(d['worst'][1])}" if d.get("worst") else "—"
+    auto = summary.get("auto")
+    if auto is None:
+        chose = "—"
+    elif auto["failed"]:
+        chose = f"failed: {auto['failed']}"
+    else:
+        chose = f"{auto['chosen']} ({auto['wall_s']:.2f} s; {_headline(auto)})"
     fastest = summary.get("fastest")
     fast = f"{fastest['method']}, {1e3 * fastest['dt']:g} ms ({fastest['wall_s']:.2f} s)" if fastest else "none"
     ratio = f"{summary['default_over_fastest']:.2f}" if fastest else "—"
+    auto_ratio = f"{summary['auto_over_fastest']:.2f}" if "auto_over_fastest" in summary else "—"
     ref = max((v for k, v in summary["reference_error"].items() if v is not None and k in headline_keys()),
               default=None)
-    return (f"| {summary['robot']} | {setting} | {d['wall_s']:.2f} | {errors} | {ratios} | {worst} | {fast} | "
-            f"{ratio} | {pct(ref)} |")
+    return (f"| {summary['robot']} | {setting} | {d['wall_s']:.2f} | {errors} | {ratios} | {worst} | {chose} | "
+            f"{fast} | {ratio} | {auto_ratio} | {_pct(ref)} |")
 
 
 MARKDOWN_HEADER = ("| robot | default | wall s | headline error vs converged | estimate / error | worst figure | "
-                   "fastest at the same accuracy (wall s) | default / fastest | reference's own headline error |\n"
-                   "|---|---|---:|---|---|---|---|---:|---:|")
+                   "auto's choice (wall s; headline error) | fastest at the same accuracy (wall s) | default / fastest "
+                   "| auto / fastest | reference's own headline error |\n"
+                   "|---|---|---:|---|---|---|---|---|---:|---:|---:|")

@@ -109,43 +109,68 @@ def apply(spec: Any, design: tuple[str, ...]) -> None:
     outside its array. ``kp`` and ``kv`` of an actuator are its position servo's gains (gainprm[0] and
     -biasprm[1], -biasprm[2])."""
     for key, value in entries(design).items():
-        kind, name, attribute, index = parse(key)
-        where = f"model.{key}"
-        element = _element(spec, kind, name, where)
-        if kind == "actuator" and attribute in ("kp", "kv"):
-            _servo(element, attribute, value, index, where)
-            continue
-        current = getattr(element, attribute, None) if not attribute.startswith("_") else None
-        if isinstance(current, np.ndarray) and current.dtype.kind == "f":
-            if index is None and (kind, attribute) in FIRST:
-                index = 0
-            if index is None or not 0 <= index < current.size:
-                raise SceneError(f"{where}: {kind} {name!r}'s {attribute} holds {current.size} numbers: give an "
-                                 f"index from 0 to {current.size - 1}, as model.{kind}.{name}.{attribute}.0")
+        element, attribute, index = _target(spec, key)
+        if _servo_gain(key):
+            gains, biases = element.gainprm, element.biasprm
+            if attribute == "kp":
+                gains[0], biases[1] = value, -value
+            else:
+                biases[2] = -value
+            element.gainprm, element.biasprm = gains, biases
+        elif index is None:
+            setattr(element, attribute, value)
+        else:
+            current = getattr(element, attribute)
             flat = current.ravel().copy()
             flat[index] = value
             setattr(element, attribute, flat.reshape(current.shape))
-        elif isinstance(current, float):
-            if index is not None:
-                raise SceneError(f"{where}: {kind} {name!r}'s {attribute} is one number: leave the index out, as "
-                                 f"model.{kind}.{name}.{attribute}")
-            setattr(element, attribute, value)
-        else:
-            raise SceneError(f"{where}: a {kind} has no numeric attribute {attribute!r} (its numbers: "
-                             f"{', '.join(_numeric(element))}{', kp, kv' if kind == 'actuator' else ''})")
 
 
-def _servo(actuator: Any, gain: str, value: float, index: int | None, where: str) -> None:
-    """A position servo's kp (gainprm[0] = kp, biasprm[1] = -kp) or kv (biasprm[2] = -kv)."""
+def current(spec: Any, key: str) -> float:
+    """The model's own value of a design key (SceneError as `apply`)."""
+    key = key.removeprefix("model.")
+    element, attribute, index = _target(spec, key)
+    if _servo_gain(key):
+        return float(element.gainprm[0] if attribute == "kp" else -element.biasprm[2])
+    value = getattr(element, attribute)
+    return float(value if index is None else value.ravel()[index])
+
+
+def _servo_gain(key: str) -> bool:
+    kind, _, attribute, _ = parse(key)
+    return kind == "actuator" and attribute in ("kp", "kv")
+
+
+def _target(spec: Any, key: str) -> tuple[Any, str, int | None]:
+    """The element a design key edits, its attribute and the index in it (None: a number)."""
+    kind, name, attribute, index = parse(key)
+    where = f"model.{key}"
+    element = _element(spec, kind, name, where)
+    if _servo_gain(key):
+        _check_servo(element, attribute, index, where)
+        return element, attribute, None
+    current = getattr(element, attribute, None) if not attribute.startswith("_") else None
+    if isinstance(current, np.ndarray) and current.dtype.kind == "f":
+        if index is None and (kind, attribute) in FIRST:
+            index = 0
+        if index is None or not 0 <= index < current.size:
+            raise SceneError(f"{where}: {kind} {name!r}'s {attribute} holds {current.size} numbers: give an "
+                             f"index from 0 to {current.size - 1}, as model.{kind}.{name}.{attribute}.0")
+        return element, attribute, index
+    if isinstance(current, float):
+        if index is not None:
+            raise SceneError(f"{where}: {kind} {name!r}'s {attribute} is one number: leave the index out, as "
+                             f"model.{kind}.{name}.{attribute}")
+        return element, attribute, None
+    raise SceneError(f"{where}: a {kind} has no numeric attribute {attribute!r} (its numbers: "
+                     f"{', '.join(_numeric(element))}{', kp, kv' if kind == 'actuator' else ''})")
+
+
+def _check_servo(actuator: Any, gain: str, index: int | None, where: str) -> None:
+    """SceneError unless ``actuator`` is a position servo (kp: gainprm[0] = -biasprm[1]; kv: -biasprm[2])."""
     import mujoco
-    gains, biases = actuator.gainprm, actuator.biasprm
     if index is not None:
         raise SceneError(f"{where}: {gain} is one number: leave the index out")
-    if actuator.biastype != mujoco.mjtBias.mjBIAS_AFFINE or biases[1] != -gains[0]:
+    if actuator.biastype != mujoco.mjtBias.mjBIAS_AFFINE or actuator.biasprm[1] != -actuator.gainprm[0]:
         raise SceneError(f"{where}: actuator {actuator.name!r} is not a position servo (<position>): {gain} is "
                          f"a servo's gain; set its gainprm and biasprm instead (model.actuator.NAME.gainprm.0)")
-    if gain == "kp":
-        gains[0], biases[1] = value, -value
-    else:
-        biases[2] = -value
-    actuator.gainprm, actuator.biasprm = gains, biases

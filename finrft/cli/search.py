@@ -18,6 +18,7 @@ from ..errors import SceneError, UsageError
 from ..experiments.flags import add_force, add_json, add_max_error, add_quiet, add_workers, limits, number
 from ..experiments.plate import add_plate_scene, resolve_plate
 from ..experiments.swim import add_robot, resolve_robot
+from ..experiments.user_model import EXAMPLES
 from ..files import atomic_path
 from .common import (Interrupted, check_output, print_json, progress, said_written, say, text_stream,
                      write_text)
@@ -95,6 +96,18 @@ def add_optimize(sub: Any) -> None:
     add_json(p, "the result")
     add_quiet(p)
     add_robot(p)
+    g = p.add_argument_group("any robot scene (finrft run's; docs/guide/optimize.md)")
+    g.add_argument("--objective", metavar="FIGURE[:max|min]", help="optimise this figure of a robot scene's run "
+                   "(--scene ROBOT.toml or --example NAME, as finrft run) instead of the two-fin robot's eta: any "
+                   "number of its JSON by path, e.g. com_velocity_m_s.0, com_speed_m_s, cost_of_transport:min, "
+                   "medium_force_N.2 (max when left out); --bounds then takes any of its keys, e.g. "
+                   "control.0.amplitude=0.5,1.2, control.*.frequency=0.5,2 (every entry's), medium.zeta=0.3,0.8, "
+                   "model.geom.NAME.size.0=10,30mm")
+    g.add_argument("--constraint", action="append", default=[], metavar="FIGURE<=VALUE",
+                   help="with --objective: keep a figure below (<=) or above (>=) a value in its SI unit, e.g. "
+                   "cost_of_transport<=5 (repeatable)")
+    g.add_argument("--example", choices=EXAMPLES, help="with --objective: an example robot instead of --scene")
+    g.add_argument("--write-scene", metavar="OUT.toml", help="with --objective: write the best scene")
     add_max_error(p)
     p.set_defaults(handler=optimize)
 
@@ -119,6 +132,11 @@ def optimize(args: argparse.Namespace) -> int:
     from ..studies import searchlog
     from ..studies.bounds import display_units
     from ..studies.optimize import best_gait, best_gait_text, optimize
+    if args.objective or args.example or (args.resume and searchlog.schema_of(args.resume) == searchlog.SCENE):
+        return optimize_scene(args)
+    for flag in ("constraint", "write_scene"):
+        if getattr(args, flag):
+            raise UsageError(f"--{flag.replace('_', '-')} goes with --objective (a robot scene's search)")
     check_output(args.rrd, ".rrd", "--rrd", args.force)
     log = search_log(args, {"bounds": "--bounds", "scene": "--scene", "preset": "--preset", "set": "--set",
                             "fin": "--fin", "model": "--model", "backend": "--backend"})
@@ -145,6 +163,91 @@ def optimize(args: argparse.Namespace) -> int:
     said_written(args, (("search log", log), ("rerun recording", args.rrd)))
     print_json(args, summary)
     return 0
+
+
+def optimize_scene(args: argparse.Namespace) -> int:
+    """finrft optimize --objective: any figure of a robot scene over any of its keys."""
+    from ..experiments.user_model import robot_scene
+    from ..studies import searchlog
+    from ..studies.bounds import display_units, parse_bounds, shown
+    from ..studies.optimize import Constraint, Objective, Variable, logged_scene_problem, optimize_scene
+    from ..scene import UserScene
+    for flag in ("preset", "fin", "model"):
+        if getattr(args, flag):
+            raise UsageError(f"--{flag} is the two-fin robot's: a robot scene's search takes --scene or --example")
+    check_output(args.rrd, ".rrd", "--rrd", args.force)
+    check_output(args.write_scene, ".toml", "--write-scene", args.force)
+    log = search_log(args, {"bounds": "--bounds", "scene": "--scene", "example": "--example", "set": "--set",
+                            "backend": "--backend", "objective": "--objective", "constraint": "--constraint",
+                            "max_error": "--max-error"})
+    if args.resume:
+        scene, variables, objective, constraints, max_error = logged_scene_problem(args.resume)
+        past = read_scene_log(args.resume)
+    else:
+        if not args.objective:
+            raise UsageError("--objective FIGURE is required with --example (e.g. --objective com_speed_m_s)")
+        scene = robot_scene(args)
+        objective = Objective.parse(args.objective)
+        constraints = [Constraint.parse(c) for c in args.constraint]
+        max_error = limits(args) if args.max_error else None
+        variables = [Variable(k, lo, hi) for k, (lo, hi) in parse_bounds(args.bounds, UserScene).items()]
+        if not variables:
+            raise UsageError("give the keys to search: --bounds KEY=LOW,HIGH (repeatable), e.g. "
+                             "--bounds control.*.frequency=0.5,2")
+        past = []
+    keys = [v.key for v in variables]
+    generations = [(display_units(UserScene, keys, x), f) for x, f in past]
+    sign = 1 if objective.maximize else -1
+    executor = _executor(args)
+    with progress(args, args.budget, "optimize", "evaluations") as bar:
+        def on_generation(g: int, values: np.ndarray, extras: dict[str, np.ndarray], es: Any) -> None:
+            usable = np.where(extras["usable"] > 0, extras["objective"], np.nan)
+            generations.append((display_units(UserScene, keys, values), usable))
+            if bar:
+                best = np.nanmax(sign * usable) * sign if np.any(np.isfinite(usable)) else float("nan")
+                bar(es.countevals, f"generation {g + 1}, best {objective.figure} {best:.4g}")
+
+        try:
+            result = optimize_scene(scene, variables, objective, constraints, budget=args.budget, seed=args.seed,
+                                    log=log, resume=bool(args.resume), replace=args.force, executor=executor,
+                                    workers=args.workers, max_error=max_error, on_generation=on_generation)
+        except KeyboardInterrupt:
+            raise interrupted("optimize", log, searchlog.SCENE) from None
+    if args.write_scene:
+        write_text(args.write_scene, scenes.to_toml(result.best_scene))
+    if args.rrd:
+        from .. import record
+        from ..experiments.user_model import run_robot
+        record.write_optimization_rrd(args.rrd, generations, keys, run_robot(result.best_scene, max_error=None),
+                                      figure=objective.figure, scale=1.0, unit="SI", maximize=objective.maximize)
+    search = result.search
+    say(args, f"best {objective.figure} {result.best_objective:.6g} +- {result.best_objective_estimate:.2g} (refined "
+        f"at half the step{'; the refined candidates overlap within their estimates' * result.best_ambiguous}) at "
+        + ", ".join(shown(UserScene, k, v) for k, v in result.best.items())
+        + f" after {search.evaluations} evaluations in {search.wall_s:.1f} s ({result.flagged} flagged, "
+          f"{result.infeasible} infeasible, {result.failed} failed)")
+    said_written(args, (("search log", log), ("scene", args.write_scene), ("rerun recording", args.rrd)))
+    print_json(args, {"objective": str(objective), "best": result.best, "best_objective": result.best_objective,
+                      "best_objective_estimate": result.best_objective_estimate,
+                      "best_ambiguous": result.best_ambiguous, "refined": result.refined,
+                      "constraints": [str(c) for c in constraints], "evaluations": search.evaluations,
+                      "generations": search.generations, "flagged": result.flagged,
+                      "infeasible": result.infeasible, "failed": result.failed, "wall_s": search.wall_s,
+                      "seed": search.seed, "budget": search.budget,
+                      "stop": {k: str(v) for k, v in search.stop.items()}})
+    return 0
+
+
+def read_scene_log(path: str) -> list[tuple[np.ndarray, np.ndarray]]:
+    """A robot scene's search log as its generations: (values SI, the objective, NaN where unusable) each."""
+    from ..studies import searchlog
+    from ..studies.optimize import INFEASIBLE, read_log
+    log = read_log(path, searchlog.SCENE)
+    out = []
+    for g in range(len(log["state/sigma"])):
+        at = log["generation"] == g
+        out.append((log["x"][at], np.where(log["cost"][at] < INFEASIBLE, log["objective"][at], np.nan)))
+    return out
 
 
 def _executor(args: argparse.Namespace):

@@ -654,6 +654,20 @@ def example(name: str) -> str:
     return str(mjcf_path(f"{name}.toml"))
 
 
+def robot_scene(args: argparse.Namespace) -> UserScene:
+    """The robot scene of a command's flags: --scene FILE.toml or --example NAME, then --set (design keys too),
+    --backend and the MODEL.xml argument where the command has them."""
+    if bool(args.scene) == bool(args.example):
+        raise UsageError("give the scene: --scene FILE.toml, or --example NAME (one of "
+                         f"{', '.join(EXAMPLES)})")
+    overrides = dict(parse_override(item, UserScene) for item in args.set)
+    if getattr(args, "backend", None):
+        overrides["sim.backend"] = args.backend
+    if getattr(args, "model", None):
+        overrides["model.path"] = args.model
+    return load_scene(args.scene or example(args.example), overrides=overrides, cls=UserScene)
+
+
 # ---------------------------------------------------------------------------------------------------------
 # The command: finrft run
 
@@ -683,15 +697,7 @@ class RunCommand(Command):
         add_result_files(p)
 
     def scene(self, args: argparse.Namespace) -> UserScene:
-        if bool(args.scene) == bool(args.example):
-            raise UsageError("give the scene: --scene FILE.toml, or --example NAME (one of "
-                             f"{', '.join(EXAMPLES)})")
-        overrides = dict(parse_override(item, UserScene) for item in args.set)
-        if args.backend:
-            overrides["sim.backend"] = args.backend
-        if args.model:
-            overrides["model.path"] = args.model
-        return load_scene(args.scene or example(args.example), overrides=overrides, cls=UserScene)
+        return robot_scene(args)
 
     def jobs(self, args: argparse.Namespace, scene: UserScene) -> list[tuple[UserModel, UserScene]]:
         return [(UserModel.of(scene), scene)]

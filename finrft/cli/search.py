@@ -15,7 +15,8 @@ from .. import geometry
 from .. import scene as scenes
 from ..experiments.swim import RobotScene
 from ..errors import SceneError, UsageError
-from ..experiments.flags import add_force, add_json, add_max_error, add_quiet, add_workers, limits, number
+from ..experiments.flags import (add_force, add_json, add_max_error, add_quiet, add_scene_flags, add_workers, limits,
+                                 number)
 from ..experiments.plate import add_plate_scene, resolve_plate
 from ..experiments.swim import add_robot, resolve_robot
 from ..experiments.user_model import EXAMPLES
@@ -227,15 +228,24 @@ def optimize_scene(args: argparse.Namespace) -> int:
         + f" after {search.evaluations} evaluations in {search.wall_s:.1f} s ({result.flagged} flagged, "
           f"{result.infeasible} infeasible, {result.failed} failed)")
     said_written(args, (("search log", log), ("scene", args.write_scene), ("rerun recording", args.rrd)))
-    print_json(args, {"objective": str(objective), "best": result.best, "best_objective": result.best_objective,
+    print_json(args, _reported({"objective": str(objective), "best": result.best, "best_objective": result.best_objective,
                       "best_objective_estimate": result.best_objective_estimate,
                       "best_ambiguous": result.best_ambiguous, "refined": result.refined,
                       "constraints": [str(c) for c in constraints], "evaluations": search.evaluations,
                       "generations": search.generations, "flagged": result.flagged,
                       "infeasible": result.infeasible, "failed": result.failed, "wall_s": search.wall_s,
                       "seed": search.seed, "budget": search.budget,
-                      "stop": {k: str(v) for k, v in search.stop.items()}})
+                      "stop": {k: str(v) for k, v in search.stop.items()}}))
     return 0
+
+
+def _reported(value: Any) -> Any:
+    """A result as JSON reports it: a figure a run does not report (NaN in the tables) as null."""
+    if isinstance(value, dict):
+        return {k: _reported(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_reported(v) for v in value]
+    return None if isinstance(value, float) and value != value else value
 
 
 def read_scene_log(path: str) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -403,4 +413,91 @@ def fit_rft(args: argparse.Namespace) -> int:
     return 0
 
 
-SUBCOMMANDS = (add_optimize, add_fit, add_fit_rft)
+def add_sweep(sub: Any) -> None:
+    p = sub.add_parser("sweep", help="run variants of a robot scene over a grid or at random: a table of figures",
+                       description="Run variants of a robot scene (finrft run's: --scene ROBOT.toml or --example "
+                       "NAME) over a grid of values of any of its keys (--grid, repeatable: every combination), or "
+                       "N variants drawn at random (--random N --seed S, with a distribution per key: --dist), each "
+                       "with its error estimate, in parallel processes (or on a Dask cluster). Writes one table of "
+                       "every figure of the run's JSON and its estimate per variant (--csv; --out: HDF5 with each "
+                       "variant's resolved scene) and draws a figure against a swept key (--plot). Keys are scene "
+                       "keys in SI (medium.zeta, control.0.amplitude), every entry's (control.*.frequency) or the "
+                       "model's design keys (model.geom.NAME.size.0); values may carry a unit suffix (20mm, 30deg).")
+    p.add_argument("--grid", action="append", default=[], metavar="KEY=A,B,C", help="the values of a key (repeatable; "
+                   "every combination runs)")
+    p.add_argument("--random", type=number("variants", minimum=1, inclusive=True, integer=True), metavar="N",
+                   help="N variants drawn at random from the --dist distributions")
+    p.add_argument("--seed", type=_seed, default=1, metavar="S", help="the random variants' seed (default: 1)")
+    p.add_argument("--dist", action="append", default=[], metavar="KEY=NAME:A,B", help="a key's distribution for "
+                   "--random: uniform:LOW,HIGH, loguniform:LOW,HIGH or normal:MEAN,SD, e.g. "
+                   "medium.zeta=uniform:0.4,0.8 (repeatable)")
+    p.add_argument("--csv", metavar="TABLE.csv", help="the table: a row per variant, its keys, every figure and its "
+                   "estimate")
+    p.add_argument("--out", metavar="TABLE.h5", help="the table as HDF5, with each variant's resolved scene")
+    p.add_argument("--plot", metavar="KEY", help="draw --figure against this swept key (into --png)")
+    p.add_argument("--figure", default="com_speed_m_s", metavar="PATH", help="the figure --plot draws (default: "
+                   "%(default)s)")
+    p.add_argument("--png", metavar="OUT.png", help="where --plot draws")
+    add_workers(p)
+    p.add_argument("--executor", choices=("local", "dask"), default="local",
+                   help="where variants run: local processes, or a Dask cluster (needs finrft[cluster])")
+    p.add_argument("--address", metavar="tcp://HOST:PORT", help="Dask scheduler address (--executor dask)")
+    g = add_scene_flags(p, "robot", "medium.zeta=0.5", backend="where the RFT force is computed (overrides "
+                        "sim.backend)")
+    g.add_argument("--example", choices=EXAMPLES, help="an example robot instead of --scene")
+    add_max_error(p)
+    add_force(p)
+    add_json(p, "the table (a list of variants: keys, figures, estimates)")
+    add_quiet(p)
+    p.set_defaults(handler=sweep)
+
+
+def sweep(args: argparse.Namespace) -> int:
+    from ..experiments.user_model import UserModel, robot_scene
+    from ..studies import sweep as sweeps
+    from ..studies.figures import check_path
+    for path, suffix, flag in ((args.csv, ".csv", "--csv"), (args.out, ".h5", "--out"), (args.png, ".png", "--png")):
+        check_output(path, suffix, flag, args.force)
+    if bool(args.plot) != bool(args.png):
+        raise UsageError("--plot KEY and --png OUT.png go together")
+    if bool(args.grid) == bool(args.random):
+        raise UsageError("give the variants: --grid KEY=A,B,C (repeatable), or --random N with --dist")
+    if args.random and not args.dist:
+        raise UsageError("--random N draws from the --dist distributions: give one per key, e.g. "
+                         "--dist medium.zeta=uniform:0.4,0.8")
+    if args.dist and not args.random:
+        raise UsageError("--dist goes with --random N")
+    scene = robot_scene(args)
+    variants = (sweeps.grid_variants(sweeps.parse_grid(args.grid)) if args.grid
+                else sweeps.random_variants(sweeps.parse_dist(args.dist), args.random, args.seed))
+    if args.plot:
+        if args.plot not in variants[0]:
+            raise UsageError(f"--plot {args.plot}: the sweep's keys are {', '.join(variants[0])}")
+        check_path(args.figure, scene, UserModel.of(scene).bodies)
+    executor = _executor(args)
+    max_error = limits(args) if args.max_error else None
+    with progress(args, len(variants), "sweep", "variants") as bar:
+        try:
+            result = sweeps.sweep(scene, variants, workers=args.workers, executor=executor, max_error=max_error,
+                                  progress=None if bar is None else lambda done, total: bar(done))
+        except KeyboardInterrupt:
+            raise Interrupted("interrupted; nothing was written") from None
+    if args.csv:
+        write_text(args.csv, sweeps.table_csv(result))
+    if args.out:
+        sweeps.write_hdf5(args.out, result)
+    if args.plot:
+        sweeps.plot(args.png, result, args.plot, args.figure)
+    failed = sum(1 for r in result.results if r["error"])
+    say(args, f"{len(variants)} variants of {', '.join(result.keys)}: {failed} failed; " + "; ".join(
+        f"{', '.join(f'{k}={v:g}' if isinstance(v, float) else f'{k}={v}' for k, v in variant.items())}: "
+        + (f"{args.figure} {r['figures'].get(args.figure, float('nan')):.4g} +- "
+           f"{r['estimates'].get(args.figure, float('nan')):.2g}" if not r["error"] else "failed")
+        for variant, r in list(zip(variants, result.results))[:20]) + ("; ..." if len(variants) > 20 else ""))
+    said_written(args, (("table", args.csv), ("table", args.out), ("figure", args.png)))
+    print_json(args, _reported([{"keys": v, "figures": r["figures"], "estimates": r["estimates"], "error": r["error"]}
+                                for v, r in zip(variants, result.results)]))
+    return 0
+
+
+SUBCOMMANDS = (add_optimize, add_fit, add_fit_rft, add_sweep)

@@ -109,6 +109,8 @@ def add_optimize(sub: Any) -> None:
                    "cost_of_transport<=5 (repeatable)")
     g.add_argument("--example", choices=EXAMPLES, help="with --objective: an example robot instead of --scene")
     g.add_argument("--write-scene", metavar="OUT.toml", help="with --objective: write the best scene")
+    g.add_argument("--plot", metavar="OUT.png", help="with --objective: chart of the search (each evaluation's "
+                   "objective and estimate by generation, the best so far); needs --out or --resume")
     add_max_error(p)
     p.set_defaults(handler=optimize)
 
@@ -135,7 +137,7 @@ def optimize(args: argparse.Namespace) -> int:
     from ..studies.optimize import best_gait, best_gait_text, optimize
     if args.objective or args.example or (args.resume and searchlog.schema_of(args.resume) == searchlog.SCENE):
         return optimize_scene(args)
-    for flag in ("constraint", "write_scene"):
+    for flag in ("constraint", "write_scene", "plot"):
         if getattr(args, flag):
             raise UsageError(f"--{flag.replace('_', '-')} goes with --objective (a robot scene's search)")
     check_output(args.rrd, ".rrd", "--rrd", args.force)
@@ -178,6 +180,9 @@ def optimize_scene(args: argparse.Namespace) -> int:
             raise UsageError(f"--{flag} is the two-fin robot's: a robot scene's search takes --scene or --example")
     check_output(args.rrd, ".rrd", "--rrd", args.force)
     check_output(args.write_scene, ".toml", "--write-scene", args.force)
+    check_output(args.plot, ".png", "--plot", args.force)
+    if args.plot and not (args.out or args.resume):
+        raise UsageError("--plot charts the search's log: give --out LOG.h5 (or --resume LOG.h5)")
     log = search_log(args, {"bounds": "--bounds", "scene": "--scene", "example": "--example", "set": "--set",
                             "backend": "--backend", "objective": "--objective", "constraint": "--constraint",
                             "max_error": "--max-error"})
@@ -216,6 +221,9 @@ def optimize_scene(args: argparse.Namespace) -> int:
             raise interrupted("optimize", log, searchlog.SCENE) from None
     if args.write_scene:
         write_text(args.write_scene, scenes.to_toml(result.best_scene))
+    if args.plot:
+        from ..studies.optimize import plot_scene_search, read_log
+        plot_scene_search(args.plot, read_log(log, searchlog.SCENE), objective)
     if args.rrd:
         from .. import record
         from ..experiments.user_model import run_robot
@@ -227,7 +235,8 @@ def optimize_scene(args: argparse.Namespace) -> int:
         + ", ".join(shown(UserScene, k, v) for k, v in result.best.items())
         + f" after {search.evaluations} evaluations in {search.wall_s:.1f} s ({result.flagged} flagged, "
           f"{result.infeasible} infeasible, {result.failed} failed)")
-    said_written(args, (("search log", log), ("scene", args.write_scene), ("rerun recording", args.rrd)))
+    said_written(args, (("search log", log), ("scene", args.write_scene), ("chart", args.plot),
+                        ("rerun recording", args.rrd)))
     print_json(args, _reported({"objective": str(objective), "best": result.best, "best_objective": result.best_objective,
                       "best_objective_estimate": result.best_objective_estimate,
                       "best_ambiguous": result.best_ambiguous, "refined": result.refined,

@@ -743,3 +743,34 @@ def refine(scene: UserScene, search: Search, objective: Objective, constraints: 
                        flagged=int(flags.sum()), infeasible=int(np.sum((rows["cost"] >= INFEASIBLE)
                                                                        & (rows["cost"] < FAILED_RUN))),
                        failed=int(np.sum(rows["cost"] >= FAILED_RUN)))
+
+
+def plot_scene_search(path: str | Path, log: dict[str, Any], objective: Objective) -> None:
+    """A robot scene's search as a chart: each evaluation's objective with its estimate as an error bar, by
+    generation (flagged ones hollow, unusable ones left out), and the best so far."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    generation, value, error = log["generation"], log["objective"], np.nan_to_num(log["objective_error"])
+    usable, flagged = log["usable"] > 0, log["ambiguous"] > 0
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for mask, face, label in ((usable & ~flagged, "C0", "evaluation"),
+                              (usable & flagged, "none", "flagged: its estimate overlaps a neighbour's")):
+        if np.any(mask):
+            ax.errorbar(generation[mask], value[mask], yerr=error[mask], fmt="o", mfc=face, mec="C0", ecolor="C0",
+                        capsize=2, label=label)
+    pick = np.fmax.accumulate if objective.maximize else np.fmin.accumulate
+    gens = np.arange(int(generation.max()) + 1) if len(generation) else np.zeros(0, int)
+    per = np.array([(np.nanmax if objective.maximize else np.nanmin)(np.where(usable & (generation == g), value,
+                                                                               np.nan))
+                    if np.any(usable & (generation == g)) else np.nan for g in gens])
+    ax.plot(gens, pick(per), "k-", label="best so far")
+    ax.set_xlabel("generation")
+    ax.set_ylabel(f"{objective.figure} (SI)")
+    ax.set_title(f"CMA-ES: {objective}", fontsize=9)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    with files.atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110)
+    plt.close(fig)

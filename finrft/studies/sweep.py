@@ -20,11 +20,11 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from .. import batch
+from .. import batch, design
 from ..convergence import ErrorLimits, check_limits
 from ..errors import SceneError
 from ..files import atomic_path, hdf5_written, provenance
-from ..scene import UserScene, key_unit, parse_override, to_toml
+from ..scene import UserScene, field_of, key_unit, parse_override, to_toml
 from ..schema import quantity
 from .figures import evaluate_job
 
@@ -51,8 +51,11 @@ class Distribution:
 
 
 def _value(key: str, text: str) -> Any:
-    """One value of a key as --set reads it (a number, with a unit suffix, or a name)."""
-    return parse_override(f"{key}={text.strip()}", UserScene)[1]
+    """One value of a key as --set reads it: a number (one with a unit suffix in SI, as the table holds it), or a
+    name."""
+    value = parse_override(f"{key}={text.strip()}", UserScene)[1]
+    numeric = design.is_key(key) or field_of(UserScene, key).type in ("float", float)
+    return quantity(value, key_unit(UserScene, key), key) if numeric and isinstance(value, str) else value
 
 
 def parse_grid(items: Sequence[str]) -> dict[str, list[Any]]:

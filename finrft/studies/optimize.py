@@ -751,6 +751,7 @@ def plot_scene_search(path: str | Path, log: dict[str, Any], objective: Objectiv
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
     generation, value, error = log["generation"], log["objective"], np.nan_to_num(log["objective_error"])
     usable, flagged = log["usable"] > 0, log["ambiguous"] > 0
     fig, ax = plt.subplots(figsize=(6, 4))
@@ -766,6 +767,7 @@ def plot_scene_search(path: str | Path, log: dict[str, Any], objective: Objectiv
                     if np.any(usable & (generation == g)) else np.nan for g in gens])
     ax.plot(gens, pick(per), "k-", label="best so far")
     ax.set_xlabel("generation")
+    ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))
     ax.set_ylabel(f"{objective.figure} (SI)")
     ax.set_title(f"CMA-ES: {objective}", fontsize=9)
     ax.grid(alpha=0.3)

@@ -120,6 +120,7 @@ def test_a_star_key_sets_every_entry():
     assert [c.phase for c in changed.control] == [c.phase for c in scene.control]
 
 
+@pytest.mark.slow
 def test_optimize_finds_the_deepest_plate_its_drive_can_pull(scene_file, tmp_path, capsys):
     # Deepest (lowest centre of mass) under a pull of at most F: the closed form gives F(d) linear in the depth, so
     # the optimum is the depth where the pull is F: 20 mm for F = closed_form(2 cm) = 44.4 N.
@@ -142,6 +143,7 @@ def test_optimize_finds_the_deepest_plate_its_drive_can_pull(scene_file, tmp_pat
     assert chart.stat().st_size > 5000
 
 
+@pytest.mark.slow
 def test_a_resumed_scene_search_is_the_uninterrupted_one_bit_for_bit(scene_file, tmp_path, capsys):
     whole, part = tmp_path / "whole.h5", tmp_path / "part.h5"
     common = ["--scene", str(scene_file), "--objective", "drive_load.0:min", "--bounds", "medium.zeta=0.5,1.5",
@@ -158,6 +160,7 @@ def test_a_resumed_scene_search_is_the_uninterrupted_one_bit_for_bit(scene_file,
         assert np.array_equal(a[name], b[name], equal_nan=True), name
 
 
+@pytest.mark.slow
 def test_a_sweep_reproduces_the_runs_made_directly(scene_file, tmp_path, capsys):
     table, out, png = tmp_path / "t.csv", tmp_path / "t.h5", tmp_path / "t.png"
     assert main(["sweep", "--scene", str(scene_file), "--grid", "medium.zeta=0.5,1", "--grid",

@@ -197,3 +197,11 @@ def test_random_variants_follow_their_seed_and_distribution(scene_file, capsys):
     for bad in (["--dist", "medium.zeta=gauss:1,2"], ["--dist", "medium.zeta=uniform:0.8,0.4"]):
         assert main(["sweep", "--scene", str(scene_file), "--random", "2", *bad]) == 2
         assert len(capsys.readouterr().err.strip().splitlines()) == 1
+
+
+def test_a_sweep_shows_its_progress_on_a_terminal(scene_file, monkeypatch, capsys):
+    from test_cli import _bar_updates
+    seen = _bar_updates(monkeypatch)
+    assert main(["sweep", "--scene", str(scene_file), "--grid", "medium.zeta=0.5,1", "--workers", "1"]) == 0
+    assert seen[-1] == (2, 2) and all(n <= total for n, total in seen)
+    assert "2 variants of medium.zeta: 0 failed" in capsys.readouterr().out

@@ -205,3 +205,21 @@ def test_a_sweep_shows_its_progress_on_a_terminal(scene_file, monkeypatch, capsy
     assert main(["sweep", "--scene", str(scene_file), "--grid", "medium.zeta=0.5,1", "--workers", "1"]) == 0
     assert seen[-1] == (2, 2) and all(n <= total for n, total in seen)
     assert "2 variants of medium.zeta: 0 failed" in capsys.readouterr().out
+
+
+@pytest.mark.slow  # a local cluster of two processes, started and stopped
+def test_dask_gives_the_local_search_and_sweep(scene_file):
+    distributed = pytest.importorskip("dask.distributed")
+    from finrft.studies.optimize import Objective, Variable, optimize_scene
+    from finrft.studies.sweep import sweep
+    scene = load_scene(scene_file, cls=UserScene)
+    variables, objective = [Variable("medium.zeta", 0.5, 1.5)], Objective.parse("drive_load.0:min")
+    variants = [{"medium.zeta": 0.5}, {"medium.zeta": 1.0}]
+    local = optimize_scene(scene, variables, objective, budget=4, seed=3, workers=1)
+    table = sweep(scene, variants, workers=1)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, host="127.0.0.1", dashboard_address=None,
+                                  processes=True) as cluster, distributed.Client(cluster) as client:
+        remote = optimize_scene(scene, variables, objective, budget=4, seed=3, executor=client.get_executor())
+        remote_table = sweep(scene, variants, executor=client.get_executor())
+    assert remote.best == local.best and remote.best_objective == local.best_objective
+    assert [r["figures"] for r in remote_table.results] == [r["figures"] for r in table.results]

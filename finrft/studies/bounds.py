@@ -64,5 +64,7 @@ def display_units(cls: type, keys: list[str], values: np.ndarray) -> np.ndarray:
 def shown(cls: type, key: str, value: float) -> str:
     """A scene key's SI value in the CLI's unit, with the unit: ``fin.segment_length 20 mm``."""
     unit = unit_of(cls, key) or ""
-    return f"{key} {value * DISPLAY.get(unit, 1.0):.4g} {DISPLAY_UNIT.get(unit, unit)}".rstrip()
+    # a unit the schema names only in words ("actuator's unit") is left out
+    shown_unit = "" if "unit" in unit else DISPLAY_UNIT.get(unit, unit)
+    return f"{key} {value * DISPLAY.get(unit, 1.0):.4g} {shown_unit}".rstrip()
 

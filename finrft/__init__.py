@@ -29,7 +29,9 @@ The API, by topic:
   value with its unit and source; ``finrft.media.sandswim_coefficients`` derives a segment's sand-swimming law
   from 3D-RFT (a plate or robot scene's ``[medium]`` does it for its chain)
 - fitting plate parameters to measured drags: `read_drag`, `resolve_params`, `fit` -> `Fit`
-- optimising the robot's gait: `optimize`, `Variable`
+- optimising the robot's gait: `optimize`, `Variable`; any figure of any robot scene over any of its keys (the
+  model's design keys too, `finrft.design`): `optimize_scene` with an `Objective` and `Constraint`s; its variants
+  over a grid or at random: `sweep`
 - files: `write_h5`, `write_rrd` (any result)
 
 Each name loads its module on first use, so ``import finrft`` (and ``finrft --version``) loads neither MuJoCo nor
@@ -67,7 +69,8 @@ _HOMES = {
     ".media": ("medium",),
     ".scene": ("Scene", "UserScene", "load_scene", "preset", "to_toml"),
     ".studies.fit": ("Fit", "fit", "read_drag", "resolve_params"),
-    ".studies.optimize": ("Variable", "optimize"),
+    ".studies.optimize": ("Constraint", "Objective", "Variable", "optimize", "optimize_scene"),
+    ".studies.sweep": ("sweep",),
     ".studies.table": ("table_rows", "table_scenes"),
     ".record": ("write_h5", "write_rrd"),
 }

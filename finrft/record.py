@@ -154,23 +154,27 @@ def write_rrd(run: Result, path: str | Path, *, force: bool = False) -> None:
 
 
 def write_optimization_rrd(path: str | Path, generations: list[tuple[np.ndarray, np.ndarray]],
-                           names: list[str], best: Result) -> None:
-    """An optimisation as a rerun recording: best eta per generation, the population in the searched variables
-    (the first three, in the CLI's units) per generation, and the best gait's motion."""
+                           names: list[str], best: Result, *, figure: str = "eta", scale: float = 100.0,
+                           unit: str = "%", maximize: bool = True) -> None:
+    """An optimisation as a rerun recording: the best ``figure`` so far per generation (times ``scale``, in
+    ``unit``; the largest, or the smallest unless ``maximize``), the population in the searched variables (the
+    first three, in the CLI's units) per generation, and the best gait's motion."""
+    sign = 1.0 if maximize else -1.0
+    entity = f"optimization/best_{figure.replace('.', '_')}"
     with atomic_path(path) as tmp, _stream(tmp) as rec:
         best_so_far = -np.inf
         for g, (values, etas) in enumerate(generations):
             rec.set_time("generation", sequence=g)
-            finite = etas[np.isfinite(etas)]
+            finite = sign * etas[np.isfinite(etas)]
             best_so_far = max(best_so_far, float(finite.max()) if len(finite) else -np.inf)
             if np.isfinite(best_so_far):
-                rec.log("optimization/best_eta", rr.Scalars(100 * best_so_far))
+                rec.log(entity, rr.Scalars(scale * sign * best_so_far))
             cloud = np.zeros((len(values), 3))
             cloud[:, :min(3, values.shape[1])] = values[:, :3]
             rec.log("optimization/population", rr.Points3D(cloud, radii=0.5,
                                                            colors=[[230, 80, 20]] * len(values)))
         spatial, plots = _log(rec, best, prefix="best/")
-        views = rrb.Vertical(rrb.TimeSeriesView(name="Best eta per generation (%)", origin="optimization/best_eta"),
+        views = rrb.Vertical(rrb.TimeSeriesView(name=f"Best {figure} per generation ({unit})", origin=entity),
                              rrb.Spatial3DView(name="Population: " + ", ".join(names[:3]),
                                                origin="optimization/population"))
         rec.send_blueprint(rrb.Blueprint(rrb.Horizontal(views, *spatial, rrb.Vertical(*plots),

@@ -15,12 +15,13 @@ that validates, reads and writes any scene is `finrft.schema`; everything else r
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import Any, ClassVar, Mapping
 
-from . import laws, media, methods, schema
+from . import design, laws, media, methods, schema
 from .attach import MAX_ELEMENT_SIZE
 from .errors import SceneError
 from .files import read_text, read_toml
@@ -115,6 +116,10 @@ class Model:
     keyframe: str = _f("", "", "a keyframe of the model (its <key name=...>) the run starts from: its joint "
                        "positions, velocities and activations, then each drive at its start; empty: the "
                        "model's own qpos0 at rest")
+    design: tuple[str, ...] = _f((), "", "edits of the model by name before it compiles, KIND.NAME.ATTRIBUTE[.INDEX]"
+                                 "=VALUE in SI (e.g. \"geom.fin.size.0=0.02\"; KIND body, geom, joint, actuator, "
+                                 "site or tendon; an actuator's kp, kv: its position servo's gains); --set "
+                                 "model.geom.fin.size.0=20mm sets one (finrft.design)")
 
 
 Medium = schema.section("Medium", (
@@ -309,6 +314,19 @@ class UserScene(Sections):
         check_sim(self.sim)
         check_medium(self.medium)
         check_sines(self)
+        design.entries(self.model.design)
+
+    def replace(self, **updates: Any) -> UserScene:
+        """As `Sections.replace`; a design key (``model.geom.fin.size.0``, `finrft.design`) sets its entry of
+        ``model.design``, in SI or with a unit suffix its attribute's unit allows."""
+        edits = {key: design_value(key, updates.pop(key)) for key in list(updates) if design.is_key(key)}
+        if edits:
+            updates["model.design"] = design.merged(self.model.design, edits)
+        return super().replace(**updates)
+
+    def design_values(self) -> dict[str, float]:
+        """The design keys this scene sets, ``model.KIND.NAME.ATTRIBUTE[.INDEX]`` -> value (SI)."""
+        return {f"model.{key}": value for key, value in design.entries(self.model.design).items()}
 
     @property
     def duration(self) -> float:
@@ -332,6 +350,40 @@ def check_sines(scene: UserScene) -> None:
             raise SceneError(f"{where}.frequency = {frequency:g} Hz has {1 / (frequency * dt):.3g} steps per period "
                              f"at sim.dt = {dt:g} s, fewer than {SINE_STEPS}: set sim.dt <= "
                              f"{1 / (SINE_STEPS * frequency):.3g} s, or lower the frequency")
+
+
+def design_value(key: str, value: Any) -> float:
+    """A design key's value: a number, or text with a unit suffix of its attribute's unit (`finrft.design`)."""
+    unit = design.unit(key)
+    if isinstance(value, str):
+        value = schema.quantity(value, unit, key)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise SceneError(f"{key} must be a finite number ({unit or 'SI'}), got {value!r}")
+    return float(value)
+
+
+def key_unit(cls: type, key: str) -> str:
+    """A scene key's SI unit ("" when dimensionless, a name, or a design key whose attribute has none); SceneError
+    for a key the scene does not have."""
+    if cls is UserScene and design.is_key(key):
+        return design.unit(key)
+    return field_of(cls, key).metadata["unit"]
+
+
+def key_value(scene: Any, key: str) -> Any:
+    """A dotted key's value in ``scene`` (an array's entry ``control.0.phase``; ``control.*.phase``: the first
+    entry's; a design key: its value, the model's own where the scene sets none: None)."""
+    if isinstance(scene, UserScene) and design.is_key(key):
+        return scene.design_values().get(key)
+    section, _, rest = key.partition(".")
+    value = getattr(scene, section)
+    if section in schema.arrays(type(scene)):
+        first, _, name = rest.partition(".")
+        if first.isdigit() or first == "*":
+            value, rest = value[int(first) if first.isdigit() else 0], name
+        else:
+            value = value[0]
+    return getattr(value, rest)
 
 
 def drive_timing(scene: UserScene) -> tuple[float, int]:
@@ -461,5 +513,11 @@ def load_scene(path: str | Path | None = None, *, preset_name: str = "physical",
 
 
 def parse_override(text: str, cls: type = Scene) -> tuple[str, Any]:
-    """``plate.stiffness=0.3`` -> ("plate.stiffness", 0.3) for a scene of class ``cls``: `finrft.schema.parse_override`."""
+    """``plate.stiffness=0.3`` -> ("plate.stiffness", 0.3) for a scene of class ``cls``: `finrft.schema.parse_override`;
+    a user's scene takes design keys too (``model.geom.fin.size.0=20mm``, `finrft.design`)."""
+    key, sep, raw = text.partition("=")
+    if cls is UserScene and design.is_key(key.strip()) and sep:
+        design.parse(key.strip())
+        raw = raw.strip()
+        return key.strip(), float(raw) if schema.is_number(raw) else raw
     return schema.parse_override(text, cls)

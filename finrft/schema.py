@@ -7,7 +7,7 @@ scenes; each law declares its own keys (``KEYS`` in its module), from which the 
 Dotted keys name a section's entry: ``"plate.kind"``. A scene field typed ``tuple[Section, ...]`` is an array of
 tables (TOML ``[[drive]]``): zero or more entries of one section, a single ``[drive]`` table read as one; its keys
 are ``"drive.0.speed"`` (``"drive.speed"`` while it has at most one entry; an index one past the last adds an
-entry). Every failure is a SceneError naming the key and what is allowed.
+entry; ``"drive.*.speed"`` sets every entry's). Every failure is a SceneError naming the key and what is allowed.
 """
 
 from __future__ import annotations
@@ -144,8 +144,9 @@ def split_key(cls: type, key: str) -> tuple[str, str]:
     return _split(cls, key)[::2]
 
 
-def _split(cls: type, key: str) -> tuple[str, int | None, str]:
-    """A dotted key's section, entry index (None: not an array of tables, or the index left out) and name."""
+def _split(cls: type, key: str) -> tuple[str, int | str | None, str]:
+    """A dotted key's section, entry index (None: not an array of tables, or the index left out; "*": every
+    entry) and name."""
     known = sections(cls)
     section_name, _, name = key.partition(".")
     if section_name not in known or not name:
@@ -154,8 +155,8 @@ def _split(cls: type, key: str) -> tuple[str, int | None, str]:
     index = None
     if section_name in arrays(cls):
         first, dot, rest = name.partition(".")
-        if first.isdigit() and dot:
-            index, name = int(first), rest
+        if (first.isdigit() or first == "*") and dot:
+            index, name = int(first) if first.isdigit() else first, rest
     names = [f.name for f in dataclasses.fields(known[section_name])]
     if name not in names:
         raise SceneError(f"unknown scene key '{key}': [{section_name}] has {', '.join(names)}")
@@ -338,6 +339,11 @@ def updated(data: dict[str, dict[str, Any]], cls: type, updates: Mapping[str, An
             _drop_unused(data[section_name], sections(cls)[section_name], name, value, updates, f"{section_name}.")
             continue
         entries = data[section_name] = list(data[section_name])
+        if index == "*":
+            if not entries:
+                raise SceneError(f"scene key '{key}': there are no [[{section_name}]] entries to set")
+            updated(data, cls, {f"{section_name}.{i}.{name}": value for i in range(len(entries))})
+            continue
         if index is None:
             if len(entries) > 1:
                 raise SceneError(f"scene key '{key}': there are {len(entries)} [[{section_name}]] entries; name one "

@@ -405,6 +405,7 @@ JSON_ARGS = {
     "swim": ["--preset", "paper"],
     "run": ["{tmp}/plate.xml", "--scene", "{tmp}/scene.toml"],
     "wheel": ["--slip", "0.5", "--sinkage", "20", "--set", "sim.duration=0.2", "--set", "sim.settle=0.1"],
+    "sweep": ["--scene", "{tmp}/scene.toml", "--grid", "medium.zeta=0.5,1", "--workers", "1"],
     "medium": [],
     "law": ["sandswim"],
     "fit-rft": ["--data", "{tmp}/forces.csv"],

@@ -15,9 +15,11 @@ from .. import geometry
 from .. import scene as scenes
 from ..experiments.swim import RobotScene
 from ..errors import SceneError, UsageError
-from ..experiments.flags import add_force, add_json, add_max_error, add_quiet, add_workers, limits, number
+from ..experiments.flags import (add_force, add_json, add_max_error, add_quiet, add_scene_flags, add_workers, limits,
+                                 number)
 from ..experiments.plate import add_plate_scene, resolve_plate
 from ..experiments.swim import add_robot, resolve_robot
+from ..experiments.user_model import EXAMPLES
 from ..files import atomic_path
 from .common import (Interrupted, check_output, print_json, progress, said_written, say, text_stream,
                      write_text)
@@ -95,6 +97,20 @@ def add_optimize(sub: Any) -> None:
     add_json(p, "the result")
     add_quiet(p)
     add_robot(p)
+    g = p.add_argument_group("any robot scene (finrft run's; docs/guide/optimize.md)")
+    g.add_argument("--objective", metavar="FIGURE[:max|min]", help="optimise this figure of a robot scene's run "
+                   "(--scene ROBOT.toml or --example NAME, as finrft run) instead of the two-fin robot's eta: any "
+                   "number of its JSON by path, e.g. com_velocity_m_s.0, com_speed_m_s, cost_of_transport:min, "
+                   "medium_force_N.2 (max when left out); --bounds then takes any of its keys, e.g. "
+                   "control.0.amplitude=0.5,1.2, control.*.frequency=0.5,2 (every entry's), medium.zeta=0.3,0.8, "
+                   "model.geom.NAME.size.0=10,30mm")
+    g.add_argument("--constraint", action="append", default=[], metavar="FIGURE<=VALUE",
+                   help="with --objective: keep a figure below (<=) or above (>=) a value in its SI unit, e.g. "
+                   "cost_of_transport<=5 (repeatable)")
+    g.add_argument("--example", choices=EXAMPLES, help="with --objective: an example robot instead of --scene")
+    g.add_argument("--write-scene", metavar="OUT.toml", help="with --objective: write the best scene")
+    g.add_argument("--plot", metavar="OUT.png", help="with --objective: chart of the search (each evaluation's "
+                   "objective and estimate by generation, the best so far); needs --out or --resume")
     add_max_error(p)
     p.set_defaults(handler=optimize)
 
@@ -119,6 +135,11 @@ def optimize(args: argparse.Namespace) -> int:
     from ..studies import searchlog
     from ..studies.bounds import display_units
     from ..studies.optimize import best_gait, best_gait_text, optimize
+    if args.objective or args.example or (args.resume and searchlog.schema_of(args.resume) == searchlog.SCENE):
+        return optimize_scene(args)
+    for flag in ("constraint", "write_scene", "plot"):
+        if getattr(args, flag):
+            raise UsageError(f"--{flag.replace('_', '-')} goes with --objective (a robot scene's search)")
     check_output(args.rrd, ".rrd", "--rrd", args.force)
     log = search_log(args, {"bounds": "--bounds", "scene": "--scene", "preset": "--preset", "set": "--set",
                             "fin": "--fin", "model": "--model", "backend": "--backend"})
@@ -145,6 +166,107 @@ def optimize(args: argparse.Namespace) -> int:
     said_written(args, (("search log", log), ("rerun recording", args.rrd)))
     print_json(args, summary)
     return 0
+
+
+def optimize_scene(args: argparse.Namespace) -> int:
+    """finrft optimize --objective: any figure of a robot scene over any of its keys."""
+    from ..experiments.user_model import robot_scene
+    from ..studies import searchlog
+    from ..studies.bounds import display_units, parse_bounds, shown
+    from ..studies.optimize import Constraint, Objective, Variable, logged_scene_problem, optimize_scene
+    from ..scene import UserScene
+    for flag in ("preset", "fin", "model"):
+        if getattr(args, flag):
+            raise UsageError(f"--{flag} is the two-fin robot's: a robot scene's search takes --scene or --example")
+    check_output(args.rrd, ".rrd", "--rrd", args.force)
+    check_output(args.write_scene, ".toml", "--write-scene", args.force)
+    check_output(args.plot, ".png", "--plot", args.force)
+    if args.plot and not (args.out or args.resume):
+        raise UsageError("--plot charts the search's log: give --out LOG.h5 (or --resume LOG.h5)")
+    log = search_log(args, {"bounds": "--bounds", "scene": "--scene", "example": "--example", "set": "--set",
+                            "backend": "--backend", "objective": "--objective", "constraint": "--constraint",
+                            "max_error": "--max-error"})
+    if args.resume:
+        scene, variables, objective, constraints, max_error = logged_scene_problem(args.resume)
+        past = read_scene_log(args.resume)
+    else:
+        if not args.objective:
+            raise UsageError("--objective FIGURE is required with --example (e.g. --objective com_speed_m_s)")
+        scene = robot_scene(args)
+        objective = Objective.parse(args.objective)
+        constraints = [Constraint.parse(c) for c in args.constraint]
+        max_error = limits(args) if args.max_error else None
+        variables = [Variable(k, lo, hi) for k, (lo, hi) in parse_bounds(args.bounds, UserScene).items()]
+        if not variables:
+            raise UsageError("give the keys to search: --bounds KEY=LOW,HIGH (repeatable), e.g. "
+                             "--bounds control.*.frequency=0.5,2")
+        past = []
+    keys = [v.key for v in variables]
+    generations = [(display_units(UserScene, keys, x), f) for x, f in past]
+    sign = 1 if objective.maximize else -1
+    executor = _executor(args)
+    with progress(args, args.budget, "optimize", "evaluations") as bar:
+        def on_generation(g: int, values: np.ndarray, extras: dict[str, np.ndarray], es: Any) -> None:
+            usable = np.where(extras["usable"] > 0, extras["objective"], np.nan)
+            generations.append((display_units(UserScene, keys, values), usable))
+            if bar:
+                best = np.nanmax(sign * usable) * sign if np.any(np.isfinite(usable)) else float("nan")
+                bar(es.countevals, f"generation {g + 1}, best {objective.figure} {best:.4g}")
+
+        try:
+            result = optimize_scene(scene, variables, objective, constraints, budget=args.budget, seed=args.seed,
+                                    log=log, resume=bool(args.resume), replace=args.force, executor=executor,
+                                    workers=args.workers, max_error=max_error, on_generation=on_generation)
+        except KeyboardInterrupt:
+            raise interrupted("optimize", log, searchlog.SCENE) from None
+    if args.write_scene:
+        write_text(args.write_scene, scenes.to_toml(result.best_scene))
+    if args.plot:
+        from ..studies.optimize import plot_scene_search, read_log
+        plot_scene_search(args.plot, read_log(log, searchlog.SCENE), objective)
+    if args.rrd:
+        from .. import record
+        from ..experiments.user_model import run_robot
+        record.write_optimization_rrd(args.rrd, generations, keys, run_robot(result.best_scene, max_error=None),
+                                      figure=objective.figure, scale=1.0, unit="SI", maximize=objective.maximize)
+    search = result.search
+    say(args, f"best {objective.figure} {result.best_objective:.6g} +- {result.best_objective_estimate:.2g} (refined "
+        f"at half the step{'; the refined candidates overlap within their estimates' * result.best_ambiguous}) at "
+        + ", ".join(shown(UserScene, k, v) for k, v in result.best.items())
+        + f" after {search.evaluations} evaluations in {search.wall_s:.1f} s ({result.flagged} flagged, "
+          f"{result.infeasible} infeasible, {result.failed} failed)")
+    said_written(args, (("search log", log), ("scene", args.write_scene), ("chart", args.plot),
+                        ("rerun recording", args.rrd)))
+    print_json(args, _reported({"objective": str(objective), "best": result.best, "best_objective": result.best_objective,
+                      "best_objective_estimate": result.best_objective_estimate,
+                      "best_ambiguous": result.best_ambiguous, "refined": result.refined,
+                      "constraints": [str(c) for c in constraints], "evaluations": search.evaluations,
+                      "generations": search.generations, "flagged": result.flagged,
+                      "infeasible": result.infeasible, "failed": result.failed, "wall_s": search.wall_s,
+                      "seed": search.seed, "budget": search.budget,
+                      "stop": {k: str(v) for k, v in search.stop.items()}}))
+    return 0
+
+
+def _reported(value: Any) -> Any:
+    """A result as JSON reports it: a figure a run does not report (NaN in the tables) as null."""
+    if isinstance(value, dict):
+        return {k: _reported(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_reported(v) for v in value]
+    return None if isinstance(value, float) and value != value else value
+
+
+def read_scene_log(path: str) -> list[tuple[np.ndarray, np.ndarray]]:
+    """A robot scene's search log as its generations: (values SI, the objective, NaN where unusable) each."""
+    from ..studies import searchlog
+    from ..studies.optimize import INFEASIBLE, read_log
+    log = read_log(path, searchlog.SCENE)
+    out = []
+    for g in range(len(log["state/sigma"])):
+        at = log["generation"] == g
+        out.append((log["x"][at], np.where(log["cost"][at] < INFEASIBLE, log["objective"][at], np.nan)))
+    return out
 
 
 def _executor(args: argparse.Namespace):
@@ -300,4 +422,91 @@ def fit_rft(args: argparse.Namespace) -> int:
     return 0
 
 
-SUBCOMMANDS = (add_optimize, add_fit, add_fit_rft)
+def add_sweep(sub: Any) -> None:
+    p = sub.add_parser("sweep", help="run variants of a robot scene over a grid or at random: a table of figures",
+                       description="Run variants of a robot scene (finrft run's: --scene ROBOT.toml or --example "
+                       "NAME) over a grid of values of any of its keys (--grid, repeatable: every combination), or "
+                       "N variants drawn at random (--random N --seed S, with a distribution per key: --dist), each "
+                       "with its error estimate, in parallel processes (or on a Dask cluster). Writes one table of "
+                       "every figure of the run's JSON and its estimate per variant (--csv; --out: HDF5 with each "
+                       "variant's resolved scene) and draws a figure against a swept key (--plot). Keys are scene "
+                       "keys in SI (medium.zeta, control.0.amplitude), every entry's (control.*.frequency) or the "
+                       "model's design keys (model.geom.NAME.size.0); values may carry a unit suffix (20mm, 30deg).")
+    p.add_argument("--grid", action="append", default=[], metavar="KEY=A,B,C", help="the values of a key (repeatable; "
+                   "every combination runs)")
+    p.add_argument("--random", type=number("variants", minimum=1, inclusive=True, integer=True), metavar="N",
+                   help="N variants drawn at random from the --dist distributions")
+    p.add_argument("--seed", type=_seed, default=1, metavar="S", help="the random variants' seed (default: 1)")
+    p.add_argument("--dist", action="append", default=[], metavar="KEY=NAME:A,B", help="a key's distribution for "
+                   "--random: uniform:LOW,HIGH, loguniform:LOW,HIGH or normal:MEAN,SD, e.g. "
+                   "medium.zeta=uniform:0.4,0.8 (repeatable)")
+    p.add_argument("--csv", metavar="TABLE.csv", help="the table: a row per variant, its keys, every figure and its "
+                   "estimate")
+    p.add_argument("--out", metavar="TABLE.h5", help="the table as HDF5, with each variant's resolved scene")
+    p.add_argument("--plot", metavar="KEY", help="draw --figure against this swept key (into --png)")
+    p.add_argument("--figure", default="com_speed_m_s", metavar="PATH", help="the figure --plot draws (default: "
+                   "%(default)s)")
+    p.add_argument("--png", metavar="OUT.png", help="where --plot draws")
+    add_workers(p)
+    p.add_argument("--executor", choices=("local", "dask"), default="local",
+                   help="where variants run: local processes, or a Dask cluster (needs finrft[cluster])")
+    p.add_argument("--address", metavar="tcp://HOST:PORT", help="Dask scheduler address (--executor dask)")
+    g = add_scene_flags(p, "robot", "medium.zeta=0.5", backend="where the RFT force is computed (overrides "
+                        "sim.backend)")
+    g.add_argument("--example", choices=EXAMPLES, help="an example robot instead of --scene")
+    add_max_error(p)
+    add_force(p)
+    add_json(p, "the table (a list of variants: keys, figures, estimates)")
+    add_quiet(p)
+    p.set_defaults(handler=sweep)
+
+
+def sweep(args: argparse.Namespace) -> int:
+    from ..experiments.user_model import UserModel, robot_scene
+    from ..studies import sweep as sweeps
+    from ..studies.figures import check_path
+    for path, suffix, flag in ((args.csv, ".csv", "--csv"), (args.out, ".h5", "--out"), (args.png, ".png", "--png")):
+        check_output(path, suffix, flag, args.force)
+    if bool(args.plot) != bool(args.png):
+        raise UsageError("--plot KEY and --png OUT.png go together")
+    if bool(args.grid) == bool(args.random):
+        raise UsageError("give the variants: --grid KEY=A,B,C (repeatable), or --random N with --dist")
+    if args.random and not args.dist:
+        raise UsageError("--random N draws from the --dist distributions: give one per key, e.g. "
+                         "--dist medium.zeta=uniform:0.4,0.8")
+    if args.dist and not args.random:
+        raise UsageError("--dist goes with --random N")
+    scene = robot_scene(args)
+    variants = (sweeps.grid_variants(sweeps.parse_grid(args.grid)) if args.grid
+                else sweeps.random_variants(sweeps.parse_dist(args.dist), args.random, args.seed))
+    if args.plot:
+        if args.plot not in variants[0]:
+            raise UsageError(f"--plot {args.plot}: the sweep's keys are {', '.join(variants[0])}")
+        check_path(args.figure, scene, UserModel.of(scene).bodies)
+    executor = _executor(args)
+    max_error = limits(args) if args.max_error else None
+    with progress(args, len(variants), "sweep", "variants") as bar:
+        try:
+            result = sweeps.sweep(scene, variants, workers=args.workers, executor=executor, max_error=max_error,
+                                  progress=None if bar is None else lambda done, total: bar(done))
+        except KeyboardInterrupt:
+            raise Interrupted("interrupted; nothing was written") from None
+    if args.csv:
+        write_text(args.csv, sweeps.table_csv(result))
+    if args.out:
+        sweeps.write_hdf5(args.out, result)
+    if args.plot:
+        sweeps.plot(args.png, result, args.plot, args.figure)
+    failed = sum(1 for r in result.results if r["error"])
+    say(args, f"{len(variants)} variants of {', '.join(result.keys)}: {failed} failed; " + "; ".join(
+        f"{', '.join(f'{k}={v:g}' if isinstance(v, float) else f'{k}={v}' for k, v in variant.items())}: "
+        + (f"{args.figure} {r['figures'].get(args.figure, float('nan')):.4g} +- "
+           f"{r['estimates'].get(args.figure, float('nan')):.2g}" if not r["error"] else "failed")
+        for variant, r in list(zip(variants, result.results))[:20]) + ("; ..." if len(variants) > 20 else ""))
+    said_written(args, (("table", args.csv), ("table", args.out), ("figure", args.png)))
+    print_json(args, _reported([{"keys": v, "figures": r["figures"], "estimates": r["estimates"], "error": r["error"]}
+                                for v, r in zip(variants, result.results)]))
+    return 0
+
+
+SUBCOMMANDS = (add_optimize, add_fit, add_fit_rft, add_sweep)

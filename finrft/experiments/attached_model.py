@@ -14,7 +14,7 @@ from xml.etree import ElementTree
 import mujoco
 import numpy as np
 
-from .. import laws, methods, native
+from .. import design, laws, methods, native
 from ..attach import Attached, SurfaceForces, attach
 from ..drive import Drive
 from ..files import check_regular, not_a_file, read_text
@@ -57,6 +57,14 @@ def read_spec(path: str) -> mujoco.MjSpec:
         return mujoco.MjSpec.from_file(str(path))
     except ValueError as exc:
         raise SceneError(f"model file {path}: {' '.join(str(exc).split())}") from None
+
+
+def scene_spec(scene: Any) -> mujoco.MjSpec:
+    """A user's scene's model as its spec, with the scene's design edits made (`finrft.design`: SceneError for a
+    name or index the model does not have)."""
+    spec = read_spec(scene.model.path)
+    design.apply(spec, scene.model.design)
+    return spec
 
 
 # The largest file a model may name (a mesh, a texture): far above a detailed robot's meshes.

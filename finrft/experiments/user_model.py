@@ -31,7 +31,7 @@ from ..models import ARMATURE_RATIO, compile_spec, mjcf_path
 from ..scene import Control, JointDrive, SceneError, UserScene, drive_timing, load_scene, parse_override
 from ..stepping import DRIVE_LAG, jump_velocities
 from .attached_model import (DRIVEN, AttachedModel, applied_state, build_attached, driven_joint, medium_forces,
-                             read_spec, record_forward)
+                             record_forward, scene_spec)
 from .command import Command, choice_lines, register, steps_line
 from .flags import add_max_error, add_result_files, add_scene_flags
 
@@ -389,7 +389,7 @@ class UserModel:
     def of(cls, scene: UserScene, control: Controller | None = None) -> UserModel:
         """The experiment of a scene, its model read and every name the scene gives checked (SceneError)."""
         drive_timing(scene)
-        spec = read_spec(scene.model.path)
+        spec = scene_spec(scene)
         kinds = tuple(DRIVEN[int(driven_joint(spec, j.joint, f"drive.{i}.joint").type)]
                       for i, j in enumerate(scene.drive))
         m = compile_spec(spec)
@@ -430,7 +430,7 @@ class UserModel:
         return ("rad", "rad/s", "N m") if self.joints[i] == "hinge" else ("m", "m/s", "N")
 
     def build(self, scene: UserScene) -> AttachedModel:
-        return build_attached(read_spec(scene.model.path), [j.joint for j in scene.drive], scene.model.bodies,
+        return build_attached(scene_spec(scene), [j.joint for j in scene.drive], scene.model.bodies,
                               scene.medium, scene.sim, scene.model.geoms)
 
     def drive_for(self, scene: UserScene) -> Schedule:
@@ -654,6 +654,20 @@ def example(name: str) -> str:
     return str(mjcf_path(f"{name}.toml"))
 
 
+def robot_scene(args: argparse.Namespace) -> UserScene:
+    """The robot scene of a command's flags: --scene FILE.toml or --example NAME, then --set (design keys too),
+    --backend and the MODEL.xml argument where the command has them."""
+    if bool(args.scene) == bool(args.example):
+        raise UsageError("give the scene: --scene FILE.toml, or --example NAME (one of "
+                         f"{', '.join(EXAMPLES)})")
+    overrides = dict(parse_override(item, UserScene) for item in args.set)
+    if getattr(args, "backend", None):
+        overrides["sim.backend"] = args.backend
+    if getattr(args, "model", None):
+        overrides["model.path"] = args.model
+    return load_scene(args.scene or example(args.example), overrides=overrides, cls=UserScene)
+
+
 # ---------------------------------------------------------------------------------------------------------
 # The command: finrft run
 
@@ -683,15 +697,7 @@ class RunCommand(Command):
         add_result_files(p)
 
     def scene(self, args: argparse.Namespace) -> UserScene:
-        if bool(args.scene) == bool(args.example):
-            raise UsageError("give the scene: --scene FILE.toml, or --example NAME (one of "
-                             f"{', '.join(EXAMPLES)})")
-        overrides = dict(parse_override(item, UserScene) for item in args.set)
-        if args.backend:
-            overrides["sim.backend"] = args.backend
-        if args.model:
-            overrides["model.path"] = args.model
-        return load_scene(args.scene or example(args.example), overrides=overrides, cls=UserScene)
+        return robot_scene(args)
 
     def jobs(self, args: argparse.Namespace, scene: UserScene) -> list[tuple[UserModel, UserScene]]:
         return [(UserModel.of(scene), scene)]

@@ -560,8 +560,8 @@ def _explicit_step_s(scene: Any, dt: float) -> float:
 def _bare_step_s(scene: Any, steps: int) -> float:
     """Wall seconds of one ``mj_step`` of the scene's model without the medium, at its step, in C (mj_step's
     nstep), the best of three."""
-    from ..experiments.attached_model import read_spec
-    spec = read_spec(scene.model.path)
+    from ..experiments.attached_model import scene_spec
+    spec = scene_spec(scene)
     spec.option.timestep = scene.sim.dt
     model = spec.compile()
     data = mujoco.MjData(model)

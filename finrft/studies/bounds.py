@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from ..scene import SceneError, field_of
+from ..scene import SceneError, key_unit
 from ..schema import UNITS, is_number, quantity
 
 # SI units shown in the CLI's: radians (and per second) in degrees, metres in mm.
@@ -18,22 +18,24 @@ DISPLAY_UNIT = {"rad": "deg", "rad/s": "deg/s", "m": "mm"}
 def unit_of(cls: type, key: str) -> str | None:
     """A scene key's SI unit; None for a key the schema does not know (the search names it)."""
     try:
-        return field_of(cls, key).metadata.get("unit")
+        return key_unit(cls, key)
     except SceneError:
         return None
 
 
 def parse_bounds(items: list[str], cls: type,
                  aliases: dict[str, str] | None = None) -> dict[str, tuple[float, float]]:
-    """--bounds KEY=LOW:HIGH items of ``cls``'s scene keys (or their ``aliases``) in SI, or with a unit suffix the
-    key's schema unit allows (`finrft.schema.quantity`: deg for rad, mm for m, ...), on HIGH for both or on each;
-    SceneError for an item that is not so."""
+    """--bounds KEY=LOW:HIGH (or KEY=LOW,HIGH) items of ``cls``'s scene keys (or their ``aliases``) in SI, or with a
+    unit suffix the key's schema unit allows (`finrft.schema.quantity`: deg for rad, mm for m, ...), on HIGH for
+    both or on each; SceneError for an item that is not so."""
     bounds = {}
     for item in items:
         key, sep, span = item.partition("=")
         low, sep2, high = span.partition(":")
+        if not sep2:
+            low, sep2, high = span.partition(",")
         if not sep or not sep2:
-            raise SceneError(f"--bounds expects KEY=LOW:HIGH, got '{item}'")
+            raise SceneError(f"--bounds expects KEY=LOW:HIGH or KEY=LOW,HIGH, got '{item}'")
         name = (aliases or {}).get(key.strip(), key.strip())
         low, high = low.strip(), high.strip()
         suffix = next((s for s in sorted(UNITS, key=len, reverse=True) if high.endswith(s)), None)
@@ -62,5 +64,7 @@ def display_units(cls: type, keys: list[str], values: np.ndarray) -> np.ndarray:
 def shown(cls: type, key: str, value: float) -> str:
     """A scene key's SI value in the CLI's unit, with the unit: ``fin.segment_length 20 mm``."""
     unit = unit_of(cls, key) or ""
-    return f"{key} {value * DISPLAY.get(unit, 1.0):.4g} {DISPLAY_UNIT.get(unit, unit)}".rstrip()
+    # a unit the schema names only in words ("actuator's unit") is left out
+    shown_unit = "" if "unit" in unit else DISPLAY_UNIT.get(unit, unit)
+    return f"{key} {value * DISPLAY.get(unit, 1.0):.4g} {shown_unit}".rstrip()
 

@@ -15,6 +15,8 @@ random generator is the only randomness.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
+import json
 import math
 import os
 import time
@@ -26,13 +28,13 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from .. import batch, files
+from .. import batch, design, files
 from . import bounds, searchlog
 from ..convergence import ErrorLimits, SimulationFailed, check_limits
 from ..files import provenance, read_toml
 from ..experiments.swim import RobotScene
 from ..errors import UsageError
-from ..scene import SceneError, field_of, scene_from_dict, to_toml
+from ..scene import SceneError, UserScene, field_of, key_unit, key_value, scene_from_dict, to_toml
 from ..experiments.swim import swim
 
 FAILED = 2.0
@@ -87,8 +89,9 @@ def check_variables(scene: Any, variables: Sequence[Variable], cls: type = Robot
         raise SceneError("at least one variable must be searched")
     seen = set()
     for v in variables:
-        f = field_of(cls, v.key)
-        if f.type not in ("float", float):
+        # a design key is a number of the model's (finrft.design): its element and index are checked as it is read
+        f = None if cls is UserScene and design.is_key(v.key) else field_of(cls, v.key)
+        if f is not None and f.type not in ("float", float):
             raise SceneError(f"{v.key} is not a real-valued key (a whole number or a choice) and cannot be searched")
         if v.key in seen:
             raise SceneError(f"{v.key} is listed twice")
@@ -218,7 +221,7 @@ def _state(es: Any, rng: np.random.RandomState) -> dict[str, np.ndarray]:
 
 def si_units(cls: type, variables: Sequence[Variable]) -> list[str]:
     """The SI unit of each variable's scene key ("1" when dimensionless)."""
-    return [field_of(cls, v.key).metadata["unit"] or "1" for v in variables]
+    return [key_unit(cls, v.key) or "1" for v in variables]
 
 
 def cmaes(evaluate: Evaluate, variables: Sequence[Variable], *, budget: int | None = None, seed: int | None = None,
@@ -472,3 +475,304 @@ def best_gait_text(summary: dict[str, Any]) -> str:
             f"{summary['theta2_deg']:.1f} deg, arm {summary['arm_length_mm']:.1f} mm"
             f"{''.join(', ' + text for text in others)} after {summary['evaluations']} evaluations in "
             f"{summary['wall_s']:.1f} s")
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Any robot scene (finrft optimize --scene ROBOT.toml --objective FIGURE): any figure, any keys
+
+# Costs of the evaluations that rank below every feasible one: CMA-ES ranks, so their size is only an order. An
+# infeasible one ranks by its constraints' violation; a failed run (unstable, or over --max-error) below all.
+INFEASIBLE = 1e9
+FAILED_RUN = 2e9
+# The most candidates the end of a search refines (`refine`): the best and those whose estimates overlap its.
+REFINED = 4
+
+
+@dataclass(frozen=True)
+class Objective:
+    """A figure of the run's JSON by path (`finrft.studies.figures`), maximised or minimised."""
+
+    figure: str
+    maximize: bool = True
+
+    @classmethod
+    def parse(cls, text: str) -> Objective:
+        """``FIGURE[:max|min]`` (max when left out)."""
+        figure, sep, sense = text.strip().partition(":")
+        if sep and sense not in ("max", "min"):
+            raise SceneError(f"--objective {text}: give FIGURE, FIGURE:max or FIGURE:min")
+        return cls(figure.strip(), sense != "min")
+
+    def __str__(self) -> str:
+        return f"{self.figure}:{'max' if self.maximize else 'min'}"
+
+
+@dataclass(frozen=True)
+class Constraint:
+    """A figure held below (``<=``) or above (``>=``) a bound, in its SI unit."""
+
+    figure: str
+    upper: bool
+    bound: float
+
+    @classmethod
+    def parse(cls, text: str) -> Constraint:
+        for op in ("<=", ">="):
+            figure, sep, bound = text.partition(op)
+            if sep:
+                try:
+                    value = float(bound)
+                except ValueError:
+                    value = math.nan
+                if not math.isfinite(value) or not figure.strip():
+                    break
+                return cls(figure.strip(), op == "<=", value)
+        raise SceneError(f"--constraint {text}: give FIGURE<=VALUE or FIGURE>=VALUE, VALUE a number in the "
+                         f"figure's SI unit (e.g. cost_of_transport<=5)")
+
+    def violation(self, value: float) -> float:
+        """How far ``value`` lies beyond the bound, relative to it (0: met; inf: not reported)."""
+        if not math.isfinite(value):
+            return math.inf
+        over = value - self.bound if self.upper else self.bound - value
+        return max(over, 0.0) / max(abs(self.bound), 1e-12)
+
+    def __str__(self) -> str:
+        return f"{self.figure}{'<=' if self.upper else '>='}{self.bound!r}"
+
+
+@dataclass
+class SceneSearch:
+    """A robot scene's search (`optimize_scene`): the search itself, and its best after refinement."""
+
+    search: Search
+    objective: Objective
+    best: dict[str, float]                # the searched keys' values (SI)
+    best_objective: float                 # the objective figure at the best, refined (`refine`)
+    best_objective_estimate: float        # its estimated discretisation error
+    best_ambiguous: bool                  # the refined candidates' estimates still overlap: the best is not certain
+    refined: list[dict[str, Any]]         # each refined candidate: its keys, value and estimate, before and after
+    best_scene: UserScene
+    flagged: int                          # evaluations whose estimate overlapped a neighbour's in their generation
+    infeasible: int
+    failed: int
+
+
+def _costs(objective: Objective, constraints: Sequence[Constraint], results: list[dict[str, Any]]
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Each evaluation's cost (minimised), the objective figure and its estimate, and its flag: 1 where its
+    estimate could swap it with its neighbour in the ranking (their error bars overlap) or move it across a
+    constraint's bound."""
+    sign = -1.0 if objective.maximize else 1.0
+    values = np.array([r["figures"].get(objective.figure, math.nan) for r in results])
+    errors = np.array([r["estimates"].get(objective.figure, math.nan) for r in results])
+    costs, flags = np.empty(len(results)), np.zeros(len(results), dtype=np.int64)
+    for i, r in enumerate(results):
+        violation = sum(c.violation(r["figures"].get(c.figure, math.nan)) for c in constraints)
+        if r["error"] or not math.isfinite(values[i]) or math.isinf(violation):
+            costs[i] = FAILED_RUN
+        elif violation > 0:
+            costs[i] = INFEASIBLE * (1 + min(violation, 1e6) / 1e6)
+        else:
+            costs[i] = sign * values[i]
+        for c in constraints:
+            value, error = r["figures"].get(c.figure, math.nan), r["estimates"].get(c.figure, 0.0)
+            if abs(value - c.bound) < error:
+                flags[i] = 1
+    feasible = np.flatnonzero(costs < INFEASIBLE)
+    ranked = feasible[np.argsort(costs[feasible], kind="stable")]
+    for a, b in zip(ranked[:-1], ranked[1:]):
+        if abs(values[a] - values[b]) < np.nan_to_num(errors[a]) + np.nan_to_num(errors[b]):
+            flags[a] = flags[b] = 1
+    return costs, values, errors, flags
+
+
+def _start(scene: UserScene, variables: Sequence[Variable]) -> dict[str, float]:
+    """The scene's own values of the searched keys (a design key the scene leaves alone: the model's)."""
+    from ..experiments.attached_model import scene_spec
+    spec = scene_spec(scene)
+    out = {}
+    for v in variables:
+        value = key_value(scene, v.key)
+        out[v.key] = design.current(spec, v.key) if value is None else float(value)
+    return out
+
+
+def check_scene_problem(scene: UserScene, variables: Sequence[Variable], objective: Objective,
+                        constraints: Sequence[Constraint]) -> None:
+    """SceneError, before anything runs, for a key, bound, name, index or figure the scene cannot take: each
+    variable at both its bounds is read into the model (`UserModel.of`), and every figure named is one a run of
+    the scene reports."""
+    from ..experiments.user_model import UserModel
+    from .figures import check_path
+    check_variables(scene, variables, UserScene)
+    experiment = None
+    for v in variables:
+        for value in (v.low, v.high):
+            experiment = UserModel.of(scene.replace(**{v.key: value}))
+    for path in (objective.figure, *(c.figure for c in constraints)):
+        check_path(path, scene, experiment.bodies)
+
+
+def scene_problem(scene: UserScene, objective: Objective, constraints: Sequence[Constraint],
+                  max_error: ErrorLimits | None) -> dict[str, Any]:
+    """A robot scene's search as a log's root attributes: what a resumed run must match."""
+    limits = "" if max_error is None else json.dumps(dataclasses.asdict(max_error))
+    return {"scene_toml": to_toml(scene), "objective": str(objective), "objective_units": "the figure's SI unit",
+            "constraints": " ".join(str(c) for c in constraints), "max_error": limits}
+
+
+def logged_scene_problem(path: str | Path) -> tuple[UserScene, list[Variable], Objective, list[Constraint],
+                                                    ErrorLimits | None]:
+    """The scene, variables, objective, constraints and error limits of a robot scene's search log, to continue
+    it."""
+    from ..convergence import FigureLimit
+    log = read_log(path, searchlog.SCENE)
+    attrs = log["attrs"]
+    scene = scene_from_dict(read_toml(attrs["scene_toml"], f"{path}: its scene"), UserScene)
+    try:
+        limits = json.loads(attrs["max_error"]) if attrs.get("max_error") else None
+        if limits is not None:
+            figures = limits.pop("figures")
+            limits = ErrorLimits(**limits, figures=None if figures is None else tuple(FigureLimit(**f)
+                                                                                      for f in figures))
+        objective = Objective.parse(attrs["objective"])
+        constraints = [Constraint.parse(c) for c in attrs["constraints"].split()]
+    except (KeyError, TypeError, ValueError, AttributeError):
+        raise SceneError(f"{path}: its objective, constraints or error limits are damaged") from None
+    return scene, log["variables"], objective, constraints, limits
+
+
+def optimize_scene(scene: UserScene, variables: Sequence[Variable], objective: Objective,
+                   constraints: Sequence[Constraint] = (), *, budget: int | None = None, seed: int | None = None,
+                   log: str | Path | None = None, resume: bool = False, replace: bool = False,
+                   executor: Executor | None = None, workers: int | None = None,
+                   max_error: ErrorLimits | None = None,
+                   on_generation: Callable[[int, np.ndarray, dict[str, np.ndarray], Any], None] | None = None
+                   ) -> SceneSearch:
+    """Optimise any figure of a robot scene's run over any of its keys (schema keys, ``control.*.frequency``,
+    design keys of its model) with CMA-ES, under ``constraints``, from the scene's own values (the middle of the
+    bounds where they lie outside).
+
+    Every evaluation runs with its error estimate (``max_error`` None: reported, not bounded; a run over a limit
+    given counts as failed). The estimate is respected twice: an evaluation whose error bar overlaps its
+    neighbour's in its generation's ranking, or a constraint's bound, is flagged (logged ``ambiguous``); at the
+    end the best and every evaluation whose error bar overlaps the best's (`REFINED` at most, the closest first)
+    are run again at half the step (`refine`), and the best is chosen by the refined figures, flagged
+    ``best_ambiguous`` when their error bars still overlap. Budget, seed, log (schema `searchlog.SCENE`), resume,
+    replace, executor and workers as `optimize`."""
+    from .figures import evaluate_job
+    check_limits(max_error)
+    check_scene_problem(scene, variables, objective, constraints)
+    seen: list[dict[str, np.ndarray]] = []
+
+    def population(values: np.ndarray) -> tuple[list[float], dict[str, np.ndarray]]:
+        scenes = [scene.replace(**{v.key: float(x) for v, x in zip(variables, row)}) for row in values]
+        results = batch.map_jobs(evaluate_job, [(s, max_error) for s in scenes], executor=pool, workers=1)
+        costs, figure, error, flags = _costs(objective, constraints, results)
+        columns = {"objective": figure, "objective_error": error, "ambiguous": flags,
+                   "usable": (costs < INFEASIBLE).astype(np.int64)}
+        seen.append({"x": values, "cost": costs, **columns})
+        for c in constraints:
+            columns[f"constraint/{c.figure}"] = np.array([r["figures"].get(c.figure, math.nan) for r in results])
+        return list(costs), columns
+
+    columns = {"objective": ("the figure's SI unit", 0, f"{objective.figure}; NaN when the run failed"),
+               "objective_error": ("the figure's SI unit", 0, "its estimated discretisation error"),
+               "ambiguous": ("1", 0, "1 where the estimate overlaps the next evaluation's in the generation's "
+                                     "ranking, or a constraint's bound"),
+               "usable": ("1", 0, "1 where the run succeeded and met every constraint")}
+    for c in constraints:
+        columns[f"constraint/{c.figure}"] = ("the figure's SI unit", 0, f"the constrained figure ({c})")
+    with batch.pool_for(executor, workers) as pool:
+        search = cmaes(population, variables, budget=budget, seed=seed, start=_start(scene, variables), log=log,
+                       resume=resume, replace=replace, schema=searchlog.SCENE, units=si_units(UserScene, variables),
+                       problem=scene_problem(scene, objective, constraints, max_error),
+                       columns=columns, on_generation=on_generation)
+        if log is not None:  # every evaluation, a resumed run's earlier ones too
+            data = read_log(log, searchlog.SCENE)
+            rows = {k: data[k] for k in ("x", "cost", "objective", "objective_error", "ambiguous")}
+        else:
+            rows = {k: np.concatenate([block[k] for block in seen]) for k in seen[0]}
+        return refine(scene, search, objective, constraints, rows, pool, max_error)
+
+
+def refine(scene: UserScene, search: Search, objective: Objective, constraints: Sequence[Constraint],
+           rows: dict[str, np.ndarray], pool: Executor | None,
+           max_error: ErrorLimits | None) -> SceneSearch:
+    """The search's best, refined: the best evaluation and those whose error bars overlap its own (`REFINED` at
+    most, nearest first) run again at half the step (`convergence.FINER`; an adaptive method at a quarter of its
+    tolerance), each with a fresh estimate; the best of them by the refined figures, ``best_ambiguous`` where its
+    error bar still overlaps another's."""
+    from ..convergence import FINER, _companion
+    from .figures import evaluate_job
+    feasible = np.flatnonzero(rows["cost"] < INFEASIBLE)
+    if not len(feasible):
+        raise SimulationFailed(f"none of the {search.evaluations} evaluations was usable (each failed, exceeded "
+                               f"the error limit or broke a constraint): check the scene, the bounds and the "
+                               f"constraints")
+    best = feasible[np.argmin(rows["cost"][feasible])]
+    error = np.nan_to_num(rows["objective_error"])
+    gap = np.abs(rows["objective"][feasible] - rows["objective"][best])
+    close = feasible[(gap < error[feasible] + error[best]) | (feasible == best)]
+    close = close[np.argsort(np.abs(rows["objective"][close] - rows["objective"][best]), kind="stable")][:REFINED]
+    # each point once (CMA-ES may ask one twice near convergence)
+    _, first = np.unique(rows["x"][close], axis=0, return_index=True)
+    close = close[np.sort(first)]
+    variables = search.variables
+    scenes = [scene.replace(**{v.key: float(x) for v, x in zip(variables, rows["x"][i])}) for i in close]
+    finer = [_companion(s, FINER, s.sim.record_dt)[0] for s in scenes]
+    results = batch.map_jobs(evaluate_job, [(s, max_error) for s in finer], executor=pool, workers=1)
+    costs, values, errors, _ = _costs(objective, constraints, results)
+    order = np.argsort(costs, kind="stable")
+    if costs[order[0]] >= INFEASIBLE:
+        order = np.array([0])  # none refined usable: the search's own best, its figures as the search had them
+        values, errors = rows["objective"][close], rows["objective_error"][close]
+    top = order[0]
+    ambiguous = any(abs(values[top] - values[j]) < np.nan_to_num(errors[top]) + np.nan_to_num(errors[j])
+                    for j in order[1:] if costs[j] < INFEASIBLE)
+    refined = [{"values": {v.key: float(x) for v, x in zip(variables, rows["x"][i])},
+                "search_objective": float(rows["objective"][i]),
+                "search_objective_estimate": float(rows["objective_error"][i]),
+                "refined_objective": float(values[k]), "refined_objective_estimate": float(errors[k]),
+                "error": results[k]["error"]} for k, i in enumerate(close)]
+    flags = rows["ambiguous"]
+    return SceneSearch(search=search, objective=objective, best=refined[top]["values"],
+                       best_objective=float(values[top]), best_objective_estimate=float(errors[top]),
+                       best_ambiguous=bool(ambiguous), refined=refined, best_scene=scenes[top],
+                       flagged=int(flags.sum()), infeasible=int(np.sum((rows["cost"] >= INFEASIBLE)
+                                                                       & (rows["cost"] < FAILED_RUN))),
+                       failed=int(np.sum(rows["cost"] >= FAILED_RUN)))
+
+
+def plot_scene_search(path: str | Path, log: dict[str, Any], objective: Objective) -> None:
+    """A robot scene's search as a chart: each evaluation's objective with its estimate as an error bar, by
+    generation (flagged ones hollow, unusable ones left out), and the best so far."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import matplotlib.ticker
+    generation, value, error = log["generation"], log["objective"], np.nan_to_num(log["objective_error"])
+    usable, flagged = log["usable"] > 0, log["ambiguous"] > 0
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for mask, face, label in ((usable & ~flagged, "C0", "evaluation"),
+                              (usable & flagged, "none", "flagged: its estimate overlaps a neighbour's")):
+        if np.any(mask):
+            ax.errorbar(generation[mask], value[mask], yerr=error[mask], fmt="o", mfc=face, mec="C0", ecolor="C0",
+                        capsize=2, label=label)
+    pick = np.fmax.accumulate if objective.maximize else np.fmin.accumulate
+    gens = np.arange(int(generation.max()) + 1) if len(generation) else np.zeros(0, int)
+    per = np.array([(np.nanmax if objective.maximize else np.nanmin)(np.where(usable & (generation == g), value,
+                                                                               np.nan))
+                    if np.any(usable & (generation == g)) else np.nan for g in gens])
+    ax.plot(gens, pick(per), "k-", label="best so far")
+    ax.set_xlabel("generation")
+    ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))
+    ax.set_ylabel(f"{objective.figure} (SI)")
+    ax.set_title(f"CMA-ES: {objective}", fontsize=9)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    with files.atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110)
+    plt.close(fig)

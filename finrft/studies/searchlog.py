@@ -23,8 +23,11 @@ from ..errors import SceneError
 
 OPTIMIZE = "finrft.optimize/2"
 FIT = "finrft.fit/1"
+# a robot scene's search (finrft optimize --scene ROBOT.toml --objective FIGURE)
+SCENE = "finrft.optimize-scene/1"
 # schema -> (what the log is called, the command that continues it)
-_KINDS = {OPTIMIZE: ("optimisation", "optimize"), FIT: ("fit", "fit")}
+_KINDS = {OPTIMIZE: ("optimisation", "optimize"), FIT: ("fit", "fit"), SCENE: ("robot scene optimisation",
+                                                                              "optimize")}
 # The largest log read, and the most its datasets may hold: far above a search of a million evaluations.
 MAX_LOG_BYTES = 2**30
 
@@ -126,6 +129,17 @@ def read(path: str | Path, schema: str) -> tuple[dict[str, Any], dict[str, Datas
             raise
         raise SceneError(f"{path} is not a complete finrft {noun} log: {exc}") from None
     return attrs, datasets
+
+
+def schema_of(path: str | Path) -> str | None:
+    """The schema a log declares (None: not a readable HDF5 file, which its reader then refuses in its words)."""
+    import h5py
+    try:
+        with h5py.File(path, "r") as f:
+            kind = f.attrs.get("schema")
+    except (OSError, ValueError):
+        return None
+    return kind if isinstance(kind, str) else None
 
 
 def _mismatch(path: str | Path, found: Any, schema: str) -> str:

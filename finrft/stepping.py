@@ -421,14 +421,16 @@ def step_through(m: mujoco.MjModel, d: mujoco.MjData, scene: Any, advance: Stepp
     if probe is not None:
         # Per event: the first of the probe's steps at or after it, whether one is there, and whether that one is
         # taken there, from the state (traced, only at a stroke's start, whose reversal the trace has not seen) or
-        # from the trace of the call that ends there (`upto`: the probe's steps stored once that call returned).
+        # from the trace of the call that ends there. (`probed`: the probe's steps and one that is none, as a run too
+        # short for a probe has none.)
+        probed = np.r_[probe.steps, -1]
         first = np.searchsorted(probe.steps, events)
-        there = probe.steps[np.minimum(first, len(probe.steps) - 1)] == events
+        there = probed[first] == events
         at_event = there if trace is None else there & (events == starts[stroke_of])
         # The probe's steps each call from an event to the next steps through (traced): lo to hi, rows from the
         # trace's row r when they follow one another (a probe's steps do), else None.
         lo, hi = first + there, np.r_[first[1:] + (there & ~at_event)[1:], 0]
-        ends = probe.steps[np.clip(np.c_[lo, hi - 1], 0, len(probe.steps) - 1)]
+        ends = probed[np.clip(np.c_[lo, hi - 1], 0, len(probe.steps))]
         row = np.where(ends[:, 1] - ends[:, 0] == hi - lo - 1, ends[:, 0] - events - 1, -1)
         past = [(a, b, r if r >= 0 else None) for a, b, r in zip(lo.tolist(), hi.tolist(), row.tolist())]
         first, at_event = first.tolist(), at_event.tolist()

@@ -523,6 +523,8 @@ class PythonImplicit:
             analytic = attached.element_slopes(normal, v, depth, area) if slope and len(area) else None
             if analytic is not None:
                 dfdv = analytic[1]  # each element's own, as body_slope takes it from finrft_surface_element_slope
+                if not forward:  # the linearly implicit step: across the ramp's kink, a secant
+                    dfdv = dfdv + attached.trailing_slopes(normal, v, depth, area)
             elif slope and len(area):
                 # each element's dF/dv (as body_slope): forward, those leading with no DRFT term by
                 # `_leading_slope`; the others by probes (element, probe, 3), the law on all of them at once

@@ -46,13 +46,8 @@ from __future__ import annotations
 
 import sys
 import types
-from importlib import import_module, metadata
+from importlib import import_module
 from typing import Any
-
-try:
-    __version__ = metadata.version("finrft")
-except metadata.PackageNotFoundError:  # a source tree on the path, not installed
-    __version__ = "0+unknown"
 
 # Every exported name and the module it lives in, loaded on first use (`__getattr__`).
 _HOMES = {
@@ -79,7 +74,20 @@ _HOME = {name: module for module, names in _HOMES.items() for name in names}
 __all__ = sorted(_HOME)
 
 
+def _version() -> str:
+    # Read on first use: importlib.metadata was a third of the command line's start, where `finrft --help` needs
+    # no version.
+    from importlib import metadata
+    try:
+        return metadata.version("finrft")
+    except metadata.PackageNotFoundError:  # a source tree on the path, not installed
+        return "0+unknown"
+
+
 def __getattr__(name: str) -> Any:
+    if name == "__version__":
+        globals()[name] = _version()
+        return globals()[name]
     home = _HOME.get(name)
     if home is not None:
         value = getattr(import_module(home, __name__), name)

@@ -20,7 +20,6 @@ import tempfile
 import tomllib
 import uuid
 from datetime import datetime, timezone
-from importlib import metadata
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -300,6 +299,8 @@ def locked(path: str | Path, what: str) -> Iterator[None]:
 
 
 def package_version(name: str) -> str:
+    from importlib import metadata  # here: the command line's start (finrft --help) needs no version
+
     try:
         return metadata.version(name)
     except metadata.PackageNotFoundError:

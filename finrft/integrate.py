@@ -127,8 +127,22 @@ class Stepper(Protocol):
 
 
 Counts = ctypes.c_int64 * 2  # steps taken, steps rejected: the native functions add to it
-# What the native steppers that keep a `LoadPeak` take after their own arguments: its `native_args`.
+# What the native steppers that keep a `LoadPeak` take after their own arguments: its `native_args`; the fixed-step
+# ones then a `Trace`'s (none: _NO_TRACE).
 _PEAK_ARGS = (ctypes.c_int, ctypes.POINTER(ctypes.c_int), ctypes.c_double, ctypes.POINTER(ctypes.c_double))
+_TRACE_ARGS = (ctypes.c_int, ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_double))
+_NO_TRACE = (ctypes.c_int(0), None, None)
+
+
+class Trace:
+    """The velocities of the dofs ``watch`` after each step of a native stepper's call, which the stepper writes
+    (plugins/peaks.c) for the chatter probe: ``rows[i]`` after the call's step i + 1, so that a call may step past
+    the probe's steps. A call takes at most ``len(rows)`` steps."""
+
+    def __init__(self, watch: Sequence[int], steps: int) -> None:
+        self.rows = np.zeros((steps, len(watch)))
+        self.native_args = (ctypes.c_int(len(watch)), (ctypes.c_int * len(watch))(*watch),
+                            self.rows.ctypes.data_as(ctypes.POINTER(ctypes.c_double)))
 
 
 def stepper(m: mujoco.MjModel, sim: Sim, backend: str, groups: Sequence[ForceGroup],
@@ -205,6 +219,16 @@ class LoadPeak:
 class _Counted:
     def __init__(self) -> None:
         self.counts = Counts()
+        self._trace, self._traces = _NO_TRACE, False  # _traces: a native stepper that writes a `Trace`
+
+    def traced(self, watch: Sequence[int], steps: int) -> Trace | None:
+        """A `Trace` of ``watch`` that every later call (of at most ``steps`` steps) writes; None where this
+        stepper keeps none (the native fixed-step ones with a `LoadPeak` do)."""
+        if not self._traces:
+            return None
+        trace = Trace(watch, steps)
+        self._trace = trace.native_args
+        return trace
 
     @property
     def taken(self) -> int:
@@ -230,6 +254,7 @@ class Explicit(_Counted):
             self._native.argtypes = None
             self._model = ctypes.c_void_p(m._address)
             self._data: tuple[mujoco.MjData | None, ctypes.c_void_p] = (None, ctypes.c_void_p())
+            self._traces = True
 
     def __call__(self, d: mujoco.MjData, n: int) -> int:
         self.counts[0] += n
@@ -238,7 +263,7 @@ class Explicit(_Counted):
         elif self._native is not None:
             if self._data[0] is not d:
                 self._data = (d, ctypes.c_void_p(d._address))
-            return self._native(self._model, self._data[1], ctypes.c_int(n), *self.peak.native_args)
+            return self._native(self._model, self._data[1], ctypes.c_int(n), *self.peak.native_args, *self._trace)
         else:
             for _ in range(n):
                 mujoco.mj_step(self.m, d)
@@ -254,18 +279,19 @@ class Implicit(_Counted):
                  peak: LoadPeak | None = None) -> None:
         super().__init__()
         self.m, self.iterations, self.midpoint, self.peak = m, iterations, midpoint, peak
+        self._traces = backend == "native" and peak is not None
         if backend == "native":
             # finrft_implicit_peak calls the method's own stepper, finrft_implicit_step, one step at a time
             self._native = _native(native_stepper if peak is None else "finrft_implicit_peak", ctypes.c_int,
                                    ctypes.c_int, ctypes.c_double, ctypes.POINTER(ctypes.c_int64),
-                                   *(() if peak is None else _PEAK_ARGS))
+                                   *(() if peak is None else (*_PEAK_ARGS, *_TRACE_ARGS)))
         else:
             self._native, self._python = None, PythonImplicit(m, groups, attached)
 
     def __call__(self, d: mujoco.MjData, n: int) -> int:
         if self._native is not None:
             return self._native(self.m._address, d._address, n, self.iterations, self.midpoint, self.counts,
-                                *(() if self.peak is None else self.peak.native_args))
+                                *(() if self.peak is None else (*self.peak.native_args, *self._trace)))
         if self.peak is None:
             return self._python.steps(d, n, self.m.opt.timestep, self.iterations, self.counts, self.midpoint)
         for _ in range(n):
@@ -497,6 +523,8 @@ class PythonImplicit:
             analytic = attached.element_slopes(normal, v, depth, area) if slope and len(area) else None
             if analytic is not None:
                 dfdv = analytic[1]  # each element's own, as body_slope takes it from finrft_surface_element_slope
+                if not forward:  # the linearly implicit step: across the ramp's kink, a secant
+                    dfdv = dfdv + attached.trailing_slopes(normal, v, depth, area)
             elif slope and len(area):
                 # each element's dF/dv (as body_slope): forward, those leading with no DRFT term by
                 # `_leading_slope`; the others by probes (element, probe, 3), the law on all of them at once

@@ -234,6 +234,10 @@ PROBE_STEPS = 8
 CHATTER_WINDOW = 1.0
 CHATTER_SAMPLES = 3
 CHATTER_SWING = 3.0
+# The probes are judged in batches of this much simulated time (s): a run that chatters stops at most that later.
+PROBE_BATCH = 0.25
+# A native stepper that traces the probe's velocities (`integrate.Trace`) steps at most this many steps a call.
+TRACE_STEPS = 1000
 # The chatter speed of a dof that moves no point the medium acts on (rad/s or m/s): no RFT force can reverse there.
 # A hinge resting on a MuJoCo limit jitters by ~2e-3 rad/s, which is no chatter.
 CHATTER_DV = 1e-2
@@ -285,36 +289,66 @@ class Chattering:
 
 class ChatterProbe:
     """The chatter probe of a fixed-step run of ``steps`` steps of ``dt`` (the constants above): `steps`, the steps
-    whose velocities it takes (`take`), which are to be reached one by one; the probes whose steps would cross a
-    stroke's start (``starts``: a reversal jumps the velocities on purpose) are left out."""
+    whose velocities it takes (`store`), in order; the probes whose steps would cross a stroke's start (``starts``: a
+    reversal jumps the velocities on purpose) are left out. The probes are judged together, as soon as those of
+    PROBE_BATCH of simulated time are complete (a run's last ones by `flush`): numpy's cost is per call."""
 
     def __init__(self, watch: Sequence[int], speeds: np.ndarray | None, steps: int, starts: np.ndarray,
                  dt: float) -> None:
         self.watch, self.dt = list(watch), dt
         self.limit = np.full(len(self.watch), CHATTER_DV) if speeds is None else np.asarray(speeds, dtype=float)
+        self._per_swing = 1 / (PROBE_STEPS * self.limit)  # a swing per step in chatter speeds
         every = max(PROBE_STEPS + 1, round(PROBE_DT / dt))
         ends = np.arange(every, steps + 1, every)
         stroke = np.searchsorted(starts, ends - PROBE_STEPS, side="right")
         self.ends = ends[stroke == np.searchsorted(starts, ends, side="right")]
         self.steps = (self.ends[:, None] + np.arange(-PROBE_STEPS, 1)).ravel()
         self.window = max(CHATTER_SAMPLES, min(round(CHATTER_WINDOW / (every * dt)), len(self.ends)))
-        self._velocity = np.empty((PROBE_STEPS + 1, len(self.watch)))
+        self._batch = max(1, round(PROBE_BATCH / (every * dt)))
+        # The probes stored and not judged yet, each in its slot of a ring that holds a batch and one call's trace
+        # (`integrate.Trace`); flat: one row per step.
+        slots = self._batch + TRACE_STEPS // (PROBE_STEPS + 1) + 2
+        self._velocity = np.empty((slots, PROBE_STEPS + 1, len(self.watch)))
+        self._flat = self._velocity.reshape(-1, len(self.watch))
+        self._stored = 0                    # the velocities stored: those of steps[:_stored]
         self._chattered: list[bool] = []
         self._swing: list[float] = []       # each probe's largest swing per step over its dof's chatter speed
-        self._at = 0                        # the velocity of the probe's steps taken next
 
-    def take(self, qvel: np.ndarray) -> bool:
-        """The velocities at the next of `steps`; True when the run is to stop."""
-        self._velocity[self._at] = qvel[self.watch]
-        self._at = (self._at + 1) % (PROBE_STEPS + 1)
-        if self._at:
+    def store(self, first: int, velocities: np.ndarray) -> bool:
+        """The watched dofs' velocities at `steps` ``first``, ``first`` + 1, ... (one row each, at most a trace's
+        TRACE_STEPS; every step once, in order); True when the run is to stop."""
+        self._stored = first + len(velocities)
+        start = first % len(self._flat)
+        if start + len(velocities) <= len(self._flat):
+            self._flat[start:start + len(velocities)] = velocities
+        else:
+            self._flat[np.arange(first, self._stored) % len(self._flat)] = velocities
+        complete = self._stored // (PROBE_STEPS + 1)
+        return complete - len(self._chattered) >= self._batch and self._judge(complete)
+
+    def flush(self) -> bool:
+        """Judge the probes complete and not judged yet (a run's end); True when the run is to stop."""
+        return self._judge(self._stored // (PROBE_STEPS + 1))
+
+    def _judge(self, probes: int) -> bool:
+        """Judge the probes up to ``probes``; True as soon as the run is to stop."""
+        # numpy's ufuncs and their reductions, not its methods and functions, whose Python layers cost more here
+        velocity = self._velocity[np.arange(len(self._chattered), probes) % len(self._velocity)]
+        moves = velocity[:, 1:] - velocity[:, :-1]
+        size = np.abs(moves)
+        swing = (np.add.reduce(size, axis=1) - np.abs(velocity[:, -1] - velocity[:, 0])) * self._per_swing
+        flips = np.logical_and.reduce(size > self.limit, axis=1) & np.logical_and.reduce(
+            moves[:, 1:] * moves[:, :-1] < 0, axis=1)
+        chattered = np.logical_or.reduce(flips | (swing > CHATTER_SWING), axis=1).tolist()
+        self._swing.extend(np.maximum.reduce(swing, axis=1).tolist())
+        if not any(chattered):  # no probe that could tip a window
+            self._chattered.extend(chattered)
             return False
-        moves = np.diff(self._velocity, axis=0)
-        swing = (np.abs(moves).sum(axis=0) - np.abs(moves.sum(axis=0))) / PROBE_STEPS / self.limit
-        flips = np.all(np.abs(moves) > self.limit, axis=0) & np.all(moves[1:] * moves[:-1] < 0, axis=0)
-        self._swing.append(float(np.max(swing, initial=0.0)))
-        self._chattered.append(bool(np.any(flips | (swing > CHATTER_SWING))))
-        return sum(self._chattered[-self.window:]) * 2 > self.window
+        for one in chattered:
+            self._chattered.append(one)
+            if sum(self._chattered[-self.window:]) * 2 > self.window:
+                return True
+        return False
 
     @property
     def onset(self) -> float:
@@ -375,11 +409,31 @@ def step_through(m: mujoco.MjModel, d: mujoco.MjData, scene: Any, advance: Stepp
     if adaptive:
         check_adaptive_budget(scene.sim, steps * scene.sim.dt)
     probe = ChatterProbe(watch, speeds, steps, starts, scene.sim.dt) if len(watch) and not adaptive else None
-    probing = set() if probe is None else set(probe.steps.tolist())
-    events = samples if probe is None else np.union1d(samples, probe.steps)
+    # A stepper that traces the probe's velocities steps past the probe's steps (in calls of at most TRACE_STEPS);
+    # other steppers stop at each of them.
+    trace = None if probe is None or on_step is not None else getattr(advance, "traced", lambda *_: None)(
+        probe.watch, TRACE_STEPS)
+    events = samples if probe is None else np.union1d(samples, probe.steps if trace is None else
+                                                      np.arange(0, steps, TRACE_STEPS))
     events = np.union1d(events, starts)
     stroke_of = np.searchsorted(starts, events, side="right") - 1
     times = instants(events, steps, starts, scene.sim, stroke_time)
+    if probe is not None:
+        # Per event: the first of the probe's steps at or after it, whether one is there, and whether that one is
+        # taken there, from the state (traced, only at a stroke's start, whose reversal the trace has not seen) or
+        # from the trace of the call that ends there. (`probed`: the probe's steps and one that is none, as a run too
+        # short for a probe has none.)
+        probed = np.r_[probe.steps, -1]
+        first = np.searchsorted(probe.steps, events)
+        there = probed[first] == events
+        at_event = there if trace is None else there & (events == starts[stroke_of])
+        # The probe's steps each call from an event to the next steps through (traced): lo to hi, rows from the
+        # trace's row r when they follow one another (a probe's steps do), else None.
+        lo, hi = first + there, np.r_[first[1:] + (there & ~at_event)[1:], 0]
+        ends = probed[np.clip(np.c_[lo, hi - 1], 0, len(probe.steps))]
+        row = np.where(ends[:, 1] - ends[:, 0] == hi - lo - 1, ends[:, 0] - events - 1, -1)
+        past = [(a, b, r if r >= 0 else None) for a, b, r in zip(lo.tolist(), hi.tolist(), row.tolist())]
+        first, at_event = first.tolist(), at_event.tolist()
     counts = d.warning.number
     bad = [int(w) for w in _BAD_STATE]
     messages: list[str] = []
@@ -392,7 +446,7 @@ def step_through(m: mujoco.MjModel, d: mujoco.MjData, scene: Any, advance: Stepp
                 on_stroke(k)
                 if adaptive and k:
                     advance.restart()
-            if probe is not None and step in probing and probe.take(d.qvel):
+            if probe is not None and at_event[i] and probe.store(first[i], d.qvel[probe.watch][None]):
                 raise chatter(scene, probe.onset)
             if sample < len(samples) and step == samples[sample]:
                 if forward is not None:
@@ -408,12 +462,21 @@ def step_through(m: mujoco.MjModel, d: mujoco.MjData, scene: Any, advance: Stepp
             else:
                 code = _walk(advance, d, step, int(events[i + 1]), times[i + 1], scene.sim, adaptive, on_step)
             callbacks.check(m)
-            if code or any(counts[w] for w in bad):
-                raise unstable(scene, d.time, messages, code or 1)
+            if code:
+                raise unstable(scene, d.time, messages, code)
+            if trace is not None:  # the probe's steps the call stepped through
+                a, b, r = past[i]
+                if b > a and probe.store(a, trace.rows[probe.steps[a:b] - step - 1] if r is None else
+                                         trace.rows[r:r + b - a]):
+                    raise chatter(scene, probe.onset)
+            if any(counts[w] for w in bad):
+                raise unstable(scene, d.time, messages, 1)
             failure = void_run(m, d)
             if failure is not None:
                 raise failure
         failure = void_run(m, d)  # the last sample's forward pass
         if failure is not None:
             raise failure
+        if probe is not None and probe.flush():
+            raise chatter(scene, probe.onset)
     return None if probe is None else probe.seen()

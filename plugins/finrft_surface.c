@@ -772,6 +772,22 @@ void finrft_surface_element_slope(const FinrftSurface* p, const mjtNum normal[3]
   }
 }
 
+// An element that trails has force and slope 0, so a linearly implicit step at its velocity sees nothing of the force
+// it takes as it leads again, and a light body settling chatters: within the ramp's width of leading, its slope is
+// the secant F(v_s) n^T / (v_reg - n . v) to v_s = v + (v_reg - n . v) n, where it leads by v_reg.
+int finrft_surface_trailing_slope(const FinrftSurface* p, const mjtNum normal[3], const mjtNum v[3], mjtNum depth,
+                                  mjtNum area, mjtNum k[9]) {
+  mjtNum v_n = mju_dot3(normal, v);
+  if (!(p->v_reg > 0) || !(v_n > -p->v_reg) || v_n > FINRFT_RAMP_FLOOR * p->v_reg) return 0;
+  mjtNum gap = p->v_reg - v_n, ahead[3], f[3];
+  for (int i = 0; i < 3; i++) ahead[i] = v[i] + gap * normal[i];
+  finrft_surface_element_force(p, normal, ahead, depth, area, f);
+  for (int i = 0; i < 3; i++) {
+    for (int j = 0; j < 3; j++) k[3 * i + j] = f[i] * normal[j] / gap;
+  }
+  return 1;
+}
+
 // The depth below the surface of the element whose centre (body frame) is e, the body at origin with rotation R:
 // the arm's z alone, as mju_mulMatVec3 sums it, so that the elements above the surface (most of a legged robot's)
 // cost no more.

@@ -7,6 +7,9 @@
 // `peak` holds the stroke's record (LoadPeak's slots): the largest load, its change to the neighbouring loads, the
 // last load taken (NaN: none yet in the stroke), 1 when that one set the peak, and 1 when the current state's load
 // is still to be taken.
+// The fixed-step ones also keep a trace for the chatter probe (finrft.stepping.ChatterProbe): the velocities of the
+// `nwatch` dofs `watch` after each step i of the call in trace[i * nwatch ...] (none where nwatch is 0), so that a
+// run steps from one recorded sample to the next in one call, probes and all.
 
 #include <math.h>
 #include <stdint.h>
@@ -20,6 +23,10 @@ enum { PEAK, CHANGE, LAST, AFTER_PEAK, PENDING };
 // Take the load of the state whose forward pass left `qacc`. A peak at the stroke's first state is at its instant
 // exactly: nothing earlier in the stroke to miss, and the load falling after it (a light plate relaxing to the new
 // velocity in microseconds) is no error.
+static void trace_take(const mjData* d, int step, int nwatch, const int* watch, mjtNum* trace) {
+  for (int j = 0; j < nwatch; j++) trace[step * nwatch + j] = d->qvel[watch[j]];
+}
+
 static void peak_take(int ndof, const int* dofs, mjtNum armature, const mjtNum* qacc, mjtNum* peak) {
   mjtNum load = 0;
   for (int i = 0; i < ndof; i++) load = mju_max(load, fabs(qacc[dofs[i]]));
@@ -40,9 +47,10 @@ static void peak_take(int ndof, const int* dofs, mjtNum armature, const mjtNum* 
 // the next call's first step (or by LoadPeak.flush). Runge-Kutta's qacc is its last stage's: a forward pass after
 // each step instead.
 FINRFT_EXPORT int finrft_explicit_peak(const mjModel* m, mjData* d, int nstep, int ndof, const int* dofs,
-                                       mjtNum armature, mjtNum* peak) {
+                                       mjtNum armature, mjtNum* peak, int nwatch, const int* watch, mjtNum* trace) {
   for (int i = 0; i < nstep; i++) {
     mj_step(m, d);
+    trace_take(d, i, nwatch, watch, trace);
     if (m->opt.integrator == mjINT_RK4) {
       mj_forward(m, d);
       peak_take(ndof, dofs, armature, d->qacc, peak);
@@ -57,10 +65,12 @@ FINRFT_EXPORT int finrft_explicit_peak(const mjModel* m, mjData* d, int nstep, i
 // finrft_implicit_step's steps, one at a time, the load taken after each (its forward pass leaves the medium's
 // force out: a full one is needed).
 FINRFT_EXPORT int finrft_implicit_peak(const mjModel* m, mjData* d, int nstep, int iterations, mjtNum midpoint,
-                                       int64_t* counts, int ndof, const int* dofs, mjtNum armature, mjtNum* peak) {
+                                       int64_t* counts, int ndof, const int* dofs, mjtNum armature, mjtNum* peak,
+                                       int nwatch, const int* watch, mjtNum* trace) {
   for (int i = 0; i < nstep; i++) {
     int failed = finrft_implicit_step(m, d, 1, iterations, midpoint, counts);
     if (failed) return failed;
+    trace_take(d, i, nwatch, watch, trace);
     mj_forward(m, d);
     peak_take(ndof, dofs, armature, d->qacc, peak);
   }

@@ -485,6 +485,27 @@ static void rft_force(const Items* s, const mjtNum* u, mjtNum* force, mjtNum* bo
   }
 }
 
+// Add item i's J^T c J to slope (nv x nv), c its slope in its own velocity (rows x rows).
+static void add_item_slope(const Items* s, int i, const mjtNum* c, mjtNum* slope) {
+  int nv = s->nv, rows = item_rows(s, i);
+  const mjtNum* jac = s->jac + item_offset(s, i) * nv;
+  const int* col = s->col + (size_t)nv * i;
+  mjtNum cj[6];
+  for (int b = 0; b < s->ncol[i]; b++) {
+    int k = col[b];
+    for (int r = 0; r < rows; r++) {
+      cj[r] = 0;
+      for (int q = 0; q < rows; q++) cj[r] += c[rows * r + q] * jac[q * nv + k];
+    }
+    for (int a = 0; a < s->ncol[i]; a++) {
+      int row = col[a];
+      mjtNum sum = 0;
+      for (int r = 0; r < rows; r++) sum += jac[r * nv + row] * cj[r];
+      slope[row * nv + k] += sum;
+    }
+  }
+}
+
 // The derivative of the RFT force (nv x nv) at the velocity of the last rft_force, J^T (dF/dv) J summed over the
 // items, the laws' by forward differences when `forward`, else central ones; a body's from body_slopes where that
 // rft_force put it there (not NULL, the law with its own Jacobian).
@@ -492,11 +513,8 @@ static void rft_slope(const Items* s, mjtNum* slope, int forward, const mjtNum* 
   int nv = s->nv;
   mju_zero(slope, nv * nv);
   for (int i = 0; i < s->n + s->nbody; i++) {
-    int rows = item_rows(s, i);
     size_t at = item_offset(s, i);
-    const mjtNum* jac = s->jac + at * nv;
-    const int* col = s->col + (size_t)nv * i;
-    mjtNum c[36], cj[6];
+    mjtNum c[36];
     if (i < s->n) {
       segment_jacobian(s->law[i], s->vel + at, s->axes + 6 * i, s->axes + 6 * i + 3,
                        forward ? s->out + at : NULL, s->moves[i], c);
@@ -505,19 +523,29 @@ static void rft_slope(const Items* s, mjtNum* slope, int forward, const mjtNum* 
     } else {
       body_slope(s, i - s->n, s->vel + at, forward, c);
     }
-    for (int b = 0; b < s->ncol[i]; b++) {
-      int k = col[b];
-      for (int r = 0; r < rows; r++) {
-        cj[r] = 0;
-        for (int q = 0; q < rows; q++) cj[r] += c[rows * r + q] * jac[q * nv + k];
-      }
-      for (int a = 0; a < s->ncol[i]; a++) {
-        int row = col[a];
-        mjtNum sum = 0;
-        for (int r = 0; r < rows; r++) sum += jac[r * nv + row] * cj[r];
-        slope[row * nv + k] += sum;
+    add_item_slope(s, i, c, slope);
+  }
+}
+
+// The linearly implicit step's slope at the velocity of the last rft_force: the secants of the elements that trail
+// by less than the ramp's width (finrft_surface_trailing_slope; as the numpy twin's trailing_slopes), added to slope.
+static void add_trailing_slopes(const Items* s, mjtNum* slope) {
+  for (int j = 0; j < s->nbody; j++) {
+    const FinrftSurface* p = s->surface[j];
+    if (!finrft_surface_has_slope(p)) continue;
+    mjtNum c[36], k[9];
+    int any = 0;
+    mju_zero(c, 36);
+    for (int e = s->first[j]; e < s->first[j + 1]; e++) {
+      const mjtNum* element = s->element + FINRFT_SUBMERGED * (size_t)e;
+      mjtNum v[3];
+      element_velocity(s->vel + item_offset(s, s->n + j), element, v);
+      if (finrft_surface_trailing_slope(p, element + 3, v, element[6], element[7], k)) {
+        add_element_slope(element, k, c);
+        any = 1;
       }
     }
+    if (any) add_item_slope(s, s->n + j, c, slope);
   }
 }
 
@@ -594,6 +622,7 @@ static int newton_solve(Workspace* ws, const mjtNum* qvel, mjtNum dt, int iterat
   if (!ws->start_ready) {
     rft_force(s, qvel, ws->start_force, ws->body_slopes);
     rft_slope(s, ws->start_slope, iterations > 1, ws->body_slopes);
+    if (iterations == 1) add_trailing_slopes(s, ws->start_slope);
     ws->start_ready = 1;
   }
   mju_copy(w->force, ws->start_force, nv);

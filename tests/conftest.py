@@ -36,6 +36,20 @@ def _energy_warning_given():
     laws._warned.append("the presets' f_par < 0")
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _help_cache(tmp_path_factory):
+    """`finrft --help` keeps the help texts it printed in the user's cache folder (finrft.cli.helps): the tests'
+    go to a folder of their own, for their processes too."""
+    import os
+    before = os.environ.get("XDG_CACHE_HOME")
+    os.environ["XDG_CACHE_HOME"] = str(tmp_path_factory.mktemp("cache"))
+    yield
+    if before is None:
+        del os.environ["XDG_CACHE_HOME"]
+    else:
+        os.environ["XDG_CACHE_HOME"] = before
+
+
 @pytest.fixture
 def errors_only():
     """A subprocess's stderr without that once-per-process warning, for tests of other messages."""

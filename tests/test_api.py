@@ -1,6 +1,7 @@
 """The package's Python API: what `import finrft` gives, what it loads, and summaries made of plain numbers."""
 
 import json
+import os
 import subprocess
 import sys
 import textwrap
@@ -43,6 +44,48 @@ def test_version_imports_neither_the_engine_nor_the_studies(tmp_path):
         """, tmp_path)
     assert done.returncode == 0, done.stderr
     assert done.stdout.split("\n")[:3] == [f"finrft {finrft.__version__}", "exit 0", "[]"]
+
+
+def _help(argv: list[str], cache, columns: int = 100) -> subprocess.CompletedProcess:
+    """finrft's help in a process of its own, what it printed and then the heavy modules it imported."""
+    code = f"""
+        import sys
+        from finrft.cli import main
+        try:
+            main({argv!r})
+        except SystemExit as exit:
+            assert exit.code == 0, exit.code
+        print(sorted(m for m in {HEAVY + ("mujoco", "numpy")} if m in sys.modules))
+        """
+    return subprocess.run([sys.executable, "-c", textwrap.dedent(code)], cwd=cache.parent, capture_output=True,
+                          text=True, timeout=120, env={**os.environ, "XDG_CACHE_HOME": str(cache),
+                                                       "COLUMNS": str(columns)})
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["drag", "-h"], ["bench", "robots", "--help"]])
+def test_help_imports_neither_the_engine_nor_the_studies(tmp_path, argv):
+    # The commands' imports (MuJoCo, numpy, every experiment) took `finrft --help` 0.6-0.9 s; the help the full
+    # parser printed once is printed again, as long as the package and the terminal's width are the same.
+    first = _help(argv, tmp_path / "cache")
+    assert first.returncode == 0, first.stderr
+    assert first.stdout.splitlines()[-1] != "[]"  # the full parser, nothing kept yet
+    again = _help(argv, tmp_path / "cache")
+    assert again.returncode == 0, again.stderr
+    assert again.stdout.splitlines()[-1] == "[]"
+    assert again.stdout == first.stdout.replace(first.stdout.splitlines()[-1], "[]")
+
+
+def test_a_help_kept_for_another_width_or_package_is_not_printed(tmp_path):
+    wide = _help(["drag", "--help"], tmp_path / "cache", columns=140)
+    narrow = _help(["drag", "--help"], tmp_path / "cache", columns=60)
+    assert narrow.stdout.splitlines()[-1] != "[]" and max(map(len, narrow.stdout.splitlines())) <= 60
+    assert max(map(len, wide.stdout.splitlines())) > 60
+    # A kept text whose package differs (a flag added since) is not printed: its key is the package's files'.
+    kept = tmp_path / "cache" / "finrft" / "helps.json"
+    text = json.loads(kept.read_text())
+    kept.write_text(json.dumps({"key": "an older package", "helps": {k: "stale" for k in text["helps"]}}))
+    again = _help(["drag", "--help"], tmp_path / "cache", columns=60)
+    assert again.stdout == narrow.stdout
 
 
 def test_the_command_lines_parser_imports_no_study_package(tmp_path):

@@ -115,6 +115,23 @@ def test_errors_against_the_reference_have_the_known_answer(monkeypatch, box):
     assert summary["auto"]["errors"]["com_speed_m_s"] == pytest.approx(v0 * c * 7.5e-4 / reference)
 
 
+def test_the_summary_gives_the_cost_of_a_step_per_element(monkeypatch, box):
+    # The bench table's cost of a step: an implicit one (newton: the wrench, its slope and Newton's iterates) and
+    # MuJoCo's explicit one from the same state, per element of the medium beyond the bare step, and their ratio.
+    _first_order(monkeypatch, {"newton": 1e-3, "explicit": 1e-4})
+    scene = load_scene(str(box), cls=UserScene)
+    result = frontier.frontier(scene, method_names=("newton", "explicit"), steps=(1e-3, 5e-4), log=lambda s: None)
+    cost = result["summary"]["step_cost"]
+    assert (cost["method"], cost["dt"]) == ("newton", scene.sim.dt)
+    assert cost["elements"] == sum(UserModel.of(scene).build(scene).attached.elements.values())
+    assert cost["implicit_over_explicit_step"] == pytest.approx(cost["implicit_step_us"] / cost["explicit_step_us"])
+    assert cost["implicit_over_explicit_step"] > 1
+    assert cost["implicit_ns_per_element_step"] > cost["explicit_ns_per_element_step"]
+    row = frontier.markdown_row(result["summary"])
+    assert f"{cost['implicit_over_explicit_step']:.1f} explicit steps" in row
+    assert row.count("|") == frontier.MARKDOWN_HEADER.splitlines()[0].count("|")
+
+
 def test_the_cli_writes_one_row_per_run_and_a_chart(box, tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["bench", "robots", "--scene", str(box), "--method", "newton", "--method", "newton-midpoint",

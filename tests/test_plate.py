@@ -6,6 +6,7 @@ import pytest
 from scipy.optimize import brentq
 
 from conftest import face
+from finrft import integrate
 from finrft.drive import Drive
 from finrft.convergence import SimulationUnstable
 from finrft.scene import preset
@@ -115,6 +116,38 @@ def test_native_explicit_steps_take_the_peak_at_every_step_without_python(paper,
     assert calls["mj_step"] == 0 and calls["mj_forward"] < steps / 10
     assert run.peak_drive_force == pytest.approx(_peak_by_hand(scene, drive), rel=1e-12)
     assert np.abs(run.drive_force).max() < run.peak_drive_force
+
+
+def _untraced(monkeypatch):
+    """Steppers that keep no trace of the probe's velocities: the run stops at each of the probe's steps."""
+    monkeypatch.setattr(integrate._Counted, "traced", lambda self, watch, steps: None)
+
+
+@pytest.mark.parametrize("method", ["explicit", "newton"])
+def test_the_chatter_probe_reads_the_native_steppers_trace(monkeypatch, method):
+    # The native steppers trace the probe's velocities (plugins/peaks.c), so a plate run steps from one recorded
+    # sample to the next in one call: it stopped at each of the probe's 8 steps every 20 ms, 3000 calls of Python
+    # in the paper drag's 6667 steps, which took 10 times the bare steps. The probe judges the same velocities:
+    # the same largest swing over a turned-out-and-back plate (a reversal between probes), and a chattering light
+    # plate stops at the same onset.
+    calls = []
+    for cls in (integrate.Explicit, integrate.Implicit):
+        monkeypatch.setattr(cls, "__call__", lambda self, d, n, call=cls.__call__: calls.append(n) or call(self, d, n))
+    scene = preset("paper").replace(**{"sim.method": method, "sim.dt": 4e-3})
+    drive = Drive(kind="rotate", speed=np.radians(60), stroke=np.radians(120), cycles=1)
+    traced = simulate(scene, drive, estimate_error=False)
+    assert len(calls) <= len(traced.time) + 2  # a call from each recorded sample to the next, a reversal between
+    _untraced(monkeypatch)
+    untraced = simulate(scene, drive, estimate_error=False)
+    assert traced.chattering.worst > 0 and traced.chattering == untraced.chattering
+    monkeypatch.undo()
+    light = preset("physical").replace(**{"sim.method": "explicit"})
+    with pytest.raises(SimulationUnstable) as fast:
+        simulate(light, Drive(speed=0.03, stroke=0.2), estimate_error=False)
+    _untraced(monkeypatch)
+    with pytest.raises(SimulationUnstable) as slow:
+        simulate(light, Drive(speed=0.03, stroke=0.2), estimate_error=False)
+    assert "chatters at t =" in str(fast.value) and str(fast.value) == str(slow.value)
 
 
 # the adaptive methods' Python twin takes the longest: with the slow studies

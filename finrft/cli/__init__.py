@@ -20,9 +20,10 @@ import sys
 import warnings
 from typing import Sequence
 
-from .. import __version__, interrupts
+from .. import interrupts
 from ..errors import SceneError, SimulationFailed
 from ..files import keep_existing, remove_temporaries
+from . import helps
 from .common import Interrupted, Parser, one_line_warning
 
 __all__ = ["build_parser", "main"]
@@ -53,6 +54,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _add_version(parser: argparse.ArgumentParser) -> None:
+    from .. import __version__
     parser.add_argument("--version", action="version", version=f"finrft {__version__}")
 
 
@@ -66,6 +68,7 @@ def _print_version_if_asked(argv: Sequence[str]) -> None:
     with contextlib.suppress(SceneError):
         asked, _ = front.parse_known_args(list(itertools.takewhile(lambda word: word.startswith("-"), argv)))
         if asked.version and not asked.help:
+            from .. import __version__
             print(f"finrft {__version__}")
             raise SystemExit(0)
 
@@ -79,7 +82,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _main(argv: Sequence[str] | None) -> int:
-    _print_version_if_asked(sys.argv[1:] if argv is None else argv)
+    words = list(sys.argv[1:] if argv is None else argv)
+    _print_version_if_asked(words)
     # The command line renders nothing with MuJoCo: without this, importing it imports GLFW, which starts a Python
     # process to read the library's version (a tenth of a second, and tracebacks of its own on Ctrl-C). A user's
     # choice of MUJOCO_GL is kept.
@@ -95,12 +99,20 @@ def _main(argv: Sequence[str] | None) -> int:
     # SIGTERM (a scheduler's pre-emption) and SIGHUP (a lost terminal) stop as Ctrl-C does, so that a search leaves
     # a valid log, says how to continue it and shuts its workers down.
     try:
+        help_of = helps.asked(words)
+        text = None if help_of is None else helps.cached(help_of)
+        if text is not None:  # a help the full parser printed before, for the package as it is; ends as argparse's
+            sys.stdout.write(text)
+            sys.stdout.flush()
+            raise SystemExit(0)
         with warnings.catch_warnings(), interrupts.watched(_killed_in_native_code):
             warnings.showwarning = one_line_warning
             # The commands' imports take a signal when they are done: raised inside a C extension's initialisation
             # (MuJoCo's) it became an ImportError. Past GRACE the watcher ends the process as interrupted.
             with interrupts.deferred():
                 parser = build_parser()
+                if help_of is not None:
+                    helps.keep(parser)
             status = _dispatch(parser, argv)
             sys.stdout.flush()  # a reader that went away shows here, not as a traceback at exit
             return status

@@ -201,8 +201,27 @@ def frontier(scene: Any, *, name: str = "robot", method_names: tuple[str, ...] |
     for row in rows + [check]:
         if not row.failed:
             row.compare(reference.figures)
-    return {"name": name, "rows": rows, "reference": reference, "check": check,
-            "summary": summarise(name, rows, reference, check, accuracy)}
+    summary = summarise(name, rows, reference, check, accuracy)
+    summary["step_cost"] = step_cost(scene)
+    return {"name": name, "rows": rows, "reference": reference, "check": check, "summary": summary}
+
+
+def step_cost(scene: Any) -> dict[str, Any]:
+    """What a step costs: one step of an implicit method (the scene's own where it is a fixed-step implicit one,
+    else newton) and one of MuJoCo's explicit step, both at the scene's step, timed in C from the same state in
+    this process (`bench._step_costs`): ns per element per step of each beyond the bare step (the model without
+    the medium), and the implicit step's cost in explicit steps."""
+    from .bench import _bare_step_s, _elements, _step_costs
+    own = None if methods.chooses(scene.sim.method) else methods.get(scene.sim.method)
+    method = scene.sim.method if own is not None and own.implicit and not own.adaptive else "newton"
+    implicit = scene.replace(**{"sim.method": method})
+    elements = _elements(implicit)
+    costs = _step_costs(implicit, scene.sim.dt, _bare_step_s(implicit, STEP_COST_BARE_STEPS), elements)
+    return {"method": method, "dt": scene.sim.dt, "elements": elements, **costs}
+
+
+# The bare steps (the model without the medium) timed for `step_cost`, in C.
+STEP_COST_BARE_STEPS = 2000
 
 
 def summarise(name: str, rows: list[Run], reference: Run, check: Run, accuracy: float) -> dict[str, Any]:
@@ -324,7 +343,8 @@ def markdown_row(summary: dict[str, Any]) -> str:
     d = summary["default"]
     setting = f"{d['method']}, {1e3 * d['dt']:g} ms"
     if d["failed"]:
-        return f"| {summary['robot']} | {setting} | {d['wall_s']:.2f} | failed: {d['failed']} |" + " |" * 7
+        return f"| {summary['robot']} | {setting} | {d['wall_s']:.2f} | failed: {d['failed']} |" + " |" * 7 + \
+            f" {_cost(summary)} |"
     errors = _headline(d)
     ratios = ", ".join(f"{'—' if v is None else f'{v:.2g}'}" for v in d["estimate_over_error"].values())
     worst = f"{d['worst'][0]} {_pct(d['worst'][1])}" if d.get("worst") else "—"
@@ -342,10 +362,22 @@ def markdown_row(summary: dict[str, Any]) -> str:
     ref = max((v for k, v in summary["reference_error"].items() if v is not None and k in headline_keys()),
               default=None)
     return (f"| {summary['robot']} | {setting} | {d['wall_s']:.2f} | {errors} | {ratios} | {worst} | {chose} | "
-            f"{fast} | {ratio} | {auto_ratio} | {_pct(ref)} |")
+            f"{fast} | {ratio} | {auto_ratio} | {_pct(ref)} | {_cost(summary)} |")
+
+
+def _cost(summary: dict[str, Any]) -> str:
+    """The step's cost (`step_cost`): ns per element per step of its implicit and of the explicit step, and their
+    ratio."""
+    c = summary.get("step_cost")
+    if c is None:
+        return "—"
+    return (f"{c['method']} {c['implicit_ns_per_element_step']:.0f} ns, explicit "
+            f"{c['explicit_ns_per_element_step']:.0f} ns ({c['elements']} elements); "
+            f"{c['implicit_over_explicit_step']:.1f} explicit steps")
 
 
 MARKDOWN_HEADER = ("| robot | default | wall s | headline error vs converged | estimate / error | worst figure | "
                    "auto's choice (wall s; headline error) | fastest at the same accuracy (wall s) | default / fastest "
-                   "| auto / fastest | reference's own headline error |\n"
-                   "|---|---|---:|---|---|---|---|---|---:|---:|---:|")
+                   "| auto / fastest | reference's own headline error | per element per step, implicit and explicit; "
+                   "an implicit step in explicit steps |\n"
+                   "|---|---|---:|---|---|---|---|---|---:|---:|---:|---|")

@@ -131,12 +131,12 @@ def _add_robots(kinds: Any) -> argparse.ArgumentParser:
                    help="simulate S seconds instead of each example's duration (its settle scaled alike)")
     frontier = p.add_argument_group(
         "speed-accuracy frontier", "With --scene or --battery: run each robot scene with every method (--method) "
-        "over a range of steps (--dt; default: the scene's step times 2, 1, 1/2 and 1/4) and its default setting "
-        "(the method auto where it exists, else the scene's own), and measure each whole run's wall time (its error "
+        "over a range of steps (--dt; default: the scene's step times 2, 1, 1/2 and 1/4), at its default setting "
+        "(the scene's own method and step) and with the method auto from the scene's step, and measure each whole run's wall time (its error "
         "estimate's companion included) and the error of every figure it reports against a converged run (newton "
         "at half the finest step, its own error stated: its difference from newton at the finest step). Writes "
         "DIR/NAME.csv (one row per run), DIR/NAME.json (its summary), DIR/NAME.png (wall time against error, one "
-        "panel per headline figure and one for each run's worst figure, the default's run ringed) and "
+        "panel per headline figure and one for each run's worst figure, the default's run ringed, auto's a star) and "
         "DIR/frontier.md (one table row per robot).")
     frontier.add_argument("--scene", action="append", metavar="FILE.toml", help="a robot scene (the format of "
                           "finrft run --scene), or the name of an example or battery robot (repeatable)")

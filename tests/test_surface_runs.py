@@ -203,3 +203,134 @@ def test_an_hfield_of_the_model_is_measured_where_its_geom_shows_it():
     with pytest.raises(SceneError, match='contype="0"'):
         attach(mujoco.MjSpec.from_string(HFIELD.replace(' contype="0" conaffinity="0"/>\n    <body', '/>\n    <body')),
                "probe", medium="poppy_seeds_lp", surface="hfield", hfield="ground")
+
+
+@pytest.mark.parametrize("kind", ["plane", "hfield"])
+@pytest.mark.parametrize("law", ["li2013", "rft3d"])
+def test_the_implicit_steps_agree_and_turn_with_the_scene(kind, law):
+    # newton's steps take the submerged elements and each one's Jacobian in the law's frame: native and numpy
+    # agree, and the turned scene moves as the plain one, turned
+    from finrft import integrate
+    from finrft.scene import Sim
+
+    medium = {"medium": "poppy_seeds_lp"} if law == "li2013" else {"rho_c": 1617.0, "mu_int": 1.07, "mu_surf": 0.2}
+    runs = {}
+    for backend, seed in (("native", None), ("python", None), ("native", 5)):
+        R = np.eye(3) if seed is None else _rotation(seed)
+        spec = mujoco.MjSpec.from_string(BODY)
+        spec.option.gravity = R @ G
+        spec.body("probe").pos = R @ spec.body("probe").pos
+        spec.body("probe").quat = _quat(R)
+        attached = attach(spec, "probe", law=law, element_size=0.006, backend=backend, v_reg=1e-3,
+                          **_surface(kind, R), **medium)
+        m = spec.compile()
+        m.opt.timestep = 1e-3
+        d = mujoco.MjData(m)
+        d.qvel[:3], d.qvel[3:] = R @ QVEL[:3], QVEL[3:]
+        advance = integrate.stepper(m, Sim(method="newton", dt=1e-3), backend, [], attached)
+        out = []
+        with attached.installed(m):
+            for _ in range(60):
+                assert advance(d, 1) == 0
+                out.append(np.concatenate([R.T @ d.xpos[1], (R.T @ d.xmat[1].reshape(3, 3)).ravel()]))
+        runs[backend, seed] = np.array(out)
+    plain = runs["native", None]
+    free = 0.06 * QVEL[:3] + 0.5 * 0.06 ** 2 * G  # where it would be in 60 ms without the medium
+    assert np.abs(plain[-1, :3] - plain[0, :3] - free).max() > 1e-3  # the medium held it
+    for other in (runs["python", None], runs["native", 5]):
+        assert np.abs(other - plain).max() <= 1e-9, np.abs(other - plain).max(axis=0)
+
+
+def _settled_bottom(bed_depth: float) -> float:
+    """The lowest point of a heavy box dropped onto the sand, after 0.5 s of newton's steps."""
+    from finrft import integrate
+    from finrft.scene import Sim
+
+    spec = mujoco.MjSpec.from_string("""<mujoco><option timestep="1e-3"/><worldbody>
+      <body name="box" pos="0 0 0.01"><freejoint/><geom type="box" size="0.02 0.02 0.01" mass="20"/></body>
+      </worldbody></mujoco>""")
+    attached = attach(spec, "box", medium="poppy_seeds_lp", element_size=0.01, bed_depth=bed_depth, v_reg=1e-3)
+    m = spec.compile()
+    d = mujoco.MjData(m)
+    advance = integrate.stepper(m, Sim(method="newton", dt=1e-3), "native", [], attached)
+    with attached.installed(m):
+        assert advance(d, 500) == 0
+    return float(d.qpos[2] - 0.01)
+
+
+def test_a_bed_of_finite_depth_rests_the_body_on_its_floor():
+    unbounded = _settled_bottom(0.0)
+    assert unbounded < -0.04  # 20 kg on 16 cm^2 of poppy seeds: the sand alone holds it deep
+    assert _settled_bottom(0.02) == pytest.approx(-0.02, abs=2e-3)  # on the floor, to MuJoCo's soft contact
+    spec = mujoco.MjSpec.from_string(BODY)
+    attach(spec, "probe", medium="poppy_seeds_lp", surface="plane", surface_point=(0, 0, 0.004),
+           surface_normal=NORMAL, bed_depth=0.03)
+    model = spec.compile()
+    data = mujoco.MjData(model)
+    mujoco.mj_kinematics(model, data)
+    floor = model.geom("finrft_bed").id
+    # parallel to the slope, 3 cm below it along gravity
+    assert data.geom_xmat[floor].reshape(3, 3)[:, 2] == pytest.approx(NORMAL)
+    below = surfaces.module("plane").depth(data.geom_xpos[floor][None], G, surface_point=(0, 0, 0.004),
+                                           surface_normal=NORMAL)
+    assert below == pytest.approx([0.03])
+
+
+TILTED = """<mujoco><option gravity="1.7 0 -9.66"/><worldbody><body name="plate">
+  <joint name="drag" type="slide" axis="1 0 0"/><geom type="box" size="0.0005 0.02 0.03" pos="0 0 -0.03" mass="10"/>
+</body></worldbody></mujoco>"""
+PLATE = TILTED.replace("1.7 0 -9.66", "0 0 -9.81")
+SCENE = """[model]
+path = "plate.xml"
+bodies = ["plate"]
+
+[medium]
+zeta = 1.0
+
+[drive]
+joint = "drag"
+speed = 0.1
+stroke = 0.01
+
+[sim]
+dt = 1e-3
+record_dt = 0.01
+"""
+
+
+@pytest.mark.parametrize("model,sets,named", [
+    (TILTED, (), 'is not along -z over the flat surface (medium.surface = "flat" is horizontal, not a slope): for a '
+                 'slope give medium.surface = "plane" with its surface_normal'),
+    (PLATE, ("medium.surface=deforming",), 'medium.surface = "deforming" is not yet run'),
+    (PLATE, ("medium.surface=plane", "medium.surface_normal=[0, 1]"), "medium.surface_normal must be 3 numbers"),
+    (PLATE, ("medium.surface=plane", "medium.surface_normal=[0, 0, -1]"), "does not point against gravity"),
+    (PLATE, ("medium.surface=hfield", "medium.hfield=sand"), "names no <hfield> of the model"),
+    (PLATE, ("medium.hfield_slope=0.1",), "medium.hfield_slope is used by surface = 'hfield' only"),
+])
+def test_a_scene_s_bad_surface_is_one_line_exit_2(tmp_path, capsys, model, sets, named):
+    from finrft.cli import main
+
+    (tmp_path / "plate.xml").write_text(model)
+    (tmp_path / "scene.toml").write_text(SCENE)
+    argv = ["run", str(tmp_path / "plate.xml"), "--scene", str(tmp_path / "scene.toml"), "--out",
+            str(tmp_path / "run.h5"), *(item for key in sets for item in ("--set", key))]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err and named in err, err
+    assert not (tmp_path / "run.h5").exists()
+
+
+def test_a_scene_on_a_level_plane_or_hfield_runs_as_on_the_flat_surface(tmp_path):
+    import finrft
+    from finrft.experiments.user_model import UserModel
+    from finrft.scene import UserScene, load_scene
+
+    (tmp_path / "plate.xml").write_text(PLATE)
+    (tmp_path / "scene.toml").write_text(SCENE)
+    scene = load_scene(tmp_path / "scene.toml", cls=UserScene)
+    flat = finrft.run(UserModel.of(scene), scene)
+    for surface in ({"medium.surface": "plane", "medium.surface_point": (0.5, 0.1, 0.0)},
+                    {"medium.surface": "hfield", "medium.hfield_extent": 0.2, "medium.hfield_spacing": 0.02}):
+        other = finrft.run(UserModel.of(scene), scene.replace(**surface))
+        assert np.abs(flat.drive_load).max() > 1.0
+        assert other.drive_load == pytest.approx(flat.drive_load, abs=1e-9 * np.abs(flat.drive_load).max())

@@ -334,3 +334,16 @@ def test_a_scene_on_a_level_plane_or_hfield_runs_as_on_the_flat_surface(tmp_path
         other = finrft.run(UserModel.of(scene), scene.replace(**surface))
         assert np.abs(flat.drive_load).max() > 1.0
         assert other.drive_load == pytest.approx(flat.drive_load, abs=1e-9 * np.abs(flat.drive_load).max())
+
+
+@pytest.mark.parametrize("command,named", [
+    ("intrude", "the intrusion pushes its plate down from the flat surface at medium.surface_z only"),
+    ("swim", "unknown scene key 'medium.surface'"),  # a chain of segments lies below the flat surface
+    ("drag", "unknown scene key 'medium.surface'"),
+])
+def test_the_commands_on_the_flat_surface_refuse_another(capsys, command, named):
+    from finrft.cli import main
+
+    assert main([command, "--set", "medium.surface=plane"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and named in err, err

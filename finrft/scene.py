@@ -153,6 +153,8 @@ Medium = schema.section("Medium", (
     ("hfield_length", float, _f(0.05, "m", "a generated hfield's step depth, noise correlation length or pile "
                                 "radius", minimum=0.0, used_by=("surface", ("hfield",)))),
     ("hfield_seed", int, _f(0, "", "a generated noise hfield's random seed", used_by=("surface", ("hfield",)))),
+    ("hfield_heading", float, _f(0.0, "rad", "a generated hfield's x axis (its incline's direction): the world's x "
+                                 "turned this far about up, towards y", used_by=("surface", ("hfield",)))),
     ("bed_depth", float, _f(0.0, "m", "the sand's thickness: a rigid floor (a plane geom with contacts) this far "
                             "below the surface along gravity (an hfield's: below its lowest point); 0: unbounded",
                             minimum=0.0, exclusive=False)),

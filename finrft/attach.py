@@ -3,11 +3,12 @@ elements and gives them a granular resistive force law, before the spec is compi
 
 Each element below the free surface (`finrft.surfaces`: the horizontal z = surface_z, a plane at any tilt or a
 heightfield; depth measured along the model's gravity from the surface above the element) that leads the motion
-(outward normal . velocity > 0) takes the law's stress times its depth and area (a surface law of the registry `finrft.laws`, found
-by its name: `finrft.laws.li2013.element_forces` (Li 2013 in 3D, Treers et al. 2021), `li2013-planar` or
+(outward normal . velocity > 0) takes the law's stress times its depth and area (a surface law of the registry
+`finrft.laws`, found by its name: `finrft.laws.li2013.element_forces` (Li 2013 in 3D, Treers et al. 2021), `li2013-planar` or
 `finrft.laws.rft3d.element_forces`), plus, with ``drft_lambda`` > 0, DRFT's rate-dependent term
-(`finrft.laws.drft`), all times the ramp tanh(max(n . v, 0) / v_reg) (`finrft.laws.regularised`). The laws take their angles against gravity: they see
-normals and velocities in `finrft.surfaces.law_frame`, whose z is up (the identity under gravity along -z). The force
+(`finrft.laws.drft`), all times the ramp tanh(max(n . v, 0) / v_reg) (`finrft.laws.regularised`). The laws take
+their angles against gravity: they see normals and velocities in `finrft.surfaces.law_frame`, whose z is up (the
+identity under gravity along -z). The force
 appears where MuJoCo's passive forces appear, ``data.qfrc_passive``: from the native plugin ``finrft.surface``
 (plugins/finrft_surface.c, one instance per body, the elements in its config) or, with the Python backend, from a
 passive-force callback that `Attached.installed` sets for a block and then restores.
@@ -438,15 +439,15 @@ def _field(model: mujoco.MjModel, data: mujoco.MjData, surface: str | surfaces.F
     elif surface == "flat":
         field = surfaces.Field("flat", {"surface_z": float(surface_z)})
     elif surface == "plane":
-        field = surfaces.Field("plane", {"surface_point": tuple(map(float, surface_point)),
-                                         "surface_normal": tuple(map(float, surface_normal))})
+        field = surfaces.Field("plane", {"surface_point": _vector(surface_point, "surface_point"),
+                                         "surface_normal": _vector(surface_normal, "surface_normal")})
     elif surface == "hfield":
-        field = surfaces.hfield.of_model(model, data, hfield, surface_point)
-    elif surface == "deforming":
-        raise SceneError("attach: surface 'deforming' is not yet run: use flat, plane or hfield")
+        field = surfaces.module("hfield").of_model(model, data, hfield, _vector(surface_point, "surface_point"))
+    elif isinstance(surface, str) and surface in surfaces.names():
+        field = surfaces.Field(surface, {})  # a kind runs do not take yet: refused below
     else:
-        raise SceneError(f"attach: surface must be one of flat, plane, hfield, or a finrft.surfaces.Field, got "
-                         f"{surface!r}")
+        raise SceneError(f"attach: surface must be one of {', '.join(FIELD_KINDS)} or a finrft.surfaces.Field, got "
+                         f"{surface!r:.60}")
     if field.kind not in FIELD_KINDS:
         raise SceneError(f"attach: surface {field.kind!r} is not yet run: use {', '.join(FIELD_KINDS)}")
     try:
@@ -454,6 +455,14 @@ def _field(model: mujoco.MjModel, data: mujoco.MjData, surface: str | surfaces.F
     except SceneError as error:
         raise SceneError(f"attach: {error}") from None
     return field
+
+
+def _vector(value: object, key: str) -> tuple[float, float, float]:
+    """Three finite numbers; SceneError naming ``key`` otherwise."""
+    if not (isinstance(value, (list, tuple, np.ndarray)) and len(value) == 3 and all(_is_number(v) for v in value)
+            and all(math.isfinite(v) for v in value)):
+        raise SceneError(f"attach: {key} must be three finite numbers (x, y, z), got {value!r:.60}")
+    return tuple(float(v) for v in value)
 
 
 # The name of the floor under a bed of sand of finite depth (attach's bed_depth).

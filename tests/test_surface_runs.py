@@ -370,3 +370,15 @@ def test_generated_heightfields_are_the_shapes_they_name():
     assert h.std() == pytest.approx(0.004) and abs(np.corrcoef(h[:, :-1].ravel(), h[:, 1:].ravel())[0, 1]) > 0.9
     with pytest.raises(SceneError, match="hfield shape 'dunes'"):
         hfield.generated("dunes", G)
+
+
+@pytest.mark.parametrize("surface,named", [
+    ({"surface": "deforming"}, "surface 'deforming' is not yet run"),
+    ({"surface": "slope"}, "surface must be one of flat, plane, hfield"),
+    ({"surface": "plane", "surface_normal": (0, 1)}, "surface_normal must be three finite numbers"),
+    ({"surface": "plane", "surface_point": (0, 0, float("nan"))}, "surface_point must be three finite numbers"),
+    ({"bed_depth": -0.01}, "bed_depth must be >= 0 m"),
+])
+def test_attach_refuses_a_bad_surface(surface, named):
+    with pytest.raises(SceneError, match=named):
+        attach(mujoco.MjSpec.from_string(BODY), "probe", medium="poppy_seeds_lp", **surface)

@@ -4,14 +4,14 @@ elements and gives them a granular resistive force law, before the spec is compi
 Each element below the free surface (`finrft.surfaces`: the horizontal z = surface_z, a plane at any tilt or a
 heightfield; depth measured along the model's gravity from the surface above the element) that leads the motion
 (outward normal . velocity > 0) takes the law's stress times its depth and area (a surface law of the registry
-`finrft.laws`, found by its name: `finrft.laws.li2013.element_forces` (Li 2013 in 3D, Treers et al. 2021), `li2013-planar` or
-`finrft.laws.rft3d.element_forces`), plus, with ``drft_lambda`` > 0, DRFT's rate-dependent term
+`finrft.laws`, found by its name: `finrft.laws.li2013.element_forces` (Li 2013 in 3D, Treers et al. 2021),
+`li2013-planar` or `finrft.laws.rft3d.element_forces`), plus, with ``drft_lambda`` > 0, DRFT's rate-dependent term
 (`finrft.laws.drft`), all times the ramp tanh(max(n . v, 0) / v_reg) (`finrft.laws.regularised`). The laws take
 their angles against gravity: they see normals and velocities in `finrft.surfaces.law_frame`, whose z is up (the
-identity under gravity along -z). The force
-appears where MuJoCo's passive forces appear, ``data.qfrc_passive``: from the native plugin ``finrft.surface``
-(plugins/finrft_surface.c, one instance per body, the elements in its config) or, with the Python backend, from a
-passive-force callback that `Attached.installed` sets for a block and then restores.
+identity under gravity along -z). The force appears where MuJoCo's passive forces appear, ``data.qfrc_passive``:
+from the native plugin ``finrft.surface`` (plugins/finrft_surface.c, one instance per body, the elements in its
+config) or, with the Python backend, from a passive-force callback that `Attached.installed` sets for a block and
+then restores.
 
 Elements: a box's faces are cut into rectangles, a cylinder's side into rectangles and its caps into ring
 sectors, spheres, ellipsoids and a capsule's ends into bands of equal polar angle split in azimuth, a mesh's
@@ -572,16 +572,21 @@ def _bind(spec: mujoco.MjSpec, attached: Attached, surface: Surface) -> None:
 
 def _field_config(field: surfaces.Field) -> dict[str, str]:
     """The native plugin's config of a free surface (flat: none beyond surface_z)."""
-    numbers = lambda values: " ".join(map(repr, np.asarray(values, dtype=float).ravel().tolist()))  # noqa: E731
     if field.kind == "plane":
-        return {"surface": "plane", "surface_point": numbers(field.parameters["surface_point"]),
-                "surface_normal": numbers(field.parameters["surface_normal"])}
+        return {"surface": "plane", "surface_point": _numbers(field.parameters["surface_point"]),
+                "surface_normal": _numbers(field.parameters["surface_normal"])}
     if field.kind == "hfield":
         p = field.parameters
         heights = np.asarray(p["heights"], dtype=float)
-        return {"surface": "hfield", "hfield": numbers([*heights.shape, *p["size"], *p.get("centre", (0, 0, 0)),
-                                                       *np.asarray(p.get("frame", np.eye(3))).ravel(), *heights.ravel()])}
+        frame = np.asarray(p.get("frame", np.eye(3)), dtype=float)
+        return {"surface": "hfield", "hfield": _numbers([*heights.shape, *p["size"], *p.get("centre", (0, 0, 0)),
+                                                       *frame.ravel(), *heights.ravel()])}
     return {}
+
+
+def _numbers(values: object) -> str:
+    """Numbers as the plugin's config reads them: repr, the Python backend's exact numbers."""
+    return " ".join(map(repr, np.asarray(values, dtype=float).ravel().tolist()))
 
 
 def _either(value: float | None, alias: float | None, name: str, alias_name: str) -> float | None:

@@ -382,3 +382,21 @@ def test_generated_heightfields_are_the_shapes_they_name():
 def test_attach_refuses_a_bad_surface(surface, named):
     with pytest.raises(SceneError, match=named):
         attach(mujoco.MjSpec.from_string(BODY), "probe", medium="poppy_seeds_lp", **surface)
+
+
+def test_gravity_is_the_models_at_every_step():
+    # set on the compiled model (after attach), a new gravity measures the depths and turns the laws in both twins
+    wrenches = {}
+    for backend in ("native", "python"):
+        attached, model, data = _moving(backend, surface="plane", surface_point=(0.0, 0.0, 0.004),
+                                        surface_normal=NORMAL)
+        read = attached.wrenches(model)
+        with attached.installed(model):
+            before = read(data)[0].copy()
+            model.opt.gravity[:] = 9.81 * -NORMAL  # square to the slope: its depths are across it now
+            mujoco.mj_forward(model, data)
+            wrenches[backend] = before, read(data)[0].copy()
+    (before, after), (numpy_before, numpy_after) = wrenches["native"], wrenches["python"]
+    assert np.abs(after - before).max() > 1e-3 * np.abs(before).max()
+    assert np.abs(after - numpy_after).max() <= 1e-9 * np.abs(after).max()
+    assert np.abs(before - numpy_before).max() <= 1e-9 * np.abs(before).max()

@@ -277,8 +277,10 @@ class SurfaceForces:
         return self.attached.free_surface.kind == "flat" and g[0] == 0 and g[1] == 0 and g[2] <= 0
 
     def frame(self) -> np.ndarray | None:
-        """The laws' frame under the model's gravity now (`finrft.surfaces.law_frame`); None when level."""
-        return None if self.level() else surfaces.law_frame(surfaces.up(self._gravity))
+        """The laws' frame under the model's gravity now (`finrft.surfaces.law_frame`); None under gravity along -z
+        (or none), where it is the identity (the native plugin's FinrftSurface.upright)."""
+        g = self._gravity
+        return None if g[0] == 0 and g[1] == 0 and g[2] <= 0 else surfaces.law_frame(surfaces.up(g))
 
     def depths(self, d: mujoco.MjData, body: int, arm: np.ndarray) -> np.ndarray:
         """The depths (N) of the elements at ``arm`` (N, 3, world frame) from the origin of ``body``, along the

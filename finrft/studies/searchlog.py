@@ -12,6 +12,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import stat
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -132,9 +133,12 @@ def read(path: str | Path, schema: str) -> tuple[dict[str, Any], dict[str, Datas
 
 
 def schema_of(path: str | Path) -> str | None:
-    """The schema a log declares (None: not a readable HDF5 file, which its reader then refuses in its words)."""
+    """The schema a log declares (None: not a readable HDF5 file, which its reader then refuses in its words). A
+    path that is not a regular file is not opened: a FIFO's open would wait for a writer."""
     import h5py
     try:
+        if not stat.S_ISREG(os.stat(path).st_mode):
+            return None
         with h5py.File(path, "r") as f:
             kind = f.attrs.get("schema")
     except (OSError, ValueError):

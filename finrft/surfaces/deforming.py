@@ -22,6 +22,8 @@ lesser of its depths below the two. `WHEEL_GROUP_PILE_FACTOR` is their fitted fa
 
 from __future__ import annotations
 
+import ctypes
+import functools
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -194,3 +196,125 @@ def update(heights: Any, points: Any, areas: Any, velocities: Any, gravity: Any,
     """One step of the deforming surface: `sweep`, then `relax` with the points under the body blocked."""
     swept, occupied = sweep(heights, points, areas, velocities, gravity, size, centre, frame, front_share)
     return relax(swept, size, repose, occupied, tolerance, max_iterations)
+
+
+# In a run, relaxation takes at most this many iterations a step and leaves the rest of the excess to the next steps:
+# the body moves a small part of a grid spacing a step, so the surface relaxes as it goes, at a bounded cost (run to
+# convergence after every step, a rolling wheel's surface took a median of 334 iterations a step).
+STEP_ITERATIONS = 16
+
+
+class DeformingSurface:
+    """A deforming surface as a run's state: its heights (nrow, ncol, m) on a grid of half-extents ``size`` (m) at
+    ``centre`` with ``frame`` (`finrft.surfaces.hfield`'s layout), displaced by the body's elements at every step
+    (`step`) and relaxed towards the angle of ``repose`` (rad) by at most ``step_iterations`` iterations a step.
+    ``native`` steps it with the C twins (plugins/surfaces/deforming.c), else with this module's numpy functions:
+    the same heights to rounding. ``displaced`` is the volume (m^3) the sweeps have removed so far."""
+
+    def __init__(self, heights: Any, size: Any, repose: float, centre: Any = (0.0, 0.0, 0.0), frame: Any = None,
+                 pile_factor: float | None = None, front_share: float = FRONT_SHARE, tolerance: float = TOLERANCE,
+                 step_iterations: int = STEP_ITERATIONS, native: bool = True) -> None:
+        g = grid(heights, size, (0.0, 0.0, -1.0) if frame is None else -np.asarray(frame, float)[:, 2], centre, frame)
+        if not 0.0 < repose < np.pi / 2:
+            raise SceneError(f"angle of repose {repose!r} rad must be between 0 and pi/2")
+        if not (isinstance(step_iterations, (int, np.integer)) and step_iterations >= 1):
+            raise SceneError(f"step_iterations {step_iterations!r} must be a whole number of at least 1")
+        if pile_factor is not None and not (np.isfinite(pile_factor) and pile_factor > 0):
+            raise SceneError(f"pile_factor {pile_factor!r} must be a positive number (the wheel group's: "
+                             f"{WHEEL_GROUP_PILE_FACTOR})")
+        self.heights = np.ascontiguousarray(g.heights, dtype=float).copy()
+        self.original = self.heights.copy()
+        self.size, self.centre, self.frame = g.size.copy(), g.centre.copy(), np.ascontiguousarray(g.frame)
+        self.repose, self.pile_factor, self.front_share = float(repose), pile_factor, float(front_share)
+        self.tolerance, self.step_iterations, self.native = float(tolerance), int(step_iterations), bool(native)
+        self.displaced = 0.0
+        self._occupied = np.zeros(self.heights.shape, np.ubyte)
+        # The surface the elements measure their depth from: the sand's own (heights) where no body is, and under a
+        # body the height the sand had as the body entered that point (the level of the sand around the hole it
+        # digs, not the hole's floor); a point the body has left is its floor again, a rut.
+        self.level = self.heights.copy()
+
+    @property
+    def cell(self) -> float:
+        """The area (m^2) each grid point stands for."""
+        dx, dy = grid(self.heights, self.size, -self.frame[:, 2], self.centre, self.frame).spacing
+        return dx * dy
+
+    def volume(self) -> float:
+        """The sand's volume above the grid's z = 0 (m^3): what every step conserves."""
+        return self.cell * float(self.heights.sum())
+
+    def depth(self, points: Any, gravity: Any) -> np.ndarray:
+        """Each point's depth (m) below the sand's level (`level`; `depth`, with the pile rule when set)."""
+        return depth(points, gravity, self.level, self.size, self.centre, self.frame,
+                     self.original if self.pile_factor else None, self.pile_factor)
+
+    def step(self, points: Any, areas: Any, velocities: Any, gravity: Any) -> float:
+        """Sweep the sand under the elements at ``points`` (N, 3, m) of ``areas`` (N, m^2) moving at ``velocities``
+        (N, 3, m/s), then relax at most ``step_iterations`` times; the volume (m^3) this step displaced."""
+        before, entered = self.heights.copy(), self._occupied == 0
+        if self.native:
+            _native_step(self, points3(points), np.asarray(areas, float), points3(velocities),
+                         np.asarray(gravity, float))
+        else:
+            swept, occupied = sweep(self.heights, points, areas, velocities, gravity, self.size, self.centre,
+                                    self.frame, self.front_share)
+            self._occupied[...] = occupied
+            self.heights[...] = relax(swept, self.size, self.repose, occupied, self.tolerance,
+                                      self.step_iterations).heights
+        under = self._occupied != 0
+        entered &= under
+        self.level[...] = np.where(entered, before, np.where(under, self.level, self.heights))
+        removed = self.cell * float(np.clip(before - self.heights, 0.0, None).sum())
+        self.displaced += removed
+        return removed
+
+
+@functools.cache
+def _native_functions() -> tuple[Any, Any]:
+    from .. import native
+
+    if not native.available():
+        raise SceneError("the native library is not available (reinstall finrft: pip install -e .), so the deforming "
+                         "surface cannot step natively: use native=False")
+    p, i, f = ctypes.c_void_p, ctypes.c_int, ctypes.c_double
+    return (native.function("finrft_deforming_sweep", i, i, i, p, p, p, p, p, i, p, p, p, f, p),
+            native.function("finrft_deforming_relax", i, i, i, p, p, f, p, f, i))
+
+
+def _native_step(s: DeformingSurface, points: np.ndarray, areas: np.ndarray, velocities: np.ndarray,
+                 gravity: np.ndarray) -> None:
+    if areas.shape != (len(points),) or velocities.shape != points.shape:
+        raise SceneError(f"sweep needs one area and one velocity per point: {len(points)} points, areas of shape "
+                         f"{areas.shape}, velocities of shape {velocities.shape}")
+    sweep_c, relax_c = _native_functions()
+    nrow, ncol = s.heights.shape
+    size = np.ascontiguousarray(s.size, float)
+    arrays = [np.ascontiguousarray(a, float) for a in (s.centre, s.frame, gravity, points, areas, velocities)]
+    if sweep_c(nrow, ncol, s.heights.ctypes.data, size.ctypes.data, *(a.ctypes.data for a in arrays[:3]),
+               len(points), *(a.ctypes.data for a in arrays[3:]), s.front_share, s._occupied.ctypes.data):
+        raise SceneError("the deforming surface's sweep refused its input (a grid whose z axis is not against "
+                         "gravity, or front_share outside 0..1)")
+    relax_c(nrow, ncol, s.heights.ctypes.data, size.ctypes.data, s.repose, s._occupied.ctypes.data, s.tolerance,
+            s.step_iterations)
+
+
+def body_elements(attached: Any, m: Any, d: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The world centres (N, 3, m), velocities (N, 3, m/s) and areas (N, m^2) of every element of an
+    `finrft.attach.Attached` at the positions and velocities of ``d`` (its kinematics and velocities made here: after
+    a step MuJoCo's data holds the previous state's)."""
+    import mujoco
+
+    mujoco.mj_kinematics(m, d)
+    mujoco.mj_comPos(m, d)
+    mujoco.mj_comVel(m, d)
+    points, velocities, areas = [], [], []
+    twist = np.zeros(6)
+    for s in attached.surfaces:
+        body = m.body(s.body).id
+        arm = s.centre @ d.xmat[body].reshape(3, 3).T
+        mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_XBODY, body, twist, 0)
+        points.append(arm + d.xpos[body])
+        velocities.append(twist[3:] + np.cross(twist[:3], arm))
+        areas.append(s.area)
+    return np.concatenate(points), np.concatenate(velocities), np.concatenate(areas)

@@ -1,11 +1,13 @@
 """RFT on any MuJoCo model: `attach` cuts the geoms of named bodies of a user's `mujoco.MjSpec` into surface
 elements and gives them a granular resistive force law, before the spec is compiled.
 
-Each element below the free surface (z < surface_z, gravity along -z) that leads the motion (outward normal .
-velocity > 0) takes the law's stress times its depth and area (a surface law of the registry `finrft.laws`, found
+Each element below the free surface (`finrft.surfaces`: the horizontal z = surface_z, a plane at any tilt or a
+heightfield; depth measured along the model's gravity from the surface above the element) that leads the motion
+(outward normal . velocity > 0) takes the law's stress times its depth and area (a surface law of the registry `finrft.laws`, found
 by its name: `finrft.laws.li2013.element_forces` (Li 2013 in 3D, Treers et al. 2021), `li2013-planar` or
 `finrft.laws.rft3d.element_forces`), plus, with ``drft_lambda`` > 0, DRFT's rate-dependent term
-(`finrft.laws.drft`), all times the ramp tanh(max(n . v, 0) / v_reg) (`finrft.laws.regularised`). The force
+(`finrft.laws.drft`), all times the ramp tanh(max(n . v, 0) / v_reg) (`finrft.laws.regularised`). The laws take their angles against gravity: they see
+normals and velocities in `finrft.surfaces.law_frame`, whose z is up (the identity under gravity along -z). The force
 appears where MuJoCo's passive forces appear, ``data.qfrc_passive``: from the native plugin ``finrft.surface``
 (plugins/finrft_surface.c, one instance per body, the elements in its config) or, with the Python backend, from a
 passive-force callback that `Attached.installed` sets for a block and then restores.
@@ -30,7 +32,7 @@ from typing import Callable, Iterator, Sequence
 import mujoco
 import numpy as np
 
-from . import callbacks, laws, media, native
+from . import callbacks, laws, media, native, surfaces
 from .errors import SceneError
 from .laws import drft, li2013, rft3d
 
@@ -75,31 +77,49 @@ class Attached:
     drft_lambda: float = 0.0   # DRFT's lambda; 0: the quasi-static law alone
     bulk_density: float = 0.0  # kg/m^3, DRFT's rho_c (0: none known)
     v_reg: float = laws.SURFACE_V_REG  # m/s, the ramp of `finrft.laws.regularised` (0: none)
+    # the free surface; None: the horizontal one at surface_z
+    surface: surfaces.Field | None = None
 
-    def law_forces(self, normal: np.ndarray, velocity: np.ndarray, depth: np.ndarray, area: np.ndarray
-                   ) -> np.ndarray:
+    @property
+    def free_surface(self) -> surfaces.Field:
+        """The free surface the depths are measured from."""
+        return self.surface or surfaces.Field("flat", {"surface_z": self.surface_z})
+
+    def law_forces(self, normal: np.ndarray, velocity: np.ndarray, depth: np.ndarray, area: np.ndarray,
+                   frame: np.ndarray | None = None) -> np.ndarray:
         """The law's own force on each element (world frame): no DRFT term, no ramp. Every surface law is
-        rate-independent, a function of the direction of the velocity alone."""
-        return laws.module(self.law, laws.SURFACE).element_forces(normal, velocity, depth, area,
-                                                                  coefficients=self.coefficients, **self.parameters)
+        rate-independent, a function of the direction of the velocity alone. ``frame``: the law's
+        (`finrft.surfaces.law_frame` of the model's gravity; None: gravity along -z)."""
+        law = laws.module(self.law, laws.SURFACE)
+        if frame is None:
+            return law.element_forces(normal, velocity, depth, area, coefficients=self.coefficients,
+                                      **self.parameters)
+        return law.element_forces(normal @ frame.T, velocity @ frame.T, depth, area, coefficients=self.coefficients,
+                                  **self.parameters) @ frame
 
-    def element_forces(self, normal: np.ndarray, velocity: np.ndarray, depth: np.ndarray, area: np.ndarray
-                       ) -> np.ndarray:
-        """The law's force on each element (world frame), regularised, as the native plugin computes it."""
-        force = self.law_forces(normal, velocity, depth, area)
+    def element_forces(self, normal: np.ndarray, velocity: np.ndarray, depth: np.ndarray, area: np.ndarray,
+                       frame: np.ndarray | None = None) -> np.ndarray:
+        """The law's force on each element (world frame), regularised, as the native plugin computes it;
+        ``frame`` as `law_forces`'."""
+        force = self.law_forces(normal, velocity, depth, area, frame)
         if self.drft_lambda > 0:
             force = force + drft.element_forces(normal, velocity, depth, area, self.drft_lambda, self.bulk_density)
         return laws.regularised(force, normal, velocity, self.v_reg)
 
-    def element_slopes(self, normal: np.ndarray, velocity: np.ndarray, depth: np.ndarray, area: np.ndarray
-                       ) -> tuple[np.ndarray, np.ndarray] | None:
+    def element_slopes(self, normal: np.ndarray, velocity: np.ndarray, depth: np.ndarray, area: np.ndarray,
+                       frame: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray] | None:
         """`element_forces` and their analytic derivatives in the velocity (N, 3, 3; row: the force's component),
         as finrft_surface_element_slope computes them; None for a law without its own (its ``element_slopes``),
-        whose derivative the implicit steps take by differences."""
+        whose derivative the implicit steps take by differences. ``frame`` as `law_forces`'."""
         own = getattr(laws.module(self.law, laws.SURFACE), "element_slopes", None)
         if own is None:
             return None
-        force, slope = own(normal, velocity, depth, area, coefficients=self.coefficients, **self.parameters)
+        if frame is None:
+            force, slope = own(normal, velocity, depth, area, coefficients=self.coefficients, **self.parameters)
+        else:
+            force, slope = own(normal @ frame.T, velocity @ frame.T, depth, area, coefficients=self.coefficients,
+                               **self.parameters)
+            force, slope = force @ frame, np.einsum("ki,ekl,lj->eij", frame, slope, frame)
         if self.drft_lambda > 0:
             force = force + drft.element_forces(normal, velocity, depth, area, self.drft_lambda, self.bulk_density)
             slope = slope + drft.element_slopes(normal, velocity, depth, area, self.drft_lambda, self.bulk_density)
@@ -228,6 +248,7 @@ class SurfaceForces:
         self.attached = attached
         self.bodies = [(model.body(s.body).id, s) for s in attached.surfaces]
         self._twist = np.zeros(6)
+        self._gravity = model.opt.gravity  # the model's, read at every use: it may be changed between steps
         guard = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_PLUGIN, GUARD)
         self._stamp = int(model.plugin_stateadr[guard]) if guard >= 0 else -1
 
@@ -246,8 +267,24 @@ class SurfaceForces:
         arm = surface.centre @ rotation.T
         normal = surface.normal @ rotation.T
         velocity = twist[3:] + np.cross(twist[:3], arm)
-        depth = a.surface_z - (d.xpos[body, 2] + arm[:, 2])
-        return a.element_forces(normal, velocity, depth, surface.area), arm
+        return a.element_forces(normal, velocity, self.depths(d, body, arm), surface.area, self.frame()), arm
+
+    def level(self) -> bool:
+        """Whether the surface is the flat one and gravity along -z (or none): today's depth, z's alone, and the
+        laws' own frame (the native plugin's FinrftSurface.level)."""
+        g = self._gravity
+        return self.attached.free_surface.kind == "flat" and g[0] == 0 and g[1] == 0 and g[2] <= 0
+
+    def frame(self) -> np.ndarray | None:
+        """The laws' frame under the model's gravity now (`finrft.surfaces.law_frame`); None when level."""
+        return None if self.level() else surfaces.law_frame(surfaces.up(self._gravity))
+
+    def depths(self, d: mujoco.MjData, body: int, arm: np.ndarray) -> np.ndarray:
+        """The depths (N) of the elements at ``arm`` (N, 3, world frame) from the origin of ``body``, along the
+        model's gravity below the free surface."""
+        if self.level():
+            return self.attached.surface_z - (d.xpos[body, 2] + arm[:, 2])
+        return self.attached.free_surface.depth(d.xpos[body] + arm, self._gravity)
 
     def submerged(self, d: mujoco.MjData, body: int, surface: Surface
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -256,7 +293,7 @@ class SurfaceForces:
         implicit steps take them once per step: an element above the surface has no force at any velocity."""
         rotation = d.xmat[body].reshape(3, 3)
         arm = surface.centre @ rotation.T
-        depth = self.attached.surface_z - (d.xpos[body, 2] + arm[:, 2])
+        depth = self.depths(d, body, arm)
         below = depth > 0
         return arm[below], surface.normal[below] @ rotation.T, depth[below], surface.area[below]
 
@@ -276,7 +313,9 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str = (), law: str = "li
            rho_c: float | None = None, mu_int: float | None = None, mu_surf: float | None = None,
            drft_lambda: float = 0.0, bulk_density: float | None = None,
            v_reg: float = laws.SURFACE_V_REG, geoms: Sequence[str] = (), cull: bool = True,
-           internal_friction: float | None = None, surface_friction: float | None = None) -> Attached:
+           internal_friction: float | None = None, surface_friction: float | None = None,
+           surface: str | surfaces.Field = "flat", surface_point: Sequence[float] = (0.0, 0.0, 0.0),
+           surface_normal: Sequence[float] = (0.0, 0.0, 1.0), hfield: str = "", bed_depth: float = 0.0) -> Attached:
     """Add granular RFT to the named bodies of ``spec`` (before it is compiled): all the geoms of each of
     ``bodies``, and the geoms named in ``geoms`` (their bodies' other geoms left out).
 
@@ -293,7 +332,15 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str = (), law: str = "li
     ``v_reg`` (m/s, default `finrft.laws.SURFACE_V_REG`, 1e-4; 0: none): every element's force times
     tanh(max(n . v, 0) / v_reg), the smooth onset of the leading-face switch and of the speed
     (`finrft.laws.regularised`);
-    ``surface_z``: height of the free surface, m; ``element_size``: the elements' size, m; ``backend``:
+    ``surface_z``: height of the free surface, m; ``surface``: its kind (`finrft.surfaces`): ``flat`` (the
+    horizontal plane at ``surface_z``, gravity along -z), ``plane`` (through ``surface_point``, m, its
+    ``surface_normal`` out of the sand), ``hfield`` (the model's ``<hfield>`` named ``hfield``, where its geom puts
+    it, or at ``surface_point`` level with gravity when no geom shows it), or a `finrft.surfaces.Field` (a generated
+    heightfield: `finrft.surfaces.hfield.generated`); depths are measured along the model's gravity
+    (``spec.option.gravity``, read again at every step) and the laws' angles taken against it; ``bed_depth`` (m, 0:
+    unbounded): the sand's thickness, a rigid floor added to the spec (`BED`, a plane geom whose contacts are
+    MuJoCo's) that far below the surface along gravity, parallel to a flat or plane surface, level with gravity
+    below a heightfield's lowest point; ``element_size``: the elements' size, m; ``backend``:
     ``native`` (falls back to ``python``, with a warning, when the plugin cannot be loaded) or ``python`` (then run
     the model inside ``Attached.installed``: a model stepped outside it stops with an exception at its second step,
     from the native guard the compiled model carries while the plugin library loads); ``cull``: leave out the
@@ -344,7 +391,10 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str = (), law: str = "li
         model = spec.copy().compile()
     data = mujoco.MjData(model)
     mujoco.mj_kinematics(model, data)
-    surfaces = []
+    field = _field(model, data, surface, surface_z, surface_point, surface_normal, hfield)
+    if not (_is_number(bed_depth) and math.isfinite(bed_depth) and bed_depth >= 0):
+        raise SceneError(f"attach: bed_depth must be >= 0 m (0: unbounded), got {bed_depth!r}")
+    parts = []
     for name in names:
         if spec.body(name) is None:
             raise SceneError(f"attach: the model has no body named {name!r}")
@@ -352,17 +402,19 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str = (), law: str = "li
         if model.body_plugin[body] >= 0 or name in python_bodies:
             raise SceneError(f"attach: body {name!r} already has a plugin (a body takes one)" if model.body_plugin[
                 body] >= 0 else f"attach: body {name!r} has RFT attached already (a body takes it once)")
-        surfaces.append(_surface(model, data, name, body, element_size, chosen.get(name), cull))
-    total = sum(len(s.area) for s in surfaces)
+        parts.append(_surface(model, data, name, body, element_size, chosen.get(name), cull))
+    total = sum(len(s.area) for s in parts)
     if total > MAX_ELEMENTS:
         raise SceneError(f"attach: element_size = {element_size:g} m gives {total} elements, more than "
                          f"{MAX_ELEMENTS}: use a larger element_size")
     attached = Attached(law, parameters, float(surface_z), float(element_size), backend, coefficients,
-                        tuple(surfaces), float(drft_lambda), rho, float(v_reg))
+                        tuple(parts), float(drft_lambda), rho, float(v_reg), field)
+    if bed_depth > 0:
+        _add_bed(spec, field, float(bed_depth), model.opt.gravity)
     if backend == "native":
         spec.activate_plugin(PLUGIN)
-        for surface in surfaces:
-            _bind(spec, attached, surface)
+        for part in parts:
+            _bind(spec, attached, part)
     else:
         # The compiled model carries the bodies, so that stepping it without its callback is refused, as is a
         # second attach of one of them.
@@ -376,6 +428,60 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str = (), law: str = "li
     laws.warn_feeds_energy(law, module.FEEDS_ENERGY, "kept as published")
     laws.warn_caveat(law)
     return attached
+
+
+def _field(model: mujoco.MjModel, data: mujoco.MjData, surface: str | surfaces.Field, surface_z: float,
+           surface_point: Sequence[float], surface_normal: Sequence[float], hfield: str) -> surfaces.Field:
+    """The free surface `attach` was given, checked under the model's gravity; SceneError naming what is wrong."""
+    if isinstance(surface, surfaces.Field):
+        field = surface
+    elif surface == "flat":
+        field = surfaces.Field("flat", {"surface_z": float(surface_z)})
+    elif surface == "plane":
+        field = surfaces.Field("plane", {"surface_point": tuple(map(float, surface_point)),
+                                         "surface_normal": tuple(map(float, surface_normal))})
+    elif surface == "hfield":
+        field = surfaces.hfield.of_model(model, data, hfield, surface_point)
+    elif surface == "deforming":
+        raise SceneError("attach: surface 'deforming' is not yet run: use flat, plane or hfield")
+    else:
+        raise SceneError(f"attach: surface must be one of flat, plane, hfield, or a finrft.surfaces.Field, got "
+                         f"{surface!r}")
+    if field.kind not in FIELD_KINDS:
+        raise SceneError(f"attach: surface {field.kind!r} is not yet run: use {', '.join(FIELD_KINDS)}")
+    try:
+        field.check(model.opt.gravity)
+    except SceneError as error:
+        raise SceneError(f"attach: {error}") from None
+    return field
+
+
+# The name of the floor under a bed of sand of finite depth (attach's bed_depth).
+BED = "finrft_bed"
+
+
+def _add_bed(spec: mujoco.MjSpec, field: surfaces.Field, depth: float, gravity: np.ndarray) -> None:
+    """The rigid floor ``depth`` below the free surface along gravity: a plane geom of the world body."""
+    if spec.geom(BED) is not None:
+        raise SceneError(f"attach: the model has a geom named {BED!r} already: bed_depth adds the floor of that name")
+    up = surfaces.up(gravity)
+    p = field.parameters
+    if field.kind == "hfield":
+        frame = np.asarray(p["frame"], dtype=float)
+        point = np.asarray(p["centre"], dtype=float) + frame[:, 2] * (np.min(p["heights"]) - depth)
+        normal = up
+    else:
+        point = np.asarray(p.get("surface_point", (0.0, 0.0, p.get("surface_z", 0.0))), dtype=float)
+        normal = np.asarray(p.get("surface_normal", (0.0, 0.0, 1.0)), dtype=float)
+        normal = normal / np.linalg.norm(normal)
+        point = point - depth * up
+    quat = np.empty(4)
+    mujoco.mju_quatZ2Vec(quat, normal)
+    spec.worldbody.add_geom(name=BED, type=mujoco.mjtGeom.mjGEOM_PLANE, pos=point, quat=quat, size=[0, 0, 1])
+
+
+# The kinds of free surface runs take (finrft.surfaces; the native plugin's kFields).
+FIELD_KINDS = ("flat", "plane", "hfield")
 
 
 def _names(value: Sequence[str] | str, key: str) -> list[str]:
@@ -444,6 +550,7 @@ def _bind(spec: mujoco.MjSpec, attached: Attached, surface: Surface) -> None:
         **({"drft_lambda": repr(attached.drft_lambda), "bulk_density": repr(attached.bulk_density)}
            if attached.drft_lambda > 0 else {}),
         "surface_z": repr(attached.surface_z),
+        **_field_config(attached.free_surface),
         "v_reg": repr(attached.v_reg),
         "elements": " ".join(map(repr, elements.ravel().tolist())),  # repr: the Python backend's exact numbers
         "geoms": " ".join(map(repr, surface.geoms.ravel().tolist())),
@@ -452,6 +559,20 @@ def _bind(spec: mujoco.MjSpec, attached: Attached, surface: Surface) -> None:
     body.plugin = instance
     body.plugin.name = instance.name
     body.plugin.active = True
+
+
+def _field_config(field: surfaces.Field) -> dict[str, str]:
+    """The native plugin's config of a free surface (flat: none beyond surface_z)."""
+    numbers = lambda values: " ".join(map(repr, np.asarray(values, dtype=float).ravel().tolist()))  # noqa: E731
+    if field.kind == "plane":
+        return {"surface": "plane", "surface_point": numbers(field.parameters["surface_point"]),
+                "surface_normal": numbers(field.parameters["surface_normal"])}
+    if field.kind == "hfield":
+        p = field.parameters
+        heights = np.asarray(p["heights"], dtype=float)
+        return {"surface": "hfield", "hfield": numbers([*heights.shape, *p["size"], *p.get("centre", (0, 0, 0)),
+                                                       *np.asarray(p.get("frame", np.eye(3))).ravel(), *heights.ravel()])}
+    return {}
 
 
 def _either(value: float | None, alias: float | None, name: str, alias_name: str) -> float | None:

@@ -80,6 +80,7 @@ An adaptive stepper also steps ``until(d, t)``, to an instant off the grid (a re
 from __future__ import annotations
 
 import ctypes
+import functools
 import math
 from typing import Callable, Protocol, Sequence
 
@@ -409,7 +410,7 @@ def _across(v: np.ndarray) -> np.ndarray:
 
 
 def _leading_slope(attached: Attached, normal: np.ndarray, v: np.ndarray, f0: np.ndarray, depth: np.ndarray,
-                   area: np.ndarray, h: np.ndarray) -> np.ndarray:
+                   area: np.ndarray, h: np.ndarray, frame: np.ndarray | None = None) -> np.ndarray:
     """dF/dv (E, 3, 3) of elements leading at ``v`` with forces ``f0`` = r L, by forward differences (as
     leading_slope in steppers.c): the law L is rate-independent (dL/dv v = 0), so dF/dv = r'(n . v) L n^T
     + r (dL/dv p1 p1^T + dL/dv p2 p2^T), p1, p2 `_across` v: two probes of the law rather than three."""
@@ -421,7 +422,8 @@ def _leading_slope(attached: Attached, normal: np.ndarray, v: np.ndarray, f0: np
         ramp, rate = np.ones(len(v)), np.zeros(len(v))
     law = f0 / ramp[:, None]
     across = _across(v)
-    dl = np.stack([(attached.law_forces(normal, v + h[:, None] * across[:, c], depth, area) - law) / h[:, None]
+    dl = np.stack([(attached.law_forces(normal, v + h[:, None] * across[:, c], depth, area, frame) - law)
+                   / h[:, None]
                    for c in range(2)], axis=1)
     return (rate[:, None, None] * law[:, :, None] * normal[:, None, :]
             + ramp[:, None, None] * np.einsum("ecr,ecj->erj", dl, across))
@@ -449,13 +451,14 @@ class PythonImplicit:
     def _segments(self, d: mujoco.MjData) -> tuple[list, list, list]:
         """Per force group: its law, v_reg, the site Jacobians (k, 3, nv) and the segments' axes and normals; per
         penalty stop: its stiffness, hinge dofs and their deflections from the rest angle now; per attached body:
-        its `Attached` (the law), the Jacobian of its origin (6, nv: angular rows, then linear, the twist's order)
-        and its elements below the surface now (arms, normals, depths, areas)."""
+        its `Attached` (the law), the Jacobian of its origin (6, nv: angular rows, then linear, the twist's order),
+        its elements below the surface now (arms, normals, depths, areas) and the laws' frame (None: level)."""
         segments, stops, bodies = [], [], []
         for body, surface in self.bodies:
             jac = np.zeros((6, self.m.nv))
             mujoco.mj_jacBody(self.m, d, jac[3:], jac[:3], body)
-            bodies.append((self._surfaces.attached, jac, self._surfaces.submerged(d, body, surface)))
+            bodies.append((self._surfaces.attached, jac, self._surfaces.submerged(d, body, surface),
+                           self._surfaces.frame()))
         for law, group in self.laws:
             jacp = np.zeros((len(group.sites), 3, self.m.nv))
             for row, site in zip(jacp, group.sites):
@@ -488,13 +491,13 @@ class PythonImplicit:
                 step = h.sum(axis=2, keepdims=True) * (1 if forward else 2)
                 dfdv = np.swapaxes((up - down) / step, 1, 2)  # (k, force, v)
                 jacobian += np.einsum("kin,kij,kjm->nm", jacp, dfdv, jacp)
-        for attached, jac, (arm, normal, depth, area) in bodies:
-            law = attached.element_forces
+        for attached, jac, (arm, normal, depth, area), frame in bodies:
+            law = functools.partial(attached.element_forces, frame=frame)
             twist = jac @ u
             v = twist[3:] + np.cross(twist[:3], arm)
             f = law(normal, v, depth, area)
             force += jac.T @ np.concatenate([np.cross(arm, f).sum(axis=0), f.sum(axis=0)])
-            analytic = attached.element_slopes(normal, v, depth, area) if slope and len(area) else None
+            analytic = attached.element_slopes(normal, v, depth, area, frame) if slope and len(area) else None
             if analytic is not None:
                 dfdv = analytic[1]  # each element's own, as body_slope takes it from finrft_surface_element_slope
             elif slope and len(area):
@@ -504,7 +507,7 @@ class PythonImplicit:
                 rated = np.any(f != 0, axis=1) & (forward and attached.drft_lambda == 0)
                 dfdv = np.zeros((len(area), 3, 3))
                 dfdv[rated] = _leading_slope(attached, normal[rated], v[rated], f[rated], depth[rated],
-                                             area[rated], h[rated])
+                                             area[rated], h[rated], frame)
                 rest = ~rated
                 probe = h[rest, None, None] * np.eye(3)
                 each = [np.repeat(x[rest], 3, axis=0) for x in (normal, depth, area)]

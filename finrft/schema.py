@@ -168,22 +168,33 @@ def field_of(cls: type, key: str) -> dataclasses.Field:
     return next(f for f in dataclasses.fields(sections(cls)[section_name]) if f.name == name)
 
 
+def _number(key: str, value: Any, unit: str) -> float:
+    """A finite number of ``unit`` (a string with a unit suffix converted); SceneError naming ``key`` otherwise."""
+    if isinstance(value, str):
+        value = quantity(value, unit, key)
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):  # numpy's scalars are numbers too
+        raise SceneError(f"{key} must be a number ({unit or 'dimensionless'}), got {value!r}")
+    value = float(value)
+    if not math.isfinite(value):
+        raise SceneError(f"{key} must be finite, got {value!r}")
+    return value
+
+
 def check(section_name: str, f: dataclasses.Field, value: Any) -> Any:
     """``value`` for the entry ``f`` of a section, converted (an int for a float) and checked against its type,
     choices (the canonical spelling returned) and bounds; SceneError naming ``section_name.f.name`` otherwise."""
     key, meta = f"{section_name}.{f.name}", f.metadata
     if f.type in ("float", float):
-        if isinstance(value, str):
-            value = quantity(value, meta["unit"], key)
-        if isinstance(value, bool) or not isinstance(value, numbers.Real):  # numpy's scalars are numbers too
-            raise SceneError(f"{key} must be a number ({meta['unit'] or 'dimensionless'}), got {value!r}")
-        value = float(value)
-        if not math.isfinite(value):
-            raise SceneError(f"{key} must be finite, got {value!r}")
+        value = _number(key, value, meta["unit"])
     elif f.type in ("int", int):
         if isinstance(value, bool) or not isinstance(value, numbers.Integral):
             raise SceneError(f"{key} must be a whole number, got {value!r}")
         value = int(value)
+    elif f.type in ("tuple[float, ...]", tuple[float, ...]):
+        if not isinstance(value, (list, tuple)):
+            raise SceneError(f"{key} must be a list of numbers ({meta['unit'] or 'dimensionless'}), e.g. [0, 0, 1], "
+                             f"got {value!r}")
+        return tuple(_number(key, v, meta["unit"]) for v in value)
     elif f.type == "tuple[str, ...]":
         if isinstance(value, str):
             value = [value]

@@ -13,6 +13,8 @@
 
 #include <mujoco/mujoco.h>
 
+#include "surfaces/surfaces.h"
+
 #if !defined(FINRFT_LAWS) || !defined(FINRFT_UNSTABLE) || !defined(FINRFT_STEP_TOO_SMALL) || \
     !defined(FINRFT_NOT_CONVERGED) || !defined(FINRFT_ARENA_FULL)
 #error "build the plugin with setup.py (pip install .): it defines the law list and the return codes"
@@ -112,11 +114,34 @@ static inline void finrft_site_axes(const mjData* d, int s, mjtNum x[3], mjtNum 
 // finrft.surface (plugins/finrft_surface.c): one instance per body, the body's surface elements and their law.
 #define FINRFT_SURFACE_PLUGIN "finrft.surface"
 
+// The free surface an instance measures its elements' depths from (config `surface`; finrft.surfaces.Field's
+// twin), one kind of plugins/surfaces/ behind finrft_field_depth. A kind with state (the deforming one: a grid of
+// heights that the elements displace) keeps it per mjData: see finrft_field_depth in finrft_surface.c.
+enum { FINRFT_FIELD_FLAT, FINRFT_FIELD_PLANE, FINRFT_FIELD_HFIELD };
+typedef struct {
+  int kind;                    // FINRFT_FIELD_*, by the name of its file in plugins/surfaces/ (kFields)
+  double surface_z;            // flat
+  double point[3], normal[3];  // plane: a point of it (m) and its normal out of the sand
+  int nrow, ncol;              // hfield: the grid as finrft_hfield_depth takes it, its heights owned here
+  double* heights;
+  double size[2], centre[3], frame[9];
+} FinrftField;
+
+// Each of n points' (world, m) depth along gravity g below the surface: 0, or FINRFT_SURFACE_BAD_INPUT where
+// the surface cannot be measured under g (n = 0 checks only).
+int finrft_field_depth(const FinrftField* f, const double g[3], int n, const double* points, double* depth);
+
 typedef struct {
   const mjModel* model;  // the model it was made for (finrft_surface_instance)
   int law;               // index into the table of surface laws in finrft_surface.c
   double coef[60];       // the law's coefficients: li2013 the first 9, rft3d 60
   double zeta, xi, mu_surf, surface_z;
+  FinrftField field;     // the free surface (surface_z's flat one unless config `surface` names another)
+  double gravity[3];     // the model's, read again at every finrft_surface_instance (between steps it may change)
+  int level;             // flat under gravity along -z (or none): depth from z alone, the laws' own frame (today's)
+  int measured;          // gravity, level and frame are the model's as last read
+  double frame[9];       // otherwise the laws' frame, rows x, y, up (finrft_surface_frame)
+  double* scratch;       // 4 n: the elements' world centres, then their depths, at one evaluation
   double v_reg;          // m/s, the ramp tanh(max(n.v, 0) / v_reg) of every element's force; 0: none
   double drft_lambda, bulk_density;  // drft_lambda = 0: no DRFT term
   int body;

@@ -11,7 +11,15 @@
 //   zeta          li2013, li2013-planar: > 0, the medium's scale
 //   xi            rft3d: > 0, the medium's scale xi_n, N/m^3
 //   mu_surf       rft3d: >= 0, the intruder's surface friction
-//   surface_z     m, height of the free surface (gravity along -z)
+//   surface_z     m, height of the flat free surface
+//   surface       optional (absent or "flat": the horizontal plane z = surface_z): "plane" or "hfield", the kind
+//                 of free surface (plugins/surfaces/), with
+//   surface_point, surface_normal   plane: a point of it (m) and its normal out of the sand, 3 numbers each
+//   hfield        hfield: "nrow ncol sx sy cx cy cz R00 .. R22 h00 h01 ..": the grid's size, centre, frame
+//                 (row-major, its axes as columns) and heights (m, row by row), as finrft_hfield_depth takes them
+// Depths are measured along the model's gravity (opt.gravity, read again at every use) from the surface, and the
+// laws take their angles against it (finrft_surface_frame): under gravity along -z over the flat surface, exactly
+// the numbers of the plane z = surface_z and the laws' own frame.
 //   v_reg         optional, >= 0 m/s (absent: 0, none): every element's force times tanh(max(n . v, 0) / v_reg)
 //   drft_lambda   optional, >= 0 (absent: 0, off): DRFT's dimensionless lambda
 //   bulk_density  with drft_lambda > 0: > 0, the medium's density rho_c, kg/m^3
@@ -477,12 +485,15 @@ FINRFT_EXPORT void finrft_drft_element_force(double drft_lambda, double rho_c, c
 
 static const char* kSurfaceAttributes[] = {"law",         "coefficients", "zeta",  "xi",      "mu_surf",
                                            "surface_z",   "v_reg",        "drft_lambda", "bulk_density",
-                                           "elements",    "geoms"};
+                                           "elements",    "geoms",        "surface", "surface_point",
+                                           "surface_normal", "hfield"};
 
 static void surface_free(FinrftSurface* p) {
   if (!p) return;
   free(p->element);
   free(p->geom);
+  free(p->field.heights);
+  free(p->scratch);
   free(p);
 }
 
@@ -526,6 +537,79 @@ static int read_xi(const mjModel* m, int instance, FinrftSurface* p) {
   if (p->xi > 0 && p->mu_surf >= 0) return 0;
   mju_warning("finrft.surface: config 'xi' must be > 0 and 'mu_surf' >= 0");
   return -1;
+}
+
+// The kinds of free surface by name (finrft.surfaces; FINRFT_FIELD_* in finrft.h, in this order).
+static const char* kFields[] = {"flat", "plane", "hfield"};
+#define NFIELDS ((int)(sizeof(kFields) / sizeof(kFields[0])))
+
+// The hook of a kind of free surface: its depths through its own function of plugins/surfaces/. A kind with state
+// (the deforming one) adds its FINRFT_FIELD_ value and name (kFields), reads its grid in read_field, and here calls
+// finrft_deforming_depth on heights it keeps per mjData: in the instance (FinrftSurface is per mjData) when one body
+// meets the sand, else in d->plugin_state of one instance that all share (surface_nstate its size, so that
+// mj_getState and checkpoints carry it), pointed at by f->heights in finrft_surface_instance; it updates them
+// (finrft_deforming_sweep, _relax) once per step, in surface_compute after the force is applied.
+int finrft_field_depth(const FinrftField* f, const double g[3], int n, const double* points, double* depth) {
+  switch (f->kind) {
+    case FINRFT_FIELD_FLAT:
+      return finrft_flat_depth(f->surface_z, g, n, points, depth);
+    case FINRFT_FIELD_PLANE:
+      return finrft_plane_depth(f->point, f->normal, g, n, points, depth);
+    case FINRFT_FIELD_HFIELD:
+      return finrft_hfield_depth(f->nrow, f->ncol, f->heights, f->size, f->centre, f->frame, g, n, points, depth);
+    default:
+      return FINRFT_SURFACE_BAD_INPUT;
+  }
+}
+
+// A config key of exactly `count` numbers into out; 0, or -1 after a warning.
+static int read_vector(const mjModel* m, int instance, const char* key, double* out, int count) {
+  const char* text = mj_getPluginConfig(m, instance, key);
+  if (!text || read_numbers(text, out, count) != count) {
+    mju_warning("finrft.surface: config '%s' must be %d numbers", key, count);
+    return -1;
+  }
+  return 0;
+}
+
+// The free surface of config `surface` (and surface_z) into p->field; 0, or -1 after a warning.
+static int read_field(const mjModel* m, int instance, FinrftSurface* p) {
+  FinrftField* f = &p->field;
+  f->surface_z = p->surface_z;
+  const char* kind = mj_getPluginConfig(m, instance, "surface");
+  f->kind = FINRFT_FIELD_FLAT;
+  if (kind && *kind) {
+    while (f->kind < NFIELDS && strcmp(kind, kFields[f->kind])) f->kind++;
+    if (f->kind == NFIELDS) {
+      mju_warning("finrft.surface: config 'surface' must be 'flat', 'plane' or 'hfield', got '%s'", kind);
+      return -1;
+    }
+  }
+  if (f->kind == FINRFT_FIELD_PLANE) {
+    return read_vector(m, instance, "surface_point", f->point, 3) ||
+           read_vector(m, instance, "surface_normal", f->normal, 3) ? -1 : 0;
+  }
+  if (f->kind != FINRFT_FIELD_HFIELD) return 0;
+  const char* text = mj_getPluginConfig(m, instance, "hfield");
+  int count = text ? read_numbers(text, NULL, 0) : -1;
+  double head[16];
+  if (count < 16 || read_numbers(text, head, 16) < 16 || head[0] < 2 || head[1] < 2 ||
+      head[0] != floor(head[0]) || head[1] != floor(head[1]) || count != 16 + head[0] * head[1]) {
+    mju_warning("finrft.surface: config 'hfield' must be nrow ncol (at least 2 each), size (2), centre (3), frame "
+                "(9) and nrow x ncol heights");
+    return -1;
+  }
+  double* all = (double*)malloc(count * sizeof(double));
+  if (!all) return -1;
+  read_numbers(text, all, count);
+  f->nrow = (int)head[0];
+  f->ncol = (int)head[1];
+  memcpy(f->size, all + 2, 2 * sizeof(double));
+  memcpy(f->centre, all + 4, 3 * sizeof(double));
+  memcpy(f->frame, all + 7, 9 * sizeof(double));
+  memmove(all, all + 16, (count - 16) * sizeof(double));
+  f->heights = all;
+  return 0;
 }
 
 static void li2013_force(const FinrftSurface* p, const double n[3], const double v[3], double depth, double area,
@@ -587,7 +671,8 @@ static int surface_init(const mjModel* m, mjData* d, int instance) {
     surface_free(p);
     return -1;
   }
-  if (read_scalar(m, instance, "surface_z", &p->surface_z) || kLaws[index].read(m, instance, p)) {
+  if (read_scalar(m, instance, "surface_z", &p->surface_z) || kLaws[index].read(m, instance, p) ||
+      read_field(m, instance, p)) {
     surface_free(p);
     return -1;
   }
@@ -636,6 +721,11 @@ static int surface_init(const mjModel* m, mjData* d, int instance) {
     return -1;
   }
   read_numbers(text, p->element, count);
+  p->scratch = (double*)malloc(4 * p->n * sizeof(double));
+  if (!p->scratch) {
+    surface_free(p);
+    return -1;
+  }
   const char* geoms = mj_getPluginConfig(m, instance, "geoms");
   count = geoms && *geoms ? read_numbers(geoms, NULL, 0) : 0;
   if (count < 0 || count % 12) {
@@ -681,6 +771,22 @@ static int geom_changed(const mjModel* m, const FinrftSurface* p) {
   return -1;
 }
 
+// The model's gravity into the instance, its law frame and whether it is level (as SurfaceForces.level and
+// .frame in attach.py); -1 when the surface cannot be measured under it.
+static int refresh_gravity(const mjModel* m, FinrftSurface* p) {
+  const mjtNum* g = m->opt.gravity;
+  if (p->measured && p->gravity[0] == g[0] && p->gravity[1] == g[1] && p->gravity[2] == g[2]) return 0;
+  double up[3];
+  for (int i = 0; i < 3; i++) p->gravity[i] = g[i];
+  // (no gravity over the flat surface is level too, as it always was: depth from z)
+  p->level = p->field.kind == FINRFT_FIELD_FLAT && g[0] == 0 && g[1] == 0 && g[2] <= 0;
+  p->measured = p->level || !(finrft_surface_up(p->gravity, up) ||
+                              finrft_field_depth(&p->field, p->gravity, 0, NULL, NULL));
+  if (!p->measured) return -1;
+  if (!p->level) finrft_surface_frame(up, p->frame);
+  return 0;
+}
+
 // The instance for the model `d` is stepped with, made again when it was made for another: as finrft_instance.
 const FinrftSurface* finrft_surface_instance(const mjModel* m, mjData* d, int instance) {
   const FinrftSurface* p = (const FinrftSurface*)d->plugin_data[instance];
@@ -691,6 +797,11 @@ const FinrftSurface* finrft_surface_instance(const mjModel* m, mjData* d, int in
       return NULL;
     }
     p = (const FinrftSurface*)d->plugin_data[instance];
+  }
+  if (refresh_gravity(m, (FinrftSurface*)p)) {
+    mju_error("finrft.surface: the free surface cannot be measured under gravity (%g, %g, %g): it must face "
+              "against gravity (a heightfield's grid level with it), and gravity be nonzero",
+              m->opt.gravity[0], m->opt.gravity[1], m->opt.gravity[2]);
   }
   int changed = geom_changed(m, p);
   if (changed >= 0) {
@@ -710,9 +821,24 @@ const FinrftSurface* finrft_surface_instance(const mjModel* m, mjData* d, int in
   return p;
 }
 
+// The law's force in its frame (finrft_surface_frame): n and v seen in it, the force given back in the world's
+// (as Attached.law_forces with a frame); the law's own call when level.
+static void framed_force(const FinrftSurface* p, const mjtNum normal[3], const mjtNum v[3], mjtNum depth,
+                         mjtNum area, mjtNum f[3]) {
+  if (p->level) {
+    kLaws[p->law].force(p, normal, v, depth, area, f);
+    return;
+  }
+  mjtNum n_law[3], v_law[3], f_law[3];
+  mju_mulMatVec3(n_law, p->frame, normal);
+  mju_mulMatVec3(v_law, p->frame, v);
+  kLaws[p->law].force(p, n_law, v_law, depth, area, f_law);
+  mju_mulMatTVec3(f, p->frame, f_law);
+}
+
 void finrft_surface_law_force(const FinrftSurface* p, const mjtNum normal[3], const mjtNum v[3], mjtNum depth,
                               mjtNum area, mjtNum f[3]) {
-  kLaws[p->law].force(p, normal, v, depth, area, f);
+  framed_force(p, normal, v, depth, area, f);
 }
 
 // One element's force (world frame): the law's, plus DRFT's term, times the ramp tanh(max(n . v, 0) / v_reg), 0
@@ -723,7 +849,7 @@ void finrft_surface_element_force(const FinrftSurface* p, const mjtNum normal[3]
     f[0] = f[1] = f[2] = 0;
     return;
   }
-  kLaws[p->law].force(p, normal, v, depth, area, f);
+  framed_force(p, normal, v, depth, area, f);
   if (p->drft_lambda > 0) {
     mjtNum inertial[3];
     finrft_drft_element_force(p->drft_lambda, p->bulk_density, normal, v, depth, area, inertial);
@@ -751,7 +877,18 @@ void finrft_surface_element_slope(const FinrftSurface* p, const mjtNum normal[3]
     for (int i = 0; i < 9; i++) k[i] = 0;
     return;
   }
-  kLaws[p->law].slope(p, normal, v, depth, area, f, k);
+  if (p->level) {
+    kLaws[p->law].slope(p, normal, v, depth, area, f, k);
+  } else {
+    // in the law's frame F: f = F^T f', k = F^T k' F
+    mjtNum n_law[3], v_law[3], f_law[3], k_law[9], kf[9];
+    mju_mulMatVec3(n_law, p->frame, normal);
+    mju_mulMatVec3(v_law, p->frame, v);
+    kLaws[p->law].slope(p, n_law, v_law, depth, area, f_law, k_law);
+    mju_mulMatTVec3(f, p->frame, f_law);
+    mju_mulMatMat(kf, k_law, p->frame, 3, 3, 3);
+    mju_mulMatTMat(k, p->frame, kf, 3, 3, 3);
+  }
   if (p->drft_lambda > 0 && depth > 0 && v_n > 0) {
     mjtNum inertial[3], rate = 2 * p->drft_lambda * p->bulk_density * v_n * area;
     finrft_drft_element_force(p->drft_lambda, p->bulk_density, normal, v, depth, area, inertial);
@@ -772,22 +909,39 @@ void finrft_surface_element_slope(const FinrftSurface* p, const mjtNum normal[3]
   }
 }
 
-// The depth below the surface of the element whose centre (body frame) is e, the body at origin with rotation R:
-// the arm's z alone, as mju_mulMatVec3 sums it, so that the elements above the surface (most of a legged robot's)
-// cost no more.
+// The depth below the surface of the element whose centre (body frame) is e, the body at origin with rotation R,
+// when level: the arm's z alone, as mju_mulMatVec3 sums it, so that the elements above the surface (most of a
+// legged robot's) cost no more.
 static inline double element_depth(const FinrftSurface* p, const mjtNum origin[3], const mjtNum R[9],
                                    const double e[3]) {
   return p->surface_z - (origin[2] + (R[6] * e[0] + R[7] * e[1] + R[8] * e[2]));
+}
+
+// Every element's depth along gravity below the free surface at the positions of d, into p->scratch + 3 n (the
+// world centres before them); NULL when level, where element_depth takes each. The instance's surface was checked
+// under this gravity (refresh_gravity), so its kind's function cannot refuse it.
+static const double* element_depths(const FinrftSurface* p, const mjData* d) {
+  if (p->level) return NULL;
+  const mjtNum* origin = d->xpos + 3 * p->body;
+  const mjtNum* R = d->xmat + 9 * p->body;
+  double* centre = p->scratch;
+  for (int i = 0; i < p->n; i++) {
+    mju_mulMatVec3(centre + 3 * i, R, p->element + 7 * i);
+    mju_addTo3(centre + 3 * i, origin);
+  }
+  finrft_field_depth(&p->field, p->gravity, p->n, centre, p->scratch + 3 * p->n);
+  return p->scratch + 3 * p->n;
 }
 
 void finrft_surface_wrench(const FinrftSurface* p, const mjData* d, const mjtNum twist[6], mjtNum wrench[6]) {
   const mjtNum* origin = d->xpos + 3 * p->body;
   const mjtNum* R = d->xmat + 9 * p->body;
   mju_zero(wrench, 6);
+  const double* depths = element_depths(p, d);
   for (int i = 0; i < p->n; i++) {
     const double* e = p->element + 7 * i;
     mjtNum arm[3], normal[3], v[3], f[3], moment[3];
-    double depth = element_depth(p, origin, R, e);
+    double depth = depths ? depths[i] : element_depth(p, origin, R, e);
     if (!(depth > 0)) continue;
     mju_mulMatVec3(arm, R, e);
     mju_mulMatVec3(normal, R, e + 3);
@@ -804,10 +958,11 @@ int finrft_surface_submerged(const FinrftSurface* p, const mjData* d, mjtNum* ou
   const mjtNum* origin = d->xpos + 3 * p->body;
   const mjtNum* R = d->xmat + 9 * p->body;
   int count = 0;
+  const double* depths = element_depths(p, d);
   for (int i = 0; i < p->n; i++) {
     const double* e = p->element + 7 * i;
     mjtNum* o = out + FINRFT_SUBMERGED * count;
-    o[6] = element_depth(p, origin, R, e);
+    o[6] = depths ? depths[i] : element_depth(p, origin, R, e);
     if (!(o[6] > 0)) continue;
     mju_mulMatVec3(o, R, e);
     mju_mulMatVec3(o + 3, R, e + 3);

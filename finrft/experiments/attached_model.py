@@ -21,6 +21,7 @@ from ..files import check_regular, not_a_file, read_text
 from ..models import ARMATURE_RATIO, INTEGRATORS, compile_spec
 from ..scene import Medium, SceneError
 from ..stepping import Prescribed
+from ..surfaces import hfield
 
 _J = mujoco.mjtJoint
 DRIVEN = {int(_J.mjJNT_SLIDE): "slide", int(_J.mjJNT_HINGE): "hinge"}
@@ -132,13 +133,26 @@ def build_attached(spec: mujoco.MjSpec, joints: Sequence[str], bodies: tuple[str
     attached = attach(spec, list(bodies), geoms=list(geoms), law=medium.law, surface_z=medium.surface_z,
                       element_size=medium.element_size, backend=sim.backend, medium=medium.name or None,
                       drft_lambda=medium.drft_lambda, v_reg=medium.v_reg,
-                      bulk_density=None if law.DENSITY else medium.bulk_density or None, **law.given(medium))
+                      bulk_density=None if law.DENSITY else medium.bulk_density or None,
+                      bed_depth=medium.bed_depth, **surface_arguments(medium, spec.option.gravity),
+                      **law.given(medium))
     model = compile_spec(spec)
     ids = [model.joint(name).id for name in joints]
     dofs = np.array([model.jnt_dofadr[j] for j in ids], dtype=int)
     return AttachedModel(model, attached, dofs, np.array([model.jnt_qposadr[j] for j in ids], dtype=int),
                          np.array(model.dof_armature[dofs], dtype=float),
                          np.array([model.body(s.body).id for s in attached.surfaces], dtype=int))
+
+
+def surface_arguments(medium: Medium, gravity: Sequence[float]) -> dict[str, Any]:
+    """`attach`'s arguments of a scene's free surface (``[medium] surface`` and its keys): a heightfield generated
+    from the hfield_ keys when the scene names no <hfield> of the model."""
+    if medium.surface == "hfield" and not medium.hfield:
+        return {"surface": hfield.generated(medium.hfield_shape, gravity, medium.surface_point, medium.hfield_extent,
+                                            medium.hfield_spacing, medium.hfield_slope, medium.hfield_height,
+                                            medium.hfield_length, medium.hfield_seed)}
+    return {"surface": medium.surface, "surface_point": medium.surface_point,
+            "surface_normal": medium.surface_normal, "hfield": medium.hfield}
 
 
 def medium_forces(built: AttachedModel) -> Callable[[mujoco.MjData], np.ndarray]:

@@ -25,7 +25,7 @@ import numpy as np
 from .. import laws
 from ..convergence import ErrorLimits
 from ..drive import Drive
-from ..errors import UsageError
+from ..errors import SceneError, UsageError
 from ..experiment import Compared, Plot, Quantity, Result, run
 from ..scene import ExplicitSim, Medium, Sections, check_medium, check_sim, load_scene, parse_override, register_scene
 from ..schema import field as _f
@@ -66,6 +66,9 @@ class IntrusionScene(Sections):
         super().__post_init__()
         check_sim(self.sim)
         check_medium(self.medium)
+        if self.medium.surface != "flat":
+            raise SceneError(f"medium.surface = {self.medium.surface!r}: the intrusion pushes its plate down from the "
+                             f"flat surface at medium.surface_z only; leave medium.surface out")
 
 
 register_scene(IntrusionScene, title="Plate intrusion: `finrft intrude`; `finrft.IntrusionScene`")

@@ -15,7 +15,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from ..errors import SceneError
-from . import points3, up
+from . import Field, law_frame, points3, up
 
 SUMMARY = "a grid of heights (MuJoCo's <hfield>), bilinear between its points"
 
@@ -82,3 +82,83 @@ def depth(points: Any, gravity: Any, heights: Any, size: Any, centre: Any = (0.0
     g = grid(heights, size, gravity, centre, frame)
     local = g.local(points3(points))
     return g.height(local[:, 0], local[:, 1]) - local[:, 2]
+
+
+def of_model(model: Any, data: Any, name: str, surface_point: Any = (0.0, 0.0, 0.0)) -> "Field":
+    """The free surface of the ``<hfield>`` ``name`` of a compiled MuJoCo model (after mj_kinematics of ``data``):
+    its heights (size[2] times its data), placed where the geom that shows it is (a geom of a static body, that
+    collides with nothing: the sand is RFT's, not a rigid surface), else at ``surface_point`` level with gravity."""
+    import mujoco  # the model's own kinds of object; not needed by the depths
+
+    index = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_HFIELD, name) if name else -1
+    if index < 0:
+        there = ", ".join(model.hfield(i).name for i in range(model.nhfield)) or "none"
+        raise SceneError(f"medium.hfield = {name!r} names no <hfield> of the model (its hfields: {there}): name one, "
+                         f"or leave it empty for a generated one (medium.hfield_shape)")
+    nrow, ncol, adr = int(model.hfield_nrow[index]), int(model.hfield_ncol[index]), int(model.hfield_adr[index])
+    size = model.hfield_size[index]
+    heights = size[2] * np.asarray(model.hfield_data[adr:adr + nrow * ncol], dtype=float).reshape(nrow, ncol)
+    shown = [g for g in range(model.ngeom) if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_HFIELD
+             and model.geom_dataid[g] == index]
+    if not shown:
+        return Field("hfield", {"heights": heights, "size": (float(size[0]), float(size[1])),
+                                "centre": tuple(map(float, surface_point)),
+                                "frame": law_frame(up(model.opt.gravity)).T})
+    g = shown[0]
+    geom = model.geom(g).name or f"#{g}"
+    if model.body_weldid[model.geom_bodyid[g]] != 0:
+        raise SceneError(f"geom {geom!r} showing hfield {name!r} moves with a body: put it in the worldbody")
+    if model.geom_contype[g] or model.geom_conaffinity[g]:
+        raise SceneError(f"geom {geom!r} showing hfield {name!r} collides: give it contype=\"0\" conaffinity=\"0\" "
+                         f"(the sand below it is RFT's, not a rigid surface)")
+    return Field("hfield", {"heights": heights, "size": (float(size[0]), float(size[1])),
+                            "centre": tuple(map(float, data.geom_xpos[g])),
+                            "frame": np.array(data.geom_xmat[g]).reshape(3, 3)})
+
+
+SHAPES = ("slope", "steps", "noise", "pile")
+
+
+def generated(shape: str, gravity: Any, centre: Any = (0.0, 0.0, 0.0), extent: float = 1.0, spacing: float = 0.01,
+              slope: float = 0.0, height: float = 0.01, length: float = 0.05, seed: int = 0) -> "Field":
+    """A heightfield made from the scene, a square grid of half-extent ``extent`` (m) and ``spacing`` (m) about
+    ``centre``, level with ``gravity``, rising along its x axis at ``slope`` (rad), and on that incline:
+
+    - ``slope``: nothing more;
+    - ``steps``: stairs ``height`` (m) high, ``length`` (m) deep, rising along x;
+    - ``noise``: smooth random ground, ``height`` (m) its standard deviation, ``length`` (m) its correlation
+      length (white noise under a Gaussian filter; ``seed``);
+    - ``pile``: a cone ``height`` (m) high, ``length`` (m) in radius, at the centre."""
+    if shape not in SHAPES:
+        raise SceneError(f"hfield shape {shape!r} is not one of {', '.join(SHAPES)}")
+    if not (np.isfinite(extent) and np.isfinite(spacing) and 0 < spacing <= extent):
+        raise SceneError(f"hfield extent {extent!r} and spacing {spacing!r} (m) must be positive, the spacing at most "
+                         f"the extent")
+    if not (np.isfinite(slope) and abs(slope) < np.pi / 2):
+        raise SceneError(f"hfield slope {slope!r} must be an angle in rad, between -pi/2 and pi/2")
+    if not (np.isfinite(height) and np.isfinite(length) and length > 0):
+        raise SceneError(f"hfield height {height!r} and length {length!r} (m) must be finite, the length positive")
+    count = int(round(2 * extent / spacing)) + 1
+    if count > MAX_POINTS:
+        raise SceneError(f"hfield of {count} x {count} points: more than {MAX_POINTS} a side; give a coarser spacing "
+                         f"or a smaller extent")
+    axis = np.linspace(-extent, extent, count)
+    x, y = np.meshgrid(axis, axis)
+    h = np.tan(slope) * x
+    if shape == "steps":
+        h = h + height * np.floor(x / length + 0.5)
+    elif shape == "noise":
+        white = np.random.default_rng(seed).normal(size=x.shape)
+        k = 2 * np.pi * np.fft.fftfreq(count, axis[1] - axis[0])
+        kx, ky = np.meshgrid(k, k)
+        smooth = np.real(np.fft.ifft2(np.fft.fft2(white) * np.exp(-0.5 * (kx ** 2 + ky ** 2) * length ** 2)))
+        h = h + height * smooth / max(float(smooth.std()), 1e-300)
+    elif shape == "pile":
+        h = h + height * np.clip(1 - np.hypot(x, y) / length, 0.0, None)
+    return Field("hfield", {"heights": h, "size": (float(extent), float(extent)),
+                            "centre": tuple(map(float, np.asarray(centre, dtype=float).reshape(3))),
+                            "frame": law_frame(up(gravity)).T})
+
+
+# A side of a generated grid: 2001 points (4 million heights) is a 2 m bed at 1 mm.
+MAX_POINTS = 2001

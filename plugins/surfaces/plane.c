@@ -11,6 +11,23 @@ int finrft_surface_up(const double g[3], double up[3]) {
   return 0;
 }
 
+void finrft_surface_frame(const double up[3], double frame[9]) {
+  double a[3] = {fabs(up[0]) > 0.9 ? 0 : 1, fabs(up[0]) > 0.9 ? 1 : 0, 0};
+  double along = a[0] * up[0] + a[1] * up[1] + a[2] * up[2], x[3], length = 0;
+  for (int i = 0; i < 3; i++) {
+    x[i] = a[i] - along * up[i];
+    length += x[i] * x[i];
+  }
+  length = sqrt(length);
+  for (int i = 0; i < 3; i++) {
+    frame[i] = x[i] / length;
+    frame[6 + i] = up[i];
+  }
+  frame[3] = up[1] * frame[2] - up[2] * frame[1];
+  frame[4] = up[2] * frame[0] - up[0] * frame[2];
+  frame[5] = up[0] * frame[1] - up[1] * frame[0];
+}
+
 int finrft_plane_depth(const double point[3], const double normal[3], const double g[3], int n, const double* points,
                        double* depth) {
   double up[3], nrm[3];

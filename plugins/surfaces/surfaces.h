@@ -1,5 +1,6 @@
 // The free surfaces of the medium, the twins of finrft/surfaces/NAME.py: each point's depth (m) along gravity
-// below the surface, positive below it. Not yet used by the plugin's forces.
+// below the surface, positive below it. The plugin (finrft_surface.c) holds its surface as a FinrftField and
+// measures its elements with finrft_field_depth, which calls these.
 //
 // Points, gravity and vectors are world-frame double[3]; `points` and `depth` hold n points. A grid is MuJoCo's
 // <hfield> layout: heights[r * ncol + c] (m) at x = -size[0] + 2 size[0] c / (ncol - 1), y = -size[1] +
@@ -58,6 +59,10 @@ FINRFT_SURFACE_EXPORT int finrft_deforming_sweep(int nrow, int ncol, double* hei
                                                  int n, const double* points, const double* areas,
                                                  const double* velocities, double front_share,
                                                  unsigned char* occupied);
+// The frame the laws measure their angles in, rows x, y, z (row-major): z = up (unit), x the world's x (y where up
+// is near x) made square to it; the identity for up = +z. As finrft.surfaces.law_frame.
+void finrft_surface_frame(const double up[3], double frame[9]);
+
 // Relax in place; blocked may be NULL. The iterations taken, or -1 when max_iterations did not reach tolerance.
 FINRFT_SURFACE_EXPORT int finrft_deforming_relax(int nrow, int ncol, double* heights, const double size[2],
                                                  double repose, const unsigned char* blocked, double tolerance,

@@ -443,7 +443,8 @@ def _field(model: mujoco.MjModel, data: mujoco.MjData, surface: str | surfaces.F
     elif surface == "hfield":
         field = surfaces.hfield.of_model(model, data, hfield, surface_point)
     elif surface == "deforming":
-        raise SceneError("attach: surface 'deforming' is not yet run: use flat, plane or hfield")
+        raise SceneError("attach: surface 'deforming' needs its grid: give a finrft.surfaces.Field('deforming', "
+                         "...) (finrft.surfaces.deforming.field)")
     else:
         raise SceneError(f"attach: surface must be one of flat, plane, hfield, or a finrft.surfaces.Field, got "
                          f"{surface!r}")
@@ -481,7 +482,7 @@ def _add_bed(spec: mujoco.MjSpec, field: surfaces.Field, depth: float, gravity: 
 
 
 # The kinds of free surface runs take (finrft.surfaces; the native plugin's kFields).
-FIELD_KINDS = ("flat", "plane", "hfield")
+FIELD_KINDS = ("flat", "plane", "hfield", "deforming")
 
 
 def _names(value: Sequence[str] | str, key: str) -> list[str]:
@@ -567,11 +568,15 @@ def _field_config(field: surfaces.Field) -> dict[str, str]:
     if field.kind == "plane":
         return {"surface": "plane", "surface_point": numbers(field.parameters["surface_point"]),
                 "surface_normal": numbers(field.parameters["surface_normal"])}
-    if field.kind == "hfield":
+    if field.kind in ("hfield", "deforming"):
         p = field.parameters
         heights = np.asarray(p["heights"], dtype=float)
-        return {"surface": "hfield", "hfield": numbers([*heights.shape, *p["size"], *p.get("centre", (0, 0, 0)),
-                                                       *np.asarray(p.get("frame", np.eye(3))).ravel(), *heights.ravel()])}
+        config = {"surface": field.kind,
+                  "hfield": numbers([*heights.shape, *p["size"], *p.get("centre", (0, 0, 0)),
+                                     *np.asarray(p.get("frame", np.eye(3))).ravel(), *heights.ravel()])}
+        if field.kind == "deforming" and p.get("pile_factor"):
+            config["pile_factor"] = repr(float(p["pile_factor"]))
+        return config
     return {}
 
 

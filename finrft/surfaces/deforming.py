@@ -209,11 +209,15 @@ class DeformingSurface:
     ``centre`` with ``frame`` (`finrft.surfaces.hfield`'s layout), displaced by the body's elements at every step
     (`step`) and relaxed towards the angle of ``repose`` (rad) by at most ``step_iterations`` iterations a step.
     ``native`` steps it with the C twins (plugins/surfaces/deforming.c), else with this module's numpy functions:
-    the same heights to rounding. ``displaced`` is the volume (m^3) the sweeps have removed so far."""
+    the same heights to rounding. ``displaced`` is the volume (m^3) the sweeps have removed so far; ``level`` (an
+    array of the heights' shape, written in place: a `field`'s heights) the surface the elements' depths are
+    measured from. ``instances``: the native plugin's finrft.surface instances that measure from it
+    (`installed`)."""
 
     def __init__(self, heights: Any, size: Any, repose: float, centre: Any = (0.0, 0.0, 0.0), frame: Any = None,
                  pile_factor: float | None = None, front_share: float = FRONT_SHARE, tolerance: float = TOLERANCE,
-                 step_iterations: int = STEP_ITERATIONS, native: bool = True) -> None:
+                 step_iterations: int = STEP_ITERATIONS, native: bool = True, level: Any = None,
+                 instances: tuple[int, ...] | list[int] = ()) -> None:
         g = grid(heights, size, (0.0, 0.0, -1.0) if frame is None else -np.asarray(frame, float)[:, 2], centre, frame)
         if not 0.0 < repose < np.pi / 2:
             raise SceneError(f"angle of repose {repose!r} rad must be between 0 and pi/2")
@@ -228,11 +232,45 @@ class DeformingSurface:
         self.repose, self.pile_factor, self.front_share = float(repose), pile_factor, float(front_share)
         self.tolerance, self.step_iterations, self.native = float(tolerance), int(step_iterations), bool(native)
         self.displaced = 0.0
+        self.instances = tuple(instances)
+        self._model: Any = None
+        self._data: Any = None
         self._occupied = np.zeros(self.heights.shape, np.ubyte)
         # The surface the elements measure their depth from: the sand's own (heights) where no body is, and under a
         # body the height the sand had as the body entered that point (the level of the sand around the hole it
         # digs, not the hole's floor); a point the body has left is its floor again, a rut.
-        self.level = self.heights.copy()
+        self.level = self.heights.copy() if level is None else level
+        if self.level.shape != self.heights.shape or self.level.dtype != float:
+            raise SceneError(f"level must be an array of floats of the heights' shape {self.heights.shape}")
+        self.level[...] = self.heights
+
+    def installed(self, m: Any, d: Any) -> "DeformingSurface":
+        """Set the level in the native plugin's ``instances`` of the MjData ``d`` of model ``m``, now and after
+        every `step_model`; the surface itself."""
+        self._model, self._data = m, d
+        self._set_level()
+        return self
+
+    def _set_level(self) -> None:
+        if not self.instances:
+            return
+        from .. import native
+
+        set_level = native.function("finrft_surface_set_level", ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p,
+                                    ctypes.c_int, ctypes.c_int, ctypes.c_int, ctypes.c_void_p)
+        nrow, ncol = self.level.shape
+        for instance in self.instances:
+            if set_level(self._model._address, self._data._address, instance, nrow, ncol, self.level.ctypes.data):
+                raise SceneError("the model's finrft.surface instances do not measure from this deforming surface "
+                                 "(attach it with its field: finrft.surfaces.deforming.field)")
+
+    def step_model(self, attached: Any, m: Any, d: Any) -> float:
+        """`step` with every element of an `finrft.attach.Attached` at the state of ``d`` (`body_elements`), then
+        the level set in the native instances (`installed`); the volume (m^3) displaced."""
+        points, velocities, areas = body_elements(attached, m, d)
+        removed = self.step(points, areas, velocities, m.opt.gravity)
+        self._set_level()
+        return removed
 
     @property
     def cell(self) -> float:
@@ -297,6 +335,19 @@ def _native_step(s: DeformingSurface, points: np.ndarray, areas: np.ndarray, vel
                          "gravity, or front_share outside 0..1)")
     relax_c(nrow, ncol, s.heights.ctypes.data, size.ctypes.data, s.repose, s._occupied.ctypes.data, s.tolerance,
             s.step_iterations)
+
+
+def field(grid: Any, pile_factor: float | None = None) -> Any:
+    """The `finrft.surfaces.Field` of a deforming surface that starts as the heightfield ``grid`` (a Field of kind
+    hfield, as `finrft.surfaces.hfield.generated` makes): its ``heights`` are the level a run's `DeformingSurface`
+    steps in place, ``original`` the heights it started from."""
+    from . import Field
+
+    p = grid.parameters
+    heights = np.array(p["heights"], dtype=float)
+    return Field("deforming", {"heights": heights, "size": tuple(p["size"]), "centre": tuple(p["centre"]),
+                               "frame": np.asarray(p["frame"], float), "original": heights.copy(),
+                               "pile_factor": pile_factor})
 
 
 def body_elements(attached: Any, m: Any, d: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

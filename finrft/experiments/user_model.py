@@ -299,8 +299,9 @@ class RobotTrial:
 
 
 def deforming_surface(built: AttachedModel, scene: UserScene, d: mujoco.MjData) -> DeformingSurface | None:
-    """The run's deforming surface, from its field's original heights (None on any other surface): its level is the
-    field's heights (the Python backend's depths), set in the native plugin's instances as it steps."""
+    """The run's deforming surface, from its field's original heights (None on any other surface), stepped with the
+    C twins under the native backend and with numpy under the Python one: its level is the field's heights (the
+    Python backend's depths), set in the native plugin's instances as it steps."""
     attached = built.attached
     field = attached.free_surface
     if field.kind != "deforming":
@@ -309,7 +310,8 @@ def deforming_surface(built: AttachedModel, scene: UserScene, d: mujoco.MjData) 
     instances = ([int(built.model.body_plugin[built.model.body(s.body).id]) for s in attached.surfaces]
                  if attached.backend == "native" else [])
     return DeformingSurface(p["original"], p["size"], repose(scene.medium), p["centre"], p["frame"],
-                            p["pile_factor"], level=p["heights"], instances=instances).installed(built.model, d)
+                            p["pile_factor"], native=attached.backend == "native", level=p["heights"],
+                            instances=instances).installed(built.model, d)
 
 
 class WindowMeans:

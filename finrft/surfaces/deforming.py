@@ -202,6 +202,9 @@ def update(heights: Any, points: Any, areas: Any, velocities: Any, gravity: Any,
 # the body moves a small part of a grid spacing a step, so the surface relaxes as it goes, at a bounded cost (run to
 # convergence after every step, a rolling wheel's surface took a median of 334 iterations a step).
 STEP_ITERATIONS = 16
+# In a run, the surface is stepped once an element may have moved this share of the finer grid spacing: the sweep
+# lowers the grid to the elements and a body moving a small part of a spacing a step changes little between.
+MOVE = 0.5
 
 
 class DeformingSurface:
@@ -229,11 +232,15 @@ class DeformingSurface:
         self.heights = np.ascontiguousarray(g.heights, dtype=float).copy()
         self.original = self.heights.copy()
         self.size, self.centre, self.frame = g.size.copy(), g.centre.copy(), np.ascontiguousarray(g.frame)
+        self._spacing = g.spacing
         self.repose, self.pile_factor, self.front_share = float(repose), pile_factor, float(front_share)
         self.tolerance, self.step_iterations, self.native = float(tolerance), int(step_iterations), bool(native)
         self.displaced = 0.0
         self.instances = tuple(instances)
         self._model: Any = None
+        self._pose: np.ndarray | None = None  # the bodies' positions and orientations at the last step_model
+        self._bodies: list[int] = []
+        self._reach: np.ndarray | None = None  # each body's elements' largest distance from its origin
         self._data: Any = None
         self._occupied = np.zeros(self.heights.shape, np.ubyte)
         # The surface the elements measure their depth from: the sand's own (heights) where no body is, and under a
@@ -266,17 +273,29 @@ class DeformingSurface:
 
     def step_model(self, attached: Any, m: Any, d: Any) -> float:
         """`step` with every element of an `finrft.attach.Attached` at the state of ``d`` (`body_elements`), then
-        the level set in the native instances (`installed`); the volume (m^3) displaced."""
+        the level set in the native instances (`installed`), once an element may have moved `MOVE` of the finer
+        grid spacing since the last (a bound from the bodies' motion: their origins' travel and their turn times
+        their elements' reach); the volume (m^3) displaced."""
+        if self._reach is None:
+            self._bodies = [m.body(s.body).id for s in attached.surfaces]
+            self._reach = np.array([np.sqrt((s.centre ** 2).sum(axis=1)).max() for s in attached.surfaces])
+        pose = np.concatenate([d.xpos[self._bodies], d.xquat[self._bodies]], axis=1)
+        if self._pose is not None:
+            turn = 2 * np.arccos(np.clip(np.abs((pose[:, 3:] * self._pose[:, 3:]).sum(axis=1)), 0.0, 1.0))
+            moved = np.linalg.norm(pose[:, :3] - self._pose[:, :3], axis=1) + turn * self._reach
+            if moved.max() < MOVE * min(self._spacing):
+                return 0.0
+        first = self._pose is None
+        self._pose = pose
         points, velocities, areas = body_elements(attached, m, d)
-        removed = self.step(points, areas, velocities, m.opt.gravity)
+        removed = self.step(points, areas, velocities, m.opt.gravity, imprint=first)
         self._set_level()
         return removed
 
     @property
     def cell(self) -> float:
         """The area (m^2) each grid point stands for."""
-        dx, dy = grid(self.heights, self.size, -self.frame[:, 2], self.centre, self.frame).spacing
-        return dx * dy
+        return self._spacing[0] * self._spacing[1]
 
     def volume(self) -> float:
         """The sand's volume above the grid's z = 0 (m^3): what every step conserves."""
@@ -287,9 +306,11 @@ class DeformingSurface:
         return depth(points, gravity, self.level, self.size, self.centre, self.frame,
                      self.original if self.pile_factor else None, self.pile_factor)
 
-    def step(self, points: Any, areas: Any, velocities: Any, gravity: Any) -> float:
+    def step(self, points: Any, areas: Any, velocities: Any, gravity: Any, imprint: bool = False) -> float:
         """Sweep the sand under the elements at ``points`` (N, 3, m) of ``areas`` (N, m^2) moving at ``velocities``
-        (N, 3, m/s), then relax at most ``step_iterations`` times; the volume (m^3) this step displaced."""
+        (N, 3, m/s), then relax at most ``step_iterations`` times; the volume (m^3) this step displaced. With
+        ``imprint`` (a run's first step), the body's imprint instead: the sand under it lowered to it and no berm,
+        a body that starts in the sand sitting in its own hole (its volume is not conserved: 0 displaced)."""
         before, entered = self.heights.copy(), self._occupied == 0
         if self.native:
             _native_step(self, points3(points), np.asarray(areas, float), points3(velocities),
@@ -300,10 +321,13 @@ class DeformingSurface:
             self._occupied[...] = occupied
             self.heights[...] = relax(swept, self.size, self.repose, occupied, self.tolerance,
                                       self.step_iterations).heights
+        if imprint:
+            np.minimum(before, self.heights, out=self.heights)
+            self.original[...] = np.minimum(self.original, self.heights)
         under = self._occupied != 0
         entered &= under
         self.level[...] = np.where(entered, before, np.where(under, self.level, self.heights))
-        removed = self.cell * float(np.clip(before - self.heights, 0.0, None).sum())
+        removed = 0.0 if imprint else self.cell * float(np.clip(before - self.heights, 0.0, None).sum())
         self.displaced += removed
         return removed
 

@@ -29,6 +29,9 @@ DATA = str(wheel_dir() / "smooth_wheel_by_condition.csv")
 # from 0.5 s.
 HELD = ["--sinkage-from-data", "--set", "sim.duration=1", "--set", "sim.settle=0.5"]
 FREE = ["--load-from-data", "--set", "sim.duration=1.5", "--set", "sim.settle=0.5"]
+# On the deforming surface the rut and berms build up as the wheel travels: 6 s (60 mm), averaged over the last 2 s,
+# where the held locked wheel's drawbar pull has settled (it rises over the first 40 mm of travel).
+DEFORMING = ["--surface", "deforming", "--set", "sim.duration=6", "--set", "sim.settle=4"]
 RFT3D = ["--medium", "sand_3d_rft_code", "--set", "medium.law=rft3d", "--set", "medium.surface_friction=0.1806"]
 VARIANTS = {
     "li2013-cmu-held": ["--medium", "wheel_sand_cmu", *HELD],
@@ -37,6 +40,8 @@ VARIANTS = {
     "rft3d-held": [*RFT3D, *HELD],
     "li2013-cmu-free": ["--medium", "wheel_sand_cmu", *FREE],
     "rft3d-free": [*RFT3D, *FREE],
+    "li2013-cmu-deforming-held": ["--medium", "wheel_sand_cmu", "--sinkage-from-data", *DEFORMING],
+    "li2013-cmu-deforming-free": ["--medium", "wheel_sand_cmu", "--load-from-data", *DEFORMING],
 }
 # DRFT's term at the experiments' 10 mm/s: lambda = 1 on an assumed bulk density of 1600 kg/m^3 (the sand's is not
 # known), on the locked wheel at 60 deg (its largest leading normal speeds, 10 mm/s).

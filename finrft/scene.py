@@ -148,12 +148,14 @@ Medium = schema.section("Medium", (
                                 minimum=0.0, used_by=("surface", ("hfield", "deforming")))),
     ("hfield_spacing", float, _f(0.01, "m", "a generated hfield's grid spacing", minimum=0.0,
                                  used_by=("surface", ("hfield", "deforming")))),
-    ("hfield_slope", float, _f(0.0, "rad", "a generated hfield's incline along x", used_by=("surface", ("hfield", "deforming")))),
+    ("hfield_slope", float, _f(0.0, "rad", "a generated hfield's incline along x",
+                               used_by=("surface", ("hfield", "deforming")))),
     ("hfield_height", float, _f(0.01, "m", "a generated hfield's step height, noise deviation or pile height",
                                 used_by=("surface", ("hfield", "deforming")))),
     ("hfield_length", float, _f(0.05, "m", "a generated hfield's step depth, noise correlation length or pile "
                                 "radius", minimum=0.0, used_by=("surface", ("hfield", "deforming")))),
-    ("hfield_seed", int, _f(0, "", "a generated noise hfield's random seed", used_by=("surface", ("hfield", "deforming")))),
+    ("hfield_seed", int, _f(0, "", "a generated noise hfield's random seed",
+                            used_by=("surface", ("hfield", "deforming")))),
     ("pile_factor", float, _f(0.0, "", "deforming: the wheel group's pile rule, an element in raised sand takes its "
                               "depth times this factor (finrft.surfaces.deforming; theirs 0.2843); 0: none",
                               minimum=0.0, exclusive=False, used_by=("surface", ("deforming",)))),

@@ -83,3 +83,18 @@ def test_a_second_press_meets_its_own_footprint():
     # a flat plate's force is proportional to its depth: between its shallowest and deepest below the footprint
     ratio = second / first
     assert (under.min() + 0.02) / 0.02 <= ratio <= (under.max() + 0.02) / 0.02 and ratio < 0.8
+
+
+def test_finrft_wheel_surface_deforming_puts_the_grid_under_the_wheel():
+    from finrft.cli import build_parser
+    from finrft.experiments import REGISTRY
+
+    argv = ["wheel", "--slip", "-1", "--sinkage", "50", "--surface", "deforming"]
+    command = REGISTRY["wheel"]
+    scene = command.scene(build_parser().parse_args(argv))
+    assert scene.medium.surface == "deforming" and scene.medium.hfield_spacing == 0.0025
+    # the grid reaches from behind the wheel at its start to ahead of it after 6 s at 10 mm/s, berms included
+    x0, half = scene.medium.surface_point[0], scene.medium.hfield_extent
+    assert x0 - half < -scene.wheel.radius - 0.02 and x0 + half > 6 * scene.wheel.speed + scene.wheel.radius + 0.05
+    given = command.scene(build_parser().parse_args([*argv, "--set", "medium.hfield_spacing=0.004"]))
+    assert given.medium.hfield_spacing == 0.004  # --set wins

@@ -243,9 +243,10 @@ class DeformingSurface:
         self._reach: np.ndarray | None = None  # each body's elements' largest distance from its origin
         self._data: Any = None
         self._occupied = np.zeros(self.heights.shape, np.ubyte)
+        self._under = np.zeros(self.heights.shape, bool)  # the grid points under the body at the last step
         # The surface the elements measure their depth from: the sand's own (heights) where no body is, and under a
-        # body the height the sand had as the body entered that point (the level of the sand around the hole it
-        # digs, not the hole's floor); a point the body has left is its floor again, a rut.
+        # body (`_covered`) the height the sand had as the body entered that point (the level of the sand around the
+        # hole it digs, not the hole's floor); a point the body has left is its floor again, a rut.
         self.level = self.heights.copy() if level is None else level
         if self.level.shape != self.heights.shape or self.level.dtype != float:
             raise SceneError(f"level must be an array of floats of the heights' shape {self.heights.shape}")
@@ -298,6 +299,26 @@ class DeformingSurface:
         """The sand's volume above the grid's z = 0 (m^3): what every step conserves."""
         return self.cell * float(self.heights.sum())
 
+    def _covered(self, points: np.ndarray) -> np.ndarray:
+        """The grid points under the body: those with an element below the sand's level at the point nearest to it
+        or at a neighbour (elements coarser than the grid leave no gaps). A body above its own hole keeps that hole
+        at the level of the sand around it (a wheel's rear over the floor it has just cut); one that has left it
+        leaves a rut."""
+        local = (points - self.centre) @ self.frame
+        nrow, ncol = self.heights.shape
+        c = np.floor((local[:, 0] + self.size[0]) / self._spacing[0] + 0.5).astype(int)
+        r = np.floor((local[:, 1] + self.size[1]) / self._spacing[1] + 0.5).astype(int)
+        on = (c >= 0) & (c < ncol) & (r >= 0) & (r < nrow)
+        lowest = np.full(self.heights.size, np.inf)
+        np.minimum.at(lowest, r[on] * ncol + c[on], local[on, 2])
+        near = lowest.reshape(self.heights.shape) < self.level + TOUCH
+        covered = near.copy()
+        covered[1:] |= near[:-1]
+        covered[:-1] |= near[1:]
+        covered[:, 1:] |= near[:, :-1]
+        covered[:, :-1] |= near[:, 1:]
+        return covered
+
     def depth(self, points: Any, gravity: Any) -> np.ndarray:
         """Each point's depth (m) below the sand's level (`level`; `depth`, with the pile rule when set)."""
         return depth(points, gravity, self.level, self.size, self.centre, self.frame,
@@ -308,7 +329,8 @@ class DeformingSurface:
         (N, 3, m/s), then relax at most ``step_iterations`` times; the volume (m^3) this step displaced. With
         ``imprint`` (a run's first step), the body's imprint instead: the sand under it lowered to it and no berm,
         a body that starts in the sand sitting in its own hole (its volume is not conserved: 0 displaced)."""
-        before, entered = self.heights.copy(), self._occupied == 0
+        before, entered = self.heights.copy(), ~self._under
+        under = self._covered(points3(points))
         if self.native:
             _native_step(self, points3(points), np.asarray(areas, float), points3(velocities),
                          np.asarray(gravity, float))
@@ -321,8 +343,9 @@ class DeformingSurface:
         if imprint:
             np.minimum(before, self.heights, out=self.heights)
             self.original[...] = np.minimum(self.original, self.heights)
-        under = self._occupied != 0
+        under |= self._occupied != 0
         entered &= under
+        self._under = under
         self.level[...] = np.where(entered, before, np.where(under, self.level, self.heights))
         removed = 0.0 if imprint else self.cell * float(np.clip(before - self.heights, 0.0, None).sum())
         self.displaced += removed

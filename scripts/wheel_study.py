@@ -44,7 +44,6 @@ VARIANTS = {
     "li2013-cmu-free": ["--medium", "wheel_sand_cmu", *FREE],
     "rft3d-free": [*RFT3D, *FREE],
     "li2013-cmu-deforming-held": ["--medium", "wheel_sand_cmu", "--sinkage-from-data", *DEFORMING],
-    "li2013-cmu-deforming-free": ["--medium", "wheel_sand_cmu", "--load-from-data", *DEFORMING],
 }
 # DRFT's term at the experiments' 10 mm/s: lambda = 1 on an assumed bulk density of 1600 kg/m^3 (the sand's is not
 # known), on the locked wheel at 60 deg (its largest leading normal speeds, 10 mm/s).

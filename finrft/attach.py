@@ -3,14 +3,15 @@ elements and gives them a granular resistive force law, before the spec is compi
 
 Each element below the free surface (`finrft.surfaces`: the horizontal z = surface_z, a plane at any tilt or a
 heightfield; depth measured along the model's gravity from the surface above the element) that leads the motion
-(outward normal . velocity > 0) takes the law's stress times its depth and area (a surface law of the registry `finrft.laws`, found
-by its name: `finrft.laws.li2013.element_forces` (Li 2013 in 3D, Treers et al. 2021), `li2013-planar` or
-`finrft.laws.rft3d.element_forces`), plus, with ``drft_lambda`` > 0, DRFT's rate-dependent term
-(`finrft.laws.drft`), all times the ramp tanh(max(n . v, 0) / v_reg) (`finrft.laws.regularised`). The laws take their angles against gravity: they see
-normals and velocities in `finrft.surfaces.law_frame`, whose z is up (the identity under gravity along -z). The force
-appears where MuJoCo's passive forces appear, ``data.qfrc_passive``: from the native plugin ``finrft.surface``
-(plugins/finrft_surface.c, one instance per body, the elements in its config) or, with the Python backend, from a
-passive-force callback that `Attached.installed` sets for a block and then restores.
+(outward normal . velocity > 0) takes the law's stress times its depth and area (a surface law of the registry
+`finrft.laws`, found by its name: `finrft.laws.li2013.element_forces` (Li 2013 in 3D, Treers et al. 2021),
+`li2013-planar` or `finrft.laws.rft3d.element_forces`), plus, with ``drft_lambda`` > 0, DRFT's rate-dependent term
+(`finrft.laws.drft`), all times the ramp tanh(max(n . v, 0) / v_reg) (`finrft.laws.regularised`). The laws take
+their angles against gravity: they see normals and velocities in `finrft.surfaces.law_frame`, whose z is up (the
+identity under gravity along -z). The force appears where MuJoCo's passive forces appear, ``data.qfrc_passive``:
+from the native plugin ``finrft.surface`` (plugins/finrft_surface.c, one instance per body, the elements in its
+config) or, with the Python backend, from a passive-force callback that `Attached.installed` sets for a block and
+then restores.
 
 Elements: a box's faces are cut into rectangles, a cylinder's side into rectangles and its caps into ring
 sectors, spheres, ellipsoids and a capsule's ends into bands of equal polar angle split in azimuth, a mesh's
@@ -276,8 +277,10 @@ class SurfaceForces:
         return self.attached.free_surface.kind == "flat" and g[0] == 0 and g[1] == 0 and g[2] <= 0
 
     def frame(self) -> np.ndarray | None:
-        """The laws' frame under the model's gravity now (`finrft.surfaces.law_frame`); None when level."""
-        return None if self.level() else surfaces.law_frame(surfaces.up(self._gravity))
+        """The laws' frame under the model's gravity now (`finrft.surfaces.law_frame`); None under gravity along -z
+        (or none), where it is the identity (the native plugin's FinrftSurface.upright)."""
+        g = self._gravity
+        return None if g[0] == 0 and g[1] == 0 and g[2] <= 0 else surfaces.law_frame(surfaces.up(g))
 
     def depths(self, d: mujoco.MjData, body: int, arm: np.ndarray) -> np.ndarray:
         """The depths (N) of the elements at ``arm`` (N, 3, world frame) from the origin of ``body``, along the
@@ -438,16 +441,18 @@ def _field(model: mujoco.MjModel, data: mujoco.MjData, surface: str | surfaces.F
     elif surface == "flat":
         field = surfaces.Field("flat", {"surface_z": float(surface_z)})
     elif surface == "plane":
-        field = surfaces.Field("plane", {"surface_point": tuple(map(float, surface_point)),
-                                         "surface_normal": tuple(map(float, surface_normal))})
+        field = surfaces.Field("plane", {"surface_point": _vector(surface_point, "surface_point"),
+                                         "surface_normal": _vector(surface_normal, "surface_normal")})
     elif surface == "hfield":
-        field = surfaces.hfield.of_model(model, data, hfield, surface_point)
+        field = surfaces.module("hfield").of_model(model, data, hfield, _vector(surface_point, "surface_point"))
     elif surface == "deforming":
         raise SceneError("attach: surface 'deforming' needs its grid: give a finrft.surfaces.Field('deforming', "
                          "...) (finrft.surfaces.deforming.field)")
+    elif isinstance(surface, str) and surface in surfaces.names():
+        field = surfaces.Field(surface, {})  # a kind runs do not take yet: refused below
     else:
-        raise SceneError(f"attach: surface must be one of flat, plane, hfield, or a finrft.surfaces.Field, got "
-                         f"{surface!r}")
+        raise SceneError(f"attach: surface must be one of {', '.join(FIELD_KINDS)} or a finrft.surfaces.Field, got "
+                         f"{surface!r:.60}")
     if field.kind not in FIELD_KINDS:
         raise SceneError(f"attach: surface {field.kind!r} is not yet run: use {', '.join(FIELD_KINDS)}")
     try:
@@ -455,6 +460,14 @@ def _field(model: mujoco.MjModel, data: mujoco.MjData, surface: str | surfaces.F
     except SceneError as error:
         raise SceneError(f"attach: {error}") from None
     return field
+
+
+def _vector(value: object, key: str) -> tuple[float, float, float]:
+    """Three finite numbers; SceneError naming ``key`` otherwise."""
+    if not (isinstance(value, (list, tuple, np.ndarray)) and len(value) == 3 and all(_is_number(v) for v in value)
+            and all(math.isfinite(v) for v in value)):
+        raise SceneError(f"attach: {key} must be three finite numbers (x, y, z), got {value!r:.60}")
+    return tuple(float(v) for v in value)
 
 
 # The name of the floor under a bed of sand of finite depth (attach's bed_depth).
@@ -564,20 +577,24 @@ def _bind(spec: mujoco.MjSpec, attached: Attached, surface: Surface) -> None:
 
 def _field_config(field: surfaces.Field) -> dict[str, str]:
     """The native plugin's config of a free surface (flat: none beyond surface_z)."""
-    numbers = lambda values: " ".join(map(repr, np.asarray(values, dtype=float).ravel().tolist()))  # noqa: E731
     if field.kind == "plane":
-        return {"surface": "plane", "surface_point": numbers(field.parameters["surface_point"]),
-                "surface_normal": numbers(field.parameters["surface_normal"])}
+        return {"surface": "plane", "surface_point": _numbers(field.parameters["surface_point"]),
+                "surface_normal": _numbers(field.parameters["surface_normal"])}
     if field.kind in ("hfield", "deforming"):
         p = field.parameters
         heights = np.asarray(p["heights"], dtype=float)
-        config = {"surface": field.kind,
-                  "hfield": numbers([*heights.shape, *p["size"], *p.get("centre", (0, 0, 0)),
-                                     *np.asarray(p.get("frame", np.eye(3))).ravel(), *heights.ravel()])}
+        frame = np.asarray(p.get("frame", np.eye(3)), dtype=float)
+        config = {"surface": field.kind, "hfield": _numbers([*heights.shape, *p["size"], *p.get("centre", (0, 0, 0)),
+                                                            *frame.ravel(), *heights.ravel()])}
         if field.kind == "deforming" and p.get("pile_factor"):
             config["pile_factor"] = repr(float(p["pile_factor"]))
         return config
     return {}
+
+
+def _numbers(values: object) -> str:
+    """Numbers as the plugin's config reads them: repr, the Python backend's exact numbers."""
+    return " ".join(map(repr, np.asarray(values, dtype=float).ravel().tolist()))
 
 
 def _either(value: float | None, alias: float | None, name: str, alias_name: str) -> float | None:

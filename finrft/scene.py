@@ -156,6 +156,8 @@ Medium = schema.section("Medium", (
                                 "radius", minimum=0.0, used_by=("surface", ("hfield", "deforming")))),
     ("hfield_seed", int, _f(0, "", "a generated noise hfield's random seed",
                             used_by=("surface", ("hfield", "deforming")))),
+    ("hfield_heading", float, _f(0.0, "rad", "a generated hfield's x axis (its incline's direction): the world's x "
+                                 "turned this far about up, towards y", used_by=("surface", ("hfield", "deforming")))),
     ("pile_factor", float, _f(0.0, "", "deforming: the wheel group's pile rule, an element in raised sand takes its "
                               "depth times this factor (finrft.surfaces.deforming; theirs 0.2843); 0: none",
                               minimum=0.0, exclusive=False, used_by=("surface", ("deforming",)))),

@@ -142,6 +142,7 @@ typedef struct {
   double gravity[3];     // the model's, read again at every finrft_surface_instance (between steps it may change)
   int level;             // flat under gravity along -z (or none): depth from z alone, the laws' own frame (today's)
   int measured;          // gravity, level and frame are the model's as last read
+  int upright;           // gravity along -z (or none): the laws' frame is the identity, their own
   double frame[9];       // otherwise the laws' frame, rows x, y, up (finrft_surface_frame)
   double* scratch;       // 4 n: the elements' world centres, then their depths, at one evaluation
   double v_reg;          // m/s, the ramp tanh(max(n.v, 0) / v_reg) of every element's force; 0: none

@@ -807,11 +807,12 @@ static int refresh_gravity(const mjModel* m, FinrftSurface* p) {
   double up[3];
   for (int i = 0; i < 3; i++) p->gravity[i] = g[i];
   // (no gravity over the flat surface is level too, as it always was: depth from z)
-  p->level = p->field.kind == FINRFT_FIELD_FLAT && g[0] == 0 && g[1] == 0 && g[2] <= 0;
+  p->upright = g[0] == 0 && g[1] == 0 && g[2] <= 0;
+  p->level = p->field.kind == FINRFT_FIELD_FLAT && p->upright;
   p->measured = p->level || !(finrft_surface_up(p->gravity, up) ||
                               finrft_field_depth(&p->field, p->gravity, 0, NULL, NULL));
   if (!p->measured) return -1;
-  if (!p->level) finrft_surface_frame(up, p->frame);
+  if (!p->upright) finrft_surface_frame(up, p->frame);
   return 0;
 }
 
@@ -856,10 +857,10 @@ const FinrftSurface* finrft_surface_instance(const mjModel* m, mjData* d, int in
 }
 
 // The law's force in its frame (finrft_surface_frame): n and v seen in it, the force given back in the world's
-// (as Attached.law_forces with a frame); the law's own call when level.
+// (as Attached.law_forces with a frame); the law's own call when upright.
 static void framed_force(const FinrftSurface* p, const mjtNum normal[3], const mjtNum v[3], mjtNum depth,
                          mjtNum area, mjtNum f[3]) {
-  if (p->level) {
+  if (p->upright) {
     kLaws[p->law].force(p, normal, v, depth, area, f);
     return;
   }
@@ -911,7 +912,7 @@ void finrft_surface_element_slope(const FinrftSurface* p, const mjtNum normal[3]
     for (int i = 0; i < 9; i++) k[i] = 0;
     return;
   }
-  if (p->level) {
+  if (p->upright) {
     kLaws[p->law].slope(p, normal, v, depth, area, f, k);
   } else {
     // in the law's frame F: f = F^T f', k = F^T k' F

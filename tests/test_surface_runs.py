@@ -348,3 +348,56 @@ def test_the_commands_on_the_flat_surface_refuse_another(capsys, command, named)
     assert main([command, "--set", "medium.surface=plane"]) == 2
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and named in err, err
+
+
+def test_generated_heightfields_are_the_shapes_they_name():
+    rng = np.random.default_rng(8)
+    points = np.c_[rng.uniform(-0.3, 0.3, (50, 2)), rng.uniform(-0.2, 0.1, 50)]
+    centre = (0.01, -0.02, 0.003)
+    # a slope turned a quarter about up rises along y: the plane of that slope, on the grid's points and between
+    slope = hfield.generated("slope", G, centre, extent=0.4, spacing=0.02, slope=SLOPE, heading=np.pi / 2)
+    plane = surfaces.module("plane").depth(points, G, surface_point=centre,
+                                           surface_normal=(0.0, -np.sin(SLOPE), np.cos(SLOPE)))
+    assert np.abs(slope.depth(points, G) - plane).max() < 1e-12
+    # steps 1 cm high every 5 cm along x; a cone 3 cm high, 10 cm in radius
+    steps = hfield.generated("steps", G, (0, 0, 0), extent=0.4, spacing=0.01, height=0.01, length=0.05)
+    at = np.array([[0.0, 0.0, 0.0], [0.06, 0.1, 0.0], [0.11, -0.2, 0.0], [-0.06, 0.0, 0.0]])
+    assert steps.depth(at, G) == pytest.approx([0.0, 0.01, 0.02, -0.01], abs=1e-12)
+    pile = hfield.generated("pile", G, (0, 0, 0), extent=0.2, spacing=0.01, height=0.03, length=0.1)
+    at = np.array([[0.0, 0.0, 0.0], [0.05, 0.0, 0.0], [0.0, -0.15, 0.0]])
+    assert pile.depth(at, G) == pytest.approx([0.03, 0.015, 0.0], abs=1e-12)
+    noise = hfield.generated("noise", G, (0, 0, 0), extent=0.5, spacing=0.005, height=0.004, length=0.03, seed=2)
+    h = noise.parameters["heights"]
+    assert h.std() == pytest.approx(0.004) and abs(np.corrcoef(h[:, :-1].ravel(), h[:, 1:].ravel())[0, 1]) > 0.9
+    with pytest.raises(SceneError, match="hfield shape 'dunes'"):
+        hfield.generated("dunes", G)
+
+
+@pytest.mark.parametrize("surface,named", [
+    ({"surface": "deforming"}, "surface 'deforming' needs its grid"),
+    ({"surface": "slope"}, "surface must be one of flat, plane, hfield"),
+    ({"surface": "plane", "surface_normal": (0, 1)}, "surface_normal must be three finite numbers"),
+    ({"surface": "plane", "surface_point": (0, 0, float("nan"))}, "surface_point must be three finite numbers"),
+    ({"bed_depth": -0.01}, "bed_depth must be >= 0 m"),
+])
+def test_attach_refuses_a_bad_surface(surface, named):
+    with pytest.raises(SceneError, match=named):
+        attach(mujoco.MjSpec.from_string(BODY), "probe", medium="poppy_seeds_lp", **surface)
+
+
+def test_gravity_is_the_models_at_every_step():
+    # set on the compiled model (after attach), a new gravity measures the depths and turns the laws in both twins
+    wrenches = {}
+    for backend in ("native", "python"):
+        attached, model, data = _moving(backend, surface="plane", surface_point=(0.0, 0.0, 0.004),
+                                        surface_normal=NORMAL)
+        read = attached.wrenches(model)
+        with attached.installed(model):
+            before = read(data)[0].copy()
+            model.opt.gravity[:] = 9.81 * -NORMAL  # square to the slope: its depths are across it now
+            mujoco.mj_forward(model, data)
+            wrenches[backend] = before, read(data)[0].copy()
+    (before, after), (numpy_before, numpy_after) = wrenches["native"], wrenches["python"]
+    assert np.abs(after - before).max() > 1e-3 * np.abs(before).max()
+    assert np.abs(after - numpy_after).max() <= 1e-9 * np.abs(after).max()
+    assert np.abs(before - numpy_before).max() <= 1e-9 * np.abs(before).max()

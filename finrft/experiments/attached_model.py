@@ -150,12 +150,12 @@ def surface_arguments(medium: Medium, gravity: Sequence[float]) -> dict[str, Any
     if medium.surface == "deforming":
         grid = hfield.generated(medium.hfield_shape, gravity, medium.surface_point, medium.hfield_extent,
                                 medium.hfield_spacing, medium.hfield_slope, medium.hfield_height,
-                                medium.hfield_length, medium.hfield_seed)
+                                medium.hfield_length, medium.hfield_seed, medium.hfield_heading)
         return {"surface": deforming.field(grid, medium.pile_factor or None)}
     if medium.surface == "hfield" and not medium.hfield:
         return {"surface": hfield.generated(medium.hfield_shape, gravity, medium.surface_point, medium.hfield_extent,
                                             medium.hfield_spacing, medium.hfield_slope, medium.hfield_height,
-                                            medium.hfield_length, medium.hfield_seed)}
+                                            medium.hfield_length, medium.hfield_seed, medium.hfield_heading)}
     return {"surface": medium.surface, "surface_point": medium.surface_point,
             "surface_normal": medium.surface_normal, "hfield": medium.hfield}
 

@@ -84,7 +84,7 @@ def depth(points: Any, gravity: Any, heights: Any, size: Any, centre: Any = (0.0
     return g.height(local[:, 0], local[:, 1]) - local[:, 2]
 
 
-def of_model(model: Any, data: Any, name: str, surface_point: Any = (0.0, 0.0, 0.0)) -> "Field":
+def of_model(model: Any, data: Any, name: str, surface_point: Any = (0.0, 0.0, 0.0)) -> Field:
     """The free surface of the ``<hfield>`` ``name`` of a compiled MuJoCo model (after mj_kinematics of ``data``):
     its heights (size[2] times its data), placed where the geom that shows it is (a geom of a static body, that
     collides with nothing: the sand is RFT's, not a rigid surface), else at ``surface_point`` level with gravity."""
@@ -120,7 +120,8 @@ SHAPES = ("slope", "steps", "noise", "pile")
 
 
 def generated(shape: str, gravity: Any, centre: Any = (0.0, 0.0, 0.0), extent: float = 1.0, spacing: float = 0.01,
-              slope: float = 0.0, height: float = 0.01, length: float = 0.05, seed: int = 0) -> "Field":
+              slope: float = 0.0, height: float = 0.01, length: float = 0.05, seed: int = 0,
+              heading: float = 0.0) -> Field:
     """A heightfield made from the scene, a square grid of half-extent ``extent`` (m) and ``spacing`` (m) about
     ``centre``, level with ``gravity``, rising along its x axis at ``slope`` (rad), and on that incline:
 
@@ -128,7 +129,9 @@ def generated(shape: str, gravity: Any, centre: Any = (0.0, 0.0, 0.0), extent: f
     - ``steps``: stairs ``height`` (m) high, ``length`` (m) deep, rising along x;
     - ``noise``: smooth random ground, ``height`` (m) its standard deviation, ``length`` (m) its correlation
       length (white noise under a Gaussian filter; ``seed``);
-    - ``pile``: a cone ``height`` (m) high, ``length`` (m) in radius, at the centre."""
+    - ``pile``: a cone ``height`` (m) high, ``length`` (m) in radius, at the centre.
+
+    Its x axis is the world's x (made square to gravity) turned by ``heading`` (rad) about up, towards y."""
     if shape not in SHAPES:
         raise SceneError(f"hfield shape {shape!r} is not one of {', '.join(SHAPES)}")
     if not (np.isfinite(extent) and np.isfinite(spacing) and 0 < spacing <= extent):
@@ -155,9 +158,11 @@ def generated(shape: str, gravity: Any, centre: Any = (0.0, 0.0, 0.0), extent: f
         h = h + height * smooth / max(float(smooth.std()), 1e-300)
     elif shape == "pile":
         h = h + height * np.clip(1 - np.hypot(x, y) / length, 0.0, None)
+    turn = np.array([[np.cos(heading), -np.sin(heading), 0.0], [np.sin(heading), np.cos(heading), 0.0],
+                     [0.0, 0.0, 1.0]])
     return Field("hfield", {"heights": h, "size": (float(extent), float(extent)),
                             "centre": tuple(map(float, np.asarray(centre, dtype=float).reshape(3))),
-                            "frame": law_frame(up(gravity)).T})
+                            "frame": law_frame(up(gravity)).T @ turn})
 
 
 # A side of a generated grid: 2001 points (4 million heights) is a 2 m bed at 1 mm.

@@ -98,3 +98,29 @@ def test_finrft_wheel_surface_deforming_puts_the_grid_under_the_wheel():
     assert x0 - half < -scene.wheel.radius - 0.02 and x0 + half > 6 * scene.wheel.speed + scene.wheel.radius + 0.05
     given = command.scene(build_parser().parse_args([*argv, "--set", "medium.hfield_spacing=0.004"]))
     assert given.medium.hfield_spacing == 0.004  # --set wins
+
+
+def test_the_recording_draws_the_surface(runs, tmp_path):
+    import rerun as rr
+
+    from finrft.record import write_rrd
+    from finrft.views import SURFACE_FRAMES, _draw_deforming
+
+    logged = []
+
+    class Recording:
+        def set_time(self, *args, **kwargs):
+            pass
+
+        def log(self, entity, item):
+            logged.append(item)
+
+    run = runs["native"]
+    _draw_deforming(Recording(), run, run.experiment.build(run.scene).attached.free_surface, "surface")
+    assert 2 <= len(logged) <= SURFACE_FRAMES and all(isinstance(m, rr.Mesh3D) for m in logged)
+    first, last = logged[0], logged[-1]
+    colours = [np.asarray(m.vertex_colors.as_arrow_array().to_pylist()) for m in (first, last)]
+    assert (colours[0] == colours[0][0]).all()  # unchanged at the start: one colour
+    assert len(np.unique(colours[1], axis=0)) > 2  # rut and berm coloured at the end
+    write_rrd(run, tmp_path / "wheel.rrd")
+    assert (tmp_path / "wheel.rrd").stat().st_size > 0

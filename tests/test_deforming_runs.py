@@ -124,3 +124,37 @@ def test_the_recording_draws_the_surface(runs, tmp_path):
     assert len(np.unique(colours[1], axis=0)) > 2  # rut and berm coloured at the end
     write_rrd(run, tmp_path / "wheel.rrd")
     assert (tmp_path / "wheel.rrd").stat().st_size > 0
+
+
+def test_the_level_is_the_plugins_state():
+    import mujoco
+
+    scene = wheel.default_scene(**{"wheel.slip": -1.0, "wheel.sinkage": 0.04, "medium.name": "wheel_sand_cmu",
+                                   "medium.surface": "deforming", "medium.hfield_extent": 0.12,
+                                   "medium.hfield_spacing": 0.004})
+    experiment = wheel.Wheel.of(scene)
+    built = experiment.build(scene)
+    m = built.model
+    d = mujoco.MjData(m)
+    trial = experiment.start(scene, built, d, False)
+    d.qvel[m.joint("carriage").dofadr[0]] = 0.01
+    read = built.attached.wrenches(m)
+    mujoco.mj_forward(m, d)
+    flat = read(d)[0, 3:].copy()
+    trial.surface.level[...] += 0.01  # 10 mm more sand everywhere: deeper, more resistance
+    trial.surface.installed(m, d)
+    mujoco.mj_forward(m, d)
+    raised = read(d)[0, 3:].copy()
+    assert raised[0] < flat[0] < 0
+    # MuJoCo's state carries the level: another MjData set to it meets the same sand
+    spec = int(mujoco.mjtState.mjSTATE_FULLPHYSICS)
+    state = np.empty(mujoco.mj_stateSize(m, spec))
+    mujoco.mj_getState(m, d, state, spec)
+    other = mujoco.MjData(m)
+    mujoco.mj_setState(m, other, state, spec)
+    mujoco.mj_forward(m, other)
+    assert np.array_equal(read(other)[0, 3:], raised)
+    mujoco.mj_resetData(m, other)  # and a reset puts the original surface back
+    other.qpos[:], other.qvel[:] = d.qpos, d.qvel
+    mujoco.mj_forward(m, other)
+    assert np.allclose(read(other)[0, 3:], flat, rtol=1e-12)

@@ -308,10 +308,10 @@ class DeformingSurface:
         nrow, ncol = self.heights.shape
         c = np.floor((local[:, 0] + self.size[0]) / self._spacing[0] + 0.5).astype(int)
         r = np.floor((local[:, 1] + self.size[1]) / self._spacing[1] + 0.5).astype(int)
-        on = (c >= 0) & (c < ncol) & (r >= 0) & (r < nrow)
-        lowest = np.full(self.heights.size, np.inf)
-        np.minimum.at(lowest, r[on] * ncol + c[on], local[on, 2])
-        near = lowest.reshape(self.heights.shape) < self.level + TOUCH
+        on = np.flatnonzero((c >= 0) & (c < ncol) & (r >= 0) & (r < nrow))
+        on = on[local[on, 2] < self.level[r[on], c[on]] + TOUCH]
+        near = np.zeros(self.heights.shape, bool)
+        near[r[on], c[on]] = True
         covered = near.copy()
         covered[1:] |= near[:-1]
         covered[:-1] |= near[1:]

@@ -464,6 +464,9 @@ def _field(model: mujoco.MjModel, data: mujoco.MjData, surface: str | surfaces.F
                                          "surface_normal": _vector(surface_normal, "surface_normal")})
     elif surface == "hfield":
         field = surfaces.module("hfield").of_model(model, data, hfield, _vector(surface_point, "surface_point"))
+    elif surface == "deforming":
+        raise SceneError("attach: surface 'deforming' needs its grid: give a finrft.surfaces.Field('deforming', "
+                         "...) (finrft.surfaces.deforming.field)")
     elif isinstance(surface, str) and surface in surfaces.names():
         field = surfaces.Field(surface, {})  # a kind runs do not take yet: refused below
     else:
@@ -511,7 +514,7 @@ def _add_bed(spec: mujoco.MjSpec, field: surfaces.Field, depth: float, gravity: 
 
 
 # The kinds of free surface runs take (finrft.surfaces; the native plugin's kFields).
-FIELD_KINDS = ("flat", "plane", "hfield")
+FIELD_KINDS = ("flat", "plane", "hfield", "deforming")
 
 
 def _names(value: Sequence[str] | str, key: str) -> list[str]:
@@ -596,12 +599,15 @@ def _field_config(field: surfaces.Field) -> dict[str, str]:
     if field.kind == "plane":
         return {"surface": "plane", "surface_point": _numbers(field.parameters["surface_point"]),
                 "surface_normal": _numbers(field.parameters["surface_normal"])}
-    if field.kind == "hfield":
+    if field.kind in ("hfield", "deforming"):
         p = field.parameters
         heights = np.asarray(p["heights"], dtype=float)
         frame = np.asarray(p.get("frame", np.eye(3)), dtype=float)
-        return {"surface": "hfield", "hfield": _numbers([*heights.shape, *p["size"], *p.get("centre", (0, 0, 0)),
-                                                       *frame.ravel(), *heights.ravel()])}
+        config = {"surface": field.kind, "hfield": _numbers([*heights.shape, *p["size"], *p.get("centre", (0, 0, 0)),
+                                                            *frame.ravel(), *heights.ravel()])}
+        if field.kind == "deforming" and p.get("pile_factor"):
+            config["pile_factor"] = repr(float(p["pile_factor"]))
+        return config
     return {}
 
 

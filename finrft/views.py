@@ -127,9 +127,42 @@ def draw_model(rec: Any, run: Result, times: Any, prefix: str) -> list[Any]:
             static=True)
     rec.send_columns(f"{root}/medium_force", indexes=[times], columns=rr.Arrows3D.columns(
         origins=position.reshape(-1, 3), vectors=arrow_scale * force.reshape(-1, 3)).partition([n] * count))
+    if "surface_height" in run.series:
+        _draw_deforming(rec, run, built.attached.free_surface, f"{root}/surface")
+        return [rrb.Spatial3DView(name="The model, the deforming sand and the medium's force", origin=root)]
     z = scene.medium.surface_z
     corners = np.array([[low[0] - span, low[1] - span, z], [high[0] + span, low[1] - span, z],
                         [high[0] + span, high[1] + span, z], [low[0] - span, high[1] + span, z]])
     rec.log(f"{root}/surface", rr.Mesh3D(vertex_positions=corners, triangle_indices=[[0, 1, 2], [0, 2, 3]],
                                          albedo_factor=[200, 170, 110, 90]), static=True)
     return [rrb.Spatial3DView(name="The model, the sand's surface and the medium's force", origin=root)]
+
+
+# A deforming surface is drawn at this many instants of a run at most: each is a mesh of its whole grid.
+SURFACE_FRAMES = 60
+
+
+def _draw_deforming(rec: Any, run: Result, field: Any, entity: str) -> None:
+    """The deforming surface as a mesh of its grid at up to SURFACE_FRAMES recorded instants, each vertex coloured
+    by its change since the start: blue where the sand went down (a rut), red where it rose (a berm), sand-coloured
+    where it is unchanged; full colour at the largest change of the run."""
+    import rerun as rr
+
+    heights = run.series["surface_height"]
+    p = field.parameters
+    nrow, ncol = heights.shape[1:]
+    x, y = np.meshgrid(np.linspace(-p["size"][0], p["size"][0], ncol), np.linspace(-p["size"][1], p["size"][1], nrow))
+    frame, centre = np.asarray(p["frame"], dtype=float), np.asarray(p["centre"], dtype=float)
+    r, c = np.meshgrid(np.arange(nrow - 1), np.arange(ncol - 1), indexing="ij")
+    corner = (r * ncol + c).ravel()
+    triangles = np.r_[np.c_[corner, corner + 1, corner + ncol + 1], np.c_[corner, corner + ncol + 1, corner + ncol]]
+    change = heights - heights[0]
+    largest = max(float(np.abs(change).max()), 1e-12)
+    sand, down, up = np.array([200, 170, 110]), np.array([40, 90, 220]), np.array([220, 50, 30])
+    for k in np.unique(np.linspace(0, len(run.time) - 1, SURFACE_FRAMES).round().astype(int)):
+        rec.set_time("sim_time", duration=float(run.time[k]))
+        local = np.c_[x.ravel(), y.ravel(), heights[k].ravel()]
+        share = (change[k] / largest).ravel()[:, None]
+        colour = np.where(share < 0, sand + (down - sand) * -share, sand + (up - sand) * share)
+        rec.log(entity, rr.Mesh3D(vertex_positions=local @ frame.T + centre, triangle_indices=triangles,
+                                  vertex_colors=colour.astype(np.uint8)))

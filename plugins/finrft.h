@@ -117,7 +117,7 @@ static inline void finrft_site_axes(const mjData* d, int s, mjtNum x[3], mjtNum 
 // The free surface an instance measures its elements' depths from (config `surface`; finrft.surfaces.Field's
 // twin), one kind of plugins/surfaces/ behind finrft_field_depth. A kind with state (the deforming one: a grid of
 // heights that the elements displace) keeps it per mjData: see finrft_field_depth in finrft_surface.c.
-enum { FINRFT_FIELD_FLAT, FINRFT_FIELD_PLANE, FINRFT_FIELD_HFIELD };
+enum { FINRFT_FIELD_FLAT, FINRFT_FIELD_PLANE, FINRFT_FIELD_HFIELD, FINRFT_FIELD_DEFORMING };
 typedef struct {
   int kind;                    // FINRFT_FIELD_*, by the name of its file in plugins/surfaces/ (kFields)
   double surface_z;            // flat
@@ -125,6 +125,8 @@ typedef struct {
   int nrow, ncol;              // hfield: the grid as finrft_hfield_depth takes it, its heights owned here
   double* heights;
   double size[2], centre[3], frame[9];
+  double* original;            // deforming: the heights it started from (`heights` are the level the run sets)
+  double pile_factor;          // deforming: the wheel group's pile rule's factor, 0: none
 } FinrftField;
 
 // Each of n points' (world, m) depth along gravity g below the surface: 0, or FINRFT_SURFACE_BAD_INPUT where

@@ -486,13 +486,14 @@ FINRFT_EXPORT void finrft_drft_element_force(double drft_lambda, double rho_c, c
 static const char* kSurfaceAttributes[] = {"law",         "coefficients", "zeta",  "xi",      "mu_surf",
                                            "surface_z",   "v_reg",        "drft_lambda", "bulk_density",
                                            "elements",    "geoms",        "surface", "surface_point",
-                                           "surface_normal", "hfield"};
+                                           "surface_normal", "hfield", "pile_factor"};
 
 static void surface_free(FinrftSurface* p) {
   if (!p) return;
   free(p->element);
   free(p->geom);
-  free(p->field.heights);
+  if (p->field.kind != FINRFT_FIELD_DEFORMING) free(p->field.heights);  // a deforming one's are d->plugin_state
+  free(p->field.original);
   free(p->scratch);
   free(p);
 }
@@ -540,7 +541,7 @@ static int read_xi(const mjModel* m, int instance, FinrftSurface* p) {
 }
 
 // The kinds of free surface by name (finrft.surfaces; FINRFT_FIELD_* in finrft.h, in this order).
-static const char* kFields[] = {"flat", "plane", "hfield"};
+static const char* kFields[] = {"flat", "plane", "hfield", "deforming"};
 #define NFIELDS ((int)(sizeof(kFields) / sizeof(kFields[0])))
 
 // The hook of a kind of free surface: its depths through its own function of plugins/surfaces/. A kind with state
@@ -557,6 +558,9 @@ int finrft_field_depth(const FinrftField* f, const double g[3], int n, const dou
       return finrft_plane_depth(f->point, f->normal, g, n, points, depth);
     case FINRFT_FIELD_HFIELD:
       return finrft_hfield_depth(f->nrow, f->ncol, f->heights, f->size, f->centre, f->frame, g, n, points, depth);
+    case FINRFT_FIELD_DEFORMING:
+      return finrft_deforming_depth(f->nrow, f->ncol, f->heights, f->original, f->pile_factor, f->size, f->centre,
+                                    f->frame, g, n, points, depth);
     default:
       return FINRFT_SURFACE_BAD_INPUT;
   }
@@ -581,7 +585,8 @@ static int read_field(const mjModel* m, int instance, FinrftSurface* p) {
   if (kind && *kind) {
     while (f->kind < NFIELDS && strcmp(kind, kFields[f->kind])) f->kind++;
     if (f->kind == NFIELDS) {
-      mju_warning("finrft.surface: config 'surface' must be 'flat', 'plane' or 'hfield', got '%s'", kind);
+      mju_warning("finrft.surface: config 'surface' must be 'flat', 'plane', 'hfield' or 'deforming', got '%s'",
+                  kind);
       return -1;
     }
   }
@@ -589,7 +594,14 @@ static int read_field(const mjModel* m, int instance, FinrftSurface* p) {
     return read_vector(m, instance, "surface_point", f->point, 3) ||
            read_vector(m, instance, "surface_normal", f->normal, 3) ? -1 : 0;
   }
-  if (f->kind != FINRFT_FIELD_HFIELD) return 0;
+  if (f->kind == FINRFT_FIELD_DEFORMING) {
+    const char* pile = mj_getPluginConfig(m, instance, "pile_factor");
+    if (pile && *pile && (read_scalar(m, instance, "pile_factor", &f->pile_factor) || !(f->pile_factor >= 0))) {
+      mju_warning("finrft.surface: config 'pile_factor' must be >= 0");
+      return -1;
+    }
+  }
+  if (f->kind != FINRFT_FIELD_HFIELD && f->kind != FINRFT_FIELD_DEFORMING) return 0;
   const char* text = mj_getPluginConfig(m, instance, "hfield");
   int count = text ? read_numbers(text, NULL, 0) : -1;
   double head[16];
@@ -608,7 +620,11 @@ static int read_field(const mjModel* m, int instance, FinrftSurface* p) {
   memcpy(f->centre, all + 4, 3 * sizeof(double));
   memcpy(f->frame, all + 7, 9 * sizeof(double));
   memmove(all, all + 16, (count - 16) * sizeof(double));
-  f->heights = all;
+  if (f->kind == FINRFT_FIELD_DEFORMING) {
+    f->original = all;  // its heights, the level, are state: in d->plugin_state (finrft_surface_instance)
+  } else {
+    f->heights = all;
+  }
   return 0;
 }
 
@@ -745,8 +761,14 @@ static int surface_init(const mjModel* m, mjData* d, int instance) {
   return 0;
 }
 
+// A deforming surface's level (nrow x ncol heights, m) is the instance's state, in d->plugin_state: mj_getState
+// and mj_setState carry it, and an instance made again for another model (or an MjData copied) keeps it.
 static int surface_nstate(const mjModel* m, int instance) {
-  return 0;
+  const char* kind = mj_getPluginConfig(m, instance, "surface");
+  const char* text = mj_getPluginConfig(m, instance, "hfield");
+  double head[2];
+  if (!kind || strcmp(kind, "deforming") || !text || read_numbers(text, head, 2) < 2) return 0;
+  return head[0] >= 2 && head[1] >= 2 ? (int)head[0] * (int)head[1] : 0;
 }
 
 static void surface_destroy(mjData* d, int instance) {
@@ -754,7 +776,13 @@ static void surface_destroy(mjData* d, int instance) {
   d->plugin_data[instance] = 0;
 }
 
-static void surface_reset(const mjModel* m, mjtNum* plugin_state, void* plugin_data, int instance) {}
+// A deforming surface starts at its original heights.
+static void surface_reset(const mjModel* m, mjtNum* plugin_state, void* plugin_data, int instance) {
+  const FinrftSurface* p = (const FinrftSurface*)plugin_data;
+  if (p && p->field.kind == FINRFT_FIELD_DEFORMING && m->plugin_statenum[instance] == p->field.nrow * p->field.ncol) {
+    memcpy(plugin_state, p->field.original, p->field.nrow * p->field.ncol * sizeof(double));
+  }
+}
 
 // The first geom of the instance's body that differs from what its elements were cut from (config `geoms`), as
 // its place in p->geom; -1 when none does. Checked at every use: geom_size may change between steps.
@@ -798,6 +826,12 @@ const FinrftSurface* finrft_surface_instance(const mjModel* m, mjData* d, int in
       return NULL;
     }
     p = (const FinrftSurface*)d->plugin_data[instance];
+  }
+  if (p->field.kind == FINRFT_FIELD_DEFORMING) {
+    if (m->plugin_statenum[instance] != p->field.nrow * p->field.ncol) {
+      mju_error("finrft.surface: a deforming surface's model holds no state of its grid's size");
+    }
+    ((FinrftSurface*)p)->field.heights = d->plugin_state + m->plugin_stateadr[instance];
   }
   if (refresh_gravity(m, (FinrftSurface*)p)) {
     mju_error("finrft.surface: the free surface cannot be measured under gravity (%g, %g, %g): it must face "
@@ -1025,6 +1059,21 @@ FINRFT_EXPORT int finrft_surface_applied_wrench(const mjModel* m, mjData* d, int
   if (!p->has_applied || passive_off) return -2;
   mju_copy(wrench, p->applied, 6);
   return p->body;
+}
+
+// The deforming surface's level (nrow x ncol heights, m; finrft.surfaces.deforming.DeformingSurface.level) that
+// instance `instance` measures its elements' depths from in d from now on: its state, which a run steps between
+// steps (finrft_deforming_sweep, _relax) and sets here. 0; -1 when the instance is not a finrft.surface one on a
+// deforming surface of that grid.
+FINRFT_EXPORT int finrft_surface_set_level(const mjModel* m, mjData* d, int instance, int nrow, int ncol,
+                                           const double* level) {
+  int slot = -1;
+  mjp_getPlugin(FINRFT_SURFACE_PLUGIN, &slot);
+  if (instance < 0 || instance >= m->nplugin || m->plugin[instance] != slot) return -1;
+  FinrftSurface* p = (FinrftSurface*)finrft_surface_instance(m, d, instance);
+  if (!p || p->field.kind != FINRFT_FIELD_DEFORMING || p->field.nrow != nrow || p->field.ncol != ncol) return -1;
+  memcpy(d->plugin_state + m->plugin_stateadr[instance], level, nrow * ncol * sizeof(double));
+  return 0;
 }
 
 // Every element's force, summed into one force and one torque about the body's origin, applied once.

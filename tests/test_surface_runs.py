@@ -301,11 +301,12 @@ record_dt = 0.01
 @pytest.mark.parametrize("model,sets,named", [
     (TILTED, (), 'is not along -z over the flat surface (medium.surface = "flat" is horizontal, not a slope): for a '
                  'slope give medium.surface = "plane" with its surface_normal'),
-    (PLATE, ("medium.surface=deforming",), 'medium.surface = "deforming" is not yet run'),
+    (PLATE, ("medium.surface=deforming",), 'medium.surface = "deforming" needs an angle of repose: medium (unnamed) '
+                                           'catalogues none; set medium.angle_of_repose (rad)'),
     (PLATE, ("medium.surface=plane", "medium.surface_normal=[0, 1]"), "medium.surface_normal must be 3 numbers"),
     (PLATE, ("medium.surface=plane", "medium.surface_normal=[0, 0, -1]"), "does not point against gravity"),
     (PLATE, ("medium.surface=hfield", "medium.hfield=sand"), "names no <hfield> of the model"),
-    (PLATE, ("medium.hfield_slope=0.1",), "medium.hfield_slope is used by surface = 'hfield' only"),
+    (PLATE, ("medium.hfield_slope=0.1",), "medium.hfield_slope is used by surface = 'hfield' or 'deforming' only"),
 ])
 def test_a_scene_s_bad_surface_is_one_line_exit_2(tmp_path, capsys, model, sets, named):
     from finrft.cli import main
@@ -373,7 +374,7 @@ def test_generated_heightfields_are_the_shapes_they_name():
 
 
 @pytest.mark.parametrize("surface,named", [
-    ({"surface": "deforming"}, "surface 'deforming' is not yet run"),
+    ({"surface": "deforming"}, "surface 'deforming' needs its grid"),
     ({"surface": "slope"}, "surface must be one of flat, plane, hfield"),
     ({"surface": "plane", "surface_normal": (0, 1)}, "surface_normal must be three finite numbers"),
     ({"surface": "plane", "surface_point": (0, 0, float("nan"))}, "surface_point must be three finite numbers"),

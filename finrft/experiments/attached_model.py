@@ -21,7 +21,7 @@ from ..files import check_regular, not_a_file, read_text
 from ..models import ARMATURE_RATIO, INTEGRATORS, compile_spec
 from ..scene import Medium, SceneError
 from ..stepping import Prescribed
-from ..surfaces import hfield
+from ..surfaces import deforming, hfield
 
 _J = mujoco.mjtJoint
 DRIVEN = {int(_J.mjJNT_SLIDE): "slide", int(_J.mjJNT_HINGE): "hinge"}
@@ -155,6 +155,11 @@ def build_attached(spec: mujoco.MjSpec, joints: Sequence[str], bodies: tuple[str
 def surface_arguments(medium: Medium, gravity: Sequence[float]) -> dict[str, Any]:
     """`attach`'s arguments of a scene's free surface (``[medium] surface`` and its keys): a heightfield generated
     from the hfield_ keys when the scene names no <hfield> of the model."""
+    if medium.surface == "deforming":
+        grid = hfield.generated(medium.hfield_shape, gravity, medium.surface_point, medium.hfield_extent,
+                                medium.hfield_spacing, medium.hfield_slope, medium.hfield_height,
+                                medium.hfield_length, medium.hfield_seed, medium.hfield_heading)
+        return {"surface": deforming.field(grid, medium.pile_factor or None)}
     if medium.surface == "hfield" and not medium.hfield:
         return {"surface": hfield.generated(medium.hfield_shape, gravity, medium.surface_point, medium.hfield_extent,
                                             medium.hfield_spacing, medium.hfield_slope, medium.hfield_height,
@@ -194,7 +199,9 @@ def applied_state(built: AttachedModel, method: str) -> Callable[[mujoco.MjData]
 
     def applied(d: mujoco.MjData) -> mujoco.MjData:
         where.time = d.time - lag
-        for name in ("qpos", "qvel", "act", "ctrl", "qfrc_applied", "xfrc_applied", "mocap_pos", "mocap_quat"):
+        # plugin_state: a deforming surface's level, the native plugin's state
+        for name in ("qpos", "qvel", "act", "ctrl", "qfrc_applied", "xfrc_applied", "mocap_pos", "mocap_quat",
+                     "plugin_state"):
             getattr(where, name)[:] = getattr(d, name)
         mujoco.mj_integratePos(m, where.qpos, where.qvel, -lag)
         mujoco.mj_forward(m, where)

@@ -28,8 +28,9 @@ from ..files import read_text
 from .. import methods
 from ..convergence import ROBOT_HEADLINE, ErrorLimits
 from ..models import ARMATURE_RATIO, compile_spec, mjcf_path
-from ..scene import Control, JointDrive, SceneError, UserScene, drive_timing, load_scene, parse_override
+from ..scene import Control, JointDrive, SceneError, UserScene, drive_timing, load_scene, parse_override, repose
 from ..stepping import DRIVE_LAG, jump_velocities
+from ..surfaces.deforming import DeformingSurface
 from .attached_model import (DRIVEN, AttachedModel, applied_state, build_attached, driven_joint, medium_forces,
                              record_forward, scene_spec)
 from .command import Command, choice_lines, register, steps_line
@@ -199,6 +200,15 @@ class RobotTrial:
                 forward(m, d)
                 self.means.add(d.time, rates(d, self._applied(d), d.qvel[self.dofs]))
 
+        self.surface = deforming_surface(built, scene, d)
+        if self.surface is not None:
+            surface, stepped = self.surface, after_step
+            self.reads["surface_height"] = lambda d: surface.heights.copy()
+
+            def after_step(d: mujoco.MjData) -> None:
+                surface.step_model(built.attached, m, d)
+                stepped(d)
+
         self.after_step = after_step
         # the run's last state, after its recording's forward pass: the explicit step's value at the window's end
         self._close = lambda d: self.means.add(d.time, rates(d, self._applied(d), d.qvel[self.dofs]))
@@ -279,10 +289,29 @@ class RobotTrial:
         m = self.m
         if self.means.time < d.time - 1e-12:
             self._close(d)
-        return self._unpack(readings["state"]), {"model_size": model_size(self.built, m),
+        series = self._unpack(readings["state"])
+        if "surface_height" in readings:
+            series["surface_height"] = readings["surface_height"]
+        return series, {"model_size": model_size(self.built, m),
                                                  "model_mass": float(m.body_mass.sum()),
                                                  "gravity": float(np.linalg.norm(m.opt.gravity)),
                                                  "window_means": self.means.parts(d.time)}
+
+
+def deforming_surface(built: AttachedModel, scene: UserScene, d: mujoco.MjData) -> DeformingSurface | None:
+    """The run's deforming surface, from its field's original heights (None on any other surface), stepped with the
+    C twins under the native backend and with numpy under the Python one: its level is the field's heights (the
+    Python backend's depths), set in the native plugin's instances as it steps."""
+    attached = built.attached
+    field = attached.free_surface
+    if field.kind != "deforming":
+        return None
+    p = field.parameters
+    instances = ([int(built.model.body_plugin[built.model.body(s.body).id]) for s in attached.surfaces]
+                 if attached.backend == "native" else [])
+    return DeformingSurface(p["original"], p["size"], repose(scene.medium), p["centre"], p["frame"],
+                            p["pile_factor"], native=attached.backend == "native", level=p["heights"],
+                            instances=instances).installed(built.model, d)
 
 
 class WindowMeans:
@@ -463,6 +492,11 @@ class UserModel:
                                        plot=Plot("drive/load", "Drive loads (N or N m)", "drive load", "",
                                                  "drive")),
             })
+        if scene.medium.surface == "deforming":
+            out["surface_height"] = Quantity("m", "height of the deforming free surface at each point of its grid "
+                                             "(rows along the grid's y, columns along its x; medium.surface_point, "
+                                             "hfield_extent, hfield_spacing), along its z axis, against gravity",
+                                             attrs=world)
         if self.actuators:
             names = {"actuators": ",".join(self.actuators)}
             out.update({

@@ -136,6 +136,13 @@ DT = 0.01  # s
 MAX_SINKAGE = 1.0  # m: deeper, a free wheel has no equilibrium worth reporting
 
 
+# The deforming surface's grid under the wheel (`finrft wheel --surface deforming`): 2.5 mm apart (the wheel group's
+# height map's), from 100 mm behind the hub's start to 200 mm ahead and 150 mm to either side, room for the rut
+# and berms of a wheel at any slip angle over a few seconds at 10 mm/s.
+DEFORMING_GRID = {"medium.surface_point": (0.05, 0.0, 0.0), "medium.hfield_extent": 0.15,
+                  "medium.hfield_spacing": 0.0025}
+
+
 def default_scene(**overrides: Any) -> WheelScene:
     """The wheel rig's own scene (mjcf/wheel_rig.toml): its [medium] and its [sim]'s method at a step of DT, run
     for DURATION averaged from SETTLE, with dotted-key overrides."""
@@ -685,6 +692,9 @@ class WheelCommand(Command):
                             "mjcf/wheel_rig.toml, at dt = 10 ms)")
         s.add_argument("--medium", metavar="NAME", help="a catalogued medium (finrft medium --list); sets "
                        "medium.name")
+        s.add_argument("--surface", choices=("flat", "deforming"), help="the free surface: flat (default), or "
+                       "deforming, sand the wheel displaces into a rut and berms, relaxed to the medium's angle of "
+                       "repose (medium.surface; its grid by default the wheel's: DEFORMING_GRID)")
         add_max_error(p)
         add_result_files(p)  # --out and --rrd: one run, not --data
 
@@ -725,6 +735,10 @@ class WheelCommand(Command):
             overrides["medium.name"] = args.medium
         if args.backend:
             overrides["sim.backend"] = args.backend
+        if args.surface:
+            overrides["medium.surface"] = args.surface
+            if args.surface == "deforming" and not args.scene:
+                overrides.update(DEFORMING_GRID)
         overrides.update(parse_override(item, WheelScene) for item in args.set)
         if args.scene:
             return load_scene(args.scene, overrides=overrides, cls=WheelScene)

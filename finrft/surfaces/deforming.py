@@ -22,6 +22,8 @@ lesser of its depths below the two. `WHEEL_GROUP_PILE_FACTOR` is their fitted fa
 
 from __future__ import annotations
 
+import ctypes
+import functools
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -194,3 +196,223 @@ def update(heights: Any, points: Any, areas: Any, velocities: Any, gravity: Any,
     """One step of the deforming surface: `sweep`, then `relax` with the points under the body blocked."""
     swept, occupied = sweep(heights, points, areas, velocities, gravity, size, centre, frame, front_share)
     return relax(swept, size, repose, occupied, tolerance, max_iterations)
+
+
+# In a run, relaxation takes at most this many iterations a step and leaves the rest of the excess to the next steps:
+# the body moves a small part of a grid spacing a step, so the surface relaxes as it goes, at a bounded cost (run to
+# convergence after every step, a rolling wheel's surface took a median of 334 iterations a step).
+STEP_ITERATIONS = 16
+# In a run, the surface is stepped once an element may have moved this share of the finer grid spacing: the sweep
+# lowers the grid to the elements and a body moving a small part of a spacing a step changes little between.
+MOVE = 0.5
+
+
+class DeformingSurface:
+    """A deforming surface as a run's state: its heights (nrow, ncol, m) on a grid of half-extents ``size`` (m) at
+    ``centre`` with ``frame`` (`finrft.surfaces.hfield`'s layout), displaced by the body's elements at every step
+    (`step`) and relaxed towards the angle of ``repose`` (rad) by at most ``step_iterations`` iterations a step.
+    ``native`` steps it with the C twins (plugins/surfaces/deforming.c), else with this module's numpy functions:
+    the same heights to rounding. ``displaced`` is the volume (m^3) the sweeps have removed so far; ``level`` (an
+    array of the heights' shape, written in place: a `field`'s heights) the surface the elements' depths are
+    measured from. ``instances``: the native plugin's finrft.surface instances that measure from it
+    (`installed`)."""
+
+    def __init__(self, heights: Any, size: Any, repose: float, centre: Any = (0.0, 0.0, 0.0), frame: Any = None,
+                 pile_factor: float | None = None, front_share: float = FRONT_SHARE, tolerance: float = TOLERANCE,
+                 step_iterations: int = STEP_ITERATIONS, native: bool = True, level: Any = None,
+                 instances: tuple[int, ...] | list[int] = ()) -> None:
+        g = grid(heights, size, (0.0, 0.0, -1.0) if frame is None else -np.asarray(frame, float)[:, 2], centre, frame)
+        if not 0.0 < repose < np.pi / 2:
+            raise SceneError(f"angle of repose {repose!r} rad must be between 0 and pi/2")
+        if not (isinstance(step_iterations, (int, np.integer)) and step_iterations >= 1):
+            raise SceneError(f"step_iterations {step_iterations!r} must be a whole number of at least 1")
+        if pile_factor is not None and not (np.isfinite(pile_factor) and pile_factor > 0):
+            raise SceneError(f"pile_factor {pile_factor!r} must be a positive number (the wheel group's: "
+                             f"{WHEEL_GROUP_PILE_FACTOR})")
+        self.heights = np.ascontiguousarray(g.heights, dtype=float).copy()
+        self.original = self.heights.copy()
+        self.size, self.centre, self.frame = g.size.copy(), g.centre.copy(), np.ascontiguousarray(g.frame)
+        self._spacing = g.spacing
+        self.repose, self.pile_factor, self.front_share = float(repose), pile_factor, float(front_share)
+        self.tolerance, self.step_iterations, self.native = float(tolerance), int(step_iterations), bool(native)
+        self.displaced = 0.0
+        self.instances = tuple(instances)
+        self._model: Any = None
+        self._pose: np.ndarray | None = None  # the bodies' positions and orientations at the last step_model
+        self._bodies: list[int] = []
+        self._reach: np.ndarray | None = None  # each body's elements' largest distance from its origin
+        self._data: Any = None
+        self._occupied = np.zeros(self.heights.shape, np.ubyte)
+        self._under = np.zeros(self.heights.shape, bool)  # the grid points under the body at the last step
+        # The surface the elements measure their depth from: the sand's own (heights) where no body is, and under a
+        # body (`_covered`) the height the sand had as the body entered that point (the level of the sand around the
+        # hole it digs, not the hole's floor); a point the body has left is its floor again, a rut.
+        self.level = self.heights.copy() if level is None else level
+        if self.level.shape != self.heights.shape or self.level.dtype != float:
+            raise SceneError(f"level must be an array of floats of the heights' shape {self.heights.shape}")
+        self.level[...] = self.heights
+
+    def installed(self, m: Any, d: Any) -> "DeformingSurface":
+        """Set the level in the native plugin's ``instances`` of the MjData ``d`` of model ``m``, now and after
+        every `step_model`; the surface itself."""
+        self._model, self._data = m, d
+        self._set_level()
+        return self
+
+    def _set_level(self) -> None:
+        if not self.instances:
+            return
+        set_level = _native_functions()[2]
+        nrow, ncol = self.level.shape
+        for instance in self.instances:
+            if set_level(self._model._address, self._data._address, instance, nrow, ncol, self.level.ctypes.data):
+                raise SceneError("the model's finrft.surface instances do not measure from this deforming surface "
+                                 "(attach it with its field: finrft.surfaces.deforming.field)")
+
+    def step_model(self, attached: Any, m: Any, d: Any) -> float:
+        """`step` with every element of an `finrft.attach.Attached` at the state of ``d`` (`body_elements`), then
+        the level set in the native instances (`installed`), once an element may have moved `MOVE` of the finer
+        grid spacing since the last (a bound from the bodies' motion: their origins' travel and their turn times
+        their elements' reach); the volume (m^3) displaced."""
+        if self._reach is None:
+            self._bodies = [m.body(s.body).id for s in attached.surfaces]
+            self._reach = np.array([np.sqrt((s.centre ** 2).sum(axis=1)).max() for s in attached.surfaces])
+        pose = np.concatenate([d.xpos[self._bodies], d.xquat[self._bodies]], axis=1)
+        if self._pose is not None:
+            turn = 2 * np.arccos(np.clip(np.abs((pose[:, 3:] * self._pose[:, 3:]).sum(axis=1)), 0.0, 1.0))
+            moved = np.linalg.norm(pose[:, :3] - self._pose[:, :3], axis=1) + turn * self._reach
+            if moved.max() < MOVE * min(self._spacing):
+                return 0.0
+        first = self._pose is None
+        self._pose = pose
+        points, velocities, areas = body_elements(attached, m, d)
+        removed = self.step(points, areas, velocities, m.opt.gravity, imprint=first)
+        self._set_level()
+        return removed
+
+    @property
+    def cell(self) -> float:
+        """The area (m^2) each grid point stands for."""
+        return self._spacing[0] * self._spacing[1]
+
+    def volume(self) -> float:
+        """The sand's volume above the grid's z = 0 (m^3): what every step conserves."""
+        return self.cell * float(self.heights.sum())
+
+    def _covered(self, points: np.ndarray) -> np.ndarray:
+        """The grid points under the body: those with an element below the sand's level at the point nearest to it
+        or at a neighbour (elements coarser than the grid leave no gaps). A body above its own hole keeps that hole
+        at the level of the sand around it (a wheel's rear over the floor it has just cut); one that has left it
+        leaves a rut."""
+        local = (points - self.centre) @ self.frame
+        nrow, ncol = self.heights.shape
+        c = np.floor((local[:, 0] + self.size[0]) / self._spacing[0] + 0.5).astype(int)
+        r = np.floor((local[:, 1] + self.size[1]) / self._spacing[1] + 0.5).astype(int)
+        on = np.flatnonzero((c >= 0) & (c < ncol) & (r >= 0) & (r < nrow))
+        on = on[local[on, 2] < self.level[r[on], c[on]] + TOUCH]
+        near = np.zeros(self.heights.shape, bool)
+        near[r[on], c[on]] = True
+        covered = near.copy()
+        covered[1:] |= near[:-1]
+        covered[:-1] |= near[1:]
+        covered[:, 1:] |= near[:, :-1]
+        covered[:, :-1] |= near[:, 1:]
+        return covered
+
+    def depth(self, points: Any, gravity: Any) -> np.ndarray:
+        """Each point's depth (m) below the sand's level (`level`; `depth`, with the pile rule when set)."""
+        return depth(points, gravity, self.level, self.size, self.centre, self.frame,
+                     self.original if self.pile_factor else None, self.pile_factor)
+
+    def step(self, points: Any, areas: Any, velocities: Any, gravity: Any, imprint: bool = False) -> float:
+        """Sweep the sand under the elements at ``points`` (N, 3, m) of ``areas`` (N, m^2) moving at ``velocities``
+        (N, 3, m/s), then relax at most ``step_iterations`` times; the volume (m^3) this step displaced. With
+        ``imprint`` (a run's first step), the body's imprint instead: the sand under it lowered to it and no berm,
+        a body that starts in the sand sitting in its own hole (its volume is not conserved: 0 displaced)."""
+        before, entered = self.heights.copy(), ~self._under
+        under = self._covered(points3(points))
+        if self.native:
+            _native_step(self, points3(points), np.asarray(areas, float), points3(velocities),
+                         np.asarray(gravity, float))
+        else:
+            swept, occupied = sweep(self.heights, points, areas, velocities, gravity, self.size, self.centre,
+                                    self.frame, self.front_share)
+            self._occupied[...] = occupied
+            self.heights[...] = relax(swept, self.size, self.repose, occupied, self.tolerance,
+                                      self.step_iterations).heights
+        if imprint:
+            np.minimum(before, self.heights, out=self.heights)
+            self.original[...] = np.minimum(self.original, self.heights)
+        under |= self._occupied != 0
+        entered &= under
+        self._under = under
+        self.level[...] = np.where(entered, before, np.where(under, self.level, self.heights))
+        removed = 0.0 if imprint else self.cell * float(np.clip(before - self.heights, 0.0, None).sum())
+        self.displaced += removed
+        return removed
+
+
+@functools.cache
+def _native_functions() -> tuple[Any, Any, Any]:
+    from .. import native
+
+    if not native.available():
+        raise SceneError("the native library is not available (reinstall finrft: pip install -e .), so the deforming "
+                         "surface cannot step natively: use native=False")
+    p, i, f = ctypes.c_void_p, ctypes.c_int, ctypes.c_double
+    return (native.function("finrft_deforming_sweep", i, i, i, p, p, p, p, p, i, p, p, p, f, p),
+            native.function("finrft_deforming_relax", i, i, i, p, p, f, p, f, i),
+            native.function("finrft_surface_set_level", i, p, p, i, i, i, p))
+
+
+def _native_step(s: DeformingSurface, points: np.ndarray, areas: np.ndarray, velocities: np.ndarray,
+                 gravity: np.ndarray) -> None:
+    if areas.shape != (len(points),) or velocities.shape != points.shape:
+        raise SceneError(f"sweep needs one area and one velocity per point: {len(points)} points, areas of shape "
+                         f"{areas.shape}, velocities of shape {velocities.shape}")
+    sweep_c, relax_c, _ = _native_functions()
+    nrow, ncol = s.heights.shape
+    size = np.ascontiguousarray(s.size, float)
+    arrays = [np.ascontiguousarray(a, float) for a in (s.centre, s.frame, gravity, points, areas, velocities)]
+    if sweep_c(nrow, ncol, s.heights.ctypes.data, size.ctypes.data, *(a.ctypes.data for a in arrays[:3]),
+               len(points), *(a.ctypes.data for a in arrays[3:]), s.front_share, s._occupied.ctypes.data):
+        raise SceneError("the deforming surface's sweep refused its input (a grid whose z axis is not against "
+                         "gravity, or front_share outside 0..1)")
+    relax_c(nrow, ncol, s.heights.ctypes.data, size.ctypes.data, s.repose, s._occupied.ctypes.data, s.tolerance,
+            s.step_iterations)
+
+
+def field(grid: Any, pile_factor: float | None = None) -> Any:
+    """The `finrft.surfaces.Field` of a deforming surface that starts as the heightfield ``grid`` (a Field of kind
+    hfield, as `finrft.surfaces.hfield.generated` makes): its ``heights`` are the level a run's `DeformingSurface`
+    steps in place, ``original`` the heights it started from."""
+    from . import Field
+
+    p = grid.parameters
+    heights = np.array(p["heights"], dtype=float)
+    return Field("deforming", {"heights": heights, "size": tuple(p["size"]), "centre": tuple(p["centre"]),
+                               "frame": np.asarray(p["frame"], float), "original": heights.copy(),
+                               "pile_factor": pile_factor})
+
+
+def body_elements(attached: Any, m: Any, d: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The world centres (N, 3, m), velocities (N, 3, m/s) and areas (N, m^2) of every element of an
+    `finrft.attach.Attached` at the positions and velocities of ``d`` (its kinematics and velocities made here: after
+    a step MuJoCo's data holds the previous state's)."""
+    import mujoco
+
+    mujoco.mj_kinematics(m, d)
+    mujoco.mj_comPos(m, d)
+    mujoco.mj_comVel(m, d)
+    points, velocities, areas = [], [], []
+    twist = np.zeros(6)
+    for s in attached.surfaces:
+        body = m.body(s.body).id
+        arm = s.centre @ d.xmat[body].reshape(3, 3).T
+        mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_XBODY, body, twist, 0)
+        points.append(arm + d.xpos[body])
+        w = twist[:3]  # w x arm, written out: np.cross costs more than the rest of the update's Python
+        velocities.append(twist[3:] + np.c_[w[1] * arm[:, 2] - w[2] * arm[:, 1], w[2] * arm[:, 0] - w[0] * arm[:, 2],
+                                            w[0] * arm[:, 1] - w[1] * arm[:, 0]])
+        areas.append(s.area)
+    return np.concatenate(points), np.concatenate(velocities), np.concatenate(areas)

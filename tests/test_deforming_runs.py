@@ -1,0 +1,160 @@
+"""The deforming surface in runs (finrft.surfaces.deforming.DeformingSurface, medium.surface = "deforming"): the
+native plugin and the numpy backend step the same surface, the sand's volume is conserved over a run, the surface
+is recorded, and a second press at the same place meets the disturbed sand."""
+
+import math
+
+import h5py
+import numpy as np
+import pytest
+
+from finrft import media
+from finrft.experiments import wheel
+from finrft.laws import li2013
+from finrft.record import write_h5
+from finrft.surfaces import deforming
+
+G = np.array([0.0, 0.0, -9.81])
+REPOSE = media.medium("wheel_sand_cmu").get("angle_of_repose").value
+
+
+def _wheel(backend: str, duration: float = 0.4) -> object:
+    # a braked wheel held 30 mm deep, on a coarse grid: a few surface steps
+    scene = wheel.default_scene(**{"wheel.slip": -0.5, "wheel.slip_angle": math.radians(30), "wheel.sinkage": 0.03,
+                                   "medium.name": "wheel_sand_cmu", "medium.surface": "deforming",
+                                   "medium.surface_point": (0.05, 0.0, 0.0), "medium.hfield_extent": 0.12,
+                                   "medium.hfield_spacing": 0.004, "sim.duration": duration, "sim.settle": 0.1,
+                                   "sim.backend": backend})
+    return wheel.run_wheel(scene, max_error=None)
+
+
+@pytest.fixture(scope="module")
+def runs():
+    return {backend: _wheel(backend) for backend in ("native", "python")}
+
+
+def test_native_and_numpy_runs_step_the_same_surface(runs):
+    native, numpy = runs["native"].series["surface_height"], runs["python"].series["surface_height"]
+    assert np.abs(native[-1] - native[0]).max() > 0.01  # a rut and a berm
+    assert np.abs(native - numpy).max() < 1e-6
+    force = runs["native"].series["medium_force"], runs["python"].series["medium_force"]
+    assert np.abs(force[0] - force[1]).max() < 1e-6 * np.abs(force[0]).max()
+
+
+def test_a_run_conserves_the_sand(runs):
+    h = runs["native"].series["surface_height"]
+    # from the first step on (the body's imprint of its start is no flow of sand): the volume the surface lost
+    # between samples, and the whole volume's change
+    displaced = np.clip(h[1:-1] - h[2:], 0.0, None).sum()
+    assert displaced > 0 and abs(h[-1].sum() - h[1].sum()) <= 1e-6 * displaced
+
+
+def test_the_surface_is_recorded(runs, tmp_path):
+    path = tmp_path / "wheel.h5"
+    write_h5(runs["native"], path)
+    with h5py.File(path) as f:
+        heights = f["surface_height"]
+        assert heights.attrs["units"] == "m" and heights.shape == (len(f["time"]), 61, 61)
+        assert np.array_equal(heights[-1], runs["native"].series["surface_height"][-1])
+
+
+def _press(surface: deforming.DeformingSurface, depth: float) -> float:
+    """A 20 x 20 mm plate pushed down at 10 mm/s to ``depth`` below the original surface (li2013): its vertical
+    force there, then withdrawn."""
+    x, y = np.meshgrid(np.linspace(-0.009, 0.009, 10), np.linspace(-0.009, 0.009, 10))
+    area = np.full(x.size, 4e-6)
+    down = np.tile([0.0, 0.0, -0.01], (x.size, 1))
+    normal = np.tile([0.0, 0.0, -1.0], (x.size, 1))
+    for z in np.linspace(-0.001, -depth, 20):
+        points = np.c_[x.ravel(), y.ravel(), np.full(x.size, z)]
+        surface.step(points, area, down, G)
+    force = li2013.element_forces(normal, down, surface.depth(points, G), area, zeta=1.0).sum(axis=0)
+    surface.step(points + [0.0, 0.0, 1.0], area, -down, G)  # out of the sand: the surface relaxes
+    return float(force[2])
+
+
+def test_a_second_press_meets_its_own_footprint():
+    surface = deforming.DeformingSurface(np.zeros((41, 41)), (0.04, 0.04), REPOSE, step_iterations=10_000)
+    first, second = _press(surface, 0.02), _press(surface, 0.02)
+    # the first press measures 20 mm from the undisturbed surface; the second from the floor of its footprint,
+    # which relaxation to 29 deg has partly filled from the walls: less deep, less resistance, but some
+    under = surface.level[16:25, 16:25]  # the grid points under the plate
+    assert under.mean() < -0.002 and np.abs(surface.heights - surface.level).max() == 0  # a footprint, no body in it
+    # a flat plate's force is proportional to its depth: between its shallowest and deepest below the footprint
+    ratio = second / first
+    assert (under.min() + 0.02) / 0.02 <= ratio <= (under.max() + 0.02) / 0.02 and ratio < 0.8
+
+
+def test_finrft_wheel_surface_deforming_puts_the_grid_under_the_wheel():
+    from finrft.cli import build_parser
+    from finrft.experiments import REGISTRY
+
+    argv = ["wheel", "--slip", "-1", "--sinkage", "50", "--surface", "deforming"]
+    command = REGISTRY["wheel"]
+    scene = command.scene(build_parser().parse_args(argv))
+    assert scene.medium.surface == "deforming" and scene.medium.hfield_spacing == 0.0025
+    # the grid reaches from behind the wheel at its start to ahead of it after 6 s at 10 mm/s, berms included
+    x0, half = scene.medium.surface_point[0], scene.medium.hfield_extent
+    assert x0 - half < -scene.wheel.radius - 0.02 and x0 + half > 6 * scene.wheel.speed + scene.wheel.radius + 0.05
+    given = command.scene(build_parser().parse_args([*argv, "--set", "medium.hfield_spacing=0.004"]))
+    assert given.medium.hfield_spacing == 0.004  # --set wins
+
+
+def test_the_recording_draws_the_surface(runs, tmp_path):
+    import rerun as rr
+
+    from finrft.record import write_rrd
+    from finrft.views import SURFACE_FRAMES, _draw_deforming
+
+    logged = []
+
+    class Recording:
+        def set_time(self, *args, **kwargs):
+            pass
+
+        def log(self, entity, item):
+            logged.append(item)
+
+    run = runs["native"]
+    _draw_deforming(Recording(), run, run.experiment.build(run.scene).attached.free_surface, "surface")
+    assert 2 <= len(logged) <= SURFACE_FRAMES and all(isinstance(m, rr.Mesh3D) for m in logged)
+    first, last = logged[0], logged[-1]
+    colours = [np.asarray(m.vertex_colors.as_arrow_array().to_pylist()) for m in (first, last)]
+    assert (colours[0] == colours[0][0]).all()  # unchanged at the start: one colour
+    assert len(np.unique(colours[1], axis=0)) > 2  # rut and berm coloured at the end
+    write_rrd(run, tmp_path / "wheel.rrd")
+    assert (tmp_path / "wheel.rrd").stat().st_size > 0
+
+
+def test_the_level_is_the_plugins_state():
+    import mujoco
+
+    scene = wheel.default_scene(**{"wheel.slip": -1.0, "wheel.sinkage": 0.04, "medium.name": "wheel_sand_cmu",
+                                   "medium.surface": "deforming", "medium.hfield_extent": 0.12,
+                                   "medium.hfield_spacing": 0.004})
+    experiment = wheel.Wheel.of(scene)
+    built = experiment.build(scene)
+    m = built.model
+    d = mujoco.MjData(m)
+    trial = experiment.start(scene, built, d, False)
+    d.qvel[m.joint("carriage").dofadr[0]] = 0.01
+    read = built.attached.wrenches(m)
+    mujoco.mj_forward(m, d)
+    flat = read(d)[0, 3:].copy()
+    trial.surface.level[...] += 0.01  # 10 mm more sand everywhere: deeper, more resistance
+    trial.surface.installed(m, d)
+    mujoco.mj_forward(m, d)
+    raised = read(d)[0, 3:].copy()
+    assert raised[0] < flat[0] < 0
+    # MuJoCo's state carries the level: another MjData set to it meets the same sand
+    spec = int(mujoco.mjtState.mjSTATE_FULLPHYSICS)
+    state = np.empty(mujoco.mj_stateSize(m, spec))
+    mujoco.mj_getState(m, d, state, spec)
+    other = mujoco.MjData(m)
+    mujoco.mj_setState(m, other, state, spec)
+    mujoco.mj_forward(m, other)
+    assert np.array_equal(read(other)[0, 3:], raised)
+    mujoco.mj_resetData(m, other)  # and a reset puts the original surface back
+    other.qpos[:], other.qvel[:] = d.qpos, d.qvel
+    mujoco.mj_forward(m, other)
+    assert np.allclose(read(other)[0, 3:], flat, rtol=1e-12)

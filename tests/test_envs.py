@@ -94,3 +94,18 @@ def test_the_vector_worlds_are_the_single_environments():
 def test_bad_options_are_one_line(options, message):
     with pytest.raises(SceneError, match=message):
         envs.make("sand_swimmer", **options)
+
+
+@pytest.mark.slow
+def test_ppo_learns_to_swim_forward():
+    # the example's training, a short budget: the reward of the last episodes beats that of the first
+    pytest.importorskip("stable_baselines3", reason="PPO needs the rl extra: pip install 'finrft[rl]' (torch)")
+    import importlib.util
+    from pathlib import Path
+    path = Path(__file__).resolve().parents[1] / "scripts" / "train_swimmer.py"
+    spec = importlib.util.spec_from_file_location("train_swimmer", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    curve, _ = module.train(steps=20_000, worlds=2, seed=0)
+    first, last = curve[0][1], np.mean([r for _, r in curve[-3:]])
+    assert last > first + 0.05  # 1.2 mm/s more over a 40-step episode

@@ -37,7 +37,7 @@ import numpy as np
 
 from . import methods
 from .errors import SceneError
-from .experiments.user_model import EXAMPLES, STILL_SPEED, UserModel, control_reach, example
+from .experiments.user_model import EXAMPLES, STILL_SPEED, UserModel, control_reach, control_value, example
 from .integrate import stepper
 from .scene import UserScene, load_scene
 from .stepping import jump_velocities
@@ -88,7 +88,7 @@ class World:
     """A scene's compiled model, shared by the MjData of every copy: how an action is applied, a state observed
     and a control interval's figures measured."""
 
-    def __init__(self, scene: UserScene, observation: Sequence[str], control_dt: float) -> None:
+    def __init__(self, scene: UserScene, observation: Sequence[str], control_dt: float, pieces: int = 10) -> None:
         if methods.chooses(scene.sim.method):
             scene = scene.replace(**{"sim.method": "newton"})
         if methods.get(scene.sim.method).adaptive:
@@ -108,6 +108,11 @@ class World:
         self.substeps = max(1, round(control_dt / self.dt))
         self.control_dt = self.substeps * self.dt
         self.steps = max(1, round(scene.duration / self.control_dt))
+        if not isinstance(pieces, int) or pieces < 1:
+            raise SceneError(f"pieces must be a whole number >= 1, got {pieces!r}")
+        self.pieces = min(pieces, self.substeps)
+        # the steps of each piece of a control interval, as whole steps
+        self.cuts = np.diff(np.linspace(0, self.substeps, self.pieces + 1).round().astype(int))
         for i, j in enumerate(scene.drive):
             if j.profile != "constant" or j.stroke > 0:
                 raise SceneError(f"drive.{i} ({j.joint}): an environment holds constant drives without reversals "
@@ -137,6 +142,15 @@ class World:
         self.observation_space = spaces.Box(-np.inf, np.inf, (size,), np.float64)
         self.action_space = spaces.Box(-1.0, 1.0, (len(low),), np.float32)
         self.mass, self.gravity = float(m.body_mass.sum()), float(np.linalg.norm(m.opt.gravity))
+
+    def scene_action(self, t: float) -> np.ndarray:
+        """The action that plays the scene's own open-loop [[control]] entries at time t (the others, and the
+        commanded drives, at the middle of their range): the scene's gait, as a baseline for a policy."""
+        value = 0.5 * (self.low + self.high)
+        for c, table in zip(self.scene.control, self.experiment.tables):
+            if c.kind in ("constant", "sine", "table"):
+                value[self.experiment.actuators.index(c.actuator)] = control_value(c, table, t)
+        return np.clip(2 * (value - self.low) / (self.high - self.low) - 1, -1, 1).astype(np.float32)
 
     def stepper(self) -> Callable[[mujoco.MjData, int], int]:
         """A stepper of its own for one MjData (its step counts are its own)."""
@@ -170,6 +184,19 @@ class World:
             jump[self.commanded] = value[self.m.nu:] - d.qvel[self.dofs[self.commanded]]
             if np.any(jump):
                 jump_velocities(self.m, d, self.dofs, self.built.armature, jump)
+
+    def advance(self, d: mujoco.MjData, step: Callable[[mujoco.MjData, int], int], start: np.ndarray) -> int:
+        """A control interval of d: its ctrl goes from ``start`` (the last interval's) to the action's (`act`, in
+        d.ctrl) in ``pieces`` equal pieces, a step change at most 1 / pieces of the action's (a servo whose target
+        jumps each interval flings light links: the sand-swimmer's centre of mass at a metre a second under random
+        actions). The first failure code of the stepper, or 0."""
+        target = d.ctrl.copy()
+        for k, n in enumerate(self.cuts):
+            d.ctrl[:] = target if k == len(self.cuts) - 1 else start + (target - start) * (k + 1) / len(self.cuts)
+            failure = step(d, int(n))
+            if failure:
+                return failure
+        return 0
 
     def com(self, d: mujoco.MjData) -> np.ndarray:
         """The centre of mass of the state in d (its kinematics only)."""
@@ -210,14 +237,16 @@ class RobotEnv(gymnasium.Env):
     """A robot scene as a Gymnasium environment (the module's docstring says what it observes, takes and
     rewards). ``scene``: a TOML file, an example's name (`EXAMPLES`) or a `UserScene`; ``overrides``: dotted scene
     keys; ``reward``: `reward_function`'s; ``observation``: some of `OBSERVATIONS`; ``control_dt``: the control
-    interval (s, whole steps of sim.dt); ``reset_noise``: the joints' start off by up to this (m or rad)."""
+    interval (s, whole steps of sim.dt); ``pieces``: the ctrl's linear pieces over an interval, from the last
+    action's to this one's (`World.advance`; 1: held, a step change); ``reset_noise``: the joints' start off by up
+    to this (m or rad)."""
 
     metadata = {"render_modes": []}
 
     def __init__(self, scene: str | Path | UserScene, *, reward: Reward = FORWARD,
-                 observation: Sequence[str] = OBSERVATIONS, control_dt: float = 0.05, reset_noise: float = 0.0,
-                 overrides: Mapping[str, Any] | None = None) -> None:
-        self.world = World(_scene(scene, overrides), observation, control_dt)
+                 observation: Sequence[str] = OBSERVATIONS, control_dt: float = 0.05, pieces: int = 10,
+                 reset_noise: float = 0.0, overrides: Mapping[str, Any] | None = None) -> None:
+        self.world = World(_scene(scene, overrides), observation, control_dt, pieces)
         self.reward = reward_function(reward)
         self.observation_space, self.action_space = self.world.observation_space, self.world.action_space
         self.reset_noise = reset_noise
@@ -233,8 +262,9 @@ class RobotEnv(gymnasium.Env):
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         w, d = self.world, self.data
+        start = d.ctrl.copy()
         w.act(d, action)
-        failure = self._step(d, w.substeps)
+        failure = w.advance(d, self._step, start)
         self._count += 1
         *outcome, self._com = _outcome(w, d, self._com, failure, self._count, self.reward)
         return tuple(outcome)
@@ -264,10 +294,10 @@ class RobotVectorEnv(VectorEnv):
 
     def __init__(self, scene: str | Path | UserScene, num_envs: int, *, threads: int | None = None,
                  reward: Reward = FORWARD, observation: Sequence[str] = OBSERVATIONS, control_dt: float = 0.05,
-                 reset_noise: float = 0.0, overrides: Mapping[str, Any] | None = None) -> None:
+                 pieces: int = 10, reset_noise: float = 0.0, overrides: Mapping[str, Any] | None = None) -> None:
         if not isinstance(num_envs, int) or num_envs < 1:
             raise SceneError(f"num_envs must be a whole number >= 1, got {num_envs!r}")
-        self.world = w = World(_scene(scene, overrides), observation, control_dt)
+        self.world = w = World(_scene(scene, overrides), observation, control_dt, pieces)
         self.num_envs, self.reward, self.reset_noise = num_envs, reward_function(reward), reset_noise
         self.single_observation_space, self.single_action_space = w.observation_space, w.action_space
         self.observation_space = gymnasium.vector.utils.batch_space(w.observation_space, num_envs)
@@ -293,16 +323,21 @@ class RobotVectorEnv(VectorEnv):
         self.coms = [self.world.com(d) for d in self.datas]
         return np.stack([self.world.observe(d) for d in self.datas]), {}
 
-    def advance(self, n: int | None = None, skip: np.ndarray | None = None) -> list[int]:
-        """Every world (but those ``skip`` marks) ``n`` steps of sim.dt (a control interval's by default) on the
-        threads: the failure code of each (0: none)."""
-        n = self.world.substeps if n is None else n
+    def reset_world(self, i: int) -> np.ndarray:
+        """World i at the start of a new episode (its own random stream): its first observation."""
+        self.world.reset(self.datas[i], self.rngs[i], self.reset_noise)
+        self.counts[i], self.coms[i], self.ended[i] = 0, self.world.com(self.datas[i]), False
+        return self.world.observe(self.datas[i])
+
+    def advance(self, starts: Sequence[np.ndarray], skip: np.ndarray) -> list[int]:
+        """A control interval of every world but those ``skip`` marks (`World.advance`, each from its ctrl in
+        ``starts``) on the threads: the failure code of each (0: none)."""
         codes = [0] * self.num_envs
 
         def block(worlds: np.ndarray) -> None:
             for i in worlds:
-                if skip is None or not skip[i]:
-                    codes[i] = self.steppers[i](self.datas[i], n)
+                if not skip[i]:
+                    codes[i] = self.world.advance(self.datas[i], self.steppers[i], starts[i])
         if self._pool is None:
             for worlds in self._blocks:
                 block(worlds)
@@ -313,13 +348,13 @@ class RobotVectorEnv(VectorEnv):
     def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         w = self.world
         restart = self.ended.copy()
+        starts = [d.ctrl.copy() for d in self.datas]
         for i, d in enumerate(self.datas):
             if restart[i]:
-                w.reset(d, self.rngs[i], self.reset_noise)
-                self.counts[i], self.coms[i] = 0, w.com(d)
+                self.reset_world(i)
             else:
                 w.act(d, actions[i])
-        codes = self.advance(skip=restart)  # a world that resets this step is not stepped
+        codes = self.advance(starts, restart)  # a world that resets this step is not stepped
         obs = np.zeros((self.num_envs, *w.observation_space.shape))
         rewards, terminated, truncated = np.zeros(self.num_envs), np.zeros(self.num_envs, bool), \
             np.zeros(self.num_envs, bool)

@@ -1,6 +1,8 @@
-"""Throughput of the Gymnasium environments (finrft.envs) on this machine: one world's bare stepping (the C stepper
-alone, no Python between a control interval's steps), `RobotEnv.step`'s overhead over it, and `RobotVectorEnv`'s
-worlds per second by number of worlds, on one thread per core. Prints a Markdown table (docs/guide/envs.md).
+"""Throughput of the Gymnasium environments (finrft.envs) on this machine, the robot playing its scene's own gait
+as actions (`World.scene_action`; a robot standing still steps several times faster): one world's bare stepping
+(the C stepper alone, the ctrl set once an interval), `RobotEnv.step`'s overhead over it, and `RobotVectorEnv`'s
+control intervals per second by number of worlds, on one thread per core. Prints a Markdown table
+(docs/guide/envs.md).
 
     python scripts/bench_envs.py [--scene sand_swimmer] [--worlds 1,2,4,8] [--steps 40] [--repeats 3]
 """
@@ -37,33 +39,39 @@ def main() -> None:
     cores = len(os.sched_getaffinity(0))
     env = envs.make(args.scene)
     world, steps = env.world, args.steps
-    action = np.zeros(env.action_space.shape, np.float32)
+    gait = [world.scene_action(k * world.control_dt) for k in range(steps)]
+    action = gait[0]
 
     env.reset(seed=0)
     bare_step = world.stepper()
     d = env.data
 
     def bare() -> None:
-        for _ in range(steps):
-            world.act(d, action)
-            bare_step(d, world.substeps)
+        for a in gait:  # the same steps and ctrl as the environment's, nothing else
+            start = d.ctrl.copy()
+            world.act(d, a)
+            world.advance(d, bare_step, start)
 
     def wrapped() -> None:
-        for _ in range(steps):
-            env.step(action)
+        for a in gait:
+            env.step(a)
 
     def python_parts() -> None:
         # what RobotEnv.step adds to the C stepper, timed alone: the whole step's timing carries the machine's load
         for _ in range(steps):
+            start = d.ctrl.copy()
             world.act(d, action)
+            world.advance(d, lambda d, n: 0, start)  # its pieces' Python, without their steps
             env.reward(world.figures(d, world.com(d), world.com(d)))
             world.observe(d)
 
-    env.reset(seed=0)
-    one = best(bare, args.repeats)
-    added = best(python_parts, args.repeats)
-    env.reset(seed=0)
-    full = best(wrapped, args.repeats)
+    def timed(fn) -> float:
+        def again() -> None:
+            env.reset(seed=0)  # each timing from the start: the same steps
+            fn()
+        return best(again, args.repeats)
+
+    one, added, full = timed(bare), timed(python_parts), timed(wrapped)
     rate = steps / one
     print(f"{args.scene}: {world.substeps} steps of {world.dt:g} s a control interval; {cores} cores; "
           f"mujoco {mujoco.__version__}")
@@ -74,9 +82,12 @@ def main() -> None:
     print("|---:|---:|---:|---:|---:|")
     for n in (int(w) for w in args.worlds.split(",")):
         vec = envs.make_vector(args.scene, n)
-        vec.reset(seed=0)
-        actions = np.zeros((n, *action.shape), np.float32)
-        took = best(lambda: [vec.step(actions) for _ in range(steps)], args.repeats)
+
+        def play() -> None:
+            vec.reset(seed=0)  # each timing from the start (a reset is one forward pass a world)
+            for a in gait:
+                vec.step(np.repeat(a[None], n, axis=0))
+        took = best(play, args.repeats)
         total = n * steps / took
         print(f"| {n} | {vec.threads} | {total:.1f} | {total / rate:.2f} | "
               f"{100 * total / (min(n, cores) * rate):.0f} % |")

@@ -19,6 +19,7 @@ import finrft.envs as envs
 def train(steps: int, worlds: int, seed: int, episode_s: float = 2.0) -> tuple[list[tuple[int, float]], float]:
     """PPO on ``worlds`` swimmers (episodes of ``episode_s`` seconds, control every 50 ms): the learning curve
     as (environment steps, mean reward of the episodes ended since the last point), and the wall time (s)."""
+    import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.callbacks import BaseCallback
     from stable_baselines3.common.vec_env import VecMonitor
@@ -45,10 +46,7 @@ def train(steps: int, worlds: int, seed: int, episode_s: float = 2.0) -> tuple[l
             for i in np.flatnonzero(done):  # stable-baselines3 resets at once: take the world's first observation
                 infos[i]["terminal_observation"] = obs[i]
                 infos[i]["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
-                self.vec.world.reset(self.vec.datas[i], self.vec.rngs[i], self.vec.reset_noise)
-                self.vec.counts[i], self.vec.coms[i], self.vec.ended[i] = 0, self.vec.world.com(self.vec.datas[i]), \
-                    False
-                obs[i] = self.vec.world.observe(self.vec.datas[i])
+                obs[i] = self.vec.reset_world(i)
             return obs, rewards, done, infos
 
         def close(self):
@@ -82,8 +80,11 @@ def train(steps: int, worlds: int, seed: int, episode_s: float = 2.0) -> tuple[l
         def _on_step(self) -> bool:
             return True
 
+    torch.set_num_threads(1)  # the cores step the worlds; the small networks need no more
+    # a policy's first actions near the servos' centre (std e^-1 of the range's half): full-range noise every
+    # interval makes the swimmer thrash, which teaches nothing and costs many Newton iterations a step
     model = PPO("MlpPolicy", env, n_steps=max(64, 512 // worlds), batch_size=64, learning_rate=3e-4, gamma=0.98,
-                seed=seed, verbose=0, device="cpu")
+                seed=seed, verbose=0, device="cpu", policy_kwargs={"log_std_init": -1.0})
     start = time.perf_counter()
     model.learn(total_timesteps=steps, callback=Curve())
     env.close()

@@ -53,7 +53,9 @@ def test_the_scenes_gait_as_actions_swims_as_the_run_does():
         t = k * scene.sim.dt
         ctrl = [min(1, t / c.ramp) * c.amplitude * math.sin(2 * math.pi * c.frequency * t + c.phase)
                 for c in scene.control]
-        rewards.append(env.step(np.array(ctrl) / 1.2)[1])  # the servos' ctrlrange is +-1.2 rad
+        action = env.world.scene_action(t)
+        assert action == pytest.approx(np.array(ctrl) / 1.2, abs=1e-6)  # the servos' ctrlrange is +-1.2 rad
+        rewards.append(env.step(action)[1])
     run = finrft.run_robot(scene.replace(**{"sim.settle": 1.0}), max_error=None)
     assert np.mean(rewards[1000:]) == pytest.approx(run.summary()["com_velocity_m_s"][0], rel=0.02)
     assert np.mean(rewards[1000:]) > 0.03  # it swims forward

@@ -39,7 +39,8 @@ from . import methods
 from .errors import SceneError
 from .experiments.user_model import EXAMPLES, STILL_SPEED, UserModel, control_reach, control_value, example
 from .integrate import stepper
-from .scene import UserScene, load_scene
+from .experiments.swim import RobotScene, build_robot
+from .scene import UserScene, load_scene, preset
 from .stepping import jump_velocities
 
 # The figures a reward may name, each over one control interval, in the units of the run's JSON: the centre of
@@ -225,12 +226,87 @@ class World:
                 "cost_of_transport": positive / (weight * max(speed, STILL_SPEED)) if weight else 0.0}
 
 
-def _scene(scene: str | Path | UserScene, overrides: Mapping[str, Any] | None) -> UserScene:
+class TwoFinWorld(World):
+    """The paper's two-fin robot (`finrft.experiments.swim`, a `RobotScene`) as a world: its arms on position
+    servos (``robot.servo = "position"``, integrated-velocity actuators whose setpoint stays within the gait's
+    theta2..theta1), the action each servo's rate (+-2 x the gait's omega), an episode ``cycles`` of the gait's flap
+    cycles; the body swims along +y (its reward ``com_velocity_m_s.1``)."""
+
+    def __init__(self, scene: RobotScene, observation: Sequence[str], control_dt: float, pieces: int = 10,
+                 cycles: int = 4) -> None:
+        if methods.chooses(scene.sim.method) or methods.get(scene.sim.method).adaptive:
+            scene = scene.replace(**{"sim.method": "newton"})
+        if scene.robot.servo != "position":
+            scene = scene.replace(**{"robot.servo": "position"})
+        if scene.body.drag_law != "velocity":
+            raise SceneError("body.drag_law = 'stroke' follows the gait's strokes, which a policy sets: give "
+                             "body.drag_law = 'velocity'")
+        bad = [o for o in observation if o not in OBSERVATIONS]
+        if bad or not observation:
+            raise SceneError(f"observation: give some of {', '.join(OBSERVATIONS)}, got {list(observation)}")
+        self.scene, self.observation = scene, tuple(observation)
+        self.robot = robot = build_robot(scene)
+        if robot.backend != "native":
+            raise SceneError("an environment steps in the native plugin: the plugin is not loaded (finrft drag "
+                             "--json says why); sim.backend = 'native'")
+        m = self.m = robot.model
+        self.dt = scene.sim.dt
+        self.substeps = max(1, round(control_dt / self.dt))
+        self.control_dt = self.substeps * self.dt
+        g = scene.gait
+        self.steps = max(1, round(cycles * 2 * (g.theta1 - g.theta2) / g.omega / self.control_dt))
+        self.pieces = min(pieces, self.substeps)
+        self.cuts = np.diff(np.linspace(0, self.substeps, self.pieces + 1).round().astype(int))
+        self.dofs = self.qpos = np.zeros(0, int)
+        self.commanded: list[int] = []
+        self.high = np.full(m.nu, 2 * g.omega)
+        self.low = -self.high
+        self.observed = np.arange(m.nq)
+        size = (m.nq + m.nv if "joints" in observation else 0) + (m.nsensordata if "sensors" in observation else 0)
+        self.observation_space = spaces.Box(-np.inf, np.inf, (size,), np.float64)
+        self.action_space = spaces.Box(-1.0, 1.0, (m.nu,), np.float32)
+        self.mass, self.gravity = float(m.body_mass.sum()), float(np.linalg.norm(m.opt.gravity))
+
+    def scene_action(self, t: float) -> np.ndarray:
+        """The gait: each servo's rate +omega in the recovery strokes, -omega in the power strokes."""
+        g = self.scene.gait
+        k = int(t * g.omega / (g.theta1 - g.theta2) + 1e-9)
+        return np.full(self.m.nu, 0.5 if k % 2 == 0 else -0.5, np.float32)
+
+    def stepper(self) -> Callable[[mujoco.MjData, int], int]:
+        return stepper(self.m, self.scene.sim, "native", self.robot.groups)
+
+    def reset(self, d: mujoco.MjData, rng: np.random.Generator, noise: float) -> None:
+        """The swim's start: at rest, the arms at theta2 (their servos' setpoints too; the fins' hinges off by up
+        to ``noise`` rad)."""
+        mujoco.mj_resetData(self.m, d)
+        d.qpos[self.robot.servo_qpos] = self.scene.gait.theta2
+        d.act[:] = self.scene.gait.theta2
+        hinges = self.robot.fin_hinge_qpos.ravel()
+        if noise and hinges.size:
+            d.qpos[hinges] += rng.uniform(-noise, noise, hinges.size)
+        mujoco.mj_forward(self.m, d)
+
+
+def _world(scene: str | Path | UserScene | RobotScene, overrides: Mapping[str, Any] | None,
+           observation: Sequence[str], control_dt: float, pieces: int) -> World:
+    """The world of a robot scene: a `RobotScene` (or "two_fin", the physical preset) as a `TwoFinWorld`, any
+    other scene (a TOML file, an example's name, a `UserScene`) as a `World`."""
+    if isinstance(scene, str) and scene == TWO_FIN:
+        scene = preset("physical", RobotScene)
+    if isinstance(scene, RobotScene):
+        return TwoFinWorld(scene.replace(**dict(overrides or {})), observation, control_dt, pieces)
     if isinstance(scene, str) and scene in EXAMPLES:
         scene = example(scene)
     if isinstance(scene, UserScene):
-        return scene.replace(**dict(overrides or {}))
-    return load_scene(scene, overrides=overrides, cls=UserScene)
+        scene = scene.replace(**dict(overrides or {}))
+    else:
+        scene = load_scene(scene, overrides=overrides, cls=UserScene)
+    return World(scene, observation, control_dt, pieces)
+
+
+# The paper's two-fin robot, by name (its physical preset).
+TWO_FIN = "two_fin"
 
 
 class RobotEnv(gymnasium.Env):
@@ -246,7 +322,7 @@ class RobotEnv(gymnasium.Env):
     def __init__(self, scene: str | Path | UserScene, *, reward: Reward = FORWARD,
                  observation: Sequence[str] = OBSERVATIONS, control_dt: float = 0.05, pieces: int = 10,
                  reset_noise: float = 0.0, overrides: Mapping[str, Any] | None = None) -> None:
-        self.world = World(_scene(scene, overrides), observation, control_dt, pieces)
+        self.world = _world(scene, overrides, observation, control_dt, pieces)
         self.reward = reward_function(reward)
         self.observation_space, self.action_space = self.world.observation_space, self.world.action_space
         self.reset_noise = reset_noise
@@ -297,7 +373,7 @@ class RobotVectorEnv(VectorEnv):
                  pieces: int = 10, reset_noise: float = 0.0, overrides: Mapping[str, Any] | None = None) -> None:
         if not isinstance(num_envs, int) or num_envs < 1:
             raise SceneError(f"num_envs must be a whole number >= 1, got {num_envs!r}")
-        self.world = w = World(_scene(scene, overrides), observation, control_dt, pieces)
+        self.world = w = _world(scene, overrides, observation, control_dt, pieces)
         self.num_envs, self.reward, self.reset_noise = num_envs, reward_function(reward), reset_noise
         self.single_observation_space, self.single_action_space = w.observation_space, w.action_space
         self.observation_space = gymnasium.vector.utils.batch_space(w.observation_space, num_envs)
@@ -390,13 +466,14 @@ def make_vector(scene: str | Path | UserScene, num_envs: int, **options: Any) ->
 
 # The example robots as registered environments: their id, the example's TOML scene, and the options.
 EXAMPLE_IDS = {"finrft/SandSwimmer-v0": "sand_swimmer", "finrft/Hexapod-v0": "hexapod",
-               "finrft/WheelRig-v0": "wheel_rig"}
+               "finrft/WheelRig-v0": "wheel_rig", "finrft/TwoFin-v0": TWO_FIN}
 
 
 def _register() -> None:
     for env_id, name in EXAMPLE_IDS.items():
         if env_id not in gymnasium.registry:
-            gymnasium.register(env_id, entry_point="finrft.envs:RobotEnv", kwargs={"scene": example(name)},
+            options = {"reward": "com_velocity_m_s.1"} if name == TWO_FIN else {}  # it swims along +y
+            gymnasium.register(env_id, entry_point="finrft.envs:RobotEnv", kwargs={"scene": name, **options},
                                vector_entry_point="finrft.envs:RobotVectorEnv", disable_env_checker=True)
 
 

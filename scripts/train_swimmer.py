@@ -16,7 +16,8 @@ import numpy as np
 import finrft.envs as envs
 
 
-def train(steps: int, worlds: int, seed: int, episode_s: float = 2.0) -> tuple[list[tuple[int, float]], float]:
+def train(steps: int, worlds: int, seed: int, episode_s: float = 2.0,
+          progress: bool = False) -> tuple[list[tuple[int, float]], float]:
     """PPO on ``worlds`` swimmers (episodes of ``episode_s`` seconds, control every 50 ms): the learning curve
     as (environment steps, mean reward of the episodes ended since the last point), and the wall time (s)."""
     import torch
@@ -76,6 +77,9 @@ def train(steps: int, worlds: int, seed: int, episode_s: float = 2.0) -> tuple[l
             rewards = [e["r"] for e in self.model.ep_info_buffer]
             if rewards:
                 curve.append((self.num_timesteps, float(np.mean(rewards[-worlds:]))))
+                if progress:
+                    print(f"{self.num_timesteps:8d} steps, {time.perf_counter() - start:6.0f} s: mean episode reward "
+                          f"{curve[-1][1]:+.4f}", flush=True)
 
         def _on_step(self) -> bool:
             return True
@@ -98,11 +102,10 @@ def main() -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--plot", default="swimmer_ppo.png")
     args = p.parse_args()
-    curve, wall = train(args.steps, args.worlds, args.seed)
+    curve, wall = train(args.steps, args.worlds, args.seed, progress=True)
     steps_per_episode = 40  # 2 s at 50 ms
-    for n, r in curve:
-        print(f"{n:8d} steps: mean episode reward {r:+.4f} (forward speed {1e3 * r / steps_per_episode:+.2f} mm/s)")
-    print(f"trained in {wall:.0f} s")
+    print(f"trained in {wall:.0f} s; the last episodes' mean forward speed "
+          f"{1e3 * np.mean([r for _, r in curve[-3:]]) / steps_per_episode:+.2f} mm/s")
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

@@ -807,6 +807,9 @@ class RunCommand(Command):
             lines.append(f"drive {joint}: mean load {load:+.4g} {unit}, at the end {end}")
         if s["actuators"]:
             lines.append(f"actuators' mean power {s['actuator_power_W']:+.4g} W")
+        if s.get("sensors"):
+            lines.append("sensors' means (their units): " + "; ".join(
+                f"{name} {mm(f'{v:.4g}' for v in values)}" for name, values in s["sensors"].items()))
         cot = s["cost_of_transport"]
         lines.append(f"cost of transport {cot:.4g} ({s['cost_of_transport_note']})" if cot is not None
                      else f"cost of transport: none ({s['cost_of_transport_note']})")

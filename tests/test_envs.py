@@ -109,7 +109,7 @@ def test_ppo_learns_to_swim_forward():
     spec = importlib.util.spec_from_file_location("train_swimmer", path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
-    curve, _ = module.train(steps=4096, worlds=2, seed=0)  # five minutes on two cores
+    curve, _ = module.train(steps=4096, worlds=2, seed=0)  # 108 s on the two shared cores
     first, last = curve[0][1], np.mean([r for _, r in curve[-3:]])
     assert last > first + 0.1  # 2.5 mm/s faster over a 40-step episode (measured: -0.24 to +0.22)
 

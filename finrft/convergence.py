@@ -66,7 +66,7 @@ CONFIRM = 0.25
 # ``error_estimate``, in its unit: the robot's (`user_model.robot_summary`) and the wheel's (`wheel.wheel_summary`).
 FIGURES = ("com_velocity_m_s", "com_speed_m_s", "com_position_m", "medium_force_N", "body_medium_force_N", "drive_load",
            "actuator_power_W", "positive_power_W", "cost_of_transport", "Fx_N", "Fy_N", "Fz_N", "sinkage_mm",
-           "axle_torque_Nm")
+           "axle_torque_Nm", "sensors")
 # The share of a run's scale its positions may be off where neither the limits nor the experiment name figures.
 POSITION_PERCENT = 5.0
 

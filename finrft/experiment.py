@@ -33,7 +33,7 @@ from .stepping import chatter_speeds, instants, schedule, step_through
 @dataclass(frozen=True)
 class Plot:
     """How a series is shown in a rerun recording: under ``entity`` (a series of several columns: one entity
-    ``entity/{part}{i + 1}`` per column, labelled ``{label} {i + 1}``), in ``unit`` ("deg", "mm" or SI as is),
+    ``entity/{part}{i + 1}`` per column, labelled ``{label} {i + 1}``, or by ``names`` where they are given), in ``unit`` ("deg", "mm" or SI as is),
     in a time-series view named ``title``."""
 
     entity: str
@@ -41,6 +41,7 @@ class Plot:
     label: str
     unit: str = ""
     part: str = ""
+    names: tuple[str, ...] = ()  # the columns' own names (the model's): ``entity/{name}``, labelled ``{label} {name}``
 
 
 # SI to the units the recordings show.

@@ -132,8 +132,9 @@ def _log(rec: rr.RecordingStream, run: Result, prefix: str = "") -> tuple[list[A
         if shown.ndim == 1:
             _send_scalars(rec, f"{prefix}{plot.entity}", plot.label + suffix, times, shown)
         for i in range(shown.shape[1] if shown.ndim == 2 else 0):
-            _send_scalars(rec, f"{prefix}{plot.entity}/{plot.part}{i + 1}", f"{plot.label} {i + 1}{suffix}", times,
-                          shown[:, i])
+            part = rr.escape_entity_path_part(plot.names[i]) if plot.names else f"{plot.part}{i + 1}"
+            name = plot.names[i] if plot.names else i + 1
+            _send_scalars(rec, f"{prefix}{plot.entity}/{part}", f"{plot.label} {name}{suffix}", times, shown[:, i])
         plots.append(rrb.TimeSeriesView(name=plot.title, origin=f"{prefix}{plot.entity}"))
     return spatial, plots
 

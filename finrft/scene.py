@@ -237,21 +237,46 @@ class JointDrive:
     phase: float = _f(0.0, "rad", "sine: phase", used_by=SINE)
 
 
+# The control kinds that follow a reference offset + amplitude sin(2 pi frequency t + phase): the sine's ctrl itself,
+# the PD law's joint position, the sensor loop's reading (`finrft.experiments.user_model.control_value`).
+REFERENCED = ("kind", ("sine", "pd", "sensor"))
+CLOSED = ("kind", ("pd", "sensor"))
+
+
 @dataclass(frozen=True)
 class Control:
     actuator: str = _f("", "", "the actuator (MJCF <actuator> name) whose ctrl this entry sets")
     kind: str = _f("constant", "", "constant: value; sine: offset + amplitude sin(2 pi frequency t + phase); table: "
-                   "a CSV file of time_s,ctrl rows, linear in between (held beyond its ends)",
-                   choices=("constant", "sine", "table"))
+                   "a CSV file of time_s,ctrl rows, linear in between (held beyond its ends); pd: ctrl = kp (r - q) + "
+                   "kd (r' - q') for joint's position q tracking the reference r = offset + amplitude sin(2 pi "
+                   "frequency t + phase); sensor: the same law on an MJCF <sensor>'s reading (its component index) "
+                   "instead of q",
+                   choices=("constant", "sine", "table", "pd", "sensor"))
     value: float = _f(0.0, "actuator's unit", "constant: the ctrl", used_by=("kind", ("constant",)))
-    offset: float = _f(0.0, "actuator's unit", "sine: offset", used_by=("kind", ("sine",)))
-    amplitude: float = _f(0.0, "actuator's unit", "sine: amplitude", used_by=("kind", ("sine",)))
-    frequency: float = _f(1.0, "Hz", "sine: frequency", minimum=0.0, used_by=("kind", ("sine",)))
-    phase: float = _f(0.0, "rad", "sine: phase", used_by=("kind", ("sine",)))
+    offset: float = _f(0.0, "actuator's unit, or the joint's or sensor's", "sine: offset; pd, sensor: the "
+                       "reference's centre (m or rad for a joint, the sensor's unit)", used_by=REFERENCED)
+    amplitude: float = _f(0.0, "actuator's unit, or the joint's or sensor's", "sine: amplitude; pd, sensor: the "
+                          "reference's (0: a constant reference)", used_by=REFERENCED)
+    frequency: float = _f(1.0, "Hz", "sine: frequency; pd, sensor: the reference's", minimum=0.0,
+                          used_by=REFERENCED)
+    phase: float = _f(0.0, "rad", "sine: phase; pd, sensor: the reference's", used_by=REFERENCED)
     table: str = _f("", "", "table: the CSV file (relative to the scene file), a header time_s,ctrl then rows",
                     used_by=("kind", ("table",)))
-    ramp: float = _f(0.0, "s", "the ctrl rises linearly from 0 to its profile over the first ramp seconds",
-                     minimum=0.0, exclusive=False)
+    ramp: float = _f(0.0, "s", "the ctrl (pd, sensor: the reference) rises linearly from 0 to its profile over the "
+                     "first ramp seconds", minimum=0.0, exclusive=False)
+    ramps: str = _f("all", "", "what the ramp scales: all (the offset too, as before); oscillation (the sine's part "
+                    "only: the offset holds from t = 0, so a posture is kept while an oscillation ramps in)",
+                    choices=("all", "oscillation"), used_by=REFERENCED)
+    joint: str = _f("", "", "pd: the joint (slide or hinge, MJCF name) whose position tracks the reference",
+                    used_by=("kind", ("pd",)))
+    sensor: str = _f("", "", "sensor: the MJCF <sensor> (by name) fed back", used_by=("kind", ("sensor",)))
+    index: int = _f(0, "", "sensor: which component of the sensor's reading (0 for a scalar sensor; 2 for a "
+                    "framepos's z)", minimum=0, exclusive=False, used_by=("kind", ("sensor",)))
+    kp: float = _f(0.0, "actuator's unit per the reference's unit", "pd, sensor: proportional gain on the error "
+                   "r - y", used_by=CLOSED)
+    kd: float = _f(0.0, "actuator's unit per the reference's unit per s", "pd, sensor: derivative gain on the "
+                   "error's rate r' - y' (pd: the joint's velocity; sensor: the reading's change over the last step)",
+                   used_by=CLOSED)
 
 
 def repose(m: Any) -> float:
@@ -386,6 +411,11 @@ class UserScene(Sections):
         """The design keys this scene sets, ``model.KIND.NAME.ATTRIBUTE[.INDEX]`` -> value (SI)."""
         return {f"model.{key}": value for key, value in design.entries(self.model.design).items()}
 
+    def without_controls(self) -> UserScene:
+        """A copy without [[control]] entries: the scene a Python controller drives instead
+        (``finrft.run_robot(scene.without_controls(), control=...)``)."""
+        return dataclasses.replace(self, control=())
+
     @property
     def duration(self) -> float:
         """The run's length (s): ``sim.duration``, or the constant drives' own."""
@@ -402,7 +432,8 @@ def check_sines(scene: UserScene) -> None:
     """SceneError for a sine [[drive]] or [[control]] with fewer than `SINE_STEPS` steps per period at sim.dt."""
     dt = scene.sim.dt
     sines = [(f"drive.{i}", j.frequency) for i, j in enumerate(scene.drive) if j.profile == "sine"]
-    sines += [(f"control.{i}", c.frequency) for i, c in enumerate(scene.control) if c.kind == "sine"]
+    sines += [(f"control.{i}", c.frequency) for i, c in enumerate(scene.control)
+              if c.kind == "sine" or (c.kind in CLOSED[1] and c.amplitude)]
     for where, frequency in sines:
         if 1 / (frequency * dt) < SINE_STEPS:
             raise SceneError(f"{where}.frequency = {frequency:g} Hz has {1 / (frequency * dt):.3g} steps per period "

@@ -104,9 +104,10 @@ def draw_model(rec: Any, run: Result, times: Any, prefix: str) -> list[Any]:
             if shape is None:
                 continue
             q = m.geom_quat[g]
-            rec.log(f"{body}/geom{g}", rr.Transform3D(translation=m.geom_pos[g], quaternion=[*q[1:], q[0]]),
-                    static=True)
-            rec.log(f"{body}/geom{g}", shape, static=True)
+            # by the model's name where it gives one
+            entity = f"{body}/{rr.escape_entity_path_part(m.geom(int(g)).name) if m.geom(int(g)).name else f'geom{g}'}"
+            rec.log(entity, rr.Transform3D(translation=m.geom_pos[g], quaternion=[*q[1:], q[0]]), static=True)
+            rec.log(entity, shape, static=True)
     # The surface elements the medium acts on (culled faces left out), in their body's frame: they move with it.
     for surface in built.attached.surfaces:
         rec.log(f"{root}/{surface.body}/elements", rr.Points3D(surface.centre, colors=[[40, 90, 200]],

@@ -123,7 +123,7 @@ def test_a_scene_built_directly_takes_the_canonical_values():
 @pytest.mark.parametrize("build, named", [
     # a key the entry's kind (profile, law) does not use was accepted and ignored
     (lambda: UserScene(control=(Control(actuator="a", amplitude=1.0, frequency=2.0),)),
-     "control.0.amplitude is used by kind = 'sine' only, and this entry's kind is 'constant' (its default"),
+     "control.0.amplitude is used by kind = 'sine' or 'pd' or 'sensor' only, and this entry's kind is 'constant' (its default"),
     (lambda: UserScene(control=(Control(actuator="a", kind="sine", value=3.0),)), "control.0.value is used by kind"),
     (lambda: UserScene(control=(Control(actuator="a", kind="sine", table="t.csv"),)), "control.0.table"),
     (lambda: UserScene(drive=(JointDrive(joint="j", profile="sine", stroke=0.1),)), "drive.0.stroke is used by"),

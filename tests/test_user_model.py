@@ -117,7 +117,7 @@ def test_python_backend_gives_the_native_run(tmp_path):
     # a regularisation narrower than Newton's tolerance (a wrong rest force), a keyframe of NaN
     ({"set": "drive.amplitude=0.01"}, "drive.0.amplitude is used by profile = 'sine' only"),
     ({"set": ("control.0.actuator=a", "control.0.amplitude=1", "control.0.frequency=2")},
-     "this entry's kind is 'constant' (its default): set control.0.kind = 'sine'"),
+     "this entry's kind is 'constant' (its default): set control.0.kind, or leave amplitude out"),
     ({"set": ("medium.law=rft3d", "medium.zeta=2", "medium.bulk_density=1500", "medium.internal_friction=0.5")},
      "medium.zeta is used by law = 'li2013' or 'li2013-planar' only"),
     ({"set": ("drive.profile=sine", "drive.speed=0.1", "drive.stroke=0.05", "drive.frequency=1000",

@@ -102,15 +102,38 @@ def read_table(path: str, where: str) -> tuple[np.ndarray, np.ndarray]:
     return values[:, 0], values[:, 1]
 
 
+def ramp_factor(c: Control, t: float) -> tuple[float, float]:
+    """The ramp-in's factor at time t and its rate (1/s)."""
+    if c.ramp > 0 and t < c.ramp:
+        return t / c.ramp, 1 / c.ramp
+    return 1.0, 0.0
+
+
+def reference(c: Control, t: float) -> tuple[float, float]:
+    """A sine's ctrl, or a pd or sensor entry's reference, at time t and its rate: offset + amplitude sin(2 pi
+    frequency t + phase), ramped in (``ramps = "all"``: the whole of it, as the ramp always did; ``oscillation``: the
+    sine's part only, the offset held from t = 0)."""
+    f, rate = ramp_factor(c, t)
+    w = 2 * math.pi * c.frequency
+    wave, slope = c.amplitude * math.sin(w * t + c.phase), c.amplitude * w * math.cos(w * t + c.phase)
+    if c.ramps == "all":
+        return (c.offset + wave) * f, (c.offset + wave) * rate + slope * f
+    return c.offset + wave * f, wave * rate + slope * f
+
+
 def control_value(c: Control, table: tuple[np.ndarray, np.ndarray] | None, t: float) -> float:
-    """An actuator's ctrl at time t: its profile, times the ramp-in."""
-    if c.kind == "constant":
-        value = c.value
-    elif c.kind == "sine":
-        value = c.offset + c.amplitude * math.sin(2 * math.pi * c.frequency * t + c.phase)
-    else:
-        value = float(np.interp(t, *table))
-    return value * (min(1.0, t / c.ramp) if c.ramp > 0 else 1.0)
+    """An open-loop actuator's ctrl at time t: its profile, times the ramp-in (`reference` for a sine)."""
+    if c.kind == "sine":
+        return reference(c, t)[0]
+    value = c.value if c.kind == "constant" else float(np.interp(t, *table))
+    return value * ramp_factor(c, t)[0]
+
+
+def closed_loop(c: Control, t: float, measured: float, rate: float) -> float:
+    """A pd or sensor entry's ctrl: kp (r - y) + kd (r' - y') for the reference r (`reference`) and the measured
+    y (the joint's position, the sensor's reading) and its rate y'."""
+    r, r_rate = reference(c, t)
+    return c.kp * (r - measured) + c.kd * (r_rate - rate)
 
 
 def control_reach(c: Control, table: tuple[np.ndarray, np.ndarray] | None) -> float:
@@ -119,7 +142,9 @@ def control_reach(c: Control, table: tuple[np.ndarray, np.ndarray] | None) -> fl
         return abs(c.value)
     if c.kind == "sine":
         return abs(c.offset) + abs(c.amplitude)
-    return float(np.max(np.abs(table[1])))
+    if c.kind == "table":
+        return float(np.max(np.abs(table[1])))
+    return 0.0  # a closed loop's ctrl depends on the state: a bad value stops the run (`stepping.void_run`)
 
 
 Controller = Callable[[float, mujoco.MjData], Any]
@@ -145,6 +170,9 @@ class RobotTrial:
             d.qpos[qpos[i]] = drive_position(j, stroke_time, 0.0)
         self.actuators = [m.actuator(c.actuator).id for c in scene.control]
         self.tables = experiment.tables
+        self.loops = experiment.loops
+        # a sensor loop's last reading (time, value, rate): its rate is the change over the last step
+        self._readings: dict[int, tuple[float, float, float]] = {}
         self.controller = experiment.control
         if self.controller is not None:
             mujoco.mj_forward(m, d)
@@ -169,7 +197,7 @@ class RobotTrial:
                     # What each drive applies: the feed-forward force, less what its armature takes.
                     "drive_load": at.qfrc_applied[self.dofs] - self.armature * at.qacc[self.dofs],
                     "actuator_force": d.actuator_force.copy(), "actuator_velocity": d.actuator_velocity.copy(),
-                    "ctrl": d.ctrl.copy()}
+                    "ctrl": d.ctrl.copy(), "sensor": d.sensordata.copy()}
 
         self.reads = {"state": lambda d: np.concatenate([v.ravel() for v in state(d).values()])}
         self._unpack = lambda flat: _unpack(flat, m, len(built.bodies), len(self.dofs))
@@ -179,9 +207,9 @@ class RobotTrial:
             load = at.qfrc_applied[self.dofs] - self.armature * at.qacc[self.dofs]
             power = d.actuator_force * d.actuator_velocity
             return np.concatenate([force(at).ravel(), load, np.maximum(load * velocity, 0), power,
-                                   np.maximum(power, 0)])
+                                   np.maximum(power, 0), d.sensordata])
 
-        self.means = WindowMeans(scene.sim.settle, len(built.bodies), len(self.dofs), m.nu)
+        self.means = WindowMeans(scene.sim.settle, len(built.bodies), len(self.dofs), m.nu, m.nsensordata)
         method = methods.get(scene.sim.method)
         # MuJoCo's explicit step leaves in d the forces and actuator velocities of the state it started from (its
         # forward pass): read there, with the drives' velocities the control callback kept, they are what a
@@ -238,8 +266,13 @@ class RobotTrial:
         t = d.time
         if self.controller is not None:
             d.ctrl[:] = self._checked(self.controller(t, d))
-        for a, c, table in zip(self.actuators, self.scene.control, self.tables):
-            d.ctrl[a] = control_value(c, table, t)
+        for i, (a, c, table, loop) in enumerate(zip(self.actuators, self.scene.control, self.tables, self.loops)):
+            if loop is None:
+                d.ctrl[a] = control_value(c, table, t)
+            elif c.kind == "pd":
+                d.ctrl[a] = closed_loop(c, t, d.qpos[loop[0]], d.qvel[loop[1]])
+            else:
+                d.ctrl[a] = closed_loop(c, t, *self._reading(i, d.sensordata[loop[0]], t))
         self._start_velocity[:] = d.qvel[self.dofs]
         # The force that makes this step end on the sine: the velocity v = (q(t + h) - q) / h that MuJoCo's
         # (semi-implicit) position update takes there, reached by armature x (v - qvel) / h. It tracks the profile
@@ -250,6 +283,15 @@ class RobotTrial:
             j, dof = self.scene.drive[i], self.dofs[i]
             target = (drive_position(j, 0.0, t + h) - d.qpos[self.built.drive_qpos[i]]) / h
             d.qfrc_applied[dof] = self.armature[i] * (target - d.qvel[dof]) / h
+
+    def _reading(self, i: int, value: float, t: float) -> tuple[float, float]:
+        """Sensor loop i's reading and its rate, the change since the last step's (0 at the first; a second call
+        at the same time keeps the rate)."""
+        last = self._readings.get(i)
+        rate = 0.0 if last is None else last[2] if t <= last[0] else (value - last[1]) / (t - last[0])
+        if last is None or t > last[0]:
+            self._readings[i] = (t, float(value), rate)
+        return float(value), rate
 
     def on_stroke(self, k: int) -> None:
         """At each stroke of the grid, the constant drives take their stroke's velocity (an impulse at a
@@ -320,10 +362,11 @@ class WindowMeans:
     what changes within a sample interval (the example swimmer's actuator power came out 0.320 W from samples
     every 10 ms against 0.292 W over every step). Each value holds, in this order, the medium's force on each
     attached body (B, 3), the drives' loads (D), their positive power (D), the actuators' power (U) and its
-    positive part (U): positive power is clipped at every step, not after averaging."""
+    positive part (U), the model's sensors' readings (S, MuJoCo's sensordata): positive power is clipped at every
+    step, not after averaging."""
 
-    def __init__(self, start: float, bodies: int, drives: int, actuators: int) -> None:
-        self.start, self.shape = start, (bodies, drives, actuators)
+    def __init__(self, start: float, bodies: int, drives: int, actuators: int, sensors: int = 0) -> None:
+        self.start, self.shape = start, (bodies, drives, actuators, sensors)
         self.time = -math.inf
         self.value: np.ndarray | None = None
         self.total: np.ndarray | None = None
@@ -341,13 +384,13 @@ class WindowMeans:
 
     def parts(self, end: float) -> dict[str, np.ndarray]:
         """The means over [start, end], by name (SI units)."""
-        bodies, drives, actuators = self.shape
-        total = self.total if self.total is not None else np.zeros(3 * bodies + 2 * drives + 2 * actuators)
+        bodies, drives, actuators, sensors = self.shape
+        total = self.total if self.total is not None else np.zeros(3 * bodies + 2 * drives + 2 * actuators + sensors)
         mean = total / (end - self.start)
-        cuts = np.cumsum([3 * bodies, drives, drives, actuators])
-        force, load, drive_power, power, positive = np.split(mean, cuts)
+        cuts = np.cumsum([3 * bodies, drives, drives, actuators, actuators])
+        force, load, drive_power, power, positive, readings = np.split(mean, cuts)
         return {"medium_force": force.reshape(bodies, 3), "drive_load": load, "drive_positive_power": drive_power,
-                "actuator_power": power, "actuator_positive_power": positive}
+                "actuator_power": power, "actuator_positive_power": positive, "sensor": readings}
 
 
 def _unpack(flat: np.ndarray, m: mujoco.MjModel, attached: int, drives: int) -> dict[str, np.ndarray]:
@@ -355,7 +398,7 @@ def _unpack(flat: np.ndarray, m: mujoco.MjModel, attached: int, drives: int) -> 
     shapes = {"com_position": (3,), "com_velocity": (3,), "body_position": (attached, 3),
               "medium_force": (attached, 3), "link_position": (m.nbody - 1, 3), "link_quat": (m.nbody - 1, 4),
               "drive_position": (drives,), "drive_velocity": (drives,), "drive_load": (drives,),
-              "actuator_force": (m.nu,), "actuator_velocity": (m.nu,), "ctrl": (m.nu,)}
+              "actuator_force": (m.nu,), "actuator_velocity": (m.nu,), "ctrl": (m.nu,), "sensor": (m.nsensordata,)}
     out, at = {}, 0
     for name, shape in shapes.items():
         size = int(np.prod(shape))
@@ -410,6 +453,9 @@ class UserModel:
     tables: tuple = ()                    # each [[control]]'s table (times, values), or None
     control: Controller | None = None     # the Python controller, if any
     bodies: tuple[str, ...] = ()          # the attached bodies: model.bodies, then those of model.geoms
+    loops: tuple = ()                     # each [[control]]'s closed loop: pd (qpos address, dof), sensor (address,)
+    sensors: tuple[str, ...] = ()         # every MJCF <sensor>, by name (or sensor<id>)
+    sensor_dims: tuple[int, ...] = ()     # each sensor's number of values in sensordata
     name = "run"
     schema = "finrft.user/2"
     sign_convention = SIGN_CONVENTION
@@ -436,7 +482,8 @@ class UserModel:
         if len({c.actuator for c in scene.control}) < len(scene.control):
             raise SceneError("an actuator has two [[control]] entries: give each one entry")
         if control is not None and scene.control:
-            raise SceneError("give the actuators' ctrl by [[control]] or by a controller, not both")
+            raise SceneError("give the actuators' ctrl by [[control]] or by a controller, not both: run the "
+                             "controller on scene.without_controls() to let it take the [[control]] entries' place")
         keys = tuple(m.key(i).name for i in range(m.nkey))
         if scene.model.keyframe and scene.model.keyframe not in keys:
             raise SceneError(f"model.keyframe: the model has no keyframe named {scene.model.keyframe!r} (its "
@@ -452,7 +499,15 @@ class UserModel:
                 raise SceneError(f"control.{i}: its ctrl reaches {reach:g}, beyond MuJoCo's limit +-"
                                  f"{mujoco.mjMAXVAL:g} (MuJoCo would zero every ctrl): give it in the actuator's unit")
         links = tuple(m.body(i).name or f"body{i}" for i in range(1, m.nbody))
-        return cls(kinds, links, actuators, tables, control, tuple(bodies))
+        sensors = tuple(m.sensor(i).name or f"sensor{i}" for i in range(m.nsensor))
+        loops = tuple(closed_loop_address(m, c, f"control.{i}", sensors) for i, c in enumerate(scene.control))
+        return cls(kinds, links, actuators, tables, control, tuple(bodies), loops, sensors,
+                   tuple(int(n) for n in m.sensor_dim))
+
+    def sensor_columns(self) -> list[str]:
+        """A name for each value of the model's sensordata: the sensor's name, with its component's index for a
+        sensor of several values (``head_pos.2``)."""
+        return [name if n == 1 else f"{name}.{k}" for name, n in zip(self.sensors, self.sensor_dims) for k in range(n)]
 
     def unit(self, i: int) -> tuple[str, str, str]:
         """Drive i's position, velocity and load units."""
@@ -490,7 +545,7 @@ class UserModel:
                 "drive_load": Quantity(",".join(u[2] for u in units), "force (torque) each drive applies to its "
                                        "joint along (about) its axis", attrs={"joints": joints},
                                        plot=Plot("drive/load", "Drive loads (N or N m)", "drive load", "",
-                                                 "drive")),
+                                                 "drive", tuple(j.joint for j in scene.drive))),
             })
         if scene.medium.surface == "deforming":
             out["surface_height"] = Quantity("m", "height of the deforming free surface at each point of its grid "
@@ -502,10 +557,16 @@ class UserModel:
             out.update({
                 "actuator_force": Quantity("N or N m", "each actuator's force (torque) on its joint or tendon",
                                            attrs=names, plot=Plot("actuator/force", "Actuator forces (N or N m)",
-                                                                  "actuator", "", "actuator")),
+                                                                  "actuator", "", "actuator", self.actuators)),
                 "actuator_velocity": Quantity("m/s or rad/s", "each actuator's velocity", attrs=names),
                 "ctrl": Quantity("actuator's unit", "each actuator's control input", attrs=names),
             })
+        if self.sensors:
+            columns = self.sensor_columns()
+            out["sensor"] = Quantity("the sensor's own (MuJoCo: SI)", "each value of the model's <sensor> readings "
+                                     "(MuJoCo's sensordata), by sensor", attrs={"sensors": ",".join(columns)},
+                                     plot=Plot("sensor", "Sensors (their own units)", "sensor", "", "sensor",
+                                               tuple(columns)))
         return out
 
     def compared(self, scene: UserScene) -> tuple[Compared, ...]:
@@ -524,7 +585,7 @@ class UserModel:
 
     def figures(self, scene: UserScene) -> tuple[str, ...]:
         return ("com_velocity_m_s", "com_speed_m_s", "com_position_m", "medium_force_N", "body_medium_force_N",
-                "drive_load", "actuator_power_W", "positive_power_W", "cost_of_transport")
+                "drive_load", "actuator_power_W", "positive_power_W", "cost_of_transport", "sensors")
 
     def start(self, scene: UserScene, built: AttachedModel, d: mujoco.MjData, companion: bool) -> RobotTrial:
         return RobotTrial(self, scene, built, d, companion)
@@ -565,6 +626,8 @@ def robot_summary(experiment: UserModel, run: Result) -> dict[str, Any]:
     - ``drive_load``: per [[drive]], the mean force (N) or torque (N m) it applies (``drive_load_units``).
     - ``actuator_power_W``: the mean mechanical power of the actuators, sum of actuator_force x
       actuator_velocity (negative: they absorb work).
+    - ``sensors`` (a model with MJCF ``<sensor>``s only): each sensor's mean reading, a list of its values in its
+      own unit, by its name (``sensor<id>`` when it has none).
     - ``chatter``: null, or where the chatter probe saw chatter that came and went (`stepping.Chattering`): the
       share of its probes that chattered, when the first did and its largest swing over the chatter speed.
     - ``cost_of_transport``: P+ / (m g v), with P+ the mean positive power of the actuators and the drives (each
@@ -598,6 +661,9 @@ def robot_summary(experiment: UserModel, run: Result) -> dict[str, Any]:
         out["actuator_power_W"] = float(means["actuator_power"].sum())
         positive += float(means["actuator_positive_power"].sum())
     out["positive_power_W"] = positive
+    if experiment.sensors:
+        readings, at = means["sensor"], np.cumsum([0, *experiment.sensor_dims])
+        out["sensors"] = {name: readings[at[i]:at[i + 1]].tolist() for i, name in enumerate(experiment.sensors)}
     mass, gravity = run.model_mass, run.gravity
     speed = float(np.hypot(*velocity[:2]))
     if gravity == 0:
@@ -630,6 +696,31 @@ def run_robot(scene: UserScene, *, control: Controller | None = None, progress: 
         raise SceneError(f"run_robot: control must be a callable control(t, data) -> ctrl, or None, got "
                          f"{type(control).__name__} {control!r:.60}")
     return run(UserModel.of(scene, control), scene, progress=progress, max_error=max_error)
+
+
+def closed_loop_address(m: mujoco.MjModel, c: Control, where: str, sensors: tuple[str, ...]) -> tuple[int, ...] | None:
+    """Where a closed-loop [[control]] reads the model: a pd entry's joint's (qpos address, dof address), a sensor
+    entry's sensordata address; None for an open loop. SceneError naming a bad joint, sensor or index."""
+    if c.kind == "pd":
+        joints = [m.joint(i).name for i in range(m.njnt)]
+        if c.joint not in joints or not c.joint:
+            raise SceneError(f"{where}.joint: the model has no joint named {c.joint!r} (its joints: "
+                             f"{', '.join(j for j in joints if j) or 'none named'})")
+        j = m.joint(c.joint)
+        if int(j.type[0]) not in DRIVEN:
+            raise SceneError(f"{where}.joint {c.joint!r} is a {mujoco.mjtJoint(int(j.type[0])).name} joint: a pd "
+                             f"entry tracks a slide or hinge joint's position")
+        return int(j.qposadr[0]), int(j.dofadr[0])
+    if c.kind == "sensor":
+        if c.sensor not in sensors or not c.sensor:
+            raise SceneError(f"{where}.sensor: the model has no sensor named {c.sensor!r} (its sensors: "
+                             f"{', '.join(sensors) or 'none'})")
+        sensor = m.sensor(c.sensor)
+        if c.index >= int(sensor.dim[0]):
+            raise SceneError(f"{where}.index = {c.index}: sensor {c.sensor!r} has {int(sensor.dim[0])} value(s), "
+                             f"indices 0..{int(sensor.dim[0]) - 1}")
+        return (int(sensor.adr[0]) + c.index,)
+    return None
 
 
 def check_keyframe(m: mujoco.MjModel, name: str) -> None:
@@ -758,6 +849,9 @@ class RunCommand(Command):
             lines.append(f"drive {joint}: mean load {load:+.4g} {unit}, at the end {end}")
         if s["actuators"]:
             lines.append(f"actuators' mean power {s['actuator_power_W']:+.4g} W")
+        if s.get("sensors"):
+            lines.append("sensors' means (their units): " + "; ".join(
+                f"{name} {mm(f'{v:.4g}' for v in values)}" for name, values in s["sensors"].items()))
         cot = s["cost_of_transport"]
         lines.append(f"cost of transport {cot:.4g} ({s['cost_of_transport_note']})" if cot is not None
                      else f"cost of transport: none ({s['cost_of_transport_note']})")

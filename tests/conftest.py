@@ -92,3 +92,14 @@ def physics_run(scene, control=None):
     from finrft.experiment import run
     from finrft.experiments.user_model import UserModel
     return run(UserModel.of(scene, control), scene, max_error=None, estimate_error=False)
+
+
+def dragged_plate_scene(stroke: float, *, drive: str = "", **sim: object) -> str:
+    """The TOML scene of a plate (the body "plate" of plate.xml, beside the scene) dragged on its slide "drag" at
+    0.1 m/s for ``stroke`` (m) through li2013's generic medium (zeta 1); ``drive``: more lines of the drive, ``sim``:
+    keys of the sim beside a 1 ms step."""
+    lines = [f"{key} = {value!r}" if isinstance(value, str) else f"{key} = {value}" for key, value in sim.items()]
+    lines = [line.replace("'", '"') for line in lines]
+    return "\n".join(['[model]', 'path = "plate.xml"', 'bodies = ["plate"]', '', '[medium]', 'zeta = 1.0', '',
+                      '[drive]', 'joint = "drag"', 'speed = 0.1', f'stroke = {stroke}', *([drive] if drive else []),
+                      '', '[sim]', 'dt = 1e-3', *lines]) + "\n"

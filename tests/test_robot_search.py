@@ -18,6 +18,7 @@ from finrft.experiments.user_model import run_robot
 from finrft.scene import UserScene, load_scene
 from finrft.studies import searchlog
 from finrft.studies.optimize import read_log
+from conftest import dragged_plate_scene
 
 # A 4 cm x 6 cm plate (1 mm thick) on a slide along x, its top edge at its body's origin: dragged at 0.1 m/s with
 # its top d below the surface, li2013's generic medium (zeta 1) resists with alpha w ((d + H)^2 - d^2) / 2,
@@ -25,23 +26,7 @@ from finrft.studies.optimize import read_log
 MODEL = """<mujoco><option gravity="0 0 -9.81"/><worldbody><body name="plate">
   <joint name="drag" type="slide" axis="1 0 0"/><geom name="plate" type="box" size="0.0005 0.02 0.03" pos="0 0 -0.03"
   mass="10"/></body></worldbody><actuator><position name="servo" joint="drag" kp="0.001"/></actuator></mujoco>"""
-SCENE = """[model]
-path = "plate.xml"
-bodies = ["plate"]
-
-[medium]
-zeta = 1.0
-
-[drive]
-joint = "drag"
-speed = 0.1
-stroke = 0.01
-
-[sim]
-dt = 1e-3
-method = "newton"
-record_dt = 0.01
-"""
+SCENE = dragged_plate_scene(0.01, method="newton", record_dt=0.01)
 
 
 def closed_form(depth_cm: float, width_cm: float = 4.0, height_cm: float = 6.0) -> float:

@@ -11,6 +11,7 @@ from finrft import surfaces
 from finrft.attach import attach
 from finrft.errors import SceneError
 from finrft.surfaces import hfield
+from conftest import dragged_plate_scene
 
 # A free body of three kinds of geom, no contacts: what moves it is gravity and the medium.
 BODY = """
@@ -280,22 +281,7 @@ TILTED = """<mujoco><option gravity="1.7 0 -9.66"/><worldbody><body name="plate"
   <joint name="drag" type="slide" axis="1 0 0"/><geom type="box" size="0.0005 0.02 0.03" pos="0 0 -0.03" mass="10"/>
 </body></worldbody></mujoco>"""
 PLATE = TILTED.replace("1.7 0 -9.66", "0 0 -9.81")
-SCENE = """[model]
-path = "plate.xml"
-bodies = ["plate"]
-
-[medium]
-zeta = 1.0
-
-[drive]
-joint = "drag"
-speed = 0.1
-stroke = 0.01
-
-[sim]
-dt = 1e-3
-record_dt = 0.01
-"""
+SCENE = dragged_plate_scene(0.01, record_dt=0.01)
 
 
 @pytest.mark.parametrize("model,sets,named", [

@@ -18,28 +18,13 @@ from finrft.laws import li2013
 from finrft.experiments.intrusion import IntrusionScene
 from finrft.scene import UserScene, load_scene
 from finrft.experiments.user_model import UserModel
+from conftest import dragged_plate_scene
 
 # A 4 cm x 6 cm plate (1 mm thick), its top at the surface, on a slide along x: the README's attach example.
 MODEL = """<mujoco><option gravity="0 0 -9.81"/><worldbody><body name="plate">
   <joint name="drag" type="slide" axis="1 0 0"/><geom type="box" size="0.0005 0.02 0.03" pos="0 0 -0.03" mass="10"/>
 </body></worldbody></mujoco>"""
-SCENE = """[model]
-path = "plate.xml"
-bodies = ["plate"]
-
-[medium]
-zeta = 1.0
-
-[drive]
-joint = "drag"
-speed = 0.1
-stroke = 0.02
-cycles = {cycles}
-
-[sim]
-dt = 1e-3
-record_dt = 0.01
-"""
+SCENE = dragged_plate_scene(0.02, drive="cycles = {cycles}", record_dt=0.01)
 CLOSED_FORM = 0.370 * 4 * 6 ** 2 / 2  # alpha_x(90 deg, 0) w H^2 / 2 in N/cm^3 x cm^3: 26.64 N
 
 

@@ -21,7 +21,10 @@ from .errors import SceneError
 KINDS = ("body", "geom", "joint", "actuator", "site", "tendon")
 # The SI unit of an attribute, where it has one whatever the element (a key's --bounds may then carry mm, g, deg).
 UNITS = {"size": "m", "pos": "m", "fromto": "m", "mass": "kg", "ipos": "m", "margin": "m", "gap": "m",
-         "width": "m", "range": "m or rad", "springref": "m or rad", "ref": "m or rad"}
+         "width": "m"}
+# Attributes in m on a slide joint and in rad on a hinge: the key alone does not say which, so they take plain SI
+# numbers, never a unit suffix (20mm on a hinge would be 0.02 rad).
+JOINT_UNIT = ("range", "springref", "ref")
 # Array attributes that MJCF writes as one number (MuJoCo 4 keeps polynomial terms after it): no index is the first.
 FIRST = {("joint", "stiffness"), ("joint", "damping"), ("tendon", "stiffness"), ("tendon", "damping")}
 

@@ -76,8 +76,9 @@ def reward_function(reward: Reward) -> Callable[[dict[str, Any]], float]:
         raise SceneError(f"reward must be a figure's name, a mapping of figures to weights or a callable, got "
                          f"{type(reward).__name__}")
     for key, weight in weights.items():
-        name, _, index = str(key).partition(".")
-        if name not in FIGURES or (index and (name != "com_velocity_m_s" or index not in "012")):
+        name, dot, index = str(key).partition(".")
+        vector = name == "com_velocity_m_s"  # a reward is one number: the velocity by its component
+        if name not in FIGURES or (index not in ("0", "1", "2") if vector else dot):
             raise SceneError(f"reward: no figure {key!r} (the figures: {', '.join(FIGURES)}; com_velocity_m_s.N, "
                              f"N = 0, 1, 2, a component)")
         if not isinstance(weight, (int, float)) or not math.isfinite(weight):

@@ -444,6 +444,9 @@ def check_sines(scene: UserScene) -> None:
 def design_value(key: str, value: Any) -> float:
     """A design key's value: a number, or text with a unit suffix of its attribute's unit (`finrft.design`)."""
     unit = design.unit(key)
+    if isinstance(value, str) and design.parse(key)[2] in design.JOINT_UNIT and not schema.is_number(value):
+        raise SceneError(f"{key} = {value!r}: give a plain number in SI, m on a slide joint or rad on a hinge (a unit "
+                         f"suffix cannot tell which the joint is)")
     if isinstance(value, str):
         value = schema.quantity(value, unit, key)
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):

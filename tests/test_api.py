@@ -88,6 +88,18 @@ def test_a_help_kept_for_another_width_or_package_is_not_printed(tmp_path):
     assert again.stdout == narrow.stdout
 
 
+@pytest.mark.parametrize("cache", ["file", "relative"])
+def test_a_cache_folder_that_cannot_be_used_still_prints_the_help(tmp_path, cache):
+    # XDG_CACHE_HOME at a regular file: NotADirectoryError escaped as a traceback; a relative one is to be ignored
+    (tmp_path / "a_file").write_text("")
+    home = str(tmp_path / "a_file") if cache == "file" else "relative_cache"
+    done = subprocess.run([sys.executable, "-m", "finrft", "--help"], cwd=tmp_path, capture_output=True, text=True,
+                          timeout=120, env={**os.environ, "XDG_CACHE_HOME": home, "HOME": str(tmp_path / "home")})
+    assert done.returncode == 0 and "usage: finrft" in done.stdout and not done.stderr, done.stderr
+    assert not (tmp_path / "relative_cache").exists()
+    assert (tmp_path / "home" / ".cache" / "finrft" / "helps.json").exists() == (cache == "relative")
+
+
 def test_the_command_lines_parser_imports_no_study_package(tmp_path):
     # Every command's flags, without what only some commands use (scipy.optimize, half the start, is the media's fit)
     done = _python(f"""

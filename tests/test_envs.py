@@ -61,6 +61,14 @@ def test_the_scenes_gait_as_actions_swims_as_the_run_does():
     assert np.mean(rewards[1000:]) > 0.03  # it swims forward
 
 
+@pytest.mark.parametrize("reward", ["com_velocity_m_s.12", "com_velocity_m_s.01", "com_velocity_m_s.",
+                                    "com_velocity_m_s", "com_speed_m_s.0", "speed"])
+def test_a_reward_of_no_figure_is_refused_when_made(reward):
+    # "12" and "01" passed a substring test: the first failed at the first step, the second read the y component
+    with pytest.raises(SceneError, match="no figure"):
+        envs.make("sand_swimmer", reward=reward)
+
+
 def test_a_weighted_reward_is_the_sum_of_its_figures():
     env = envs.make("sand_swimmer", reward={"com_speed_m_s": 2.0, "positive_power_W": -0.5})
     env.reset(seed=0)

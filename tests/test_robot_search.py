@@ -71,13 +71,14 @@ def test_design_keys_edit_the_model_and_its_force_follows_the_closed_form(scene_
     ("model.joint.drag.colour=1", "no numeric attribute 'colour'"),
     ("model.geom.plate.size.0=abc", "must be a number"),
     ("model.actuator.nope.kp=1", "no actuator named 'nope'"),
+    ("model.joint.drag.range.0=20mm", "m on a slide joint or rad on a hinge"),
 ])
 def test_a_bad_design_key_is_one_line_and_exit_2_before_anything_runs(scene_file, capsys, item, words):
     for command in (["run", "--scene", str(scene_file), "--set", item],
                     ["optimize", "--scene", str(scene_file), "--objective", "drive_load.0",
                      "--bounds", f"{item.partition('=')[0]}=0.01,0.02"],
                     ["sweep", "--scene", str(scene_file), "--grid", f"{item.partition('=')[0]}=0.01,0.02"]):
-        if "abc" in item and command[0] != "run":
+        if ("abc" in item or "mm" in item) and command[0] != "run":  # a bad value, not a bad key
             continue
         assert main(command) == 2
         err = capsys.readouterr().err
@@ -95,6 +96,18 @@ def test_bad_figures_keys_and_bounds_exit_2(scene_file, capsys):
         assert main(base + extra) == 2
         err = capsys.readouterr().err
         assert words in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_a_sweep_whose_figure_or_plot_cannot_be_drawn_is_refused_before_it_runs(scene_file, tmp_path, capsys):
+    # a mistyped --figure printed nan for every variant; a text key to --plot failed after the whole sweep had run
+    base = ["sweep", "--scene", str(scene_file), "--csv", str(tmp_path / "t.csv")]
+    for extra, words in ((["--grid", "medium.zeta=0.5,1", "--figure", "com_sped"], "no figure 'com_sped'"),
+                         (["--grid", "sim.method=newton,implicit", "--plot", "sim.method", "--png",
+                           str(tmp_path / "p.png")], "its values are not numbers")):
+        assert main(base + extra) == 2
+        err = capsys.readouterr().err
+        assert words in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "t.csv").exists() and not (tmp_path / "p.png").exists()
 
 
 def test_a_star_key_sets_every_entry():

@@ -10,6 +10,7 @@ would print. A cache folder that cannot be written only costs the speed.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import hashlib
 import json
 import os
@@ -50,7 +51,8 @@ def keep(parser: argparse.ArgumentParser) -> None:
         temporary.write_text(json.dumps({"key": _key(), "helps": helps}), encoding="utf-8")
         os.replace(temporary, target)  # a reader sees the former file or this one, whole
     except OSError:
-        temporary.unlink(missing_ok=True)
+        with contextlib.suppress(OSError):  # the folder may not exist or be enterable either
+            temporary.unlink()
 
 
 def _helps(parser: argparse.ArgumentParser, path: str):
@@ -62,7 +64,9 @@ def _helps(parser: argparse.ArgumentParser, path: str):
 
 
 def _file() -> Path:
-    home = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    home = os.environ.get("XDG_CACHE_HOME", "")
+    if not os.path.isabs(home):  # the XDG specification: a relative path is to be ignored
+        home = os.path.join(os.path.expanduser("~"), ".cache")
     return Path(home) / "finrft" / "helps.json"
 
 

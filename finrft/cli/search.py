@@ -479,10 +479,12 @@ def sweep(args: argparse.Namespace) -> int:
     scene = robot_scene(args)
     variants = (sweeps.grid_variants(sweeps.parse_grid(args.grid)) if args.grid
                 else sweeps.random_variants(sweeps.parse_dist(args.dist), args.random, args.seed))
+    check_path(args.figure, scene, UserModel.of(scene).bodies)
     if args.plot:
         if args.plot not in variants[0]:
             raise UsageError(f"--plot {args.plot}: the sweep's keys are {', '.join(variants[0])}")
-        check_path(args.figure, scene, UserModel.of(scene).bodies)
+        if not all(isinstance(v[args.plot], (int, float)) and not isinstance(v[args.plot], bool) for v in variants):
+            raise UsageError(f"--plot {args.plot}: its values are not numbers; plot against a numeric key")
     executor = _executor(args)
     max_error = limits(args) if args.max_error else None
     with progress(args, len(variants), "sweep", "variants") as bar:

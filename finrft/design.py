@@ -110,7 +110,7 @@ def apply(spec: Any, design: tuple[str, ...]) -> None:
     """Make a scene's ``model.design`` edits on ``spec`` (an MjSpec, before it compiles); SceneError naming the
     key for a name the model does not have, an attribute that is not a number or an array of them, or an index
     outside its array. ``kp`` and ``kv`` of an actuator are its position servo's gains (gainprm[0] and
-    -biasprm[1], -biasprm[2])."""
+    -biasprm[1], -biasprm[2]); ``kv`` of a velocity servo is its gain (gainprm[0] and -biasprm[2])."""
     for key, value in entries(design).items():
         element, attribute, index = _target(spec, key)
         if _servo_gain(key):
@@ -118,6 +118,8 @@ def apply(spec: Any, design: tuple[str, ...]) -> None:
             if attribute == "kp":
                 gains[0], biases[1] = value, -value
             else:
+                if _velocity_servo(element):
+                    gains[0] = value
                 biases[2] = -value
             element.gainprm, element.biasprm = gains, biases
         elif index is None:
@@ -174,6 +176,15 @@ def _check_servo(actuator: Any, gain: str, index: int | None, where: str) -> Non
     import mujoco
     if index is not None:
         raise SceneError(f"{where}: {gain} is one number: leave the index out")
-    if actuator.biastype != mujoco.mjtBias.mjBIAS_AFFINE or actuator.biasprm[1] != -actuator.gainprm[0]:
-        raise SceneError(f"{where}: actuator {actuator.name!r} is not a position servo (<position>): {gain} is "
-                         f"a servo's gain; set its gainprm and biasprm instead (model.actuator.NAME.gainprm.0)")
+    position = actuator.biastype == mujoco.mjtBias.mjBIAS_AFFINE and actuator.biasprm[1] == -actuator.gainprm[0]
+    if not (position or (gain == "kv" and _velocity_servo(actuator))):
+        raise SceneError(f"{where}: actuator {actuator.name!r} is not a position servo (<position>)"
+                         f"{' nor a velocity servo (<velocity>)' if gain == 'kv' else ''}: {gain} is a servo's gain; "
+                         f"set its gainprm and biasprm instead (model.actuator.NAME.gainprm.0)")
+
+
+def _velocity_servo(actuator: Any) -> bool:
+    """A <velocity> actuator: force kv (ctrl - qdot), gainprm[0] = kv = -biasprm[2], no position term."""
+    import mujoco
+    return (actuator.biastype == mujoco.mjtBias.mjBIAS_AFFINE and actuator.biasprm[1] == 0
+            and actuator.gainprm[0] > 0 and actuator.biasprm[2] == -actuator.gainprm[0])

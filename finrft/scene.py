@@ -119,8 +119,8 @@ class Model:
                        "model's own qpos0 at rest")
     design: tuple[str, ...] = _f((), "", "edits of the model by name before it compiles, KIND.NAME.ATTRIBUTE[.INDEX]"
                                  "=VALUE in SI (e.g. \"geom.fin.size.0=0.02\"; KIND body, geom, joint, actuator, "
-                                 "site or tendon; an actuator's kp, kv: its position servo's gains); --set "
-                                 "model.geom.fin.size.0=20mm sets one (finrft.design)")
+                                 "site or tendon; an actuator's kp, kv: its position servo's gains, kv a velocity "
+                                 "servo's); --set model.geom.fin.size.0=20mm sets one (finrft.design)")
 
 
 Medium = schema.section("Medium", (

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from finrft import design
+from finrft.errors import SceneError
 from finrft.cli import main
 from finrft.experiments.attached_model import scene_spec
 from finrft.experiments.user_model import run_robot
@@ -62,6 +63,18 @@ def test_design_keys_edit_the_model_and_its_force_follows_the_closed_form(scene_
     m = spec.compile()
     assert m.jnt_stiffness[0] == 3.0 and m.actuator_gainprm[0, 0] == 7.0
     assert design.current(scene_spec(load_scene(scene_file, cls=UserScene)), "model.geom.plate.size.2") == 0.03
+
+
+def test_kv_of_a_velocity_servo_is_its_gain():
+    # a wheel's <velocity> servo pushes kv (ctrl - qdot): its kv is gainprm[0] = -biasprm[2]; a kp it has not
+    spec = mujoco.MjSpec.from_string("""<mujoco><worldbody><body><joint name="axle"/><geom size="0.1" mass="1"/>
+      </body></worldbody><actuator><velocity name="wheel" joint="axle" kv="0.2"/></actuator></mujoco>""")
+    assert design.current(spec, "model.actuator.wheel.kv") == pytest.approx(0.2)
+    design.apply(spec, ("actuator.wheel.kv=0.5",))
+    m = spec.compile()
+    assert m.actuator_gainprm[0, 0] == 0.5 and m.actuator_biasprm[0, 2] == -0.5 and m.actuator_biasprm[0, 1] == 0
+    with pytest.raises(SceneError, match="not a position servo"):
+        design.apply(spec, ("actuator.wheel.kp=3",))
 
 
 @pytest.mark.parametrize("item, words", [

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from finrft import design
-from finrft.errors import SceneError
 from finrft.cli import main
+from finrft.errors import SceneError
 from finrft.experiments.attached_model import scene_spec
 from finrft.experiments.user_model import run_robot
 from finrft.scene import UserScene, load_scene

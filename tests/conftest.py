@@ -1,5 +1,7 @@
 """Scenes shared by the physics tests."""
 
+from pathlib import Path
+
 import pytest
 
 from finrft.scene import Scene, preset
@@ -103,3 +105,33 @@ def dragged_plate_scene(stroke: float, *, drive: str = "", **sim: object) -> str
     return "\n".join(['[model]', 'path = "plate.xml"', 'bodies = ["plate"]', '', '[medium]', 'zeta = 1.0', '',
                       '[drive]', 'joint = "drag"', 'speed = 0.1', f'stroke = {stroke}', *([drive] if drive else []),
                       '', '[sim]', 'dt = 1e-3', *lines]) + "\n"
+
+
+def settling_box(folder: Path, method: str) -> Path:
+    """A 50 g box 40 x 40 x 10 mm (the body "box" of box.xml), its top at the surface of li2013's medium (zeta 1),
+    settling for 0.1 s at ``method`` and a 1 ms step: the scene written into ``folder`` (box.toml) and its path."""
+    (folder / "box.xml").write_text("""<mujoco model="box">
+  <option integrator="implicitfast"><flag contact="disable"/></option>
+  <worldbody>
+    <body name="box" pos="0 0 -0.005">
+      <freejoint/>
+      <geom type="box" size="0.02 0.02 0.005" mass="0.05" contype="0" conaffinity="0"/>
+    </body>
+  </worldbody>
+</mujoco>
+""")
+    scene = folder / "box.toml"
+    scene.write_text(f"""[model]
+path = "box.xml"
+bodies = ["box"]
+[medium]
+law = "li2013"
+zeta = 1.0
+element_size = 0.005
+[sim]
+dt = 0.001
+method = "{method}"
+duration = 0.1
+settle = 0.05
+""")
+    return scene

@@ -8,43 +8,18 @@ import mujoco
 import numpy as np
 import pytest
 
+from conftest import settling_box
 from finrft.cli import main
 from finrft.experiments.user_model import UserModel
 from finrft.scene import UserScene, load_scene
 from finrft.studies import frontier
 from finrft.studies.frontier import BATTERY, Run, battery_scene, relative_error
 
-BOX = """<mujoco model="box">
-  <option integrator="implicitfast"><flag contact="disable"/></option>
-  <worldbody>
-    <body name="box" pos="0 0 -0.005">
-      <freejoint/>
-      <geom type="box" size="0.02 0.02 0.005" mass="0.05" contype="0" conaffinity="0"/>
-    </body>
-  </worldbody>
-</mujoco>
-"""
-# A 50 g plate 10 mm thick, its top at the surface, settling into the sand for 0.1 s.
-BOX_SCENE = """[model]
-path = "box.xml"
-bodies = ["box"]
-[medium]
-law = "li2013"
-zeta = 1.0
-element_size = 0.005
-[sim]
-dt = 0.001
-method = "newton"
-duration = 0.1
-settle = 0.05
-"""
 
 
 @pytest.fixture
 def box(tmp_path):
-    (tmp_path / "box.xml").write_text(BOX)
-    (tmp_path / "box.toml").write_text(BOX_SCENE)
-    return tmp_path / "box.toml"
+    return settling_box(tmp_path, "newton")
 
 
 def test_relative_error_is_the_norm_of_the_difference_over_the_reference():

@@ -8,6 +8,7 @@ import mujoco
 import numpy as np
 import pytest
 
+from conftest import settling_box
 from finrft import integrate, methods
 from finrft.attach import attach
 from finrft.errors import Chatter
@@ -245,26 +246,6 @@ def test_chatter_probe_passes_a_body_at_rest_and_stops_a_chattering_step(method)
         assert abs(d.qvel[2]) < 1e-4
 
 
-# A 50 g plate 40 x 40 x 10 mm, its top at the surface of li2013's medium, settling for 0.1 s (as tests/test_frontier.py).
-PLATE = """<mujoco model="plate"><option integrator="implicitfast"><flag contact="disable"/></option><worldbody>
-  <body name="plate" pos="0 0 -0.005"><freejoint/>
-    <geom type="box" size="0.02 0.02 0.005" mass="0.05" contype="0" conaffinity="0"/></body>
-</worldbody></mujoco>"""
-PLATE_SCENE = """[model]
-path = "plate.xml"
-bodies = ["plate"]
-[medium]
-law = "li2013"
-zeta = 1.0
-element_size = 0.005
-[sim]
-dt = 0.001
-method = "implicit"
-duration = 0.1
-settle = 0.05
-"""
-
-
 def test_the_linearly_implicit_step_holds_a_light_plate_settling(tmp_path):
     # The exact slope of an element that trails is 0, so the linearly implicit step saw nothing of the force it
     # takes as it leads again: the 50 g plate at 1 ms chattered (Chatter at 0.04 s) where central differences had
@@ -272,12 +253,11 @@ def test_the_linearly_implicit_step_holds_a_light_plate_settling(tmp_path):
     # medium carrying its weight, in both twins.
     import finrft
     from finrft.scene import UserScene, load_scene
-    (tmp_path / "plate.xml").write_text(PLATE)
-    (tmp_path / "plate.toml").write_text(PLATE_SCENE)
+    path = settling_box(tmp_path, "implicit")
     weight = 0.05 * 9.81
     forces = []
     for backend in ("native", "python"):
-        scene = load_scene(str(tmp_path / "plate.toml"), cls=UserScene, overrides={"sim.backend": backend})
+        scene = load_scene(str(path), cls=UserScene, overrides={"sim.backend": backend})
         summary = finrft.run_robot(scene, max_error=None).summary()
         assert summary["chatter"] is None
         assert summary["medium_force_N"][2] == pytest.approx(weight, rel=1e-3)

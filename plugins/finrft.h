@@ -54,6 +54,13 @@ static inline void finrft_cross(mjtNum out[3], const mjtNum a[3], const mjtNum b
   out[2] = a[0] * b[1] - a[1] * b[0];
 }
 
+// R v, R a 3 x 3 row-major matrix, summed as mju_mulMatVec3 sums it (the same numbers without the call).
+static inline void finrft_mul_mat_vec3(mjtNum out[3], const mjtNum R[9], const mjtNum v[3]) {
+  out[0] = R[0] * v[0] + R[1] * v[1] + R[2] * v[2];
+  out[1] = R[3] * v[0] + R[4] * v[1] + R[5] * v[2];
+  out[2] = R[6] * v[0] + R[7] * v[1] + R[8] * v[2];
+}
+
 // The inputs of every law: tanh(|v| / v_reg), and the direction cosines v^.x^ and v^.y^ (0 at rest). Inline,
 // as it is on the steps' hot path.
 static inline void finrft_components(mjtNum v_reg, const mjtNum v[3], const mjtNum x[3], const mjtNum y[3],

@@ -302,26 +302,21 @@ static void element_force(const FinrftSurface* p, const mjtNum* element, const m
 }
 
 // Add A_e^T k A_e to dw (6 x 6, row-major), A_e = [-[arm]x | I] (3 x 6) mapping a twist to the element's velocity,
-// k (3 x 3) the element's dF/dv: its share of dW/dtwist.
+// k (3 x 3) the element's dF/dv: its share of dW/dtwist. By cross products, as A_e^T = ([arm]x ; I): k A_e's row r
+// is (arm x k_r, k_r), k_r the row r of k, and [arm]x takes each column of k A_e to arm x it (a sixth of the
+// multiplications of the products with A_e's zeros and ones).
 static void add_element_slope(const mjtNum arm[3], const mjtNum k[9], mjtNum dw[36]) {
-  mjtNum a[18], ka[18];
-  mjtNum cross[9] = {0, -arm[2], arm[1], arm[2], 0, -arm[0], -arm[1], arm[0], 0};
+  mjtNum ka[18];
   for (int r = 0; r < 3; r++) {
-    for (int c = 0; c < 3; c++) {
-      a[6 * r + c] = -cross[3 * r + c];
-      a[6 * r + 3 + c] = r == c;
-    }
-  }
-  // K A_e, and its rows added as A_e^T (K A_e) = ([arm]x K A_e ; K A_e)
-  for (int r = 0; r < 3; r++) {
-    for (int c = 0; c < 6; c++) {
-      ka[6 * r + c] = k[3 * r] * a[c] + k[3 * r + 1] * a[6 + c] + k[3 * r + 2] * a[12 + c];
-    }
+    finrft_cross(ka + 6 * r, arm, k + 3 * r);
+    for (int c = 0; c < 3; c++) ka[6 * r + 3 + c] = k[3 * r + c];
   }
   for (int c = 0; c < 6; c++) {
+    mjtNum column[3] = {ka[c], ka[6 + c], ka[12 + c]}, turned[3];
+    finrft_cross(turned, arm, column);
     for (int r = 0; r < 3; r++) {
-      dw[6 * r + c] += cross[3 * r] * ka[c] + cross[3 * r + 1] * ka[6 + c] + cross[3 * r + 2] * ka[12 + c];
-      dw[6 * (3 + r) + c] += ka[6 * r + c];
+      dw[6 * r + c] += turned[r];
+      dw[6 * (3 + r) + c] += column[r];
     }
   }
 }

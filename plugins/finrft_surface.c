@@ -139,6 +139,8 @@ FINRFT_EXPORT void finrft_li2013_planar_element_force(const double coef[NCOEF], 
 #define F23_B 1.61146827229181
 #define F23_C 0.973746396532650
 #define F23_D 5.81083560370960
+// weight_within(1), the weight of a velocity wholly within the plane (1 to 4e-16): a log a call saved
+#define F23_ONE 1.0000000000000004
 
 static double weight_across(double size, double* slope) {
   double grow = exp(2 * F1_B * size), below = exp(-F1_C) * (grow - 1) + 2 * cosh(F1_C);
@@ -220,7 +222,7 @@ FINRFT_EXPORT void finrft_li2013_element_force(const double coef[NCOEF], double 
     double own[3], e2[2], cb, sb, inverse = 1 / speed;
     horizontal_unit(v, n, e2);
     unit_angle(-(n[0] * e2[0] + n[1] * e2[1]), n[2], &cb, &sb);
-    plane_stress(coef, zeta, e2, 0, weight_within(1, NULL), cb, sb, (v[0] * e2[0] + v[1] * e2[1]) * inverse,
+    plane_stress(coef, zeta, e2, 0, F23_ONE, cb, sb, (v[0] * e2[0] + v[1] * e2[1]) * inverse,
                  -v[2] * inverse, own);
     for (int i = 0; i < 3; i++) stress[i] = w * stress[i] + (1 - w) * own[i];
   }
@@ -377,6 +379,16 @@ static void rft3d_terms(double p1, double p2, double p3, double t[NTERMS]) {
   memcpy(t, values, sizeof(values));
 }
 
+// sum_i c_i t_i over the 20 terms, in two interleaved sums: one chain of 20 additions was most of a call's time.
+static inline double rft3d_sum(const double c[NTERMS], const double t[NTERMS]) {
+  double even = 0, odd = 0;
+  for (int i = 0; i < NTERMS; i += 2) {
+    even += c[i] * t[i];
+    odd += c[i + 1] * t[i + 1];
+  }
+  return even + odd;
+}
+
 // The 3D-RFT force on one element (world frame, z up): coefficients c1, c2, c3, the medium's scale xi (N/m^3),
 // the surface friction, outward unit normal n, velocity v, depth below the surface, area. As element_forces in
 // rft3d.py.
@@ -385,14 +397,13 @@ FINRFT_EXPORT void finrft_rft3d_element_force(const double coef[NCOEF_RFT3D], do
                                               double area, double force[3]) {
   force[0] = force[1] = force[2] = 0;
   if (!(depth > 0) || !(n[0] * v[0] + n[1] * v[1] + n[2] * v[2] > 0)) return;
-  double speed = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
-  double u[3] = {v[0] / speed, v[1] / speed, v[2] / speed};
+  double speed = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]), inverse = 1 / speed;
+  double u[3] = {v[0] * inverse, v[1] * inverse, v[2] * inverse};
   double side = n[2] < 0 ? 1 : -1;  // the plate's lower face
   double low[3] = {side * n[0], side * n[1], side * n[2]};
-  double t[NTERMS], f[3] = {0, 0, 0};
+  double t[NTERMS], f[3];
   rft3d_terms(-u[2], -low[2], low[0] * u[0] + low[1] * u[1] + low[2] * u[2], t);
-  for (int k = 0; k < 3; k++)
-    for (int i = 0; i < NTERMS; i++) f[k] += coef[NTERMS * k + i] * t[i];
+  for (int k = 0; k < 3; k++) f[k] = rft3d_sum(coef + NTERMS * k, t);
   double stress[3], normal_part[3], tangential[3];
   for (int i = 0; i < 3; i++) stress[i] = f[0] * low[i] + f[1] * u[i];
   stress[2] -= f[2];
@@ -426,15 +437,15 @@ FINRFT_EXPORT void finrft_rft3d_element_slope(const double coef[NCOEF_RFT3D], do
   for (int i = 0; i < 9; i++) slope[i] = 0;
   force[0] = force[1] = force[2] = 0;
   if (!(depth > 0) || !(n[0] * v[0] + n[1] * v[1] + n[2] * v[2] > 0)) return;
-  double speed = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
-  double u[3] = {v[0] / speed, v[1] / speed, v[2] / speed};
+  double speed = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]), inverse = 1 / speed;
+  double u[3] = {v[0] * inverse, v[1] * inverse, v[2] * inverse};
   double side = n[2] < 0 ? 1 : -1;
   double low[3] = {side * n[0], side * n[1], side * n[2]};
   double p1 = -u[2], p2 = -low[2], p3 = low[0] * u[0] + low[1] * u[1] + low[2] * u[2];
-  double t[NTERMS], f[3] = {0, 0, 0}, a[3], b[3];
+  double t[NTERMS], f[3], a[3], b[3];
   rft3d_terms(p1, p2, p3, t);
   for (int k = 0; k < 3; k++) {
-    for (int i = 0; i < NTERMS; i++) f[k] += coef[NTERMS * k + i] * t[i];
+    f[k] = rft3d_sum(coef + NTERMS * k, t);
     rft3d_term_slopes(coef + NTERMS * k, p1, p2, p3, a + k, b + k);
   }
   // d f_k / du = -a_k z + b_k low; stress = f_0 low + f_1 u - f_2 z

@@ -416,6 +416,7 @@ JSON_ARGS = {
     "table": pytest.param(["--preset", "paper", "--workers", "1"], marks=SLOW),
     "bench backends": pytest.param(["--batch", "1", "--workers", "1"], marks=SLOW),
     "bench robots": pytest.param(["--robot", "sand_swimmer", "--duration", "0.6"], marks=SLOW),
+    "bench steps": ["--robot", "wheel_rig"],
     "bench modelling": pytest.param([], marks=SLOW),
     "bench fit": pytest.param(["--budget", "1", "--workers", "1"], marks=SLOW),
 }

@@ -181,3 +181,20 @@ def test_frontier_flags_without_a_scene_are_refused(argv, capsys):
     assert main(["bench", "robots", *argv]) == 2
     err = capsys.readouterr().err
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_bench_steps_times_each_implicit_method_against_the_explicit_step():
+    """`finrft bench steps`: each fixed-step implicit method's step and the explicit one from the same state, the
+    ratio their times' and the cost per element per step beyond the bare step over the robot's elements."""
+    from finrft.experiments.user_model import example
+    from finrft.studies import bench
+    row = bench.steps(("wheel_rig",), log=lambda text: None)["robots"]["wheel_rig"]
+    scene = load_scene(example("wheel_rig"), cls=UserScene)
+    assert row["elements"] == sum(UserModel.of(scene).build(scene).attached.elements.values())
+    assert set(bench.STEP_METHODS) <= set(row)
+    for method in bench.STEP_METHODS:
+        cost = row[method]
+        assert cost["implicit_over_explicit_step"] == pytest.approx(cost["implicit_step_us"] / cost["explicit_step_us"])
+        per_element = 1e3 * (cost["implicit_step_us"] - row["bare_us_per_step"]) / row["elements"]
+        assert cost["implicit_ns_per_element_step"] == pytest.approx(per_element)
+        assert cost["implicit_step_us"] > 0 and cost["explicit_step_us"] > 0

@@ -76,7 +76,7 @@ def report(args: argparse.Namespace) -> int:
 def add_bench(sub: Any) -> None:
     bench = sub.add_parser("bench", help="benchmarks, measured as ratios in one run on this machine")
     kinds = bench.add_subparsers(dest="bench", required=True, parser_class=type(bench))
-    for add in (_add_backends, _add_robot, _add_robots, _add_accuracy, _add_modelling, _add_fit):
+    for add in (_add_backends, _add_robot, _add_robots, _add_steps, _add_accuracy, _add_modelling, _add_fit):
         kind = add(kinds)
         add_quiet(kind)
         if add is not _add_accuracy:
@@ -151,6 +151,20 @@ def _add_robots(kinds: Any) -> argparse.ArgumentParser:
     return p
 
 
+def _add_steps(kinds: Any) -> argparse.ArgumentParser:
+    from ..studies.bench import STEP_METHODS
+    from ..studies.frontier import BATTERY
+    p = kinds.add_parser("steps", help="what one step of each implicit method costs against the explicit step",
+                         description="For each robot at its own step: one step of each fixed-step implicit method ("
+                         f"{', '.join(STEP_METHODS)}) and one of MuJoCo's explicit step at the same step, from the "
+                         "same state 0.5 s into the run, timed in C in one process: microseconds a step, nanoseconds "
+                         "per element per step beyond the bare step (the model without the medium), and the implicit "
+                         "step's cost in explicit steps. A few seconds a robot.")
+    p.add_argument("--robot", action="append", choices=[*EXAMPLES, *BATTERY],
+                   help="an example or battery robot (repeatable; default: the examples)")
+    return p
+
+
 def _add_accuracy(kinds: Any) -> argparse.ArgumentParser:
     p = kinds.add_parser("accuracy", help="speed against accuracy of every time-stepping method and step",
                          description="Run the origami drag (45 mm out and back) and one flap cycle of the robot, "
@@ -206,6 +220,8 @@ def _bench_figures(args: argparse.Namespace, log: Any, tick: Any) -> dict[str, A
                          "--scene FILE.toml (or --battery)")
     if args.bench == "robots":
         return bench.robots(tuple(args.robot or ()), duration=args.duration, log=log, progress=tick)
+    if args.bench == "steps":
+        return bench.steps(tuple(args.robot or ()), log=log, progress=tick)
     return bench.modelling(log=log, progress=tick)
 
 

@@ -6,6 +6,7 @@ device; its kernels compile once into ~/.cache/warp."""
 from __future__ import annotations
 
 import dataclasses
+import json
 import functools
 
 import mujoco
@@ -148,3 +149,19 @@ def test_warp_worlds_refuse_bad_input():
         worlds.set_medium(zeta=[1.0, 2.0])
     with pytest.raises(SceneError, match="ctrl must be"):
         worlds.set_ctrl(np.zeros(2))
+
+
+def test_bench_warp_reports_rates_and_the_difference(capsys):
+    from finrft.cli import main
+    assert main(["bench", "warp", "--worlds", "1,2", "--steps", "5", "--json"]) == 0
+    figures = json.loads(capsys.readouterr().out)
+    assert figures["device"].startswith("cpu") and [r["worlds"] for r in figures["rows"]] == [1, 2]
+    assert all(r["warp_steps_per_s"] > 0 and r["native_steps_per_s"] > 0 for r in figures["rows"])
+    assert figures["max_relative_difference_laws"] < 1e-12      # the same float64 arithmetic as the plugin's
+    assert figures["max_relative_difference"] < 1e-5            # through MuJoCo Warp's float32 state
+
+
+def test_bench_warp_refuses_bad_worlds(capsys):
+    from finrft.cli import main
+    assert main(["bench", "warp", "--worlds", "16,x"]) == 2
+    assert "whole numbers of worlds" in capsys.readouterr().err

@@ -41,9 +41,15 @@ wp.config.log_level = wp.LOG_WARNING  # no line per module loaded
 wp.init()
 import mujoco_warp as mjw  # noqa: E402  (after wp.init)
 
+from mujoco_warp._src import derivative  # noqa: E402
+from mujoco_warp._src.forward import _advance as advance  # noqa: E402
+
 from . import kernels  # noqa: E402
 
 LAWS = {"li2013": kernels.LI2013, "rft3d": kernels.RFT3D}
+# The time-stepping methods, by finrft's names (`finrft.methods`): MuJoCo's step with the medium's force as it
+# is, and implicitfast with it linearised in velocity.
+METHODS = ("explicit", "implicit")
 # What `set_medium` takes per world, by law: the law's parameters (`finrft.attach`'s names), DRFT's and the
 # surface's height.
 SHARED = ("drft_lambda", "bulk_density", "surface_z")
@@ -64,7 +70,7 @@ class WarpWorlds:
     """
 
     def __init__(self, model: mujoco.MjModel, attached: Attached, worlds: int = 1, *, device: str | None = None,
-                 data: mujoco.MjData | None = None) -> None:
+                 data: mujoco.MjData | None = None, method: str = "explicit") -> None:
         if not isinstance(attached, Attached):
             raise SceneError(f"WarpWorlds: attached must be what finrft.attach returned, got "
                              f"{type(attached).__name__}")
@@ -78,10 +84,12 @@ class WarpWorlds:
         if attached.free_surface.kind != "flat" or not (g[0] == 0 and g[1] == 0 and g[2] <= 0):
             raise SceneError("WarpWorlds: runs the flat free surface under gravity along -z only (surface "
                              f"{attached.free_surface.kind!r}, gravity {tuple(float(x) for x in g)})")
+        if method not in METHODS:
+            raise SceneError(f"WarpWorlds: method must be one of {', '.join(METHODS)}, got {method!r}")
         if not (isinstance(worlds, int) and worlds >= 1):
             raise SceneError(f"WarpWorlds: worlds must be a whole number >= 1, got {worlds!r}")
         attached.check_compiled(model)
-        self.model, self.attached, self.worlds = model, attached, worlds
+        self.model, self.attached, self.worlds, self.method = model, attached, worlds, method
         self.device = wp.get_device(device)
         if data is None:
             data = mujoco.MjData(model)
@@ -99,6 +107,13 @@ class WarpWorlds:
             self._rotation = wp.zeros((worlds, self.nbody), dtype=wp.mat33d)
             self._twist = wp.zeros((worlds, self.nbody), dtype=wp.spatial_vectord)
             self._wrench = wp.zeros((worlds, self.nbody), dtype=wp.spatial_vectord)
+            if method == "implicit":
+                self._com = wp.zeros((worlds, self.nbody), dtype=wp.vec3d)
+                self._damping = wp.zeros((worlds, self.nbody), dtype=wp.spatial_matrixd)
+                self._smooth = wp.zeros((worlds, self.m.nC), dtype=float)
+                self._work = wp.zeros((worlds, model.nv, model.nv + 1), dtype=wp.float64)
+                self._qacc = wp.zeros((worlds, model.nv), dtype=float)
+                self._fullm = (self.m.M_fullm_i, self.m.M_fullm_j)
         self.m.callback = dataclasses.replace(self.m.callback, passive=self._passive)
 
     # --- set up ------------------------------------------------------------------------------------------------
@@ -215,11 +230,42 @@ class WarpWorlds:
                           self._origin, self._rotation, self._twist], outputs=[self._wrench])
 
     def step(self, steps: int = 1) -> None:
-        """Advance every world ``steps`` steps of the model's timestep with MuJoCo Warp's step (the model's
-        integrator: the medium's force enters as an explicit passive force)."""
+        """Advance every world ``steps`` steps of the model's timestep. ``method`` explicit: MuJoCo Warp's step of
+        the model's integrator, the medium's force an explicit passive force (light bodies need dt < 2 m v_reg /
+        F). implicit: the forward pass, then MuJoCo's implicitfast solve with each body's RFT damping, linearised
+        at the step's start, added to MuJoCo's own (`_implicit`)."""
         with wp.ScopedDevice(self.device):
             for _ in range(steps):
-                mjw.step(self.m, self.d)
+                if self.method == "explicit":
+                    mjw.step(self.m, self.d)
+                else:
+                    mjw.forward(self.m, self.d)
+                    self._implicit()
+
+    def _implicit(self) -> None:
+        """v' = v + dt (M - dt D - dt K)^-1 f: finrft's implicit method (implicitfast with the RFT force linearised
+        in velocity) on MuJoCo Warp. f is the forward pass's force (the medium's included), D MuJoCo Warp's
+        derivative of its smooth forces (dampers, actuators: its implicitfast's), K = sum over bodies J^T G J the
+        medium's, from every submerged element's dF/dv (central differences of the same law; the trailing
+        elements' secant as the native step takes it). Dense, one world per thread, in float64: robots have tens
+        of dofs. Free bodies go without MuJoCo Warp's gyroscopic term of implicitfast."""
+        m, d = self.m, self.d
+        wp.launch(kernels.tree_centres, dim=(self.worlds, self.nbody), inputs=[self._body, self._rootid,
+                  d.subtree_com], outputs=[self._com])
+        self._damping.zero_()
+        med = self._medium
+        rft = self._law == kernels.RFT3D
+        wp.launch(kernels.element_damping, dim=(self.worlds, self.nelement),
+                  inputs=[self._law, self._coef, wp.float64(self.attached.v_reg), self._element_body, self._centre,
+                          self._normal, self._area, self._scale, med["mu_surf"] if rft else self._zeros,
+                          med["drft_lambda"], med["rho_c"] if rft else med["bulk_density"], med["surface_z"],
+                          self._origin, self._rotation, self._twist, self._com], outputs=[self._damping])
+        derivative.deriv_smooth_vel(m, d, self._smooth)
+        wp.launch(kernels.implicit_solve, dim=self.worlds,
+                  inputs=[self.model.nv, self.nbody, self._body, m.body_isdofancestor, d.cdof, *self._fullm,
+                          m.M_elemid, self._smooth, wp.float64(self.model.opt.timestep), self._damping, d.efc.Ma,
+                          self._work], outputs=[self._qacc])
+        advance(m, d, self._qacc)
 
     def forward(self) -> None:
         """MuJoCo Warp's forward pass at the current state (applies the medium's force into qfrc_passive)."""

@@ -317,3 +317,134 @@ def apply_wrenches(nbody: int, body: wp.array(dtype=int), rootid: wp.array(dtype
         torque = wp.spatial_top(w) + wp.cross(origin[world, b] - wp.vec3d(subtree_com[world, rootid[i]]), force)
         total += wp.dot(wp.vec3d(wp.spatial_top(axis)), torque) + wp.dot(wp.vec3d(wp.spatial_bottom(axis)), force)
     qfrc[world, dof] = qfrc[world, dof] + float(total)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# The implicit step: each body's RFT damping, linearised at the step's start, taken into MuJoCo's implicit solve.
+
+DIFFERENCE = wp.constant(f64(1e-7))  # the central differences' step, a share of |v| + v_reg
+LEAST_STEP = wp.constant(f64(1e-12))  # m/s: the differences' step where both are 0
+
+
+@wp.func
+def element_slope(law: int, coef: wp.array(dtype=f64), scale: f64, mu_surf: f64, drft_lambda: f64, rho_c: f64,
+                  v_reg: f64, n: wp.vec3d, v: wp.vec3d, depth: f64, area: f64) -> wp.mat33d:
+    """d(element_force)/dv (row: the force's component): by central differences, every law alike; an element
+    trailing by less than the ramp's width takes the secant to where it leads by v_reg, as the native linearly
+    implicit step (finrft_surface_trailing_slope), so that a light body settling does not chatter."""
+    v_n = wp.dot(n, v)
+    if v_reg > ZERO and v_n > -v_reg and not (v_n > RAMP_FLOOR * v_reg):
+        gap = v_reg - v_n
+        ahead = element_force(law, coef, scale, mu_surf, drft_lambda, rho_c, v_reg, n, v + gap * n, depth, area)
+        return wp.outer(ahead, n) / gap
+    h = wp.max(DIFFERENCE * (wp.length(v) + v_reg), LEAST_STEP)
+    k = wp.mat33d()
+    for j in range(3):
+        e = wp.vec3d(ZERO, ZERO, ZERO)
+        e[j] = h
+        up = element_force(law, coef, scale, mu_surf, drft_lambda, rho_c, v_reg, n, v + e, depth, area)
+        down = element_force(law, coef, scale, mu_surf, drft_lambda, rho_c, v_reg, n, v - e, depth, area)
+        for i in range(3):
+            k[i, j] = (up[i] - down[i]) / (TWO * h)
+    return k
+
+
+@wp.kernel
+def element_damping(law: int, coef: wp.array(dtype=f64), v_reg: f64, element_body: wp.array(dtype=int),
+                    centre: wp.array(dtype=wp.vec3d), normal: wp.array(dtype=wp.vec3d), area: wp.array(dtype=f64),
+                    scale: wp.array(dtype=f64), mu_surf: wp.array(dtype=f64), drft_lambda: wp.array(dtype=f64),
+                    rho_c: wp.array(dtype=f64), surface_z: wp.array(dtype=f64), origin: wp.array2d(dtype=wp.vec3d),
+                    rotation: wp.array2d(dtype=wp.mat33d), twist: wp.array2d(dtype=wp.spatial_vectord),
+                    com: wp.array2d(dtype=wp.vec3d), damping: wp.array2d(dtype=wp.spatial_matrixd)):
+    """Each body's linearised damping G = sum_e S_e^T k_e S_e (6 x 6, zeroed before) in the motion coordinates of
+    MuJoCo's cdof (angular, linear; about the tree's centre of mass c): an element at r = p - c moves at
+    v = S u = linear - [r]x angular, so J^T dF/dv J of a dof pair is s_i^T G s_j."""
+    world, e = wp.tid()
+    b = element_body[e]
+    R = rotation[world, b]
+    o = origin[world, b]
+    c = centre[e]
+    depth = surface_z[world] - (o[2] + (R[2, 0] * c[0] + R[2, 1] * c[1] + R[2, 2] * c[2]))
+    if not (depth > ZERO):
+        return
+    arm = R * c
+    n = R * normal[e]
+    t = twist[world, b]
+    v = wp.cross(wp.spatial_top(t), arm) + wp.spatial_bottom(t)
+    k = element_slope(law, coef, scale[world], mu_surf[world], drft_lambda[world], rho_c[world], v_reg, n, v, depth,
+                      area[e])
+    r = o + arm - com[world, b]
+    X = wp.skew(r)
+    aa = -(X * k * X)
+    al = X * k
+    la = -(k * X)
+    g = wp.spatial_matrixd()
+    for i in range(3):
+        for j in range(3):
+            g[i, j] = aa[i, j]
+            g[i, j + 3] = al[i, j]
+            g[i + 3, j] = la[i, j]
+            g[i + 3, j + 3] = k[i, j]
+    wp.atomic_add(damping, world, b, g)
+
+
+@wp.kernel
+def tree_centres(body: wp.array(dtype=int), rootid: wp.array(dtype=int), subtree_com: wp.array2d(dtype=wp.vec3),
+                 com: wp.array2d(dtype=wp.vec3d)):
+    """The centre of mass of each attached body's tree, where MuJoCo's cdof takes its axes, in float64."""
+    world, b = wp.tid()
+    com[world, b] = wp.vec3d(subtree_com[world, rootid[body[b]]])
+
+
+@wp.kernel
+def implicit_solve(nv: int, nbody: int, body: wp.array(dtype=int), isdofancestor: wp.array2d(dtype=int),
+                   cdof: wp.array2d(dtype=wp.spatial_vector), fullm_i: wp.array(dtype=int),
+                   fullm_j: wp.array(dtype=int), elemid: wp.array2d(dtype=int), smooth: wp.array2d(dtype=float),
+                   timestep: f64, damping: wp.array2d(dtype=wp.spatial_matrixd), force: wp.array2d(dtype=float),
+                   work: wp.array3d(dtype=f64), qacc: wp.array2d(dtype=float)):
+    """qacc = (M - dt D - dt K)^-1 (M qacc of the forward pass), one world per thread, dense, in float64: M - dt D
+    MuJoCo Warp's own (``smooth``, its derivative of the smooth forces, in M's sparse layout), K = J^T G J the
+    bodies' RFT damping (`element_damping`), whole (not only its symmetric part), by Gaussian elimination with
+    partial pivoting in ``work`` (nv x nv + 1)."""
+    world = wp.tid()
+    for i in range(nv):
+        for j in range(nv + 1):
+            work[world, i, j] = ZERO
+        work[world, i, nv] = f64(force[world, i])
+    for k in range(fullm_i.shape[0]):
+        i = fullm_i[k]
+        j = fullm_j[k]
+        madr = elemid[i, j]
+        if madr >= 0:
+            work[world, i, j] = f64(smooth[world, madr])
+            work[world, j, i] = f64(smooth[world, madr])
+    for i in range(nv):
+        si = wp.spatial_vectord(cdof[world, i])
+        for j in range(nv):
+            sj = wp.spatial_vectord(cdof[world, j])
+            total = ZERO
+            for b in range(nbody):
+                if isdofancestor[body[b], i] != 0 and isdofancestor[body[b], j] != 0:
+                    total += wp.dot(si, damping[world, b] * sj)
+            work[world, i, j] = work[world, i, j] - timestep * total
+    for col in range(nv):
+        pivot = col
+        for i in range(col + 1, nv):
+            if wp.abs(work[world, i, col]) > wp.abs(work[world, pivot, col]):
+                pivot = i
+        if pivot != col:
+            for j in range(nv + 1):
+                swap = work[world, col, j]
+                work[world, col, j] = work[world, pivot, j]
+                work[world, pivot, j] = swap
+        for i in range(col + 1, nv):
+            factor = work[world, i, col] / work[world, col, col]
+            for j in range(col, nv + 1):
+                work[world, i, j] = work[world, i, j] - factor * work[world, col, j]
+    for back in range(nv):
+        i = nv - 1 - back
+        total = work[world, i, nv]
+        for j in range(i + 1, nv):
+            total -= work[world, i, j] * work[world, j, nv]
+        work[world, i, nv] = total / work[world, i, i]
+        qacc[world, i] = float(work[world, i, nv])

@@ -48,8 +48,10 @@ from . import kernels  # noqa: E402
 
 LAWS = {"li2013": kernels.LI2013, "rft3d": kernels.RFT3D}
 # The time-stepping methods, by finrft's names (`finrft.methods`): MuJoCo's step with the medium's force as it
-# is, and implicitfast with it linearised in velocity.
-METHODS = ("explicit", "implicit")
+# is, implicitfast with it linearised in velocity, and backward Euler in it.
+METHODS = ("explicit", "implicit", "newton")
+NEWTON_ROUNDS = 50  # the most evaluations of the medium's force a newton step makes (finrft.integrate's iterations)
+CHECK_EVERY = 4     # rounds between looks at whether every world's Newton iteration has converged
 # What `set_medium` takes per world, by law: the law's parameters (`finrft.attach`'s names), DRFT's and the
 # surface's height.
 SHARED = ("drft_lambda", "bulk_density", "surface_z")
@@ -107,13 +109,21 @@ class WarpWorlds:
             self._rotation = wp.zeros((worlds, self.nbody), dtype=wp.mat33d)
             self._twist = wp.zeros((worlds, self.nbody), dtype=wp.spatial_vectord)
             self._wrench = wp.zeros((worlds, self.nbody), dtype=wp.spatial_vectord)
-            if method == "implicit":
+            if method != "explicit":
                 self._com = wp.zeros((worlds, self.nbody), dtype=wp.vec3d)
                 self._damping = wp.zeros((worlds, self.nbody), dtype=wp.spatial_matrixd)
                 self._smooth = wp.zeros((worlds, self.m.nC), dtype=float)
                 self._work = wp.zeros((worlds, model.nv, model.nv + 1), dtype=wp.float64)
                 self._qacc = wp.zeros((worlds, model.nv), dtype=float)
                 self._fullm = (self.m.M_fullm_i, self.m.M_fullm_j)
+            if method == "newton":
+                nv = model.nv
+                self._gen = wp.zeros((worlds, nv), dtype=wp.float64)
+                self._rest, self._v0, self._dv, self._accepted, self._direction = (
+                    wp.zeros((worlds, nv), dtype=wp.float64) for _ in range(5))
+                self._search = wp.zeros((worlds, 4), dtype=wp.float64)
+                self._trial = wp.zeros((worlds, self.nbody), dtype=wp.spatial_vectord)
+                self._trial_wrench = wp.zeros((worlds, self.nbody), dtype=wp.spatial_vectord)
         self.m.callback = dataclasses.replace(self.m.callback, passive=self._passive)
 
     # --- set up ------------------------------------------------------------------------------------------------
@@ -220,27 +230,36 @@ class WarpWorlds:
                           self._origin, self._wrench], outputs=[d.qfrc_passive])
 
     def _sum_wrenches(self) -> None:
-        self._wrench.zero_()
+        self._per_element(kernels.element_wrenches, self._twist, self._wrench)
+
+    def _per_element(self, kernel: Any, twist: Any, out: Any, *more: Any) -> None:
+        """Launch a kernel over worlds x elements at the forward pass's positions and the twists given, the
+        medium's parameters of each world, into ``out`` (zeroed first)."""
+        out.zero_()
         med = self._medium
         rft = self._law == kernels.RFT3D
-        wp.launch(kernels.element_wrenches, dim=(self.worlds, self.nelement),
+        wp.launch(kernel, dim=(self.worlds, self.nelement),
                   inputs=[self._law, self._coef, wp.float64(self.attached.v_reg), self._element_body, self._centre,
                           self._normal, self._area, self._scale, med["mu_surf"] if rft else self._zeros,
                           med["drft_lambda"], med["rho_c"] if rft else med["bulk_density"], med["surface_z"],
-                          self._origin, self._rotation, self._twist], outputs=[self._wrench])
+                          self._origin, self._rotation, twist, *more], outputs=[out])
 
     def step(self, steps: int = 1) -> None:
         """Advance every world ``steps`` steps of the model's timestep. ``method`` explicit: MuJoCo Warp's step of
         the model's integrator, the medium's force an explicit passive force (light bodies need dt < 2 m v_reg /
         F). implicit: the forward pass, then MuJoCo's implicitfast solve with each body's RFT damping, linearised
-        at the step's start, added to MuJoCo's own (`_implicit`)."""
+        at the step's start, added to MuJoCo's own (`_implicit`). newton: backward Euler in the medium's force,
+        solved by Newton's method (`_newton`): stable on light links at 1 ms."""
         with wp.ScopedDevice(self.device):
             for _ in range(steps):
                 if self.method == "explicit":
                     mjw.step(self.m, self.d)
                 else:
                     mjw.forward(self.m, self.d)
-                    self._implicit()
+                    if self.method == "implicit":
+                        self._implicit()
+                    else:
+                        self._newton()
 
     def _implicit(self) -> None:
         """v' = v + dt (M - dt D - dt K)^-1 f: finrft's implicit method (implicitfast with the RFT force linearised
@@ -252,19 +271,48 @@ class WarpWorlds:
         m, d = self.m, self.d
         wp.launch(kernels.tree_centres, dim=(self.worlds, self.nbody), inputs=[self._body, self._rootid,
                   d.subtree_com], outputs=[self._com])
-        self._damping.zero_()
-        med = self._medium
-        rft = self._law == kernels.RFT3D
-        wp.launch(kernels.element_damping, dim=(self.worlds, self.nelement),
-                  inputs=[self._law, self._coef, wp.float64(self.attached.v_reg), self._element_body, self._centre,
-                          self._normal, self._area, self._scale, med["mu_surf"] if rft else self._zeros,
-                          med["drft_lambda"], med["rho_c"] if rft else med["bulk_density"], med["surface_z"],
-                          self._origin, self._rotation, self._twist, self._com], outputs=[self._damping])
+        self._per_element(kernels.element_damping, self._twist, self._damping, self._com)
         derivative.deriv_smooth_vel(m, d, self._smooth)
         wp.launch(kernels.implicit_solve, dim=self.worlds,
                   inputs=[self.model.nv, self.nbody, self._body, m.body_isdofancestor, d.cdof, *self._fullm,
                           m.M_elemid, self._smooth, wp.float64(self.model.opt.timestep), self._damping, d.efc.Ma,
                           self._work], outputs=[self._qacc])
+        advance(m, d, self._qacc)
+
+    def _newton(self) -> None:
+        """finrft's newton method on MuJoCo Warp: the velocity change dv solves (M - dt D) dv = dt (f - F(v) +
+        F(v + dv)) at the forward pass's positions (F the medium's generalized force, f every force of the forward
+        pass), by Newton's method per world with the Jacobian M - dt D - dt K(v + dv) and a backtracking line
+        search on the residual's norm (halving, at most 6 times), to the native step's root: a residual of at
+        most 1e-3 of dt times the step's largest force with a change below 1e-7 (1 + |qvel|) (the native 1e-10 is
+        below the rounding of MuJoCo Warp's float32 qvel), or a residual a million times smaller; else, after
+        NEWTON_ROUNDS evaluations, the last accepted dv (where the native step would halve itself). Every world
+        iterates in the same launches, the converged ones idle."""
+        m, d, nv = self.m, self.d, self.model.nv
+        dt = wp.float64(self.model.opt.timestep)
+        wp.launch(kernels.tree_centres, dim=(self.worlds, self.nbody), inputs=[self._body, self._rootid,
+                  d.subtree_com], outputs=[self._com])
+        moving = [nv, self._body, m.body_isdofancestor, d.cdof, self._origin, self._com]
+        wp.launch(kernels.generalized_forces, dim=(self.worlds, nv), inputs=[self.nbody, *moving[1:], self._wrench],
+                  outputs=[self._gen])
+        wp.launch(kernels.newton_start, dim=(self.worlds, nv), inputs=[self._gen, d.efc.Ma, d.qvel],
+                  outputs=[self._rest, self._v0, self._dv, self._search])
+        derivative.deriv_smooth_vel(m, d, self._smooth)
+        for round in range(NEWTON_ROUNDS):
+            wp.launch(kernels.trial_twists, dim=(self.worlds, self.nbody), inputs=[*moving, self._v0, self._dv],
+                      outputs=[self._trial])
+            self._per_element(kernels.element_wrenches, self._trial, self._trial_wrench)
+            self._per_element(kernels.element_damping, self._trial, self._damping, self._com)
+            wp.launch(kernels.generalized_forces, dim=(self.worlds, nv),
+                      inputs=[self.nbody, *moving[1:], self._trial_wrench], outputs=[self._gen])
+            wp.launch(kernels.newton_update, dim=self.worlds,
+                      inputs=[nv, self.nbody, self._body, m.body_isdofancestor, d.cdof, *self._fullm, m.M_elemid,
+                              self._smooth, dt, self._damping, self._rest, self._gen, self._v0, self._work],
+                      outputs=[self._dv, self._accepted, self._direction, self._search])
+            if round % CHECK_EVERY == CHECK_EVERY - 1 and self._search.numpy()[:, 2].all():
+                break
+        wp.launch(kernels.newton_finish, dim=(self.worlds, nv), inputs=[dt, self._dv, self._accepted, self._search],
+                  outputs=[self._qacc])
         advance(m, d, self._qacc)
 
     def forward(self) -> None:

@@ -396,21 +396,59 @@ def tree_centres(body: wp.array(dtype=int), rootid: wp.array(dtype=int), subtree
     com[world, b] = wp.vec3d(subtree_com[world, rootid[body[b]]])
 
 
+# ---------------------------------------------------------------------------------------------------------------
+# The newton step: backward Euler in the medium's force, (M - dt D) dv = dt (f - F(v) + F(v + dv)), solved per world
+# by Newton's method with a backtracking line search on the residual, as finrft_implicit_step's newton.
+
 @wp.kernel
-def implicit_solve(nv: int, nbody: int, body: wp.array(dtype=int), isdofancestor: wp.array2d(dtype=int),
-                   cdof: wp.array2d(dtype=wp.spatial_vector), fullm_i: wp.array(dtype=int),
-                   fullm_j: wp.array(dtype=int), elemid: wp.array2d(dtype=int), smooth: wp.array2d(dtype=float),
-                   timestep: f64, damping: wp.array2d(dtype=wp.spatial_matrixd), force: wp.array2d(dtype=float),
-                   work: wp.array3d(dtype=f64), qacc: wp.array2d(dtype=float)):
-    """qacc = (M - dt D - dt K)^-1 (M qacc of the forward pass), one world per thread, dense, in float64: M - dt D
-    MuJoCo Warp's own (``smooth``, its derivative of the smooth forces, in M's sparse layout), K = J^T G J the
-    bodies' RFT damping (`element_damping`), whole (not only its symmetric part), by Gaussian elimination with
-    partial pivoting in ``work`` (nv x nv + 1)."""
-    world = wp.tid()
+def trial_twists(nv: int, body: wp.array(dtype=int), isdofancestor: wp.array2d(dtype=int),
+                 cdof: wp.array2d(dtype=wp.spatial_vector), origin: wp.array2d(dtype=wp.vec3d),
+                 com: wp.array2d(dtype=wp.vec3d), qvel: wp.array2d(dtype=f64), dv: wp.array2d(dtype=f64),
+                 twist: wp.array2d(dtype=wp.spatial_vectord)):
+    """Each attached body's twist (angular velocity, velocity of its origin) at the velocities qvel + dv and the
+    positions of the forward pass: sum over the dofs that move it of cdof times the dof's velocity."""
+    world, b = wp.tid()
+    angular = wp.vec3d(ZERO, ZERO, ZERO)
+    linear = wp.vec3d(ZERO, ZERO, ZERO)
     for i in range(nv):
-        for j in range(nv + 1):
+        if isdofancestor[body[b], i] != 0:
+            axis = wp.spatial_vectord(cdof[world, i])
+            u = qvel[world, i] + dv[world, i]
+            angular += u * wp.spatial_top(axis)
+            linear += u * wp.spatial_bottom(axis)
+    linear += wp.cross(angular, origin[world, b] - com[world, b])
+    twist[world, b] = wp.spatial_vectord(angular[0], angular[1], angular[2], linear[0], linear[1], linear[2])
+
+
+@wp.kernel
+def generalized_forces(nbody: int, body: wp.array(dtype=int), isdofancestor: wp.array2d(dtype=int),
+                       cdof: wp.array2d(dtype=wp.spatial_vector), origin: wp.array2d(dtype=wp.vec3d),
+                       com: wp.array2d(dtype=wp.vec3d), wrench: wp.array2d(dtype=wp.spatial_vectord),
+                       out: wp.array2d(dtype=f64)):
+    """J^T of every attached body's wrench, per dof, in float64 (`apply_wrenches` without the narrowing)."""
+    world, dof = wp.tid()
+    total = ZERO
+    axis = wp.spatial_vectord(cdof[world, dof])
+    for b in range(nbody):
+        if isdofancestor[body[b], dof] == 0:
+            continue
+        w = wrench[world, b]
+        force = wp.spatial_bottom(w)
+        torque = wp.spatial_top(w) + wp.cross(origin[world, b] - com[world, b], force)
+        total += wp.dot(wp.spatial_top(axis), torque) + wp.dot(wp.spatial_bottom(axis), force)
+    out[world, dof] = total
+
+
+@wp.func
+def assemble(world: int, nv: int, nbody: int, body: wp.array(dtype=int), isdofancestor: wp.array2d(dtype=int),
+             cdof: wp.array2d(dtype=wp.spatial_vector), fullm_i: wp.array(dtype=int), fullm_j: wp.array(dtype=int),
+             elemid: wp.array2d(dtype=int), smooth: wp.array2d(dtype=float), timestep: f64,
+             damping: wp.array2d(dtype=wp.spatial_matrixd), work: wp.array3d(dtype=f64)):
+    """work[:, :nv] = M - dt D - dt J^T G J: MuJoCo Warp's M - dt D (``smooth``, M's sparse layout) and the
+    bodies' RFT damping."""
+    for i in range(nv):
+        for j in range(nv):
             work[world, i, j] = ZERO
-        work[world, i, nv] = f64(force[world, i])
     for k in range(fullm_i.shape[0]):
         i = fullm_i[k]
         j = fullm_j[k]
@@ -427,6 +465,11 @@ def implicit_solve(nv: int, nbody: int, body: wp.array(dtype=int), isdofancestor
                 if isdofancestor[body[b], i] != 0 and isdofancestor[body[b], j] != 0:
                     total += wp.dot(si, damping[world, b] * sj)
             work[world, i, j] = work[world, i, j] - timestep * total
+
+
+@wp.func
+def solve_in_place(world: int, nv: int, work: wp.array3d(dtype=f64)):
+    """Gaussian elimination with partial pivoting of work[:, :nv] x = work[:, nv], x into work[:, nv]."""
     for col in range(nv):
         pivot = col
         for i in range(col + 1, nv):
@@ -447,4 +490,121 @@ def implicit_solve(nv: int, nbody: int, body: wp.array(dtype=int), isdofancestor
         for j in range(i + 1, nv):
             total -= work[world, i, j] * work[world, j, nv]
         work[world, i, nv] = total / work[world, i, i]
+
+
+@wp.kernel
+def implicit_solve(nv: int, nbody: int, body: wp.array(dtype=int), isdofancestor: wp.array2d(dtype=int),
+                   cdof: wp.array2d(dtype=wp.spatial_vector), fullm_i: wp.array(dtype=int),
+                   fullm_j: wp.array(dtype=int), elemid: wp.array2d(dtype=int), smooth: wp.array2d(dtype=float),
+                   timestep: f64, damping: wp.array2d(dtype=wp.spatial_matrixd), force: wp.array2d(dtype=float),
+                   work: wp.array3d(dtype=f64), qacc: wp.array2d(dtype=float)):
+    """qacc = (M - dt D - dt K)^-1 (M qacc of the forward pass), one world per thread, dense, in float64, K = J^T G
+    J the bodies' RFT damping (`element_damping`), whole (not only its symmetric part)."""
+    world = wp.tid()
+    assemble(world, nv, nbody, body, isdofancestor, cdof, fullm_i, fullm_j, elemid, smooth, timestep, damping, work)
+    for i in range(nv):
+        work[world, i, nv] = f64(force[world, i])
+    solve_in_place(world, nv, work)
+    for i in range(nv):
         qacc[world, i] = float(work[world, i, nv])
+
+
+@wp.kernel
+def newton_start(medium: wp.array2d(dtype=f64), force: wp.array2d(dtype=float), qvel_in: wp.array2d(dtype=float),
+                 rest: wp.array2d(dtype=f64), qvel: wp.array2d(dtype=f64), dv: wp.array2d(dtype=f64),
+                 search: wp.array2d(dtype=f64)):
+    """rest = f - J^T F(v) (the forward pass's force without the medium's), v in float64, dv = 0, a fresh search."""
+    world, i = wp.tid()
+    rest[world, i] = f64(force[world, i]) - medium[world, i]
+    qvel[world, i] = f64(qvel_in[world, i])
+    dv[world, i] = ZERO
+    if i < 4:
+        search[world, i] = ZERO
+
+
+@wp.kernel
+def newton_finish(timestep: f64, dv: wp.array2d(dtype=f64), accepted: wp.array2d(dtype=f64),
+                  search: wp.array2d(dtype=f64), qacc: wp.array2d(dtype=float)):
+    """qacc = dv / dt: the converged dv, else the last accepted one."""
+    world, i = wp.tid()
+    change = accepted[world, i]
+    if search[world, 2] > ZERO:
+        change = dv[world, i]
+    qacc[world, i] = float(change / timestep)
+
+
+# |change| <= it (1 + |qvel|): finrft.integrate.NEWTON_TOLERANCE is 1e-10, but MuJoCo Warp keeps qvel in float32,
+# whose rounding (6e-8) no smaller change survives
+NEWTON_TOLERANCE = wp.constant(f64(1e-7))
+NEWTON_RESIDUAL = wp.constant(f64(1e-3))  # as NEWTON_RESIDUAL in plugins/steppers.c
+TINY = wp.constant(f64(1e-6))
+LEAST_SHRINK = wp.constant(f64(1.0 / 64.0))  # a line search shorter than this takes the step anyway
+
+
+@wp.kernel
+def newton_update(nv: int, nbody: int, body: wp.array(dtype=int), isdofancestor: wp.array2d(dtype=int),
+                  cdof: wp.array2d(dtype=wp.spatial_vector), fullm_i: wp.array(dtype=int),
+                  fullm_j: wp.array(dtype=int), elemid: wp.array2d(dtype=int), smooth: wp.array2d(dtype=float),
+                  timestep: f64, damping: wp.array2d(dtype=wp.spatial_matrixd), rest: wp.array2d(dtype=f64),
+                  medium: wp.array2d(dtype=f64), qvel: wp.array2d(dtype=f64), work: wp.array3d(dtype=f64),
+                  dv: wp.array2d(dtype=f64), accepted: wp.array2d(dtype=f64), direction: wp.array2d(dtype=f64),
+                  search: wp.array2d(dtype=f64)):
+    """One round of Newton's method per world, at the candidate dv whose medium force J^T F(v + dv) is ``medium``
+    and damping ``damping``: its residual r = (M - dt D) dv - dt (rest + medium), rest = f - F(v), against the last
+    accepted one's; accepted (or the first, or a search cut below LEAST_SHRINK), the next candidate is the Newton
+    step dv - (M - dt D - dt K)^-1 r; else half the last step. search[w] = (|r| accepted, step share, done, rounds
+    since accepted)."""
+    world = wp.tid()
+    if search[world, 2] > ZERO:
+        return
+    norm = ZERO
+    largest = ZERO
+    scale = ZERO
+    for i in range(nv):
+        total = ZERO
+        for k in range(fullm_i.shape[0]):
+            a = fullm_i[k]
+            c = fullm_j[k]
+            madr = elemid[a, c]
+            if madr >= 0:
+                if a == i:
+                    total += f64(smooth[world, madr]) * dv[world, c]
+                if c == i and a != c:
+                    total += f64(smooth[world, madr]) * dv[world, a]
+        r = total - timestep * (rest[world, i] + medium[world, i])
+        work[world, i, nv] = -r
+        norm += r * r
+        largest = wp.max(largest, wp.abs(r))
+        scale = wp.max(scale, wp.max(wp.abs(rest[world, i]), wp.abs(medium[world, i])))
+    norm = wp.sqrt(norm)
+    # the root, to the native step's tests: a residual of at most NEWTON_RESIDUAL of dt times the step's largest
+    # force with a change below the tolerance, or one a million times smaller whatever the change (a kink of a
+    # law, an element switching on, lets the change creep without end)
+    small = largest <= NEWTON_RESIDUAL * timestep * scale
+    if largest <= NEWTON_RESIDUAL * TINY * timestep * scale:
+        search[world, 2] = ONE
+        return
+    share = search[world, 1]
+    first = search[world, 3] == ZERO
+    if not first and not (norm < search[world, 0]) and share > LEAST_SHRINK:
+        share = share / TWO
+        search[world, 1] = share
+        for i in range(nv):
+            dv[world, i] = accepted[world, i] + share * direction[world, i]
+        return
+    search[world, 0] = norm
+    search[world, 3] = ONE
+    for i in range(nv):
+        accepted[world, i] = dv[world, i]
+    assemble(world, nv, nbody, body, isdofancestor, cdof, fullm_i, fullm_j, elemid, smooth, timestep, damping, work)
+    solve_in_place(world, nv, work)
+    change = ZERO
+    speed = ZERO
+    for i in range(nv):
+        direction[world, i] = work[world, i, nv]
+        dv[world, i] = accepted[world, i] + work[world, i, nv]
+        change = wp.max(change, wp.abs(work[world, i, nv]))
+        speed = wp.max(speed, wp.abs(qvel[world, i] + dv[world, i]))
+    search[world, 1] = ONE
+    if small and change <= NEWTON_TOLERANCE * (ONE + speed):
+        search[world, 2] = ONE

@@ -50,7 +50,9 @@ LAWS = {"li2013": kernels.LI2013, "rft3d": kernels.RFT3D}
 # The time-stepping methods, by finrft's names (`finrft.methods`): MuJoCo's step with the medium's force as it
 # is, implicitfast with it linearised in velocity, and backward Euler in it.
 METHODS = ("explicit", "implicit", "newton")
-NEWTON_ROUNDS = 50  # the most evaluations of the medium's force a newton step makes (finrft.integrate's iterations)
+# The most evaluations of the medium's force a newton step makes: finrft.integrate's 50 iterations, each with a
+# few of its line search's
+NEWTON_ROUNDS = 200
 CHECK_EVERY = 4     # rounds between looks at whether every world's Newton iteration has converged
 # What `set_medium` takes per world, by law: the law's parameters (`finrft.attach`'s names), DRFT's and the
 # surface's height.
@@ -271,7 +273,7 @@ class WarpWorlds:
         m, d = self.m, self.d
         wp.launch(kernels.tree_centres, dim=(self.worlds, self.nbody), inputs=[self._body, self._rootid,
                   d.subtree_com], outputs=[self._com])
-        self._per_element(kernels.element_damping, self._twist, self._damping, self._com)
+        self._per_element(kernels.element_damping, self._twist, self._damping, self._com, 1)
         derivative.deriv_smooth_vel(m, d, self._smooth)
         wp.launch(kernels.implicit_solve, dim=self.worlds,
                   inputs=[self.model.nv, self.nbody, self._body, m.body_isdofancestor, d.cdof, *self._fullm,
@@ -283,7 +285,7 @@ class WarpWorlds:
         """finrft's newton method on MuJoCo Warp: the velocity change dv solves (M - dt D) dv = dt (f - F(v) +
         F(v + dv)) at the forward pass's positions (F the medium's generalized force, f every force of the forward
         pass), by Newton's method per world with the Jacobian M - dt D - dt K(v + dv) and a backtracking line
-        search on the residual's norm (halving, at most 6 times), to the native step's root: a residual of at
+        search on the residual's norm (halving, down to 1e-6 of the step), to the native step's root: a residual of at
         most 1e-3 of dt times the step's largest force with a change below 1e-7 (1 + |qvel|) (the native 1e-10 is
         below the rounding of MuJoCo Warp's float32 qvel), or a residual a million times smaller; else, after
         NEWTON_ROUNDS evaluations, the last accepted dv (where the native step would halve itself). Every world
@@ -302,7 +304,7 @@ class WarpWorlds:
             wp.launch(kernels.trial_twists, dim=(self.worlds, self.nbody), inputs=[*moving, self._v0, self._dv],
                       outputs=[self._trial])
             self._per_element(kernels.element_wrenches, self._trial, self._trial_wrench)
-            self._per_element(kernels.element_damping, self._trial, self._damping, self._com)
+            self._per_element(kernels.element_damping, self._trial, self._damping, self._com, 0)
             wp.launch(kernels.generalized_forces, dim=(self.worlds, nv),
                       inputs=[self.nbody, *moving[1:], self._trial_wrench], outputs=[self._gen])
             wp.launch(kernels.newton_update, dim=self.worlds,
@@ -363,9 +365,9 @@ def body_state(model: mujoco.MjModel, data: mujoco.MjData, bodies: Sequence[str]
 
 
 def scene_worlds(scene: Any, worlds: int = 1, *, device: str | None = None,
-                 overrides: Mapping[str, Any] | None = None) -> WarpWorlds:
+                 overrides: Mapping[str, Any] | None = None, method: str = "explicit") -> WarpWorlds:
     """`WarpWorlds` of a robot scene (a `finrft.scene.UserScene`, or the path of its TOML file): its model with its
-    medium attached (backend warp), at its keyframe if it names one."""
+    medium attached (backend warp), at its keyframe if it names one, stepped by ``method``."""
     from ..experiments.attached_model import build_attached, scene_spec
     from ..scene import UserScene, load_scene
     if not isinstance(scene, UserScene):
@@ -376,4 +378,4 @@ def scene_worlds(scene: Any, worlds: int = 1, *, device: str | None = None,
     data = mujoco.MjData(built.model)
     if scene.model.keyframe:
         mujoco.mj_resetDataKeyframe(built.model, data, built.model.key(scene.model.keyframe).id)
-    return WarpWorlds(built.model, built.attached, worlds, device=device, data=data)
+    return WarpWorlds(built.model, built.attached, worlds, device=device, data=data, method=method)

@@ -328,12 +328,13 @@ LEAST_STEP = wp.constant(f64(1e-12))  # m/s: the differences' step where both ar
 
 @wp.func
 def element_slope(law: int, coef: wp.array(dtype=f64), scale: f64, mu_surf: f64, drft_lambda: f64, rho_c: f64,
-                  v_reg: f64, n: wp.vec3d, v: wp.vec3d, depth: f64, area: f64) -> wp.mat33d:
-    """d(element_force)/dv (row: the force's component): by central differences, every law alike; an element
-    trailing by less than the ramp's width takes the secant to where it leads by v_reg, as the native linearly
-    implicit step (finrft_surface_trailing_slope), so that a light body settling does not chatter."""
+                  v_reg: f64, n: wp.vec3d, v: wp.vec3d, depth: f64, area: f64, trailing: int) -> wp.mat33d:
+    """d(element_force)/dv (row: the force's component): by central differences, every law alike. With
+    ``trailing``, an element trailing by less than the ramp's width takes the secant to where it leads by v_reg,
+    as the native linearly implicit step (finrft_surface_trailing_slope), so that a light body settling does not
+    chatter; Newton's method takes the slope itself (0 there), as the native newton does."""
     v_n = wp.dot(n, v)
-    if v_reg > ZERO and v_n > -v_reg and not (v_n > RAMP_FLOOR * v_reg):
+    if trailing != 0 and v_reg > ZERO and v_n > -v_reg and not (v_n > RAMP_FLOOR * v_reg):
         gap = v_reg - v_n
         ahead = element_force(law, coef, scale, mu_surf, drft_lambda, rho_c, v_reg, n, v + gap * n, depth, area)
         return wp.outer(ahead, n) / gap
@@ -355,7 +356,7 @@ def element_damping(law: int, coef: wp.array(dtype=f64), v_reg: f64, element_bod
                     scale: wp.array(dtype=f64), mu_surf: wp.array(dtype=f64), drft_lambda: wp.array(dtype=f64),
                     rho_c: wp.array(dtype=f64), surface_z: wp.array(dtype=f64), origin: wp.array2d(dtype=wp.vec3d),
                     rotation: wp.array2d(dtype=wp.mat33d), twist: wp.array2d(dtype=wp.spatial_vectord),
-                    com: wp.array2d(dtype=wp.vec3d), damping: wp.array2d(dtype=wp.spatial_matrixd)):
+                    com: wp.array2d(dtype=wp.vec3d), trailing: int, damping: wp.array2d(dtype=wp.spatial_matrixd)):
     """Each body's linearised damping G = sum_e S_e^T k_e S_e (6 x 6, zeroed before) in the motion coordinates of
     MuJoCo's cdof (angular, linear; about the tree's centre of mass c): an element at r = p - c moves at
     v = S u = linear - [r]x angular, so J^T dF/dv J of a dof pair is s_i^T G s_j."""
@@ -372,7 +373,7 @@ def element_damping(law: int, coef: wp.array(dtype=f64), v_reg: f64, element_bod
     t = twist[world, b]
     v = wp.cross(wp.spatial_top(t), arm) + wp.spatial_bottom(t)
     k = element_slope(law, coef, scale[world], mu_surf[world], drft_lambda[world], rho_c[world], v_reg, n, v, depth,
-                      area[e])
+                      area[e], trailing)
     r = o + arm - com[world, b]
     X = wp.skew(r)
     aa = -(X * k * X)
@@ -538,7 +539,8 @@ def newton_finish(timestep: f64, dv: wp.array2d(dtype=f64), accepted: wp.array2d
 NEWTON_TOLERANCE = wp.constant(f64(1e-7))
 NEWTON_RESIDUAL = wp.constant(f64(1e-3))  # as NEWTON_RESIDUAL in plugins/steppers.c
 TINY = wp.constant(f64(1e-6))
-LEAST_SHRINK = wp.constant(f64(1.0 / 64.0))  # a line search shorter than this takes the step anyway
+LEAST_SHRINK = wp.constant(f64(1e-6))  # a line search shorter than this takes the step anyway (as the native)
+DESCENT = wp.constant(f64(1e-4))  # the share of the step's full decrease a search asks (Armijo's, as the native)
 
 
 @wp.kernel
@@ -586,7 +588,7 @@ def newton_update(nv: int, nbody: int, body: wp.array(dtype=int), isdofancestor:
         return
     share = search[world, 1]
     first = search[world, 3] == ZERO
-    if not first and not (norm < search[world, 0]) and share > LEAST_SHRINK:
+    if not first and not (norm <= (ONE - DESCENT * share) * search[world, 0]) and share > LEAST_SHRINK:
         share = share / TWO
         search[world, 1] = share
         for i in range(nv):

@@ -78,7 +78,8 @@ def bench(robot: str = "sand_swimmer", worlds: Sequence[int] = WORLDS, steps: in
                            f"{platform.python_implementation()} {platform.python_version()}",
                            "mujoco": mujoco.__version__, "warp": wp.__version__, "dt": m.opt.timestep,
                            "integrator": mujoco.mjtIntegrator(m.opt.integrator).name.removeprefix("mjINT_").lower(),
-                           "native_threads": threads, "elements": int(sum(len(s.area) for s in native.attached.surfaces)),
+                           "native_threads": threads,
+                           "elements": int(sum(len(s.area) for s in native.attached.surfaces)),
                            "rows": []}
     log(f"{robot}: {out['elements']} elements, dt {m.opt.timestep:g} s, Warp on {out['device']}, native rollout "
         f"on {threads} threads")

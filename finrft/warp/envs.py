@@ -13,7 +13,7 @@ import mujoco
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 
-from ..envs import FORWARD, OBSERVATIONS, Reward, World, _world, reward_function
+from ..envs import FORWARD, OBSERVATIONS, Reward, _world, reward_function
 from ..errors import SceneError
 from ..scene import UserScene
 from . import METHODS, WarpWorlds

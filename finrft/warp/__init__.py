@@ -287,9 +287,9 @@ class WarpWorlds:
         pass), by Newton's method per world with the Jacobian M - dt D - dt K(v + dv) and a backtracking line
         search on the residual's norm (halving, down to 1e-6 of the step), to the native step's root: a residual of at
         most 1e-3 of dt times the step's largest force with a change below 1e-7 (1 + |qvel|) (the native 1e-10 is
-        below the rounding of MuJoCo Warp's float32 qvel), or a residual a million times smaller; else, after
-        NEWTON_ROUNDS evaluations, the last accepted dv (where the native step would halve itself). Every world
-        iterates in the same launches, the converged ones idle."""
+        below the rounding of MuJoCo Warp's float32 qvel), or a residual a million times smaller; else, when a
+        search finds no descent or after NEWTON_ROUNDS evaluations, the last accepted dv (where the native step
+        would halve itself). Every world iterates in the same launches, the finished ones idle."""
         m, d, nv = self.m, self.d, self.model.nv
         dt = wp.float64(self.model.opt.timestep)
         wp.launch(kernels.tree_centres, dim=(self.worlds, self.nbody), inputs=[self._body, self._rootid,
@@ -311,7 +311,7 @@ class WarpWorlds:
                       inputs=[nv, self.nbody, self._body, m.body_isdofancestor, d.cdof, *self._fullm, m.M_elemid,
                               self._smooth, dt, self._damping, self._rest, self._gen, self._v0, self._work],
                       outputs=[self._dv, self._accepted, self._direction, self._search])
-            if round % CHECK_EVERY == CHECK_EVERY - 1 and self._search.numpy()[:, 2].all():
+            if round % CHECK_EVERY == CHECK_EVERY - 1 and (self._search.numpy()[:, 2] > 0).all():
                 break
         wp.launch(kernels.newton_finish, dim=(self.worlds, nv), inputs=[dt, self._dv, self._accepted, self._search],
                   outputs=[self._qacc])

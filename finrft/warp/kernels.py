@@ -529,7 +529,7 @@ def newton_finish(timestep: f64, dv: wp.array2d(dtype=f64), accepted: wp.array2d
     """qacc = dv / dt: the converged dv, else the last accepted one."""
     world, i = wp.tid()
     change = accepted[world, i]
-    if search[world, 2] > ZERO:
+    if search[world, 2] == ONE:
         change = dv[world, i]
     qacc[world, i] = float(change / timestep)
 
@@ -539,7 +539,7 @@ def newton_finish(timestep: f64, dv: wp.array2d(dtype=f64), accepted: wp.array2d
 NEWTON_TOLERANCE = wp.constant(f64(1e-7))
 NEWTON_RESIDUAL = wp.constant(f64(1e-3))  # as NEWTON_RESIDUAL in plugins/steppers.c
 TINY = wp.constant(f64(1e-6))
-LEAST_SHRINK = wp.constant(f64(1e-6))  # a line search shorter than this takes the step anyway (as the native)
+LEAST_SHRINK = wp.constant(f64(1e-6))  # a line search shorter than this has failed (as the native's)
 DESCENT = wp.constant(f64(1e-4))  # the share of the step's full decrease a search asks (Armijo's, as the native)
 
 
@@ -553,9 +553,9 @@ def newton_update(nv: int, nbody: int, body: wp.array(dtype=int), isdofancestor:
                   search: wp.array2d(dtype=f64)):
     """One round of Newton's method per world, at the candidate dv whose medium force J^T F(v + dv) is ``medium``
     and damping ``damping``: its residual r = (M - dt D) dv - dt (rest + medium), rest = f - F(v), against the last
-    accepted one's; accepted (or the first, or a search cut below LEAST_SHRINK), the next candidate is the Newton
-    step dv - (M - dt D - dt K)^-1 r; else half the last step. search[w] = (|r| accepted, step share, done, rounds
-    since accepted)."""
+    accepted one's; accepted (or the first), the next candidate is the Newton step dv - (M - dt D - dt K)^-1 r;
+    else half the last step, down to LEAST_SHRINK. search[w] = (|r| accepted, step share, 1 converged or 2
+    failed, 1 once a candidate was taken)."""
     world = wp.tid()
     if search[world, 2] > ZERO:
         return
@@ -588,7 +588,12 @@ def newton_update(nv: int, nbody: int, body: wp.array(dtype=int), isdofancestor:
         return
     share = search[world, 1]
     first = search[world, 3] == ZERO
-    if not first and not (norm <= (ONE - DESCENT * share) * search[world, 0]) and share > LEAST_SHRINK:
+    if not first and not (norm <= (ONE - DESCENT * share) * search[world, 0]):
+        if share <= LEAST_SHRINK:
+            # no descent left along the step (a kink of the law, an element switching on): the native step stops
+            # here and halves itself; this one keeps the last accepted iterate
+            search[world, 2] = TWO
+            return
         share = share / TWO
         search[world, 1] = share
         for i in range(nv):

@@ -37,7 +37,7 @@ from . import callbacks, laws, media, native, surfaces
 from .errors import SceneError
 from .laws import drft, li2013, rft3d
 
-BACKENDS = ("native", "python")
+BACKENDS = ("native", "python", "warp")
 PLUGIN = "finrft.surface"
 # The Python backend's forces come from a callback installed for a block: a model given them carries an instance of
 # the native plugin finrft.guard (plugins/finrft_guard.c), which MuJoCo runs right after the callback in every
@@ -72,7 +72,7 @@ class Attached:
     parameters: dict[str, float]  # the law's parameters (its PARAMETERS): li2013's zeta, rft3d's rho_c, mu_int, mu_surf
     surface_z: float
     element_size: float
-    backend: str               # the backend in use: "native" (plugin instances in the spec) or "python"
+    backend: str               # the backend in use: "native" (plugin instances in the spec), "python" or "warp"
     coefficients: li2013.Coefficients | rft3d.Coefficients
     surfaces: tuple[Surface, ...] = field(repr=False)
     drft_lambda: float = 0.0   # DRFT's lambda; 0: the quasi-static law alone
@@ -365,7 +365,9 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str = (), law: str = "li
     below a heightfield's lowest point; ``element_size``: the elements' size, m; ``backend``:
     ``native`` (falls back to ``python``, with a warning, when the plugin cannot be loaded) or ``python`` (then run
     the model inside ``Attached.installed``: a model stepped outside it stops with an exception at its second step,
-    from the native guard the compiled model carries while the plugin library loads); ``cull``: leave out the
+    from the native guard the compiled model carries while the plugin library loads) or ``warp`` (the spec as with
+    ``python``, which MuJoCo's own step runs; many worlds of the model run on MuJoCo Warp with `finrft.warp.WarpWorlds`,
+    the ``warp`` extra); ``cull``: leave out the
     elements that face another geom of the same kinematic tree closely (`TOUCHING`), such as the end faces of
     neighbouring links of a chain, which the grains cannot reach. Raises `SceneError` on bad input.
     """
@@ -443,8 +445,9 @@ def attach(spec: mujoco.MjSpec, bodies: Sequence[str] | str = (), law: str = "li
         if mark is None:
             mark = spec.add_text(name=callbacks.PYTHON_MARK)
         mark.data = " ".join([str(spec._address), *python_bodies, *names])
-        # Stepped where no callback is installed at all, only a native guard can stop it (`GUARD`).
-        if native.available() and not any(p.name == GUARD for p in spec.plugins):
+        # Stepped where no callback is installed at all, only a native guard can stop it (`GUARD`); MuJoCo Warp
+        # takes a model with no plugin instance, so the warp backend's has none.
+        if backend == "python" and native.available() and not any(p.name == GUARD for p in spec.plugins):
             spec.activate_plugin(GUARD_PLUGIN)
             spec.add_plugin(name=GUARD, plugin_name=GUARD_PLUGIN, active=True)
     laws.warn_feeds_energy(law, module.FEEDS_ENERGY, "kept as published")

@@ -457,8 +457,15 @@ def make(scene: str | Path | UserScene, **options: Any) -> RobotEnv:
     return RobotEnv(scene, **options)
 
 
-def make_vector(scene: str | Path | UserScene, num_envs: int, **options: Any) -> RobotVectorEnv:
-    """``num_envs`` worlds of a robot scene stepped on threads: `RobotVectorEnv`."""
+def make_vector(scene: str | Path | UserScene, num_envs: int, backend: str = "native", **options: Any) -> VectorEnv:
+    """``num_envs`` worlds of a robot scene: stepped on threads of the native stepper (`RobotVectorEnv`), or with
+    ``backend="warp"`` all at once on MuJoCo Warp (`finrft.warp.envs.WarpVectorEnv`, the warp extra; its option
+    ``device`` instead of ``threads``)."""
+    if backend == "warp":
+        from .warp.envs import WarpVectorEnv
+        return WarpVectorEnv(scene, num_envs, **options)
+    if backend != "native":
+        raise SceneError(f"backend must be 'native' or 'warp', got {backend!r}")
     return RobotVectorEnv(scene, num_envs, **options)
 
 

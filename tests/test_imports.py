@@ -3,7 +3,7 @@
 import subprocess
 import sys
 
-HEAVY = ("rerun", "matplotlib", "h5py", "dask")
+HEAVY = ("rerun", "matplotlib", "h5py", "dask", "warp", "mujoco_warp")
 
 
 def test_drag_imports_no_heavy_dependency(tmp_path):

@@ -76,7 +76,8 @@ def report(args: argparse.Namespace) -> int:
 def add_bench(sub: Any) -> None:
     bench = sub.add_parser("bench", help="benchmarks, measured as ratios in one run on this machine")
     kinds = bench.add_subparsers(dest="bench", required=True, parser_class=type(bench))
-    for add in (_add_backends, _add_robot, _add_robots, _add_steps, _add_accuracy, _add_modelling, _add_fit):
+    for add in (_add_backends, _add_robot, _add_robots, _add_steps, _add_accuracy, _add_modelling, _add_fit,
+                _add_warp):
         kind = add(kinds)
         add_quiet(kind)
         if add is not _add_accuracy:
@@ -201,8 +202,43 @@ def _add_fit(kinds: Any) -> argparse.ArgumentParser:
     return p
 
 
+def _worlds(text: str) -> tuple[int, ...]:
+    """--worlds: whole numbers >= 1, comma-separated."""
+    try:
+        counts = tuple(int(item) for item in text.split(","))
+    except ValueError:
+        counts = ()
+    if not counts or min(counts) < 1:
+        raise argparse.ArgumentTypeError(f"give whole numbers of worlds >= 1, comma-separated (1,16,256), got "
+                                         f"{text!r}")
+    return counts
+
+
+def _add_warp(kinds: Any) -> argparse.ArgumentParser:
+    p = kinds.add_parser("warp", help="many worlds on MuJoCo Warp against the native threaded rollout",
+                         description="Robot-steps per second of an example robot against the number of worlds: "
+                         "MuJoCo Warp with the surface laws in Warp kernels (finrft.warp, the warp extra), on the "
+                         "Warp device there is (a GPU, else the CPU), beside MuJoCo's threaded rollout with the "
+                         "native plugin on every core; both MuJoCo's step of the model's integrator at the scene's "
+                         "dt under the scene's controls. Also the largest relative difference of the Warp "
+                         "backend's per-body forces from the native plugin's at native states of the run.")
+    p.add_argument("--worlds", type=_worlds, default=(1, 16, 256, 4096), metavar="N,N,...",
+                   help="numbers of worlds (default: 1,16,256,4096)")
+    p.add_argument("--robot", choices=EXAMPLES, default="sand_swimmer", help="example robot (default: %(default)s)")
+    p.add_argument("--steps", type=number("steps", minimum=1, inclusive=True, integer=True), default=0,
+                   metavar="K", help="steps per measurement (default: about 20000 robot-steps, at least 5)")
+    p.add_argument("--device", help="Warp device, e.g. cpu or cuda:0 (default: Warp's, the GPU where there is one)")
+    return p
+
+
 def _bench_figures(args: argparse.Namespace, log: Any, tick: Any) -> dict[str, Any]:
     from ..studies import bench
+    if args.bench == "warp":
+        try:
+            from ..warp import bench as warp_bench
+        except ImportError:
+            raise SceneError("finrft bench warp needs the warp extra: pip install 'finrft[warp]'") from None
+        return warp_bench.bench(args.robot, args.worlds, steps=args.steps, device=args.device, log=log)
     if args.bench == "fit":
         return bench.fit_speed(args.data, budget=args.budget, workers=args.workers, log=log, progress=tick)
     if args.bench == "robot":

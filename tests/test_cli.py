@@ -1,6 +1,7 @@
 """The command line: outputs, units, and how bad input and failures are reported."""
 
 import argparse
+import importlib.util
 import json
 import math
 import re
@@ -398,6 +399,8 @@ def _takes_json(parser: argparse.ArgumentParser, argv: list[str]) -> bool:
 # Cheap arguments for every command that takes --json ({tmp}: the test's folder, which holds the files below);
 # the long ones run with the slow studies.
 SLOW = pytest.mark.slow
+NEEDS_WARP = pytest.mark.skipif(importlib.util.find_spec("mujoco_warp") is None,
+                                reason="the warp extra is not installed: pip install '.[warp]'")
 JSON_ARGS = {
     "drag": FAST,
     "rotate": ["--amplitude", "30", "--set", "sim.dt=0.001"],
@@ -419,6 +422,7 @@ JSON_ARGS = {
     "bench steps": ["--robot", "wheel_rig"],
     "bench modelling": pytest.param([], marks=SLOW),
     "bench fit": pytest.param(["--budget", "1", "--workers", "1"], marks=SLOW),
+    "bench warp": pytest.param(["--worlds", "1", "--steps", "5"], marks=NEEDS_WARP),
 }
 
 

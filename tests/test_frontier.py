@@ -187,12 +187,11 @@ def test_bench_steps_times_each_implicit_method_against_the_explicit_step():
     """`finrft bench steps`: each fixed-step implicit method's step and the explicit one from the same state, the
     ratio their times' and the cost per element per step beyond the bare step over the robot's elements."""
     from finrft.experiments.user_model import example
-    from finrft.studies import bench
-    row = bench.steps(("wheel_rig",), log=lambda text: None)["robots"]["wheel_rig"]
+    row = frontier.steps(("wheel_rig",), log=lambda text: None)["robots"]["wheel_rig"]
     scene = load_scene(example("wheel_rig"), cls=UserScene)
     assert row["elements"] == sum(UserModel.of(scene).build(scene).attached.elements.values())
-    assert set(bench.STEP_METHODS) <= set(row)
-    for method in bench.STEP_METHODS:
+    assert set(frontier.STEP_METHODS) <= set(row)
+    for method in frontier.STEP_METHODS:
         cost = row[method]
         assert cost["implicit_over_explicit_step"] == pytest.approx(cost["implicit_step_us"] / cost["explicit_step_us"])
         per_element = 1e3 * (cost["implicit_step_us"] - row["bare_us_per_step"]) / row["elements"]

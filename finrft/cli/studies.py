@@ -153,8 +153,7 @@ def _add_robots(kinds: Any) -> argparse.ArgumentParser:
 
 
 def _add_steps(kinds: Any) -> argparse.ArgumentParser:
-    from ..studies.bench import STEP_METHODS
-    from ..studies.frontier import BATTERY
+    from ..studies.frontier import BATTERY, STEP_METHODS
     p = kinds.add_parser("steps", help="what one step of each implicit method costs against the explicit step",
                          description="For each robot at its own step: one step of each fixed-step implicit method ("
                          f"{', '.join(STEP_METHODS)}) and one of MuJoCo's explicit step at the same step, from the "
@@ -257,7 +256,8 @@ def _bench_figures(args: argparse.Namespace, log: Any, tick: Any) -> dict[str, A
     if args.bench == "robots":
         return bench.robots(tuple(args.robot or ()), duration=args.duration, log=log, progress=tick)
     if args.bench == "steps":
-        return bench.steps(tuple(args.robot or ()), log=log, progress=tick)
+        from ..studies import frontier
+        return frontier.steps(tuple(args.robot or ()), log=log, progress=tick)
     return bench.modelling(log=log, progress=tick)
 
 

@@ -541,41 +541,6 @@ def _step_costs(scene: Any, explicit_dt: float, bare_s: float, elements: int) ->
             "implicit_over_explicit_step": walls["implicit"] / walls["explicit"]}
 
 
-# The fixed-step implicit methods `steps` times against MuJoCo's explicit step.
-STEP_METHODS = ("implicit", "newton", "newton-midpoint")
-
-
-def steps(names: tuple[str, ...] | None = None, *, log: Callable[[str], None] = print,
-          progress: Progress = None) -> dict[str, Any]:
-    """What one step costs, for each robot (an example, `finrft run --example NAME`, or one of the battery,
-    finrft.studies.frontier.BATTERY; default: the examples) at its own step: one step of each fixed-step implicit
-    method (`STEP_METHODS`) and one of MuJoCo's explicit step at the same step, from the same state (the run's 0.5 s
-    in, or its settle), timed in C in one process, each the best of several interleaved rounds (`_step_costs`):
-    microseconds a step, nanoseconds per element per step beyond the bare step (the model without the medium), and
-    the implicit step's cost in explicit steps. A few seconds a robot."""
-    from ..experiments.user_model import EXAMPLES, example
-    from ..scene import UserScene, load_scene
-    from .frontier import BATTERY, STEP_COST_BARE_STEPS, battery_scene
-    names = names or EXAMPLES
-    out: dict[str, Any] = {"date": date.today().isoformat(), "machine": f"{platform.machine()}, "
-                           f"{batch.default_workers()} cores", "mujoco": mujoco.__version__, "robots": {}}
-    for i, name in enumerate(names):
-        scene = load_scene(battery_scene(name) if name in BATTERY else example(name), cls=UserScene)
-        elements = _elements(scene)
-        bare = _bare_step_s(scene, STEP_COST_BARE_STEPS)
-        row: dict[str, Any] = {"dt": scene.sim.dt, "elements": elements, "bare_us_per_step": 1e6 * bare}
-        for method in STEP_METHODS:
-            implicit = scene.replace(**{"sim.method": method})
-            row[method] = _step_costs(implicit, scene.sim.dt, bare, elements)
-        out["robots"][name] = row
-        log(f"{name} ({elements} elements, {scene.sim.dt:g} s): " + "; ".join(
-            f"{m} {row[m]['implicit_ns_per_element_step']:.0f} ns per element, "
-            f"{row[m]['implicit_over_explicit_step']:.1f} explicit steps" for m in STEP_METHODS)
-            + f"; explicit {row[STEP_METHODS[0]]['explicit_ns_per_element_step']:.0f} ns per element")
-        _tick(progress, i + 1, len(names))
-    return out
-
-
 def _elements(scene: Any) -> int:
     from ..experiments.user_model import UserModel
     return sum(UserModel.of(scene).build(scene).attached.elements.values())

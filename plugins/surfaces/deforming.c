@@ -3,6 +3,7 @@
 
 #include <math.h>
 #include <stdlib.h>
+#include <string.h>
 
 #include "surfaces.h"
 
@@ -17,21 +18,73 @@ static FinrftGrid make_grid(int nrow, int ncol, const double* heights, const dou
   return grid;
 }
 
+void finrft_deforming_grid(FinrftDeformingGrid* g, int nrow, int ncol, const double* heights,
+                           const double* original, double pile_factor, const double size[2], const double centre[3],
+                           const double frame[9]) {
+  g->grid = make_grid(nrow, ncol, heights, size, centre, frame);
+  g->original = original;
+  g->pile_factor = pile_factor;
+  g->scale[0] = (ncol - 1) / (2 * size[0]);
+  g->scale[1] = (nrow - 1) / (2 * size[1]);
+}
+
+// The grid's (u, v) of (x, y), within it (beyond it, the nearest edge's), its cell's first point and the place in it.
+static inline void cell_of(const FinrftDeformingGrid* g, double x, double y, int* i, double* fu, double* fv) {
+  int nrow = g->grid.nrow, ncol = g->grid.ncol;
+  double u = (x + g->grid.size[0]) * g->scale[0], v = (y + g->grid.size[1]) * g->scale[1];
+  u = u > 0 ? (u < ncol - 1 ? u : ncol - 1) : 0;  // (NaN to 0: a point no grid can place)
+  v = v > 0 ? (v < nrow - 1 ? v : nrow - 1) : 0;
+  int c = (int)u, r = (int)v;  // floor: u, v >= 0
+  if (c > ncol - 2) c = ncol - 2;
+  if (r > nrow - 2) r = nrow - 2;
+  *i = r * ncol + c;
+  *fu = u - c;
+  *fv = v - r;
+}
+
+static inline double bilinear(const double* h, int ncol, int i, double fu, double fv) {
+  return (1 - fu) * (1 - fv) * h[i] + fu * (1 - fv) * h[i + 1] + (1 - fu) * fv * h[i + ncol] +
+         fu * fv * h[i + ncol + 1];
+}
+
+double finrft_deforming_local_depth(const FinrftDeformingGrid* g, const double local[3], int submerged_only) {
+  int i, ncol = g->grid.ncol;
+  double fu, fv;
+  cell_of(g, local[0], local[1], &i, &fu, &fv);
+  double deformed = bilinear(g->grid.heights, ncol, i, fu, fv) - local[2];
+  if (!(g->pile_factor > 0) || (submerged_only && !(deformed > 0))) return deformed;
+  double below_original = bilinear(g->original, ncol, i, fu, fv) - local[2];
+  int pile = deformed > 0 && below_original <= 0;
+  return pile ? g->pile_factor * deformed : fmin(deformed, below_original);
+}
+
+double finrft_deforming_top(const FinrftDeformingGrid* g, const double low[2], const double high[2]) {
+  int i0, i1;
+  double fu, fv;
+  cell_of(g, low[0], low[1], &i0, &fu, &fv);
+  cell_of(g, high[0], high[1], &i1, &fu, &fv);
+  int ncol = g->grid.ncol, r0 = i0 / ncol, c0 = i0 % ncol, r1 = i1 / ncol + 1, c1 = i1 % ncol + 1;
+  const double* h = g->grid.heights;
+  double top = h[i0];
+  for (int r = r0; r <= r1; r++) {
+    for (int c = c0; c <= c1; c++) top = h[r * ncol + c] > top ? h[r * ncol + c] : top;
+  }
+  return top;
+}
+
 int finrft_deforming_depth(int nrow, int ncol, const double* heights, const double* original, double pile_factor,
                            const double size[2], const double centre[3], const double frame[9], const double g[3],
                            int n, const double* points, double* depth) {
-  if (finrft_hfield_depth(nrow, ncol, heights, size, centre, frame, g, n, points, depth)) {
+  FinrftDeformingGrid grid;
+  finrft_deforming_grid(&grid, nrow, ncol, heights, original, pile_factor, size, centre, frame);
+  if (finrft_grid_check(&grid.grid, g) || !(isfinite(pile_factor) && pile_factor >= 0) ||
+      (pile_factor > 0 && !original)) {
     return FINRFT_SURFACE_BAD_INPUT;
   }
-  if (pile_factor == 0) return 0;
-  if (!(isfinite(pile_factor) && pile_factor > 0) || !original) return FINRFT_SURFACE_BAD_INPUT;
-  FinrftGrid grid = make_grid(nrow, ncol, original, size, centre, frame);
   for (int k = 0; k < n; k++) {
     double local[3];
-    finrft_grid_local(&grid, points + 3 * k, local);
-    double below_original = finrft_grid_height(&grid, original, local[0], local[1]) - local[2];
-    int pile = depth[k] > 0 && below_original <= 0;
-    depth[k] = pile ? pile_factor * depth[k] : fmin(depth[k], below_original);
+    finrft_grid_local(&grid.grid, points + 3 * k, local);
+    depth[k] = finrft_deforming_local_depth(&grid, local, 0);
   }
   return 0;
 }
@@ -67,10 +120,12 @@ int finrft_deforming_sweep(int nrow, int ncol, double* heights, const double siz
     target[i] = INFINITY;
     direction[2 * i] = direction[2 * i + 1] = 0;
   }
-  double dx = 2 * size[0] / (ncol - 1), dy = 2 * size[1] / (nrow - 1);
+  double dx = 2 * size[0] / (ncol - 1), dy = 2 * size[1] / (nrow - 1), top = heights[0];
+  for (int i = 1; i < cells; i++) top = heights[i] > top ? heights[i] : top;
   for (int e = 0; e < n; e++) {
     double p[3], v[3];
     finrft_grid_local(&grid, points + 3 * e, p);
+    if (p[2] > top + TOUCH) continue;  // above every point: it lowers none and is over none
     const double* vw = velocities + 3 * e;
     for (int j = 0; j < 3; j++) v[j] = vw[0] * frame[j] + vw[1] * frame[3 + j] + vw[2] * frame[6 + j];
     double radius = sqrt((areas[e] > 0 ? areas[e] : 0) / M_PI);
@@ -139,30 +194,26 @@ int finrft_deforming_sweep(int nrow, int ncol, double* heights, const double siz
   return 0;
 }
 
-// Only edges next to a point that changed in the last iteration can have sand to move (one that did not change
-// kept its excess, and one with excess moved sand), so each iteration looks at the box of the points that changed,
-// one point wider: the same heights as the twin's sweep over the whole grid, at the cost of the disturbed region.
-int finrft_deforming_relax(int nrow, int ncol, double* heights, const double size[2], double repose,
-                           const unsigned char* blocked, double tolerance, int max_iterations) {
-  if (nrow < 2 || ncol < 2 || !(repose > 0 && repose < M_PI / 2) || !(size[0] > 0 && size[1] > 0) ||
-      !isfinite(size[0]) || !isfinite(size[1]) || !(tolerance > 0)) {
-    return FINRFT_SURFACE_BAD_INPUT;
-  }
-  double dx = 2 * size[0] / (ncol - 1), dy = 2 * size[1] / (nrow - 1), slope = tan(repose);
+// Only an edge steeper than the tolerance flows, and only edges next to a point that changed in the last iteration
+// can start to (one that did not change kept its excess, and one with excess moved sand), so each iteration looks
+// at the box of the points that changed, one point wider: the same heights as the twin's sweep over the whole grid,
+// at the cost of the disturbed region. `box` (rows r0..r1, columns c0..c1) holds at the start every edge that may
+// flow, and at the end those that still would (r0 > r1: none). The iterations taken, or -1.
+static int relax_box(int nrow, int ncol, double* heights, double dx, double dy, double slope,
+                     const unsigned char* blocked, double tolerance, int max_iterations, double* flow, int box[4]) {
   int nx = nrow * (ncol - 1);
-  double* flow = malloc(sizeof(double) * (nx + (nrow - 1) * ncol));
-  if (!flow) return FINRFT_SURFACE_BAD_INPUT;
-  int result = -1, r0 = 0, r1 = nrow - 1, c0 = 0, c1 = ncol - 1;  // the box of points to look at
+  int result = -1, r0 = box[0], r1 = box[1], c0 = box[2], c1 = box[3];  // the box of points to look at
+  int cr0 = nrow, cr1 = -1, cc0 = ncol, cc1 = -1;  // the box of points that change
+  double rise_x = slope * dx, rise_y = slope * dy, over_x = tolerance * dx, over_y = tolerance * dy;
   for (int iteration = 0; iteration <= max_iterations; iteration++) {
-    double worst = -INFINITY;
-    int cr0 = nrow, cr1 = -1, cc0 = ncol, cc1 = -1;  // the box of points that change
+    cr0 = nrow, cr1 = -1, cc0 = ncol, cc1 = -1;
     for (int r = r0; r <= r1; r++) {
       for (int c = c0; c < c1; c++) {
-        int i = r * ncol + c, free_edge = !blocked || (!blocked[i] && !blocked[i + 1]);
-        double step = heights[i + 1] - heights[i], excess = free_edge ? fabs(step) - slope * dx : 0;
-        if (excess / dx > worst) worst = excess / dx;
-        flow[r * (ncol - 1) + c] = excess > 0 ? -copysign(RELAX_RATE * excess, step) : 0;
-        if (excess > 0) {
+        int i = r * ncol + c;
+        double step = heights[i + 1] - heights[i], excess = fabs(step) - rise_x;
+        int flows = excess > over_x && (!blocked || (!blocked[i] && !blocked[i + 1]));
+        flow[r * (ncol - 1) + c] = flows ? -copysign(RELAX_RATE * excess, step) : 0;
+        if (flows) {
           if (r < cr0) cr0 = r;
           if (r > cr1) cr1 = r;
           if (c < cc0) cc0 = c;
@@ -172,11 +223,11 @@ int finrft_deforming_relax(int nrow, int ncol, double* heights, const double siz
     }
     for (int r = r0; r < r1; r++) {
       for (int c = c0; c <= c1; c++) {
-        int i = r * ncol + c, free_edge = !blocked || (!blocked[i] && !blocked[i + ncol]);
-        double step = heights[i + ncol] - heights[i], excess = free_edge ? fabs(step) - slope * dy : 0;
-        if (excess / dy > worst) worst = excess / dy;
-        flow[nx + i] = excess > 0 ? -copysign(RELAX_RATE * excess, step) : 0;
-        if (excess > 0) {
+        int i = r * ncol + c;
+        double step = heights[i + ncol] - heights[i], excess = fabs(step) - rise_y;
+        int flows = excess > over_y && (!blocked || (!blocked[i] && !blocked[i + ncol]));
+        flow[nx + i] = flows ? -copysign(RELAX_RATE * excess, step) : 0;
+        if (flows) {
           if (r < cr0) cr0 = r;
           if (r + 1 > cr1) cr1 = r + 1;
           if (c < cc0) cc0 = c;
@@ -184,7 +235,7 @@ int finrft_deforming_relax(int nrow, int ncol, double* heights, const double siz
         }
       }
     }
-    if (worst <= tolerance) {
+    if (cr1 < 0) {
       result = iteration;
       break;
     }
@@ -208,6 +259,107 @@ int finrft_deforming_relax(int nrow, int ncol, double* heights, const double siz
     c0 = cc0 > 0 ? cc0 - 1 : 0;
     c1 = cc1 < ncol - 1 ? cc1 + 1 : ncol - 1;
   }
+  // where sand would still flow: the points of the edges the last check found steeper than the tolerance
+  box[0] = cr0, box[1] = cr1, box[2] = cc0, box[3] = cc1;
+  return result;
+}
+
+static int relax_checked(int nrow, int ncol, const double size[2], double repose, double tolerance) {
+  return nrow < 2 || ncol < 2 || !(repose > 0 && repose < M_PI / 2) || !(size[0] > 0 && size[1] > 0) ||
+         !isfinite(size[0]) || !isfinite(size[1]) || !(tolerance > 0);
+}
+
+int finrft_deforming_relax(int nrow, int ncol, double* heights, const double size[2], double repose,
+                           const unsigned char* blocked, double tolerance, int max_iterations) {
+  if (relax_checked(nrow, ncol, size, repose, tolerance)) return FINRFT_SURFACE_BAD_INPUT;
+  double* flow = malloc(sizeof(double) * (nrow * (ncol - 1) + (nrow - 1) * ncol));
+  if (!flow) return FINRFT_SURFACE_BAD_INPUT;
+  int box[4] = {0, nrow - 1, 0, ncol - 1};
+  int result = relax_box(nrow, ncol, heights, 2 * size[0] / (ncol - 1), 2 * size[1] / (nrow - 1), tan(repose),
+                         blocked, tolerance, max_iterations, flow, box);
   free(flow);
   return result;
+}
+
+// The box (r0, r1, c0, c1) grown to hold the point i.
+static void grow(int box[4], int ncol, int i) {
+  int r = i / ncol, c = i % ncol;
+  if (r < box[0]) box[0] = r;
+  if (r > box[1]) box[1] = r;
+  if (c < box[2]) box[2] = c;
+  if (c > box[3]) box[3] = c;
+}
+
+int finrft_deforming_step(FinrftDeforming* s, const double g[3], int n, const double* points, const double* areas,
+                          const double* velocities, int imprint, double* removed) {
+  int nrow = s->nrow, ncol = s->ncol, cells = nrow * ncol;
+  if (relax_checked(nrow, ncol, s->size, s->repose, s->tolerance) || s->step_iterations < 0) {
+    return FINRFT_SURFACE_BAD_INPUT;
+  }
+  double dx = 2 * s->size[0] / (ncol - 1), dy = 2 * s->size[1] / (nrow - 1);
+  // before (cells), the relaxation's flows (2 cells), the points under the body before (cells bytes)
+  double* before = malloc(sizeof(double) * 3 * cells + cells);
+  if (!before) return FINRFT_SURFACE_BAD_INPUT;
+  double* flow = before + cells;
+  unsigned char* was = (unsigned char*)(flow + 2 * cells);
+  memcpy(before, s->heights, sizeof(double) * cells);
+  memcpy(was, s->occupied, cells);
+  // the grid points under the body (DeformingSurface._covered): nearest to an element below the level, and their
+  // neighbours; `entered` (was not under before) is read from s->under before it is replaced
+  unsigned char* under = s->under;  // 1: under at the last step; 2: near an element now; 4: under now
+  FinrftGrid grid = make_grid(nrow, ncol, s->heights, s->size, s->centre, s->frame);
+  for (int e = 0; e < n; e++) {
+    double p[3];
+    finrft_grid_local(&grid, points + 3 * e, p);
+    int c = (int)floor((p[0] + s->size[0]) / dx + 0.5), r = (int)floor((p[1] + s->size[1]) / dy + 0.5);
+    if (c < 0 || c >= ncol || r < 0 || r >= nrow) continue;
+    if (p[2] < s->level[r * ncol + c] + TOUCH) under[r * ncol + c] |= 2;
+  }
+  for (int r = 0; r < nrow; r++) {
+    for (int c = 0; c < ncol; c++) {
+      int i = r * ncol + c;
+      if ((under[i] & 2) || (r > 0 && (under[i - ncol] & 2)) || (r < nrow - 1 && (under[i + ncol] & 2)) ||
+          (c > 0 && (under[i - 1] & 2)) || (c < ncol - 1 && (under[i + 1] & 2))) {
+        under[i] |= 4;
+      }
+    }
+  }
+  int failed = finrft_deforming_sweep(nrow, ncol, s->heights, s->size, s->centre, s->frame, g, n, points, areas,
+                                      velocities, s->front_share, s->occupied);
+  if (failed) {
+    for (int i = 0; i < cells; i++) under[i] &= 1;
+    free(before);
+    return failed;
+  }
+  // what relaxation must look at: the excess left by the last step, and every point the sweep changed or whose
+  // being under the body did (an edge elsewhere is as the last relaxation left it, without excess)
+  int* box = s->dirty;
+  for (int i = 0; i < cells; i++) {
+    if (s->heights[i] != before[i] || s->occupied[i] != was[i]) grow(box, ncol, i);
+  }
+  if (box[0] <= box[1]) {
+    box[0] = box[0] > 0 ? box[0] - 1 : 0;
+    box[1] = box[1] < nrow - 1 ? box[1] + 1 : nrow - 1;
+    box[2] = box[2] > 0 ? box[2] - 1 : 0;
+    box[3] = box[3] < ncol - 1 ? box[3] + 1 : ncol - 1;
+    relax_box(nrow, ncol, s->heights, dx, dy, tan(s->repose), s->occupied, s->tolerance, s->step_iterations, flow,
+              box);
+  }
+  double lost = 0;
+  for (int i = 0; i < cells; i++) {
+    if (imprint) {
+      s->heights[i] = fmin(before[i], s->heights[i]);
+      s->original[i] = fmin(s->original[i], s->heights[i]);
+    }
+    int now = (under[i] & 4) || s->occupied[i], entered = now && !(under[i] & 1);
+    under[i] = (unsigned char)now;
+    s->level[i] = entered ? before[i] : (now ? s->level[i] : s->heights[i]);
+    if (before[i] > s->heights[i]) lost += before[i] - s->heights[i];
+  }
+  if (imprint) {  // the imprint lowered points anywhere under the body: every edge may have excess
+    box[0] = 0, box[1] = nrow - 1, box[2] = 0, box[3] = ncol - 1;
+  }
+  *removed = imprint ? 0 : dx * dy * lost;
+  free(before);
+  return 0;
 }

@@ -201,38 +201,45 @@ int finrft_deforming_sweep(int nrow, int ncol, double* heights, const double siz
 // flow, and at the end those that still would (r0 > r1: none). The iterations taken, or -1.
 static int relax_box(int nrow, int ncol, double* heights, double dx, double dy, double slope,
                      const unsigned char* blocked, double tolerance, int max_iterations, double* flow, int box[4]) {
-  int nx = nrow * (ncol - 1);
+  // flow[i]: from point i to i + 1 (x), flow[cells + i]: from i to i + ncol (y), written for the edges in the box
+  double* flow_x = flow;
+  double* flow_y = flow + nrow * ncol;
   int result = -1, r0 = box[0], r1 = box[1], c0 = box[2], c1 = box[3];  // the box of points to look at
   int cr0 = nrow, cr1 = -1, cc0 = ncol, cc1 = -1;  // the box of points that change
   double rise_x = slope * dx, rise_y = slope * dy, over_x = tolerance * dx, over_y = tolerance * dy;
   for (int iteration = 0; iteration <= max_iterations; iteration++) {
     cr0 = nrow, cr1 = -1, cc0 = ncol, cc1 = -1;
     for (int r = r0; r <= r1; r++) {
+      const double* h = heights + r * ncol;
+      double* fx = flow_x + r * ncol;
+      int first = ncol, last = -1;  // the row's points at an edge that flows
       for (int c = c0; c < c1; c++) {
-        int i = r * ncol + c;
-        double step = heights[i + 1] - heights[i], excess = fabs(step) - rise_x;
-        int flows = excess > over_x && (!blocked || (!blocked[i] && !blocked[i + 1]));
-        flow[r * (ncol - 1) + c] = flows ? -copysign(RELAX_RATE * excess, step) : 0;
-        if (flows) {
-          if (r < cr0) cr0 = r;
-          if (r > cr1) cr1 = r;
-          if (c < cc0) cc0 = c;
-          if (c + 1 > cc1) cc1 = c + 1;
+        double step = h[c + 1] - h[c], excess = fabs(step) - rise_x;
+        fx[c] = 0;
+        if (excess > over_x && (!blocked || (!blocked[r * ncol + c] && !blocked[r * ncol + c + 1]))) {
+          fx[c] = -copysign(RELAX_RATE * excess, step);
+          if (first > c) first = c;
+          last = c + 1;
         }
       }
-    }
-    for (int r = r0; r < r1; r++) {
-      for (int c = c0; c <= c1; c++) {
-        int i = r * ncol + c;
-        double step = heights[i + ncol] - heights[i], excess = fabs(step) - rise_y;
-        int flows = excess > over_y && (!blocked || (!blocked[i] && !blocked[i + ncol]));
-        flow[nx + i] = flows ? -copysign(RELAX_RATE * excess, step) : 0;
-        if (flows) {
-          if (r < cr0) cr0 = r;
-          if (r + 1 > cr1) cr1 = r + 1;
-          if (c < cc0) cc0 = c;
-          if (c > cc1) cc1 = c;
+      if (r < r1) {
+        double* fy = flow_y + r * ncol;
+        for (int c = c0; c <= c1; c++) {
+          double step = h[c + ncol] - h[c], excess = fabs(step) - rise_y;
+          fy[c] = 0;
+          if (excess > over_y && (!blocked || (!blocked[r * ncol + c] && !blocked[(r + 1) * ncol + c]))) {
+            fy[c] = -copysign(RELAX_RATE * excess, step);
+            if (first > c) first = c;
+            if (last < c) last = c;
+            if (cr1 < r + 1) cr1 = r + 1;
+          }
         }
+      }
+      if (last >= 0) {
+        if (cr0 > r) cr0 = r;
+        if (cr1 < r) cr1 = r;
+        if (cc0 > first) cc0 = first;
+        if (cc1 < last) cc1 = last;
       }
     }
     if (cr1 < 0) {
@@ -240,18 +247,19 @@ static int relax_box(int nrow, int ncol, double* heights, double dx, double dy, 
       break;
     }
     if (iteration == max_iterations) break;
+    // each point takes what flows in from its neighbours in the box and gives what flows out (edges leaving the box
+    // have no flow: both their points are as the last iteration left them, without excess between)
     for (int r = r0; r <= r1; r++) {
-      for (int c = c0; c < c1; c++) {
-        double f = flow[r * (ncol - 1) + c];
-        heights[r * ncol + c] -= f;
-        heights[r * ncol + c + 1] += f;
-      }
-    }
-    for (int r = r0; r < r1; r++) {
+      double* h = heights + r * ncol;
+      const double* fx = flow_x + r * ncol;
+      const double* fy = flow_y + r * ncol;
       for (int c = c0; c <= c1; c++) {
-        int i = r * ncol + c;
-        heights[i] -= flow[nx + i];
-        heights[i + ncol] += flow[nx + i];
+        double change = 0;
+        if (c < c1) change -= fx[c];
+        if (c > c0) change += fx[c - 1];
+        if (r < r1) change -= fy[c];
+        if (r > r0) change += fy[c - ncol];
+        h[c] += change;
       }
     }
     r0 = cr0 > 0 ? cr0 - 1 : 0;
@@ -272,7 +280,7 @@ static int relax_checked(int nrow, int ncol, const double size[2], double repose
 int finrft_deforming_relax(int nrow, int ncol, double* heights, const double size[2], double repose,
                            const unsigned char* blocked, double tolerance, int max_iterations) {
   if (relax_checked(nrow, ncol, size, repose, tolerance)) return FINRFT_SURFACE_BAD_INPUT;
-  double* flow = malloc(sizeof(double) * (nrow * (ncol - 1) + (nrow - 1) * ncol));
+  double* flow = malloc(sizeof(double) * 2 * nrow * ncol);
   if (!flow) return FINRFT_SURFACE_BAD_INPUT;
   int box[4] = {0, nrow - 1, 0, ncol - 1};
   int result = relax_box(nrow, ncol, heights, 2 * size[0] / (ncol - 1), 2 * size[1] / (nrow - 1), tan(repose),

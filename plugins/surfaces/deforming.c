@@ -91,12 +91,18 @@ int finrft_deforming_depth(int nrow, int ncol, const double* heights, const doub
 
 // The first grid point not under the body from (r, c) along (sx, sy) in steps of the finer spacing; the last one
 // on the grid should the march leave it first.
+// floor(x) for |x| < 2^31, without a call
+static inline int floor_int(double x) {
+  int i = (int)x;
+  return x < i ? i - 1 : i;
+}
+
 static int march(const unsigned char* occupied, int nrow, int ncol, int r, int c, double sx, double sy, double dx,
                  double dy) {
   double step = dx < dy ? dx : dy;
   int last = r * ncol + c;
   for (int s = 1; s <= nrow + ncol; s++) {
-    int cc = (int)floor(c + s * step * sx / dx + 0.5), rr = (int)floor(r + s * step * sy / dy + 0.5);
+    int cc = floor_int(c + s * step * sx / dx + 0.5), rr = floor_int(r + s * step * sy / dy + 0.5);
     if (cc < 0 || cc >= ncol || rr < 0 || rr >= nrow) return last;
     if (rr != r || cc != c) {
       last = rr * ncol + cc;
@@ -112,82 +118,108 @@ int finrft_deforming_sweep(int nrow, int ncol, double* heights, const double siz
                            unsigned char* occupied) {
   FinrftGrid grid = make_grid(nrow, ncol, heights, size, centre, frame);
   if (finrft_grid_check(&grid, g) || !(front_share >= 0 && front_share <= 1)) return FINRFT_SURFACE_BAD_INPUT;
+  double *target = NULL, *direction = NULL;
   int cells = nrow * ncol;
-  double* target = malloc(sizeof(double) * 3 * cells);  // the lowest element's height, then its direction
-  if (!target) return FINRFT_SURFACE_BAD_INPUT;
-  double* direction = target + cells;
-  for (int i = 0; i < cells; i++) {
-    target[i] = INFINITY;
-    direction[2 * i] = direction[2 * i + 1] = 0;
-  }
   double dx = 2 * size[0] / (ncol - 1), dy = 2 * size[1] / (nrow - 1), top = heights[0];
   for (int i = 1; i < cells; i++) top = heights[i] > top ? heights[i] : top;
-  for (int e = 0; e < n; e++) {
-    double p[3], v[3];
-    finrft_grid_local(&grid, points + 3 * e, p);
-    if (p[2] > top + TOUCH) continue;  // above every point: it lowers none and is over none
-    const double* vw = velocities + 3 * e;
-    for (int j = 0; j < 3; j++) v[j] = vw[0] * frame[j] + vw[1] * frame[3 + j] + vw[2] * frame[6 + j];
-    double radius = sqrt((areas[e] > 0 ? areas[e] : 0) / M_PI);
-    double u = (p[0] + size[0]) / dx, w = (p[1] + size[1]) / dy;
-    int cn = (int)floor(u + 0.5), rn = (int)floor(w + 0.5);
-    cn = cn < 0 ? 0 : (cn > ncol - 1 ? ncol - 1 : cn);
-    rn = rn < 0 ? 0 : (rn > nrow - 1 ? nrow - 1 : rn);
-    int c0 = (int)ceil(u - radius / dx), c1 = (int)floor(u + radius / dx);
-    int r0 = (int)ceil(w - radius / dy), r1 = (int)floor(w + radius / dy);
-    if (c0 < 0) c0 = 0;
-    if (r0 < 0) r0 = 0;
-    if (c1 > ncol - 1) c1 = ncol - 1;
-    if (r1 > nrow - 1) r1 = nrow - 1;
-    double speed = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]), horizontal = hypot(v[0], v[1]);
-    double d[2] = {0, 0};
-    if (horizontal > STRAIGHT_DOWN * speed && horizontal > 0) {
-      d[0] = v[0] / horizontal;
-      d[1] = v[1] / horizontal;
-    }
-    // the footprint's points row by row, then the nearest point should the disc miss it (as the twin appends it)
-    int nearest_seen = 0;
-    for (int pass = 0; pass < 2; pass++) {
-      for (int r = pass ? rn : r0; r <= (pass ? rn : r1); r++) {
-        for (int c = pass ? cn : c0; c <= (pass ? cn : c1); c++) {
-          if (!pass) {
-            double ex = c * dx - size[0] - p[0], ey = r * dy - size[1] - p[1];
-            if (!(ex * ex + ey * ey <= radius * radius || (r == rn && c == cn))) continue;
-            if (r == rn && c == cn) nearest_seen = 1;
-          } else if (nearest_seen) {
-            continue;
-          }
-          int i = r * ncol + c;
-          if (p[2] < target[i]) {
-            target[i] = p[2];
-            direction[2 * i] = d[0];
-            direction[2 * i + 1] = d[1];
+  // Each element's footprint: its disc's grid points and the nearest one. The elements above every point lower
+  // none and are over none; the rest's footprints lie in one box, the only points this sweep reads or changes.
+  int box[4] = {nrow, -1, ncol, -1};
+  for (int pass = 0; pass < 2; pass++) {
+    for (int e = 0; e < n; e++) {
+      double p[3];
+      finrft_grid_local(&grid, points + 3 * e, p);
+      if (p[2] > top + TOUCH) continue;
+      double radius = sqrt((areas[e] > 0 ? areas[e] : 0) / M_PI);
+      double u = (p[0] + size[0]) / dx, w = (p[1] + size[1]) / dy;
+      int cn = (int)floor(u + 0.5), rn = (int)floor(w + 0.5);
+      cn = cn < 0 ? 0 : (cn > ncol - 1 ? ncol - 1 : cn);
+      rn = rn < 0 ? 0 : (rn > nrow - 1 ? nrow - 1 : rn);
+      int c0 = (int)ceil(u - radius / dx), c1 = (int)floor(u + radius / dx);
+      int r0 = (int)ceil(w - radius / dy), r1 = (int)floor(w + radius / dy);
+      if (c0 < 0) c0 = 0;
+      if (r0 < 0) r0 = 0;
+      if (c1 > ncol - 1) c1 = ncol - 1;
+      if (r1 > nrow - 1) r1 = nrow - 1;
+      if (pass == 0) {
+        int lo_r = r0 < rn ? r0 : rn, hi_r = r1 > rn ? r1 : rn, lo_c = c0 < cn ? c0 : cn, hi_c = c1 > cn ? c1 : cn;
+        if (lo_r < box[0]) box[0] = lo_r;
+        if (hi_r > box[1]) box[1] = hi_r;
+        if (lo_c < box[2]) box[2] = lo_c;
+        if (hi_c > box[3]) box[3] = hi_c;
+        continue;
+      }
+      double v[3];
+      const double* vw = velocities + 3 * e;
+      for (int j = 0; j < 3; j++) v[j] = vw[0] * frame[j] + vw[1] * frame[3 + j] + vw[2] * frame[6 + j];
+      double speed = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]), horizontal = hypot(v[0], v[1]);
+      double d[2] = {0, 0};
+      if (horizontal > STRAIGHT_DOWN * speed && horizontal > 0) {
+        d[0] = v[0] / horizontal;
+        d[1] = v[1] / horizontal;
+      }
+      // the footprint's points row by row, then the nearest point should the disc miss it (as the twin appends it)
+      int nearest_seen = 0;
+      for (int again = 0; again < 2; again++) {
+        for (int r = again ? rn : r0; r <= (again ? rn : r1); r++) {
+          for (int c = again ? cn : c0; c <= (again ? cn : c1); c++) {
+            if (!again) {
+              double ex = c * dx - size[0] - p[0], ey = r * dy - size[1] - p[1];
+              if (!(ex * ex + ey * ey <= radius * radius || (r == rn && c == cn))) continue;
+              if (r == rn && c == cn) nearest_seen = 1;
+            } else if (nearest_seen) {
+              continue;
+            }
+            int i = r * ncol + c;
+            if (p[2] < target[i]) {
+              target[i] = p[2];
+              direction[2 * i] = d[0];
+              direction[2 * i + 1] = d[1];
+            }
           }
         }
       }
     }
+    if (pass == 0) {
+      if (box[1] < 0) break;  // no element below the highest point
+      target = malloc(sizeof(double) * 3 * cells);  // the lowest element's height, then its direction
+      if (!target) return FINRFT_SURFACE_BAD_INPUT;
+      direction = target + cells;
+      for (int r = box[0]; r <= box[1]; r++) {
+        for (int i = r * ncol + box[2]; i <= r * ncol + box[3]; i++) {
+          target[i] = INFINITY;
+          direction[2 * i] = direction[2 * i + 1] = 0;
+        }
+      }
+    }
   }
+  memset(occupied, 0, cells);
+  if (!target) return 0;
   double* removed = target;  // reused in place: the height each point loses
-  for (int i = 0; i < cells; i++) {
-    occupied[i] = target[i] <= heights[i] + TOUCH;
-    double lost = target[i] < heights[i] ? heights[i] - target[i] : 0;
-    if (target[i] < heights[i]) heights[i] = target[i];
-    removed[i] = lost;
+  for (int r = box[0]; r <= box[1]; r++) {
+    for (int i = r * ncol + box[2]; i <= r * ncol + box[3]; i++) {
+      occupied[i] = target[i] <= heights[i] + TOUCH;
+      double lost = target[i] < heights[i] ? heights[i] - target[i] : 0;
+      if (target[i] < heights[i]) heights[i] = target[i];
+      removed[i] = lost;
+    }
   }
   double side = 0.5 * (1 - front_share);
-  for (int i = 0; i < cells; i++) {
-    if (removed[i] == 0) continue;
-    int r = i / ncol, c = i % ncol;
-    double d0 = direction[2 * i], d1 = direction[2 * i + 1];
-    if (d0 == 0 && d1 == 0) {
-      heights[march(occupied, nrow, ncol, r, c, 1, 0, dx, dy)] += 0.25 * removed[i];
-      heights[march(occupied, nrow, ncol, r, c, -1, 0, dx, dy)] += 0.25 * removed[i];
-      heights[march(occupied, nrow, ncol, r, c, 0, 1, dx, dy)] += 0.25 * removed[i];
-      heights[march(occupied, nrow, ncol, r, c, 0, -1, dx, dy)] += 0.25 * removed[i];
-    } else {
-      heights[march(occupied, nrow, ncol, r, c, d0, d1, dx, dy)] += front_share * removed[i];
-      heights[march(occupied, nrow, ncol, r, c, -d1, d0, dx, dy)] += side * removed[i];
-      heights[march(occupied, nrow, ncol, r, c, d1, -d0, dx, dy)] += side * removed[i];
+  for (int r = box[0]; r <= box[1]; r++) {
+    for (int c = box[2]; c <= box[3]; c++) {
+      int i = r * ncol + c;
+      if (removed[i] == 0) continue;
+      double d0 = direction[2 * i], d1 = direction[2 * i + 1];
+      if (d0 == 0 && d1 == 0) {
+        heights[march(occupied, nrow, ncol, r, c, 1, 0, dx, dy)] += 0.25 * removed[i];
+        heights[march(occupied, nrow, ncol, r, c, -1, 0, dx, dy)] += 0.25 * removed[i];
+        heights[march(occupied, nrow, ncol, r, c, 0, 1, dx, dy)] += 0.25 * removed[i];
+        heights[march(occupied, nrow, ncol, r, c, 0, -1, dx, dy)] += 0.25 * removed[i];
+      } else {
+        heights[march(occupied, nrow, ncol, r, c, d0, d1, dx, dy)] += front_share * removed[i];
+        heights[march(occupied, nrow, ncol, r, c, -d1, d0, dx, dy)] += side * removed[i];
+        heights[march(occupied, nrow, ncol, r, c, d1, -d0, dx, dy)] += side * removed[i];
+      }
     }
   }
   free(target);

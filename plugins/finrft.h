@@ -162,6 +162,7 @@ typedef struct {
   int paused;       // as FinrftInstance's
   int has_applied;  // 1 when the last passive force computation on this mjData applied `applied` (not paused)
   double applied[6];
+  double reach;     // deforming surface: the elements' largest distance from the body's origin (0: not yet known)
 } FinrftSurface;
 
 // The instance of finrft.surface with index `instance` for the model `m` that `d` is stepped with (made again for

@@ -987,11 +987,57 @@ static inline double element_depth(const FinrftSurface* p, const mjtNum origin[3
   return p->surface_z - (origin[2] + (R[6] * e[0] + R[7] * e[1] + R[8] * e[2]));
 }
 
+// ---- The deforming surface's elements ----
+// The elements' largest distance from the body's origin, once.
+static void deforming_reach(FinrftSurface* p) {
+  for (int i = 0; i < p->n; i++) p->reach = fmax(p->reach, mju_norm3(p->element + 7 * i));
+}
+
+// Every element's depth below a deforming surface's level, into p->scratch + 3 n: an element's height in the grid's
+// frame costs three products (w . e, w the grid's up axis in the body's frame), and only those below the highest
+// grid point within the body's reach are placed on the grid and interpolated; the rest (most of a wheel's) get that
+// height less theirs, <= 0, no force. As finrft_deforming_depth where the depth is positive.
+static const double* deforming_element_depths(const FinrftSurface* p, const mjData* d) {
+  const FinrftField* f = &p->field;
+  const mjtNum* origin = d->xpos + 3 * p->body;
+  const mjtNum* R = d->xmat + 9 * p->body;
+  double* depth = p->scratch + 3 * p->n;
+  FinrftDeformingGrid grid;
+  finrft_deforming_grid(&grid, f->nrow, f->ncol, f->heights, f->original, f->pile_factor, f->size, f->centre,
+                        f->frame);
+  if (!(p->reach > 0)) deforming_reach((FinrftSurface*)p);
+  // the body's origin in the grid's frame, its up axis in the body's
+  double at[3], w[3], up[3] = {f->frame[2], f->frame[5], f->frame[8]};
+  finrft_grid_local(&grid.grid, origin, at);
+  mju_mulMatTVec3(w, R, up);
+  double low[2] = {at[0] - p->reach, at[1] - p->reach}, high[2] = {at[0] + p->reach, at[1] + p->reach};
+  double top = finrft_deforming_top(&grid, low, high) - at[2];  // as the elements' heights, from the origin
+  for (int i = 0; i < p->n; i++) {
+    const double* e = p->element + 7 * i;
+    double height = w[0] * e[0] + w[1] * e[1] + w[2] * e[2];
+    if (height >= top) {
+      depth[i] = top - height;
+      continue;
+    }
+    // the element's place in the grid's frame: the origin's, plus its arm R e turned into the grid's frame
+    double arm[3] = {R[0] * e[0] + R[1] * e[1] + R[2] * e[2], R[3] * e[0] + R[4] * e[1] + R[5] * e[2],
+                     R[6] * e[0] + R[7] * e[1] + R[8] * e[2]};
+    double local[3];
+    for (int j = 0; j < 3; j++) {
+      local[j] = at[j] + arm[0] * f->frame[j] + arm[1] * f->frame[3 + j] + arm[2] * f->frame[6 + j];
+    }
+    depth[i] = finrft_deforming_local_depth(&grid, local, 1);
+  }
+  return depth;
+}
+// ---- end of the deforming surface's elements ----
+
 // Every element's depth along gravity below the free surface at the positions of d, into p->scratch + 3 n (the
 // world centres before them); NULL when level, where element_depth takes each. The instance's surface was checked
 // under this gravity (refresh_gravity), so its kind's function cannot refuse it.
 static const double* element_depths(const FinrftSurface* p, const mjData* d) {
   if (p->level) return NULL;
+  if (p->field.kind == FINRFT_FIELD_DEFORMING) return deforming_element_depths(p, d);
   const mjtNum* origin = d->xpos + 3 * p->body;
   const mjtNum* R = d->xmat + 9 * p->body;
   double* centre = p->scratch;
@@ -1096,6 +1142,81 @@ FINRFT_EXPORT int finrft_surface_set_level(const mjModel* m, mjData* d, int inst
   memcpy(d->plugin_state + m->plugin_stateadr[instance], level, nrow * ncol * sizeof(double));
   return 0;
 }
+
+// ---- The deforming surface's step ----
+// A run's step of its deforming surface `s` (finrft.surfaces.deforming.DeformingSurface.step_model): once an element
+// of the bodies of the finrft.surface `instances` may have moved `move` (m) since the last step (their origins'
+// travel and their turn times their elements' reach, from the poses in d before the kinematics are made again; the
+// last step's in `pose`, 7 per instance, NaN before the first), every element at the state of d sweeps the sand
+// (finrft_deforming_step; the first step imprints the bodies) and the level is set in each instance's state. 1 when
+// it stepped, with the volume displaced in *removed (m^3); 0 when not; -1 when an instance is not a finrft.surface one
+// on a deforming surface of s's grid, or the step refused its input.
+FINRFT_EXPORT int finrft_surface_deforming_step(const mjModel* m, mjData* d, FinrftDeforming* s, int ninstance,
+                                                const int* instances, double* pose, double move, double* removed) {
+  int slot = -1, n = 0;
+  mjp_getPlugin(FINRFT_SURFACE_PLUGIN, &slot);
+  const FinrftSurface* ps[ninstance > 0 ? ninstance : 1];
+  for (int k = 0; k < ninstance; k++) {
+    int instance = instances[k];
+    if (instance < 0 || instance >= m->nplugin || m->plugin[instance] != slot) return -1;
+    const FinrftSurface* p = finrft_surface_instance(m, d, instance);
+    if (!p || p->field.kind != FINRFT_FIELD_DEFORMING || p->field.nrow != s->nrow || p->field.ncol != s->ncol) {
+      return -1;
+    }
+    if (!(p->reach > 0)) deforming_reach((FinrftSurface*)p);
+    ps[k] = p;
+    n += p->n;
+  }
+  *removed = 0;
+  int first = isnan(pose[0]), still = !first;
+  for (int k = 0; k < ninstance && still; k++) {
+    const double* x = d->xpos + 3 * ps[k]->body;
+    const double* q = d->xquat + 4 * ps[k]->body;
+    double* last = pose + 7 * k;
+    double dot = fabs(q[0] * last[3] + q[1] * last[4] + q[2] * last[5] + q[3] * last[6]);
+    double turn = 2 * acos(dot < 1 ? dot : 1);
+    double travel = sqrt((x[0] - last[0]) * (x[0] - last[0]) + (x[1] - last[1]) * (x[1] - last[1]) +
+                         (x[2] - last[2]) * (x[2] - last[2]));
+    if (!(travel + turn * ps[k]->reach < move)) still = 0;
+  }
+  if (still) return 0;
+  for (int k = 0; k < ninstance; k++) {
+    mju_copy3(pose + 7 * k, d->xpos + 3 * ps[k]->body);
+    mju_copy4(pose + 7 * k + 3, d->xquat + 4 * ps[k]->body);
+  }
+  // every element's world centre, velocity and area at the state of d (as body_elements in deforming.py)
+  mj_kinematics(m, d);
+  mj_comPos(m, d);
+  mj_comVel(m, d);
+  double* buffer = (double*)malloc(sizeof(double) * 7 * (n > 0 ? n : 1));
+  if (!buffer) return -1;
+  double *points = buffer, *velocities = buffer + 3 * n, *areas = buffer + 6 * n;
+  int j = 0;
+  for (int k = 0; k < ninstance; k++) {
+    const FinrftSurface* p = ps[k];
+    const mjtNum* origin = d->xpos + 3 * p->body;
+    const mjtNum* R = d->xmat + 9 * p->body;
+    mjtNum twist[6];
+    mj_objectVelocity(m, d, mjOBJ_XBODY, p->body, twist, 0);
+    for (int i = 0; i < p->n; i++, j++) {
+      const double* e = p->element + 7 * i;
+      double arm[3], spin[3];
+      mju_mulMatVec3(arm, R, e);
+      mju_add3(points + 3 * j, arm, origin);
+      mju_cross(spin, twist, arm);
+      mju_add3(velocities + 3 * j, twist + 3, spin);
+      areas[j] = e[6];
+    }
+  }
+  int failed = finrft_deforming_step(s, m->opt.gravity, n, points, areas, velocities, first, removed);
+  free(buffer);
+  if (failed) return -1;
+  for (int k = 0; k < ninstance; k++) {
+    memcpy(d->plugin_state + m->plugin_stateadr[instances[k]], s->level, s->nrow * s->ncol * sizeof(double));
+  }
+  return 1;
+}
+// ---- end of the deforming surface's step ----
 
 // Every element's force, summed into one force and one torque about the body's origin, applied once.
 static void surface_compute(const mjModel* m, mjData* d, int instance, int capability_bit) {

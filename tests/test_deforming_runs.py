@@ -158,3 +158,11 @@ def test_the_level_is_the_plugins_state():
     other.qpos[:], other.qvel[:] = d.qpos, d.qvel
     mujoco.mj_forward(m, other)
     assert np.allclose(read(other)[0, 3:], flat, rtol=1e-12)
+
+
+def test_the_modelling_bench_compares_the_wheel_on_both_surfaces():
+    from finrft.studies.bench import _wheel_surfaces
+
+    row = _wheel_surfaces(1)
+    # the braked wheel pushes a pile ahead of it on the deforming surface: more resistance than on the flat one
+    assert row["fx_diff_N"] < -1.0 and row["wall_a_s"] > 0 and row["wall_b_s"] > 0

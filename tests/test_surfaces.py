@@ -254,3 +254,34 @@ def test_the_surfaces_are_installed_with_finrft():
     packages = tomllib.loads((root / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"]
     assert "finrft.surfaces" in packages
     assert sorted(Path(root, "plugins", "surfaces").glob("*.c"))  # compiled by setup.py's source list
+
+
+def test_a_relaxed_region_stays_still_while_another_flows():
+    # a slope within the tolerance above repose on one side, a spike on the other: only the spike's sand moves
+    x, y = _grid_xy(33, 41)
+    h = (np.tan(REPOSE) + 0.5 * deforming.TOLERANCE) * np.minimum(x + 0.03, 0.0)
+    h[16, 35] = 0.05
+    relaxed = deforming.relax(h, SIZE, REPOSE)
+    assert relaxed.converged and relaxed.iterations > 3
+    assert np.array_equal(relaxed.heights[:, x[0] < -0.035], h[:, x[0] < -0.035])
+
+
+def test_the_c_step_of_a_run_agrees_with_its_twin():
+    # a row of elements cutting a rut across the grid and leaving it: sweep, relaxation carried over from step to
+    # step (the C step relaxes only where sand can still flow), the level under the body and the rut it leaves
+    R = _rotation(8)
+    surfaces_ = [deforming.DeformingSurface(np.zeros((31, 37)), SIZE, REPOSE, (0.01, 0.0, 0.0), R, native=native)
+                 for native in (True, False)]
+    y = np.linspace(-0.0203, 0.0197, 9)
+    removed = np.zeros(2)
+    for step in range(40):
+        depth = -0.015 if step < 30 else 0.02  # out of the sand for the last ten
+        local = np.c_[np.full(9, -0.0713 + 0.0043 * step), y, np.full(9, depth)]
+        points, velocities = local @ R.T + R @ [0.01, 0.0, 0.0], np.tile(R @ [0.1, 0.02, -0.01], (9, 1))
+        for k, s in enumerate(surfaces_):
+            removed[k] += s.step(points, np.full(9, 3e-5), velocities, R @ G, imprint=step == 0)
+    native, twin = surfaces_
+    assert np.abs(native.heights).max() > 0.01 and removed[0] > 0
+    assert np.abs(native.heights - twin.heights).max() < 1e-9 and np.abs(native.level - twin.level).max() < 1e-9
+    assert abs(removed[0] - removed[1]) < 1e-9 * removed[0] and np.abs(native.original - twin.original).max() < 1e-9
+    assert abs(native.volume() - twin.volume()) < 1e-6 * removed[0]

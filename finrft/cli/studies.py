@@ -185,9 +185,10 @@ def _add_accuracy(kinds: Any) -> argparse.ArgumentParser:
 def _add_modelling(kinds: Any) -> argparse.ArgumentParser:
     return kinds.add_parser("modelling", help="what each modelling choice costs and changes",
                             description="Measure planar against 3D chains, rigid plates as one body against welded "
-                            "segments, MuJoCo limit against penalty stops, and the half against the full robot: the "
-                            "largest change in segment angle (deg), drive force (% of its peak) or efficiency "
-                            "(points), and the wall-time ratio. About 10 s.")
+                            "segments, MuJoCo limit against penalty stops, the half against the full robot, and the "
+                            "wheel on a deforming surface against the flat one: the largest change in segment angle "
+                            "(deg), drive force (% of its peak) or efficiency (points), or the wheel's Fx (N), and "
+                            "the wall-time ratio. About 20 s.")
 
 
 def _add_fit(kinds: Any) -> argparse.ArgumentParser:

@@ -282,7 +282,11 @@ def fit_speed(paths: list[str] | None = None, *, budget: int = 300, workers: int
 # What each modelling choice costs and changes
 
 
-MODELLING_CASES = 9  # chain x 2 presets, rigid plate x 2, origami stop x 3, robot x 2
+MODELLING_CASES = 10  # chain x 2 presets, rigid plate x 2, origami stop x 3, robot x 2, surface
+# The wheel on a deforming surface against the flat one: held 30 mm deep at slip -0.5 for 6 s (60 mm) with its error
+# estimate, as the wheel study runs it (docs/results/wheel.md).
+WHEEL_SURFACE_RUN = {"wheel.slip": -0.5, "wheel.sinkage": 0.03, "medium.name": "wheel_sand_cmu", "sim.duration": 6.0,
+                     "sim.settle": 4.0}
 
 
 def _plate_pair(a: Scene, b: Scene, drive: Drive, repeat: int) -> dict[str, float]:
@@ -296,10 +300,24 @@ def _plate_pair(a: Scene, b: Scene, drive: Drive, repeat: int) -> dict[str, floa
             "wall_b_s": _best(lambda: simulate(b, drive, estimate_error=False), repeat)}
 
 
+def _wheel_surfaces(repeat: int) -> dict[str, float]:
+    """The wheel run on the flat and the deforming surface (`WHEEL_SURFACE_RUN`): the change of its drawbar pull
+    Fx (N) and the best wall times of each, taken in turn."""
+    from ..experiments.wheel import DEFORMING_GRID, default_scene, run_wheel
+
+    flat = default_scene(**WHEEL_SURFACE_RUN)
+    deforming = default_scene(**WHEEL_SURFACE_RUN, **{"medium.surface": "deforming", "medium.pile_factor": 0.7},
+                              **DEFORMING_GRID)
+    pull = [run_wheel(scene).summary()["Fx_N"] for scene in (flat, deforming)]
+    times = _interleaved({"flat": lambda: run_wheel(flat), "deforming": lambda: run_wheel(deforming)}, repeat)
+    return {"fx_diff_N": pull[1] - pull[0], "wall_a_s": min(times["flat"]), "wall_b_s": min(times["deforming"])}
+
+
 def modelling(*, repeat: int = 3, log: Callable[[str], None] = print, progress: Progress = None) -> dict[str, Any]:
     """Measure what each modelling choice costs and changes: a planar chain against a 3D chain free to turn
-    out of the plane, the half robot against the full one, a MuJoCo limit stop against the penalty stop, and a
-    rigid plate as one body against hinged segments held by welds. Returns the rows and a Markdown table."""
+    out of the plane, the half robot against the full one, a MuJoCo limit stop against the penalty stop, a
+    rigid plate as one body against hinged segments held by welds, and the wheel on a deforming surface against
+    the flat one. Returns the rows and a Markdown table."""
     drag = Drive()  # 200 mm at 30 mm/s
     cycle = PLATE_DRIVE  # 45 mm out and back
     rows = []
@@ -339,11 +357,14 @@ def modelling(*, repeat: int = 3, log: Callable[[str], None] = print, progress: 
                 "wall_a_s": _best(lambda: swim(scene, 1, estimate_error=False), repeat),
                 "wall_b_s": _best(lambda: swim(full_scene, 1, estimate_error=False), repeat)}
         add("robot", f"robot {name}, optimised gait, one cycle", "half", "full", pair)
+    add("surface", "wheel rig, held 30 mm deep at slip -0.5, 6 s", "flat", "deforming",
+        _wheel_surfaces(repeat))
     lines = ["| choice | scene | A | B | what changes (B against A) | cost of B / A |", "|---|---|---|---|---|---:|"]
     for r in rows:
         change = ", ".join(f"{v:.2g} {unit}" for key, unit in (("angle_diff_deg", "° in angle"),
                                                                 ("force_diff_pct", "% in drive force"),
-                                                                ("eta_diff_pts", "points in η"))
+                                                                ("eta_diff_pts", "points in η"),
+                                                                ("fx_diff_N", "N in Fx"))
                            if (v := r.get(key)) is not None)
         change += f"; {r['note']}" if r["note"] else ""
         lines.append(f"| {r['choice']} | {r['scene']} | {r['a']} ({1e3 * r['wall_a_s']:.1f} ms) | {r['b']} "

@@ -9,10 +9,9 @@ the sand's volume is dx dy times the sum of the heights; both conserve it (to ro
   first grid point not under the body along the element's horizontal velocity (``front_share`` of it) and across it
   on either side (half the rest each), or equally to the four directions of the grid for an element moving
   straight down. An element coarser than the grid leaves points between footprints untouched.
-- `relax`: between neighbouring grid points (along x and along y) whose slope is steeper than the angle of repose,
-  sand flows from the higher to the lower, a quarter of the excess height per iteration (the explicit diffusion
-  limit), until no slope exceeds tan(repose) + ``tolerance``. Points under the body (``blocked``) neither give nor
-  take.
+- `relax`: between neighbouring grid points (along x and along y) whose slope exceeds tan(repose) + ``tolerance``,
+  sand flows from the higher to the lower, a quarter of the height above the angle of repose per iteration (the
+  explicit diffusion limit), until no slope does. Points under the body (``blocked``) neither give nor take.
 
 `depth` measures from the deformed surface; with ``pile_factor`` it follows the wheel group's rule instead
 (qishuny/3D-RFT-wheel, RFT3D/SandDeformation.m): an element in raised sand (below the deformed surface, above the
@@ -175,14 +174,15 @@ def relax(heights: Any, size: Any, repose: float, blocked: Any = None, tolerance
         step_x, step_y = h[:, 1:] - h[:, :-1], h[1:, :] - h[:-1, :]
         excess_x = np.where(free_x, np.abs(step_x) - slope * dx, 0.0)
         excess_y = np.where(free_y, np.abs(step_y) - slope * dy, 0.0)
-        worst = max(float(excess_x.max()) / dx, float(excess_y.max()) / dy)
-        if worst <= tolerance:
+        # only an edge steeper than the tolerance flows: a relaxed region stays still while another flows
+        flowing_x, flowing_y = excess_x > tolerance * dx, excess_y > tolerance * dy
+        if not (flowing_x.any() or flowing_y.any()):
             return Relaxed(h, iteration, True)
         if iteration == max_iterations:
             break
         # moved from the higher point to the lower, along + (up the index) where the step is negative
-        flow_x = -np.sign(step_x) * RELAX_RATE * np.maximum(excess_x, 0.0)
-        flow_y = -np.sign(step_y) * RELAX_RATE * np.maximum(excess_y, 0.0)
+        flow_x = -np.sign(step_x) * RELAX_RATE * np.where(flowing_x, excess_x, 0.0)
+        flow_y = -np.sign(step_y) * RELAX_RATE * np.where(flowing_y, excess_y, 0.0)
         h[:, :-1] -= flow_x
         h[:, 1:] += flow_x
         h[:-1, :] -= flow_y
@@ -243,7 +243,8 @@ class DeformingSurface:
         self._reach: np.ndarray | None = None  # each body's elements' largest distance from its origin
         self._data: Any = None
         self._occupied = np.zeros(self.heights.shape, np.ubyte)
-        self._under = np.zeros(self.heights.shape, bool)  # the grid points under the body at the last step
+        # the grid points under the body at the last step (bytes 0 or 1: the C step's, which uses the other bits)
+        self._under = np.zeros(self.heights.shape, np.ubyte)
         # The surface the elements measure their depth from: the sand's own (heights) where no body is, and under a
         # body (`_covered`) the height the sand had as the body entered that point (the level of the sand around the
         # hole it digs, not the hole's floor); a point the body has left is its floor again, a rut.
@@ -251,6 +252,7 @@ class DeformingSurface:
         if self.level.shape != self.heights.shape or self.level.dtype != float:
             raise SceneError(f"level must be an array of floats of the heights' shape {self.heights.shape}")
         self.level[...] = self.heights
+        self._state = _state(self) if self.native else None
 
     def installed(self, m: Any, d: Any) -> "DeformingSurface":
         """Set the level in the native plugin's ``instances`` of the MjData ``d`` of model ``m``, now and after
@@ -262,7 +264,7 @@ class DeformingSurface:
     def _set_level(self) -> None:
         if not self.instances:
             return
-        set_level = _native_functions()[2]
+        set_level = _native_functions()[1]
         nrow, ncol = self.level.shape
         for instance in self.instances:
             if set_level(self._model._address, self._data._address, instance, nrow, ncol, self.level.ctypes.data):
@@ -274,6 +276,8 @@ class DeformingSurface:
         the level set in the native instances (`installed`), once an element may have moved `MOVE` of the finer
         grid spacing since the last (a bound from the bodies' motion: their origins' travel and their turn times
         their elements' reach); the volume (m^3) displaced."""
+        if self.native and self.instances:
+            return self._native_step_model(m, d)
         if self._reach is None:
             self._bodies = [m.body(s.body).id for s in attached.surfaces]
             self._reach = np.array([np.sqrt((s.centre ** 2).sum(axis=1)).max() for s in attached.surfaces])
@@ -289,6 +293,21 @@ class DeformingSurface:
         removed = self.step(points, areas, velocities, m.opt.gravity, imprint=first)
         self._set_level()
         return removed
+
+    def _native_step_model(self, m: Any, d: Any) -> float:
+        if self._pose is None:
+            self._pose = np.full(7 * len(self.instances), np.nan)
+            self._instance_array = np.array(self.instances, dtype=np.intc)
+            self._move = MOVE * min(self._spacing)
+        removed = ctypes.c_double(0.0)
+        stepped = _native_functions()[2](m._address, d._address, ctypes.byref(self._state), len(self.instances),
+                                         self._instance_array.ctypes.data, self._pose.ctypes.data, self._move,
+                                         ctypes.byref(removed))
+        if stepped < 0:
+            raise SceneError("the model's finrft.surface instances do not measure from this deforming surface "
+                             "(attach it with its field: finrft.surfaces.deforming.field)")
+        self.displaced += removed.value
+        return removed.value
 
     @property
     def cell(self) -> float:
@@ -329,27 +348,51 @@ class DeformingSurface:
         (N, 3, m/s), then relax at most ``step_iterations`` times; the volume (m^3) this step displaced. With
         ``imprint`` (a run's first step), the body's imprint instead: the sand under it lowered to it and no berm,
         a body that starts in the sand sitting in its own hole (its volume is not conserved: 0 displaced)."""
-        before, entered = self.heights.copy(), ~self._under
-        under = self._covered(points3(points))
         if self.native:
-            _native_step(self, points3(points), np.asarray(areas, float), points3(velocities),
-                         np.asarray(gravity, float))
-        else:
-            swept, occupied = sweep(self.heights, points, areas, velocities, gravity, self.size, self.centre,
-                                    self.frame, self.front_share)
-            self._occupied[...] = occupied
-            self.heights[...] = relax(swept, self.size, self.repose, occupied, self.tolerance,
-                                      self.step_iterations).heights
+            removed = _native_step(self, points3(points), np.asarray(areas, float), points3(velocities),
+                                   np.asarray(gravity, float), imprint)
+            self.displaced += removed
+            return removed
+        before, entered = self.heights.copy(), self._under == 0
+        under = self._covered(points3(points))
+        swept, occupied = sweep(self.heights, points, areas, velocities, gravity, self.size, self.centre,
+                                self.frame, self.front_share)
+        self._occupied[...] = occupied
+        self.heights[...] = relax(swept, self.size, self.repose, occupied, self.tolerance,
+                                  self.step_iterations).heights
         if imprint:
             np.minimum(before, self.heights, out=self.heights)
             self.original[...] = np.minimum(self.original, self.heights)
         under |= self._occupied != 0
         entered &= under
-        self._under = under
+        self._under[...] = under
         self.level[...] = np.where(entered, before, np.where(under, self.level, self.heights))
         removed = 0.0 if imprint else self.cell * float(np.clip(before - self.heights, 0.0, None).sum())
         self.displaced += removed
         return removed
+
+
+class _Deforming(ctypes.Structure):
+    """FinrftDeforming (plugins/surfaces/surfaces.h): a DeformingSurface's grid, parameters and arrays for the C
+    step."""
+
+    _fields_ = [("nrow", ctypes.c_int), ("ncol", ctypes.c_int), ("size", ctypes.c_double * 2),
+                ("centre", ctypes.c_double * 3), ("frame", ctypes.c_double * 9), ("repose", ctypes.c_double),
+                ("front_share", ctypes.c_double), ("tolerance", ctypes.c_double), ("step_iterations", ctypes.c_int),
+                ("heights", ctypes.c_void_p), ("level", ctypes.c_void_p), ("original", ctypes.c_void_p),
+                ("under", ctypes.c_void_p), ("occupied", ctypes.c_void_p), ("dirty", ctypes.c_int * 4)]
+
+
+def _state(s: DeformingSurface) -> _Deforming:
+    """The C step's view of ``s``: its arrays, written in place (they must stay the same arrays)."""
+    nrow, ncol = s.heights.shape
+    for a in (s.heights, s.level, s.original, s._under, s._occupied):
+        if not a.flags.c_contiguous:
+            raise SceneError("the deforming surface's arrays must be contiguous")
+    return _Deforming(nrow, ncol, (ctypes.c_double * 2)(*s.size), (ctypes.c_double * 3)(*s.centre),
+                      (ctypes.c_double * 9)(*np.ravel(s.frame)), s.repose, s.front_share, s.tolerance,
+                      s.step_iterations, s.heights.ctypes.data, s.level.ctypes.data, s.original.ctypes.data,
+                      s._under.ctypes.data, s._occupied.ctypes.data, (ctypes.c_int * 4)(0, nrow - 1, 0, ncol - 1))
 
 
 @functools.cache
@@ -360,26 +403,23 @@ def _native_functions() -> tuple[Any, Any, Any]:
         raise SceneError("the native library is not available (reinstall finrft: pip install -e .), so the deforming "
                          "surface cannot step natively: use native=False")
     p, i, f = ctypes.c_void_p, ctypes.c_int, ctypes.c_double
-    return (native.function("finrft_deforming_sweep", i, i, i, p, p, p, p, p, i, p, p, p, f, p),
-            native.function("finrft_deforming_relax", i, i, i, p, p, f, p, f, i),
-            native.function("finrft_surface_set_level", i, p, p, i, i, i, p))
+    return (native.function("finrft_deforming_step", i, p, p, i, p, p, p, i, p),
+            native.function("finrft_surface_set_level", i, p, p, i, i, i, p),
+            native.function("finrft_surface_deforming_step", i, p, p, p, i, p, p, f, p))
 
 
 def _native_step(s: DeformingSurface, points: np.ndarray, areas: np.ndarray, velocities: np.ndarray,
-                 gravity: np.ndarray) -> None:
+                 gravity: np.ndarray, imprint: bool) -> float:
     if areas.shape != (len(points),) or velocities.shape != points.shape:
         raise SceneError(f"sweep needs one area and one velocity per point: {len(points)} points, areas of shape "
                          f"{areas.shape}, velocities of shape {velocities.shape}")
-    sweep_c, relax_c, _ = _native_functions()
-    nrow, ncol = s.heights.shape
-    size = np.ascontiguousarray(s.size, float)
-    arrays = [np.ascontiguousarray(a, float) for a in (s.centre, s.frame, gravity, points, areas, velocities)]
-    if sweep_c(nrow, ncol, s.heights.ctypes.data, size.ctypes.data, *(a.ctypes.data for a in arrays[:3]),
-               len(points), *(a.ctypes.data for a in arrays[3:]), s.front_share, s._occupied.ctypes.data):
+    arrays = [np.ascontiguousarray(a, float) for a in (gravity, points, areas, velocities)]
+    removed = ctypes.c_double(0.0)
+    if _native_functions()[0](ctypes.byref(s._state), arrays[0].ctypes.data, len(points),
+                              *(a.ctypes.data for a in arrays[1:]), int(imprint), ctypes.byref(removed)):
         raise SceneError("the deforming surface's sweep refused its input (a grid whose z axis is not against "
                          "gravity, or front_share outside 0..1)")
-    relax_c(nrow, ncol, s.heights.ctypes.data, size.ctypes.data, s.repose, s._occupied.ctypes.data, s.tolerance,
-            s.step_iterations)
+    return removed.value
 
 
 def field(grid: Any, pile_factor: float | None = None) -> Any:

@@ -3,6 +3,7 @@
 
 #include <math.h>
 #include <stdlib.h>
+#include <string.h>
 
 #include "surfaces.h"
 
@@ -17,33 +18,91 @@ static FinrftGrid make_grid(int nrow, int ncol, const double* heights, const dou
   return grid;
 }
 
+void finrft_deforming_grid(FinrftDeformingGrid* g, int nrow, int ncol, const double* heights,
+                           const double* original, double pile_factor, const double size[2], const double centre[3],
+                           const double frame[9]) {
+  g->grid = make_grid(nrow, ncol, heights, size, centre, frame);
+  g->original = original;
+  g->pile_factor = pile_factor;
+  g->scale[0] = (ncol - 1) / (2 * size[0]);
+  g->scale[1] = (nrow - 1) / (2 * size[1]);
+}
+
+// The grid's (u, v) of (x, y), within it (beyond it, the nearest edge's), its cell's first point and the place in it.
+static inline void cell_of(const FinrftDeformingGrid* g, double x, double y, int* i, double* fu, double* fv) {
+  int nrow = g->grid.nrow, ncol = g->grid.ncol;
+  double u = (x + g->grid.size[0]) * g->scale[0], v = (y + g->grid.size[1]) * g->scale[1];
+  u = u > 0 ? (u < ncol - 1 ? u : ncol - 1) : 0;  // (NaN to 0: a point no grid can place)
+  v = v > 0 ? (v < nrow - 1 ? v : nrow - 1) : 0;
+  int c = (int)u, r = (int)v;  // floor: u, v >= 0
+  if (c > ncol - 2) c = ncol - 2;
+  if (r > nrow - 2) r = nrow - 2;
+  *i = r * ncol + c;
+  *fu = u - c;
+  *fv = v - r;
+}
+
+static inline double bilinear(const double* h, int ncol, int i, double fu, double fv) {
+  return (1 - fu) * (1 - fv) * h[i] + fu * (1 - fv) * h[i + 1] + (1 - fu) * fv * h[i + ncol] +
+         fu * fv * h[i + ncol + 1];
+}
+
+double finrft_deforming_local_depth(const FinrftDeformingGrid* g, const double local[3], int submerged_only) {
+  int i, ncol = g->grid.ncol;
+  double fu, fv;
+  cell_of(g, local[0], local[1], &i, &fu, &fv);
+  double deformed = bilinear(g->grid.heights, ncol, i, fu, fv) - local[2];
+  if (!(g->pile_factor > 0) || (submerged_only && !(deformed > 0))) return deformed;
+  double below_original = bilinear(g->original, ncol, i, fu, fv) - local[2];
+  int pile = deformed > 0 && below_original <= 0;
+  return pile ? g->pile_factor * deformed : fmin(deformed, below_original);
+}
+
+double finrft_deforming_top(const FinrftDeformingGrid* g, const double low[2], const double high[2]) {
+  int i0, i1;
+  double fu, fv;
+  cell_of(g, low[0], low[1], &i0, &fu, &fv);
+  cell_of(g, high[0], high[1], &i1, &fu, &fv);
+  int ncol = g->grid.ncol, r0 = i0 / ncol, c0 = i0 % ncol, r1 = i1 / ncol + 1, c1 = i1 % ncol + 1;
+  const double* h = g->grid.heights;
+  double top = h[i0];
+  for (int r = r0; r <= r1; r++) {
+    for (int c = c0; c <= c1; c++) top = h[r * ncol + c] > top ? h[r * ncol + c] : top;
+  }
+  return top;
+}
+
 int finrft_deforming_depth(int nrow, int ncol, const double* heights, const double* original, double pile_factor,
                            const double size[2], const double centre[3], const double frame[9], const double g[3],
                            int n, const double* points, double* depth) {
-  if (finrft_hfield_depth(nrow, ncol, heights, size, centre, frame, g, n, points, depth)) {
+  FinrftDeformingGrid grid;
+  finrft_deforming_grid(&grid, nrow, ncol, heights, original, pile_factor, size, centre, frame);
+  if (finrft_grid_check(&grid.grid, g) || !(isfinite(pile_factor) && pile_factor >= 0) ||
+      (pile_factor > 0 && !original)) {
     return FINRFT_SURFACE_BAD_INPUT;
   }
-  if (pile_factor == 0) return 0;
-  if (!(isfinite(pile_factor) && pile_factor > 0) || !original) return FINRFT_SURFACE_BAD_INPUT;
-  FinrftGrid grid = make_grid(nrow, ncol, original, size, centre, frame);
   for (int k = 0; k < n; k++) {
     double local[3];
-    finrft_grid_local(&grid, points + 3 * k, local);
-    double below_original = finrft_grid_height(&grid, original, local[0], local[1]) - local[2];
-    int pile = depth[k] > 0 && below_original <= 0;
-    depth[k] = pile ? pile_factor * depth[k] : fmin(depth[k], below_original);
+    finrft_grid_local(&grid.grid, points + 3 * k, local);
+    depth[k] = finrft_deforming_local_depth(&grid, local, 0);
   }
   return 0;
 }
 
 // The first grid point not under the body from (r, c) along (sx, sy) in steps of the finer spacing; the last one
 // on the grid should the march leave it first.
+// floor(x) for |x| < 2^31, without a call
+static inline int floor_int(double x) {
+  int i = (int)x;
+  return x < i ? i - 1 : i;
+}
+
 static int march(const unsigned char* occupied, int nrow, int ncol, int r, int c, double sx, double sy, double dx,
                  double dy) {
   double step = dx < dy ? dx : dy;
   int last = r * ncol + c;
   for (int s = 1; s <= nrow + ncol; s++) {
-    int cc = (int)floor(c + s * step * sx / dx + 0.5), rr = (int)floor(r + s * step * sy / dy + 0.5);
+    int cc = floor_int(c + s * step * sx / dx + 0.5), rr = floor_int(r + s * step * sy / dy + 0.5);
     if (cc < 0 || cc >= ncol || rr < 0 || rr >= nrow) return last;
     if (rr != r || cc != c) {
       last = rr * ncol + cc;
@@ -59,148 +118,180 @@ int finrft_deforming_sweep(int nrow, int ncol, double* heights, const double siz
                            unsigned char* occupied) {
   FinrftGrid grid = make_grid(nrow, ncol, heights, size, centre, frame);
   if (finrft_grid_check(&grid, g) || !(front_share >= 0 && front_share <= 1)) return FINRFT_SURFACE_BAD_INPUT;
+  double *target = NULL, *direction = NULL;
   int cells = nrow * ncol;
-  double* target = malloc(sizeof(double) * 3 * cells);  // the lowest element's height, then its direction
-  if (!target) return FINRFT_SURFACE_BAD_INPUT;
-  double* direction = target + cells;
-  for (int i = 0; i < cells; i++) {
-    target[i] = INFINITY;
-    direction[2 * i] = direction[2 * i + 1] = 0;
-  }
-  double dx = 2 * size[0] / (ncol - 1), dy = 2 * size[1] / (nrow - 1);
-  for (int e = 0; e < n; e++) {
-    double p[3], v[3];
-    finrft_grid_local(&grid, points + 3 * e, p);
-    const double* vw = velocities + 3 * e;
-    for (int j = 0; j < 3; j++) v[j] = vw[0] * frame[j] + vw[1] * frame[3 + j] + vw[2] * frame[6 + j];
-    double radius = sqrt((areas[e] > 0 ? areas[e] : 0) / M_PI);
-    double u = (p[0] + size[0]) / dx, w = (p[1] + size[1]) / dy;
-    int cn = (int)floor(u + 0.5), rn = (int)floor(w + 0.5);
-    cn = cn < 0 ? 0 : (cn > ncol - 1 ? ncol - 1 : cn);
-    rn = rn < 0 ? 0 : (rn > nrow - 1 ? nrow - 1 : rn);
-    int c0 = (int)ceil(u - radius / dx), c1 = (int)floor(u + radius / dx);
-    int r0 = (int)ceil(w - radius / dy), r1 = (int)floor(w + radius / dy);
-    if (c0 < 0) c0 = 0;
-    if (r0 < 0) r0 = 0;
-    if (c1 > ncol - 1) c1 = ncol - 1;
-    if (r1 > nrow - 1) r1 = nrow - 1;
-    double speed = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]), horizontal = hypot(v[0], v[1]);
-    double d[2] = {0, 0};
-    if (horizontal > STRAIGHT_DOWN * speed && horizontal > 0) {
-      d[0] = v[0] / horizontal;
-      d[1] = v[1] / horizontal;
-    }
-    // the footprint's points row by row, then the nearest point should the disc miss it (as the twin appends it)
-    int nearest_seen = 0;
-    for (int pass = 0; pass < 2; pass++) {
-      for (int r = pass ? rn : r0; r <= (pass ? rn : r1); r++) {
-        for (int c = pass ? cn : c0; c <= (pass ? cn : c1); c++) {
-          if (!pass) {
-            double ex = c * dx - size[0] - p[0], ey = r * dy - size[1] - p[1];
-            if (!(ex * ex + ey * ey <= radius * radius || (r == rn && c == cn))) continue;
-            if (r == rn && c == cn) nearest_seen = 1;
-          } else if (nearest_seen) {
-            continue;
-          }
-          int i = r * ncol + c;
-          if (p[2] < target[i]) {
-            target[i] = p[2];
-            direction[2 * i] = d[0];
-            direction[2 * i + 1] = d[1];
+  double dx = 2 * size[0] / (ncol - 1), dy = 2 * size[1] / (nrow - 1), top = heights[0];
+  for (int i = 1; i < cells; i++) top = heights[i] > top ? heights[i] : top;
+  // Each element's footprint: its disc's grid points and the nearest one. The elements above every point lower
+  // none and are over none; the rest's footprints lie in one box, the only points this sweep reads or changes.
+  int box[4] = {nrow, -1, ncol, -1};
+  for (int pass = 0; pass < 2; pass++) {
+    for (int e = 0; e < n; e++) {
+      double p[3];
+      finrft_grid_local(&grid, points + 3 * e, p);
+      if (p[2] > top + TOUCH) continue;
+      double radius = sqrt((areas[e] > 0 ? areas[e] : 0) / M_PI);
+      double u = (p[0] + size[0]) / dx, w = (p[1] + size[1]) / dy;
+      int cn = (int)floor(u + 0.5), rn = (int)floor(w + 0.5);
+      cn = cn < 0 ? 0 : (cn > ncol - 1 ? ncol - 1 : cn);
+      rn = rn < 0 ? 0 : (rn > nrow - 1 ? nrow - 1 : rn);
+      int c0 = (int)ceil(u - radius / dx), c1 = (int)floor(u + radius / dx);
+      int r0 = (int)ceil(w - radius / dy), r1 = (int)floor(w + radius / dy);
+      if (c0 < 0) c0 = 0;
+      if (r0 < 0) r0 = 0;
+      if (c1 > ncol - 1) c1 = ncol - 1;
+      if (r1 > nrow - 1) r1 = nrow - 1;
+      if (pass == 0) {
+        int lo_r = r0 < rn ? r0 : rn, hi_r = r1 > rn ? r1 : rn, lo_c = c0 < cn ? c0 : cn, hi_c = c1 > cn ? c1 : cn;
+        if (lo_r < box[0]) box[0] = lo_r;
+        if (hi_r > box[1]) box[1] = hi_r;
+        if (lo_c < box[2]) box[2] = lo_c;
+        if (hi_c > box[3]) box[3] = hi_c;
+        continue;
+      }
+      double v[3];
+      const double* vw = velocities + 3 * e;
+      for (int j = 0; j < 3; j++) v[j] = vw[0] * frame[j] + vw[1] * frame[3 + j] + vw[2] * frame[6 + j];
+      double speed = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]), horizontal = hypot(v[0], v[1]);
+      double d[2] = {0, 0};
+      if (horizontal > STRAIGHT_DOWN * speed && horizontal > 0) {
+        d[0] = v[0] / horizontal;
+        d[1] = v[1] / horizontal;
+      }
+      // the footprint's points row by row, then the nearest point should the disc miss it (as the twin appends it)
+      int nearest_seen = 0;
+      for (int again = 0; again < 2; again++) {
+        for (int r = again ? rn : r0; r <= (again ? rn : r1); r++) {
+          for (int c = again ? cn : c0; c <= (again ? cn : c1); c++) {
+            if (!again) {
+              double ex = c * dx - size[0] - p[0], ey = r * dy - size[1] - p[1];
+              if (!(ex * ex + ey * ey <= radius * radius || (r == rn && c == cn))) continue;
+              if (r == rn && c == cn) nearest_seen = 1;
+            } else if (nearest_seen) {
+              continue;
+            }
+            int i = r * ncol + c;
+            if (p[2] < target[i]) {
+              target[i] = p[2];
+              direction[2 * i] = d[0];
+              direction[2 * i + 1] = d[1];
+            }
           }
         }
       }
     }
+    if (pass == 0) {
+      if (box[1] < 0) break;  // no element below the highest point
+      target = malloc(sizeof(double) * 3 * cells);  // the lowest element's height, then its direction
+      if (!target) return FINRFT_SURFACE_BAD_INPUT;
+      direction = target + cells;
+      for (int r = box[0]; r <= box[1]; r++) {
+        for (int i = r * ncol + box[2]; i <= r * ncol + box[3]; i++) {
+          target[i] = INFINITY;
+          direction[2 * i] = direction[2 * i + 1] = 0;
+        }
+      }
+    }
   }
+  memset(occupied, 0, cells);
+  if (!target) return 0;
   double* removed = target;  // reused in place: the height each point loses
-  for (int i = 0; i < cells; i++) {
-    occupied[i] = target[i] <= heights[i] + TOUCH;
-    double lost = target[i] < heights[i] ? heights[i] - target[i] : 0;
-    if (target[i] < heights[i]) heights[i] = target[i];
-    removed[i] = lost;
+  for (int r = box[0]; r <= box[1]; r++) {
+    for (int i = r * ncol + box[2]; i <= r * ncol + box[3]; i++) {
+      occupied[i] = target[i] <= heights[i] + TOUCH;
+      double lost = target[i] < heights[i] ? heights[i] - target[i] : 0;
+      if (target[i] < heights[i]) heights[i] = target[i];
+      removed[i] = lost;
+    }
   }
   double side = 0.5 * (1 - front_share);
-  for (int i = 0; i < cells; i++) {
-    if (removed[i] == 0) continue;
-    int r = i / ncol, c = i % ncol;
-    double d0 = direction[2 * i], d1 = direction[2 * i + 1];
-    if (d0 == 0 && d1 == 0) {
-      heights[march(occupied, nrow, ncol, r, c, 1, 0, dx, dy)] += 0.25 * removed[i];
-      heights[march(occupied, nrow, ncol, r, c, -1, 0, dx, dy)] += 0.25 * removed[i];
-      heights[march(occupied, nrow, ncol, r, c, 0, 1, dx, dy)] += 0.25 * removed[i];
-      heights[march(occupied, nrow, ncol, r, c, 0, -1, dx, dy)] += 0.25 * removed[i];
-    } else {
-      heights[march(occupied, nrow, ncol, r, c, d0, d1, dx, dy)] += front_share * removed[i];
-      heights[march(occupied, nrow, ncol, r, c, -d1, d0, dx, dy)] += side * removed[i];
-      heights[march(occupied, nrow, ncol, r, c, d1, -d0, dx, dy)] += side * removed[i];
+  for (int r = box[0]; r <= box[1]; r++) {
+    for (int c = box[2]; c <= box[3]; c++) {
+      int i = r * ncol + c;
+      if (removed[i] == 0) continue;
+      double d0 = direction[2 * i], d1 = direction[2 * i + 1];
+      if (d0 == 0 && d1 == 0) {
+        heights[march(occupied, nrow, ncol, r, c, 1, 0, dx, dy)] += 0.25 * removed[i];
+        heights[march(occupied, nrow, ncol, r, c, -1, 0, dx, dy)] += 0.25 * removed[i];
+        heights[march(occupied, nrow, ncol, r, c, 0, 1, dx, dy)] += 0.25 * removed[i];
+        heights[march(occupied, nrow, ncol, r, c, 0, -1, dx, dy)] += 0.25 * removed[i];
+      } else {
+        heights[march(occupied, nrow, ncol, r, c, d0, d1, dx, dy)] += front_share * removed[i];
+        heights[march(occupied, nrow, ncol, r, c, -d1, d0, dx, dy)] += side * removed[i];
+        heights[march(occupied, nrow, ncol, r, c, d1, -d0, dx, dy)] += side * removed[i];
+      }
     }
   }
   free(target);
   return 0;
 }
 
-// Only edges next to a point that changed in the last iteration can have sand to move (one that did not change
-// kept its excess, and one with excess moved sand), so each iteration looks at the box of the points that changed,
-// one point wider: the same heights as the twin's sweep over the whole grid, at the cost of the disturbed region.
-int finrft_deforming_relax(int nrow, int ncol, double* heights, const double size[2], double repose,
-                           const unsigned char* blocked, double tolerance, int max_iterations) {
-  if (nrow < 2 || ncol < 2 || !(repose > 0 && repose < M_PI / 2) || !(size[0] > 0 && size[1] > 0) ||
-      !isfinite(size[0]) || !isfinite(size[1]) || !(tolerance > 0)) {
-    return FINRFT_SURFACE_BAD_INPUT;
-  }
-  double dx = 2 * size[0] / (ncol - 1), dy = 2 * size[1] / (nrow - 1), slope = tan(repose);
-  int nx = nrow * (ncol - 1);
-  double* flow = malloc(sizeof(double) * (nx + (nrow - 1) * ncol));
-  if (!flow) return FINRFT_SURFACE_BAD_INPUT;
-  int result = -1, r0 = 0, r1 = nrow - 1, c0 = 0, c1 = ncol - 1;  // the box of points to look at
+// Only an edge steeper than the tolerance flows, and only edges next to a point that changed in the last iteration
+// can start to (one that did not change kept its excess, and one with excess moved sand), so each iteration looks
+// at the box of the points that changed, one point wider: the same heights as the twin's sweep over the whole grid,
+// at the cost of the disturbed region. `box` (rows r0..r1, columns c0..c1) holds at the start every edge that may
+// flow, and at the end those that still would (r0 > r1: none). The iterations taken, or -1.
+static int relax_box(int nrow, int ncol, double* heights, double dx, double dy, double slope,
+                     const unsigned char* blocked, double tolerance, int max_iterations, double* flow, int box[4]) {
+  // flow[i]: from point i to i + 1 (x), flow[cells + i]: from i to i + ncol (y), written for the edges in the box
+  double* flow_x = flow;
+  double* flow_y = flow + nrow * ncol;
+  int result = -1, r0 = box[0], r1 = box[1], c0 = box[2], c1 = box[3];  // the box of points to look at
+  int cr0 = nrow, cr1 = -1, cc0 = ncol, cc1 = -1;  // the box of points that change
+  double rise_x = slope * dx, rise_y = slope * dy, over_x = tolerance * dx, over_y = tolerance * dy;
   for (int iteration = 0; iteration <= max_iterations; iteration++) {
-    double worst = -INFINITY;
-    int cr0 = nrow, cr1 = -1, cc0 = ncol, cc1 = -1;  // the box of points that change
+    cr0 = nrow, cr1 = -1, cc0 = ncol, cc1 = -1;
     for (int r = r0; r <= r1; r++) {
+      const double* h = heights + r * ncol;
+      double* fx = flow_x + r * ncol;
+      int first = ncol, last = -1;  // the row's points at an edge that flows
       for (int c = c0; c < c1; c++) {
-        int i = r * ncol + c, free_edge = !blocked || (!blocked[i] && !blocked[i + 1]);
-        double step = heights[i + 1] - heights[i], excess = free_edge ? fabs(step) - slope * dx : 0;
-        if (excess / dx > worst) worst = excess / dx;
-        flow[r * (ncol - 1) + c] = excess > 0 ? -copysign(RELAX_RATE * excess, step) : 0;
-        if (excess > 0) {
-          if (r < cr0) cr0 = r;
-          if (r > cr1) cr1 = r;
-          if (c < cc0) cc0 = c;
-          if (c + 1 > cc1) cc1 = c + 1;
+        double step = h[c + 1] - h[c], excess = fabs(step) - rise_x;
+        fx[c] = 0;
+        if (excess > over_x && (!blocked || (!blocked[r * ncol + c] && !blocked[r * ncol + c + 1]))) {
+          fx[c] = -copysign(RELAX_RATE * excess, step);
+          if (first > c) first = c;
+          last = c + 1;
         }
       }
-    }
-    for (int r = r0; r < r1; r++) {
-      for (int c = c0; c <= c1; c++) {
-        int i = r * ncol + c, free_edge = !blocked || (!blocked[i] && !blocked[i + ncol]);
-        double step = heights[i + ncol] - heights[i], excess = free_edge ? fabs(step) - slope * dy : 0;
-        if (excess / dy > worst) worst = excess / dy;
-        flow[nx + i] = excess > 0 ? -copysign(RELAX_RATE * excess, step) : 0;
-        if (excess > 0) {
-          if (r < cr0) cr0 = r;
-          if (r + 1 > cr1) cr1 = r + 1;
-          if (c < cc0) cc0 = c;
-          if (c > cc1) cc1 = c;
+      if (r < r1) {
+        double* fy = flow_y + r * ncol;
+        for (int c = c0; c <= c1; c++) {
+          double step = h[c + ncol] - h[c], excess = fabs(step) - rise_y;
+          fy[c] = 0;
+          if (excess > over_y && (!blocked || (!blocked[r * ncol + c] && !blocked[(r + 1) * ncol + c]))) {
+            fy[c] = -copysign(RELAX_RATE * excess, step);
+            if (first > c) first = c;
+            if (last < c) last = c;
+            if (cr1 < r + 1) cr1 = r + 1;
+          }
         }
       }
+      if (last >= 0) {
+        if (cr0 > r) cr0 = r;
+        if (cr1 < r) cr1 = r;
+        if (cc0 > first) cc0 = first;
+        if (cc1 < last) cc1 = last;
+      }
     }
-    if (worst <= tolerance) {
+    if (cr1 < 0) {
       result = iteration;
       break;
     }
     if (iteration == max_iterations) break;
+    // each point takes what flows in from its neighbours in the box and gives what flows out (edges leaving the box
+    // have no flow: both their points are as the last iteration left them, without excess between)
     for (int r = r0; r <= r1; r++) {
-      for (int c = c0; c < c1; c++) {
-        double f = flow[r * (ncol - 1) + c];
-        heights[r * ncol + c] -= f;
-        heights[r * ncol + c + 1] += f;
-      }
-    }
-    for (int r = r0; r < r1; r++) {
+      double* h = heights + r * ncol;
+      const double* fx = flow_x + r * ncol;
+      const double* fy = flow_y + r * ncol;
       for (int c = c0; c <= c1; c++) {
-        int i = r * ncol + c;
-        heights[i] -= flow[nx + i];
-        heights[i + ncol] += flow[nx + i];
+        double change = 0;
+        if (c < c1) change -= fx[c];
+        if (c > c0) change += fx[c - 1];
+        if (r < r1) change -= fy[c];
+        if (r > r0) change += fy[c - ncol];
+        h[c] += change;
       }
     }
     r0 = cr0 > 0 ? cr0 - 1 : 0;
@@ -208,6 +299,107 @@ int finrft_deforming_relax(int nrow, int ncol, double* heights, const double siz
     c0 = cc0 > 0 ? cc0 - 1 : 0;
     c1 = cc1 < ncol - 1 ? cc1 + 1 : ncol - 1;
   }
+  // where sand would still flow: the points of the edges the last check found steeper than the tolerance
+  box[0] = cr0, box[1] = cr1, box[2] = cc0, box[3] = cc1;
+  return result;
+}
+
+static int relax_checked(int nrow, int ncol, const double size[2], double repose, double tolerance) {
+  return nrow < 2 || ncol < 2 || !(repose > 0 && repose < M_PI / 2) || !(size[0] > 0 && size[1] > 0) ||
+         !isfinite(size[0]) || !isfinite(size[1]) || !(tolerance > 0);
+}
+
+int finrft_deforming_relax(int nrow, int ncol, double* heights, const double size[2], double repose,
+                           const unsigned char* blocked, double tolerance, int max_iterations) {
+  if (relax_checked(nrow, ncol, size, repose, tolerance)) return FINRFT_SURFACE_BAD_INPUT;
+  double* flow = malloc(sizeof(double) * 2 * nrow * ncol);
+  if (!flow) return FINRFT_SURFACE_BAD_INPUT;
+  int box[4] = {0, nrow - 1, 0, ncol - 1};
+  int result = relax_box(nrow, ncol, heights, 2 * size[0] / (ncol - 1), 2 * size[1] / (nrow - 1), tan(repose),
+                         blocked, tolerance, max_iterations, flow, box);
   free(flow);
   return result;
+}
+
+// The box (r0, r1, c0, c1) grown to hold the point i.
+static void grow(int box[4], int ncol, int i) {
+  int r = i / ncol, c = i % ncol;
+  if (r < box[0]) box[0] = r;
+  if (r > box[1]) box[1] = r;
+  if (c < box[2]) box[2] = c;
+  if (c > box[3]) box[3] = c;
+}
+
+int finrft_deforming_step(FinrftDeforming* s, const double g[3], int n, const double* points, const double* areas,
+                          const double* velocities, int imprint, double* removed) {
+  int nrow = s->nrow, ncol = s->ncol, cells = nrow * ncol;
+  if (relax_checked(nrow, ncol, s->size, s->repose, s->tolerance) || s->step_iterations < 0) {
+    return FINRFT_SURFACE_BAD_INPUT;
+  }
+  double dx = 2 * s->size[0] / (ncol - 1), dy = 2 * s->size[1] / (nrow - 1);
+  // before (cells), the relaxation's flows (2 cells), the points under the body before (cells bytes)
+  double* before = malloc(sizeof(double) * 3 * cells + cells);
+  if (!before) return FINRFT_SURFACE_BAD_INPUT;
+  double* flow = before + cells;
+  unsigned char* was = (unsigned char*)(flow + 2 * cells);
+  memcpy(before, s->heights, sizeof(double) * cells);
+  memcpy(was, s->occupied, cells);
+  // the grid points under the body (DeformingSurface._covered): nearest to an element below the level, and their
+  // neighbours; `entered` (was not under before) is read from s->under before it is replaced
+  unsigned char* under = s->under;  // 1: under at the last step; 2: near an element now; 4: under now
+  FinrftGrid grid = make_grid(nrow, ncol, s->heights, s->size, s->centre, s->frame);
+  for (int e = 0; e < n; e++) {
+    double p[3];
+    finrft_grid_local(&grid, points + 3 * e, p);
+    int c = (int)floor((p[0] + s->size[0]) / dx + 0.5), r = (int)floor((p[1] + s->size[1]) / dy + 0.5);
+    if (c < 0 || c >= ncol || r < 0 || r >= nrow) continue;
+    if (p[2] < s->level[r * ncol + c] + TOUCH) under[r * ncol + c] |= 2;
+  }
+  for (int r = 0; r < nrow; r++) {
+    for (int c = 0; c < ncol; c++) {
+      int i = r * ncol + c;
+      if ((under[i] & 2) || (r > 0 && (under[i - ncol] & 2)) || (r < nrow - 1 && (under[i + ncol] & 2)) ||
+          (c > 0 && (under[i - 1] & 2)) || (c < ncol - 1 && (under[i + 1] & 2))) {
+        under[i] |= 4;
+      }
+    }
+  }
+  int failed = finrft_deforming_sweep(nrow, ncol, s->heights, s->size, s->centre, s->frame, g, n, points, areas,
+                                      velocities, s->front_share, s->occupied);
+  if (failed) {
+    for (int i = 0; i < cells; i++) under[i] &= 1;
+    free(before);
+    return failed;
+  }
+  // what relaxation must look at: the excess left by the last step, and every point the sweep changed or whose
+  // being under the body did (an edge elsewhere is as the last relaxation left it, without excess)
+  int* box = s->dirty;
+  for (int i = 0; i < cells; i++) {
+    if (s->heights[i] != before[i] || s->occupied[i] != was[i]) grow(box, ncol, i);
+  }
+  if (box[0] <= box[1]) {
+    box[0] = box[0] > 0 ? box[0] - 1 : 0;
+    box[1] = box[1] < nrow - 1 ? box[1] + 1 : nrow - 1;
+    box[2] = box[2] > 0 ? box[2] - 1 : 0;
+    box[3] = box[3] < ncol - 1 ? box[3] + 1 : ncol - 1;
+    relax_box(nrow, ncol, s->heights, dx, dy, tan(s->repose), s->occupied, s->tolerance, s->step_iterations, flow,
+              box);
+  }
+  double lost = 0;
+  for (int i = 0; i < cells; i++) {
+    if (imprint) {
+      s->heights[i] = fmin(before[i], s->heights[i]);
+      s->original[i] = fmin(s->original[i], s->heights[i]);
+    }
+    int now = (under[i] & 4) || s->occupied[i], entered = now && !(under[i] & 1);
+    under[i] = (unsigned char)now;
+    s->level[i] = entered ? before[i] : (now ? s->level[i] : s->heights[i]);
+    if (before[i] > s->heights[i]) lost += before[i] - s->heights[i];
+  }
+  if (imprint) {  // the imprint lowered points anywhere under the body: every edge may have excess
+    box[0] = 0, box[1] = nrow - 1, box[2] = 0, box[3] = ncol - 1;
+  }
+  *removed = imprint ? 0 : dx * dy * lost;
+  free(before);
+  return 0;
 }

@@ -53,6 +53,23 @@ FINRFT_SURFACE_EXPORT int finrft_deforming_depth(int nrow, int ncol, const doubl
                                                  double pile_factor, const double size[2], const double centre[3],
                                                  const double frame[9], const double g[3], int n,
                                                  const double* points, double* depth);
+// A deforming surface's grid as the plugin measures its elements on it: the level (`grid`), the heights it started
+// from and the pile rule's factor (finrft_deforming_depth's), and the grid points per metre along x and y.
+typedef struct {
+  FinrftGrid grid;
+  const double* original;
+  double pile_factor;
+  double scale[2];
+} FinrftDeformingGrid;
+void finrft_deforming_grid(FinrftDeformingGrid* g, int nrow, int ncol, const double* heights,
+                           const double* original, double pile_factor, const double size[2], const double centre[3],
+                           const double frame[9]);
+// The depth (finrft_deforming_depth's) of a point given in the grid's frame (finrft_grid_local); with
+// `submerged_only` not through the pile rule where it is <= 0 (no force either way).
+double finrft_deforming_local_depth(const FinrftDeformingGrid* g, const double local[3], int submerged_only);
+// The highest height of the grid points around the box [low, high] of the grid's frame (x, y; beyond the grid, of
+// its nearest edge): no point of the surface over the box is higher.
+double finrft_deforming_top(const FinrftDeformingGrid* g, const double low[2], const double high[2]);
 // Sweep: heights updated in place, occupied[nrow * ncol] set to 1 under the body.
 FINRFT_SURFACE_EXPORT int finrft_deforming_sweep(int nrow, int ncol, double* heights, const double size[2],
                                                  const double centre[3], const double frame[9], const double g[3],
@@ -67,5 +84,26 @@ void finrft_surface_frame(const double up[3], double frame[9]);
 FINRFT_SURFACE_EXPORT int finrft_deforming_relax(int nrow, int ncol, double* heights, const double size[2],
                                                  double repose, const unsigned char* blocked, double tolerance,
                                                  int max_iterations);
+
+// A run's deforming surface (finrft.surfaces.deforming.DeformingSurface, whose arrays these point into; its ctypes
+// twin _Deforming): the grid, the sand's heights, the level the elements measure from, the original heights (the
+// pile rule's), the points under the body at the last step and those the last sweep found so (bytes, 0 or 1), and
+// `dirty`, the box (r0, r1, c0, c1; r0 > r1: none) of the edges relaxation left with excess.
+typedef struct {
+  int nrow, ncol;
+  double size[2], centre[3], frame[9];
+  double repose, front_share, tolerance;
+  int step_iterations;
+  double *heights, *level, *original;
+  unsigned char *under, *occupied;
+  int dirty[4];
+} FinrftDeforming;
+
+// One step (DeformingSurface.step): the elements at `points` (world, m) of `areas` moving at `velocities` sweep the
+// sand, which relaxes at most step_iterations times, and the level follows; with `imprint` the body's imprint
+// instead. The volume displaced into *removed (m^3); 0, or FINRFT_SURFACE_BAD_INPUT (nothing changed).
+FINRFT_SURFACE_EXPORT int finrft_deforming_step(FinrftDeforming* s, const double g[3], int n, const double* points,
+                                                const double* areas, const double* velocities, int imprint,
+                                                double* removed);
 
 #endif  // FINRFT_SURFACES_H_

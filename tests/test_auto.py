@@ -102,3 +102,36 @@ def test_an_explicit_choice_its_whole_run_refuses_falls_back_to_an_implicit_step
     assert methods.get(choice.method).implicit and "run whole, was refused" in choice.reason
     assert any(c.method == "explicit" and c.failed.startswith("run whole") for c in choice.candidates)
     assert run.summary()["Fz_N"] == pytest.approx(21.0, rel=1e-3)  # the medium carries the load
+
+
+def test_pilots_that_span_the_run_are_the_run_and_its_companion(tmp_path, monkeypatch):
+    # Where the pilots' window would span most of the run they run whole, and the chosen candidate's pilots are
+    # its run and its companion: no run is made twice, and the result is the run of the method named.
+    from finrft import choice as choosing
+    monkeypatch.setattr(choosing, "WHOLE_SHARE", 0.05)  # the sled's 0.06 s window of its 0.6 s: whole
+    made = []  # the runs made through (a short pilot that prices a candidate stops early)
+    once = experiment._once
+
+    def counted(exp, s, *rest):
+        result = once(exp, s, *rest)
+        made.append((s.sim.method, s.sim.dt, s.sim.duration))
+        return result
+    monkeypatch.setattr(experiment, "_once", counted)
+    run = run_robot(load_scene(_sled(tmp_path), cls=UserScene))
+    choice = run.method_choice
+    assert choice.window_s == run.scene.sim.duration and len(made) == len(set(made))
+    named = run_robot(run.scene)  # the chosen method and step, named: no pilots
+    assert named.method_choice is None and named.summary()["com_velocity_m_s"] == run.summary()["com_velocity_m_s"]
+    # the means over every step estimated alike (the centre of mass's figures interpolate its start between the
+    # companion's samples, which the named run's records every fourth instant), every figure estimated
+    assert set(run.error_estimate) == set(named.error_estimate)
+    for key in ("medium_force_N", "drive_load", "positive_power_W"):
+        assert run.error_estimate[key] == pytest.approx(named.error_estimate[key], rel=1e-6, abs=1e-12), key
+    assert run.error_companion == named.error_companion
+
+
+def test_a_step_with_room_to_spare_is_lengthened(tmp_path):
+    # The sled at 0.25 ms: its explicit step meets the limits at 0.5 ms, which costs half as much.
+    run = run_robot(load_scene(_sled(tmp_path), cls=UserScene, overrides={"sim.dt": 0.00025}))
+    assert run.method_choice.dt > 0.00025 and run.scene.sim.dt == run.method_choice.dt
+    _converged(run, ErrorLimits())

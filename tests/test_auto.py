@@ -12,6 +12,8 @@ from finrft.convergence import ErrorLimits, FigureLimit
 from finrft.experiments.user_model import UserModel, example, run_robot
 from finrft.scene import SceneError, UserScene, load_scene
 
+from conftest import settling_box
+
 # A 2 kg sled on the sand (a 10 x 10 x 2 cm box, 9 mm deep, free to sink) pushed at 20 mm/s: its explicit step holds
 # where dt < 2 m v_reg / F = 2 x 2 kg x 10 mm/s / ~22 N = 1.8 ms, and an implicit step costs several explicit ones.
 SLED = """<mujoco><option gravity="0 0 -9.81"/><worldbody><body name="carriage">
@@ -135,3 +137,10 @@ def test_a_step_with_room_to_spare_is_lengthened(tmp_path):
     run = run_robot(load_scene(_sled(tmp_path), cls=UserScene, overrides={"sim.dt": 0.00025}))
     assert run.method_choice.dt > 0.00025 and run.scene.sim.dt == run.method_choice.dt
     _converged(run, ErrorLimits())
+
+
+def test_a_resting_box_is_not_run_at_a_step_that_lifts_it_out_of_the_sand(tmp_path):
+    # Its speed is 0 and it reports no cost of transport: at twice its step the explicit step hops it out of the
+    # sand while those pass. A step longer than the scene's own keeps the medium's mean force too: the weight.
+    run = run_robot(load_scene(str(settling_box(tmp_path, "auto")), cls=UserScene))
+    assert run.summary()["medium_force_N"][2] == pytest.approx(0.05 * 9.81, rel=0.02)

@@ -4,21 +4,24 @@ least cost, and says what it chose and why (`MethodChoice`, ``method_choice`` in
 
 No method wins everywhere: the implicit steps win on light links, whose explicit step must stay below about
 2 m v_reg / F (the example sand-swimmer's 10 g links chatter down to 6.6 µs), and MuJoCo's explicit step wins
-2.5-5 times on heavy, slow robots, as an implicit step costs about ten explicit ones. Which one a robot is shows
-in its first moments, so the choice is measured, not predicted: pilot runs over the run's first `window` (past
-the controls' ramp-in, a tenth of the rest or a sine's period, whole strokes), each candidate at its step and at
-half of it, their reported figures compared as the run's companion compares them
-(`convergence.companion_estimate`):
+on heavy, slow robots, as an implicit step costs several explicit ones. Which one a robot is shows as it runs, so
+the choice is measured, not predicted: pilot runs over the run's first `window` (past the controls' ramp-in, a
+tenth of the rest or a sine's period, whole strokes; the whole run where that would be half of it or more), each
+candidate at its step and at half of it, their reported figures compared as the run's companion compares them
+(`convergence.companion_estimate`). The candidates are ``explicit`` and, on MuJoCo's implicitfast integrator,
+``newton-midpoint`` and ``newton``, each on a ladder of steps from `START` x sim.dt down (`Chooser.search`):
 
-- ``newton-midpoint`` at sim.dt runs once, which prices the implicit step;
-- ``explicit`` from sim.dt down, halving while it chatters, goes unstable or misses the limits, for as long as its
-  cost, predicted from its cost per step so far, stays below that price;
-- the implicit methods where they could cost less than the explicit step that met the limits:
-  ``newton-midpoint`` (second order for a robot's quasi-static motion) and ``newton`` (where its step costs
-  visibly less) at sim.dt; where neither meets the limits, the closer one at the step its error asks for, at most
-  `HALVINGS` halvings down (and the explicit ladder goes on below that step's cost).
+- each method is priced by the start of its first pilot (`PRICE_SHARE` of the run), its other steps by its
+  cost per step;
+- the candidate predicted cheapest is measured next; one that misses the limits gives its method's next step:
+  half of it for ``explicit`` (beyond its stability limit its error does not fall with the step), the step its
+  error asks for (first order, aimed at `SAFE` of the limit) for an implicit one;
+- once one meets the limits, only candidates predicted to cost less than `SAVING` of it are measured;
+- the cheapest that met them is tried at twice its step while its estimate is below `COARSEN` of its limit.
 
-The cheapest candidate whose pilot met the limits runs, with its companion estimate as every run has; should that
+A step longer than the scene's own keeps the medium's mean force within 2 % too (`LONGER`). Where the pilots were
+whole runs, the chosen candidate's pilot is the run and its pilot at half the step its companion: nothing runs
+twice. Else the cheapest candidate runs whole, with its companion estimate as every run has; should that
 estimate refuse it (a pilot's window is not the whole run), the next one runs. The pilots' wall time counts in
 the result's ``wall_s`` (``method_choice.pilot_wall_s``). An explicit candidate whose chatter comes and goes
 (`stepping.Chattering`) and leaves its figures within their limits is chosen, and its run reports the chatter.
@@ -330,7 +333,7 @@ class Chooser:
                 ladder[method] = None  # its finer steps cost more
                 continue
             need = 1
-            if method != "explicit" and candidate.measured and math.isfinite(candidate.excess):
+            if method != "explicit" and candidate.measured and SAFE < candidate.excess < math.inf:
                 need = max(1, math.ceil(math.log2(candidate.excess / SAFE)))
             finer = dt * FINER ** need
             ladder[method] = finer if finer >= finest[method] * (1 - 1e-9) else None

@@ -166,6 +166,7 @@ class Chooser:
         self.allowed = IMPLICIT if scene.sim.integrator == "implicitfast" else ()
         self.wall = 0.0
         self.whole = self.window >= duration  # the pilots are whole runs (`WHOLE_SHARE`)
+        self.budget = math.inf                 # the CPU time a pilot may take before it stops (`_timed`)
         self.top = START * scene.sim.dt       # the longest step tried first
         self._runs: dict[tuple[str, float], Any] = {}    # each pilot that ran (or its failure), for reuse
         self._rates: dict[tuple[str, float], float] = {}  # its CPU time per simulated second, as far as it got
@@ -283,14 +284,17 @@ class Chooser:
                 marks.append(marks[0])
             if fraction >= share and share < 1:
                 raise _Enough
+            if marks[1][0] - begin > self.budget:
+                raise _Enough(f"stopped at {fraction * span:.3g} s: it cost more than {self.budget:.3g} s, more "
+                              f"than the cheaper candidate that met the limits")
         begin = time.process_time()
         try:
             run: Any = self.pilot(scene, False, progress)
             marks[1:] = [(time.process_time(), 1.0)]
         except SimulationUnstable as exc:  # the step's failure; any other is the scene's, at every step
             run = exc
-        except _Enough:
-            run = None
+        except _Enough as exc:
+            run = exc if exc.args else None
         if not marks:
             return run, math.nan
         if marks[1][1] <= marks[0][1]:  # one sample: the whole time over the whole stretch reached
@@ -327,7 +331,10 @@ class Chooser:
                         self.candidates.append(Candidate(method, dt, cost_s=cost, skipped="not run: predicted to "
                                                          "cost more than the cheapest that met the limits"))
                 break
+            # once one met the limits, a pilot stops where it has cost what a cheaper candidate's pilots may
+            self.budget = math.inf if best is None else SAVING * best.cost_s * (1 - 1 / COMPANION_COST)
             candidate = self.try_step(method, dt)
+            self.budget = math.inf
             if candidate.passed:
                 best = candidate if best is None or candidate.cost_s < best.cost_s else best
                 ladder[method] = None  # its finer steps cost more
@@ -344,7 +351,11 @@ class Chooser:
         step at most `COARSEST` x sim.dt: the coarsest that meets the limits (its pilot at half the step is the
         one that ran)."""
         while chosen.excess < COARSEN and 2 * chosen.dt <= COARSEST * self.scene.sim.dt * (1 + 1e-9):
+            # its pilot should cost half the chosen's run: one that struggles (Newton's halvings, a step that chatters
+            # before its probe says so) stops at the whole of it
+            self.budget = chosen.cost_s / COMPANION_COST
             coarser = self.try_step(chosen.method, 2 * chosen.dt, 1.25 * chosen.cost_s)
+            self.budget = math.inf
             if not (coarser.passed and coarser.cost_s < chosen.cost_s):
                 break
             chosen = coarser
@@ -352,7 +363,8 @@ class Chooser:
 
 
 class _Enough(Exception):
-    """Stops a pilot that prices a candidate (`Chooser.price`) once it has run far enough."""
+    """Stops a pilot that prices a candidate (`Chooser.price`) once it has run far enough, or, with a message, one
+    that costs more than it may (`Chooser.budget`)."""
 
 
 def _first_line(exc: Exception) -> str:

@@ -144,3 +144,26 @@ def test_a_resting_box_is_not_run_at_a_step_that_lifts_it_out_of_the_sand(tmp_pa
     # sand while those pass. A step longer than the scene's own keeps the medium's mean force too: the weight.
     run = run_robot(load_scene(str(settling_box(tmp_path, "auto")), cls=UserScene))
     assert run.summary()["medium_force_N"][2] == pytest.approx(0.05 * 9.81, rel=0.02)
+
+
+def test_a_pilot_stops_once_it_costs_more_than_it_may(tmp_path):
+    # A pilot that spends 20 ms of CPU between its samples, under a budget of 50 ms: it stops, as the step's
+    # failure, and its cost per simulated second is measured as far as it got.
+    import time
+
+    from finrft import choice as choosing
+    scene = load_scene(_sled(tmp_path), cls=UserScene)
+
+    def pilot(s, companion, progress):
+        for i in range(11):
+            end = time.process_time() + 0.02
+            while time.process_time() < end:
+                pass
+            progress(i / 10)
+        return "the run"
+    chooser = choosing.Chooser(scene, ErrorLimits(), pilot, lambda s: None, 0.6, 0.6, 1)
+    run, rate = chooser._timed(scene, 0.6)
+    assert run == "the run" and rate == pytest.approx(0.02 * 10 / 0.6, rel=0.5)
+    chooser.budget = 0.05
+    run, _ = chooser._timed(scene, 0.6)
+    assert isinstance(run, Exception) and "cost more than" in str(run)

@@ -11,8 +11,8 @@ candidate at its step and at half of it, their reported figures compared as the 
 (`convergence.companion_estimate`). The candidates are ``explicit`` and, on MuJoCo's implicitfast integrator,
 ``newton-midpoint`` and ``newton``, each on a ladder of steps from `START` x sim.dt down (`Chooser.search`):
 
-- each method is priced by the start of its first pilot (`PRICE_SHARE` of the run), its other steps by its
-  cost per step;
+- each method is priced by the start of its first pilot (the second half of `PRICE_SHARE` of the run), its
+  other steps by its cost per step;
 - the candidate predicted cheapest is measured next; one that misses the limits gives its method's next step:
   half of it for ``explicit`` (beyond its stability limit its error does not fall with the step), the step its
   error asks for (first order, aimed at `SAFE` of the limit) for an implicit one;
@@ -64,8 +64,10 @@ SAFE = 0.8
 # Once a candidate met the limits, another is measured only where it is predicted to cost less than this share of
 # it: a pilot that would save less is not worth its risk of missing the limits.
 SAVING = 0.85
-# The share of the run a short pilot prices a candidate over before any is run whole (`Chooser.price`).
-PRICE_SHARE = 0.05
+# The share of the run a short pilot prices a candidate over before any is run whole (`Chooser.price`), timed over
+# its second half: a robot's first moments (a sled landing on the sand) can cost a Newton step several times its
+# gait's (the paddle sled's newton-midpoint priced at 4 times its cost from its first 5 %).
+PRICE_SHARE = 0.1
 # A run's cost against its pilot's: the run itself and its companion at half the step (`convergence.checked`).
 COMPANION_COST = 1 + 1 / FINER
 
@@ -260,7 +262,7 @@ class Chooser:
             try:
                 scene = self.at(method, dt)
                 self.prepare(scene)
-                run, self._rates[key] = self._timed(scene, self.window, min(1.0, share))
+                run, self._rates[key] = self._timed(scene, self.window, min(1.0, share), min(1.0, share) / 2)
             except SceneError as exc:  # as `_run`
                 if not dt > self.scene.sim.dt:
                     raise
@@ -271,17 +273,17 @@ class Chooser:
             self.wall += self._walls[key]
         return self.cost(method, dt)
 
-    def _timed(self, scene: Any, span: float, share: float = 1.0) -> tuple[Any, float]:
+    def _timed(self, scene: Any, span: float, share: float = 1.0, skip: float = 0.0) -> tuple[Any, float]:
         """A pilot's result (or its step's failure; None where it stopped at ``share`` of its run) and its CPU time
-        per simulated second, from its first recorded sample on (a run's set-up, a fixed cost, would weigh on a
-        short stretch) as far as it got (NaN: nowhere). CPU time, not wall time: the choice must not follow the
-        load of other processes."""
+        per simulated second, from its first recorded sample at or past ``skip`` of it on (a run's set-up, a fixed
+        cost, would weigh on a short stretch) as far as it got (NaN: nowhere). CPU time, not wall time: the choice
+        must not follow the load of other processes."""
         marks: list[tuple[float, float]] = []
 
         def progress(fraction: float) -> None:
+            if not marks or marks[0][1] < skip:  # the first sample at or past ``skip`` opens the stretch timed
+                marks[:] = [(time.process_time(), fraction)]
             marks[1:] = [(time.process_time(), fraction)]
-            if len(marks) == 1:
-                marks.append(marks[0])
             if fraction >= share and share < 1:
                 raise _Enough
             if marks[1][0] - begin > self.budget:

@@ -4,21 +4,24 @@ least cost, and says what it chose and why (`MethodChoice`, ``method_choice`` in
 
 No method wins everywhere: the implicit steps win on light links, whose explicit step must stay below about
 2 m v_reg / F (the example sand-swimmer's 10 g links chatter down to 6.6 µs), and MuJoCo's explicit step wins
-2.5-5 times on heavy, slow robots, as an implicit step costs about ten explicit ones. Which one a robot is shows
-in its first moments, so the choice is measured, not predicted: pilot runs over the run's first `window` (past
-the controls' ramp-in, a tenth of the rest or a sine's period, whole strokes), each candidate at its step and at
-half of it, their reported figures compared as the run's companion compares them
-(`convergence.companion_estimate`):
+on heavy, slow robots, as an implicit step costs several explicit ones. Which one a robot is shows as it runs, so
+the choice is measured, not predicted: pilot runs over the run's first `window` (past the controls' ramp-in, a
+tenth of the rest or a sine's period, whole strokes; the whole run where that would be half of it or more), each
+candidate at its step and at half of it, their reported figures compared as the run's companion compares them
+(`convergence.companion_estimate`). The candidates are ``explicit`` and, on MuJoCo's implicitfast integrator,
+``newton-midpoint`` and ``newton``, each on a ladder of steps from `START` x sim.dt down (`Chooser.search`):
 
-- ``newton-midpoint`` at sim.dt runs once, which prices the implicit step;
-- ``explicit`` from sim.dt down, halving while it chatters, goes unstable or misses the limits, for as long as its
-  cost, predicted from its cost per step so far, stays below that price;
-- the implicit methods where they could cost less than the explicit step that met the limits:
-  ``newton-midpoint`` (second order for a robot's quasi-static motion) and ``newton`` (where its step costs
-  visibly less) at sim.dt; where neither meets the limits, the closer one at the step its error asks for, at most
-  `HALVINGS` halvings down (and the explicit ladder goes on below that step's cost).
+- each method is priced by the start of its first pilot (the second half of `PRICE_SHARE` of the run), its
+  other steps by its cost per step;
+- the candidate predicted cheapest is measured next; one that misses the limits gives its method's next step:
+  half of it for ``explicit`` (beyond its stability limit its error does not fall with the step), the step its
+  error asks for (first order, aimed at `SAFE` of the limit) for an implicit one;
+- once one meets the limits, only candidates predicted to cost less than `SAVING` of it are measured;
+- the cheapest that met them is tried at twice its step while its estimate is below `COARSEN` of its limit.
 
-The cheapest candidate whose pilot met the limits runs, with its companion estimate as every run has; should that
+A step longer than the scene's own keeps the medium's mean force within 2 % too (`LONGER`). Where the pilots were
+whole runs, the chosen candidate's pilot is the run and its pilot at half the step its companion: nothing runs
+twice. Else the cheapest candidate runs whole, with its companion estimate as every run has; should that
 estimate refuse it (a pilot's window is not the whole run), the next one runs. The pilots' wall time counts in
 the result's ``wall_s`` (``method_choice.pilot_wall_s``). An explicit candidate whose chatter comes and goes
 (`stepping.Chattering`) and leaves its figures within their limits is chosen, and its run reports the chatter.
@@ -31,21 +34,40 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
-from .convergence import FINER, ErrorLimits, companion_estimate, magnitude
-from .errors import InaccurateResult, SimulationUnstable
+from .convergence import FINER, ErrorLimits, FigureLimit, companion_estimate, magnitude
+from .errors import InaccurateResult, SceneError, SimulationUnstable
 
 # The pilots' window (`window`): the controls' ramp-in and this share of the rest of the run (or a sine's
 # period), at least PILOT_STEPS steps of sim.dt.
 PILOT_SHARE = 0.1
 PILOT_STEPS = 16
+# A window that would span this share of the run spans all of it: the pilots are then whole runs, and the chosen
+# candidate's pilot and its pilot at half the step are the run and its companion (no run is made twice).
+WHOLE_SHARE = 0.5
 IMPLICIT = ("newton-midpoint", "newton")
-HALVINGS = 3             # the implicit methods at sim.dt down to sim.dt / 8
-EXPLICIT_HALVINGS = 8    # the explicit step from sim.dt down to sim.dt / 256, while it is the cheaper
+# Every ladder starts at START times sim.dt: a scene's step is often set with room to spare (eight of the eleven
+# robots of `finrft bench robots --battery` meet 2 % fastest at twice it), and the pilot at START x sim.dt shares
+# its pilot at half the step with the one at sim.dt, so it costs half a run at sim.dt.
+START = 2.0
+HALVINGS = 4             # the implicit methods at START x sim.dt down to sim.dt / 8
+EXPLICIT_HALVINGS = 9    # the explicit step from START x sim.dt down to sim.dt / 256, while it is the cheaper
+# The cheapest candidate that met the limits is tried at twice its step while its estimate is below this share of
+# its limit (first order: the error doubles), up to COARSEST x sim.dt; its pilot at half the step is the one run.
+COARSEN = 0.45
+COARSEST = 4.0
+# A step longer than the scene's own is taken only where the medium's mean force on the robot is estimated within
+# this too, whatever the limits: the headline figures alone let a box resting on the sand hop out of it at twice
+# its step (its speed 0, its cost of transport not reported).
+LONGER = (FigureLimit("medium_force_N", 2.0),)
 # The share of its limit an implicit step's estimate is aimed at, where the one at sim.dt exceeds it.
 SAFE = 0.8
-# newton is tried beside newton-midpoint where its step costs less than this share of newton-midpoint's: where it
-# does not, newton-midpoint (the more accurate on a robot in sand) is not worth a second pilot.
-NEWTON_SAVING = 0.85
+# Once a candidate met the limits, another is measured only where it is predicted to cost less than this share of
+# it: a pilot that would save less is not worth its risk of missing the limits.
+SAVING = 0.85
+# The share of the run a short pilot prices a candidate over before any is run whole (`Chooser.price`), timed over
+# its second half: a robot's first moments (a sled landing on the sand) can cost a Newton step several times its
+# gait's (the paddle sled's newton-midpoint priced at 4 times its cost from its first 5 %).
+PRICE_SHARE = 0.1
 # A run's cost against its pilot's: the run itself and its companion at half the step (`convergence.checked`).
 COMPANION_COST = 1 + 1 / FINER
 
@@ -65,6 +87,7 @@ class Candidate:
     failed: str = ""
     skipped: str = ""         # why its pilot at half the step did not run
     excess: float = math.inf  # the largest estimate over its limit (below 1: within the limits)
+    estimate: dict[str, Any] = field(default_factory=dict, repr=False)  # its pilots' whole error estimate
 
     @property
     def passed(self) -> bool:
@@ -117,7 +140,8 @@ def window(scene: Any, duration: float, stroke_time: float, strokes: int) -> tup
     span = ramp + max(PILOT_SHARE * (duration - ramp), PILOT_STEPS * scene.sim.dt, 1 / min(sines, default=math.inf))
     if strokes > 1:
         span = math.ceil(span / stroke_time - 1e-9) * stroke_time
-    span = min(span, duration)
+    if span >= WHOLE_SHARE * duration:
+        return duration, scene.sim.settle
     return span, min(ramp, scene.sim.settle, span / 2)
 
 
@@ -132,7 +156,7 @@ class Chooser:
     def __init__(self, scene: Any, limits: ErrorLimits, pilot: Pilot, prepare: Callable[[Any], Any],
                  duration: float, stroke_time: float, strokes: int) -> None:
         self.scene, self.limits, self.pilot, self.prepare = scene, limits, pilot, prepare
-        self.duration = duration
+        self.duration, self.stroke_time, self.strokes_n = duration, stroke_time, strokes
         self.window, self.settle = window(scene, duration, stroke_time, strokes)
         # A run of one stroke is cut short by shortening its stroke (the same motion up to the window's end); one
         # of several keeps its whole strokes (`window`).
@@ -143,33 +167,44 @@ class Chooser:
         # the implicit methods extend MuJoCo's implicitfast integrator; with another, the explicit step alone
         self.allowed = IMPLICIT if scene.sim.integrator == "implicitfast" else ()
         self.wall = 0.0
-        self.found: Candidate | None = None  # the explicit step that met the limits, once found
+        self.whole = self.window >= duration  # the pilots are whole runs (`WHOLE_SHARE`)
+        self.budget = math.inf                 # the CPU time a pilot may take before it stops (`_timed`)
+        self.top = START * scene.sim.dt       # the longest step tried first
         self._runs: dict[tuple[str, float], Any] = {}    # each pilot that ran (or its failure), for reuse
         self._rates: dict[tuple[str, float], float] = {}  # its CPU time per simulated second, as far as it got
+        self._walls: dict[tuple[str, float], float] = {}  # its wall time
 
     def at(self, method: str, dt: float) -> Any:
         """The scene of a candidate's pilot."""
-        return self.scene.replace(**{"sim.method": method, "sim.dt": dt, "sim.duration": self.window,
-                                     "sim.settle": self.settle, **self.strokes})
+        window = {} if self.whole else {"sim.duration": self.window, "sim.settle": self.settle, **self.strokes}
+        return self.scene.replace(**{"sim.method": method, "sim.dt": dt, **window})
 
-    def _run(self, method: str, dt: float, companion: bool) -> Any:
+    def _run(self, method: str, dt: float) -> Any:
         key = (method, dt)
         if key not in self._runs:
-            reached = [0.0]
             start = time.perf_counter()
-            scene = self.at(method, dt)
-            self.prepare(scene)  # the model's build, outside the cost of a step
-            # CPU time, not wall time: the choice must not follow the load of other processes on the machine
-            cpu = time.process_time()
             try:
-                self._runs[key] = self.pilot(scene, companion, lambda f: reached.__setitem__(0, f))
-                reached[0] = 1.0
-            except SimulationUnstable as exc:  # the step's failure; any other is the scene's, at every step
-                self._runs[key] = exc
-            cpu = time.process_time() - cpu
-            self.wall += time.perf_counter() - start
-            self._rates[key] = cpu / (reached[0] * self.window) if reached[0] > 0 else math.nan
+                scene = self.at(method, dt)
+                self.prepare(scene)  # the model's build, outside the cost of a step
+                self._runs[key], self._rates[key] = self._timed(scene, self.window)
+            except SceneError as exc:  # a step longer than the scene's that does not resolve its strokes
+                if not dt > self.scene.sim.dt:
+                    raise
+                self._runs[key], self._rates[key] = exc, math.nan
+            self._walls[key] = time.perf_counter() - start
+            self.wall += self._walls[key]
         return self._runs[key]
+
+    def reused(self, candidate: Candidate) -> Any:
+        """The chosen candidate's run, where its pilots were whole runs: its pilot, with the estimate from its pilot
+        at half the step as its companion's (`convergence.checked`); None where they were not whole."""
+        if not (self.whole and candidate.passed):
+            return None
+        run, fine = self._runs[(candidate.method, candidate.dt)], (candidate.method, candidate.dt * FINER)
+        run.error_estimate, run.error_companion = dict(candidate.estimate), f"dt {fine[1]:g} s"
+        run.error_wall_s = self._walls[fine]
+        run.wall_s = self.wall - run.error_wall_s  # the pilots' and the run's own, not its companion's
+        return run
 
     def cost(self, method: str, dt: float) -> float:
         """The predicted time of the whole run with its companion (CPU s, the wall time of an idle machine), from the
@@ -187,7 +222,7 @@ class Chooser:
         if not known:
             self.candidates.append(candidate)
         start = self.wall - candidate.pilot_wall_s
-        run = self._run(method, dt, False)
+        run = self._run(method, dt)
         candidate.cost_s = self.cost(method, dt)
         if isinstance(run, Exception):
             candidate.failed = _first_line(run)
@@ -195,7 +230,7 @@ class Chooser:
             candidate.skipped = dearer
         else:
             candidate.skipped = ""
-            fine = self._run(method, dt * FINER, True)
+            fine = self._run(method, dt * FINER)
             if isinstance(fine, Exception):
                 candidate.failed = f"its pilot at half the step failed: {_first_line(fine)}"
             else:
@@ -205,63 +240,133 @@ class Chooser:
         return candidate
 
     def _judge(self, candidate: Candidate, run: Any, fine: Any) -> None:
-        estimate = companion_estimate(run, fine, FINER)
+        estimate = candidate.estimate = companion_estimate(run, fine, FINER)
         figures, headline = run.figure_values(), run.headline()
         limits = {f.key: f for f in (headline if self.limits.figures is None else self.limits.figures)}
         candidate.error = {key: magnitude(estimate[key]) for key in limits if estimate.get(key) is not None}
         candidate.over = self.limits.exceeded(estimate, figures, headline)
+        if candidate.dt > self.scene.sim.dt * (1 + 1e-9):  # longer than the scene's own: its medium force kept too
+            candidate.over += ErrorLimits(figures=LONGER).exceeded(estimate, figures)
         candidate.excess = max((error / limits[key].allowed(figures[key]) for key, error in candidate.error.items()
                                 if figures.get(key) is not None), default=0.0)
 
-    def implicit(self, allowed: tuple[str, ...], bound: float) -> Candidate | None:
-        """The cheapest implicit candidate that meets the limits and costs less than ``bound`` (s; None: none did),
-        from sim.dt down: each method at sim.dt, then the more accurate one at the step its error asks for (first
-        order: the step times the limit over the estimate, at most `HALVINGS` halvings in all)."""
-        dt = self.scene.sim.dt
-        tried = [self.try_step(allowed[0], dt, bound)]
-        for method in allowed[1:]:
-            saving = NEWTON_SAVING * tried[0].cost_s if tried[0].cost_s > 0 else math.inf
-            tried.append(self.try_step(method, dt, min(bound, saving), f"its step costs more than "
-                                       f"{NEWTON_SAVING:.0%} of {tried[0].method}'s, or than the explicit one"))
-        halvings = 0
-        while True:
-            passed = [c for c in tried if c.passed]
-            if passed:
-                return min(passed, key=lambda c: c.cost_s)
-            best = min(tried, key=lambda c: c.excess)
-            need = math.ceil(math.log2(best.excess / SAFE)) if math.isfinite(best.excess) else 1
-            if halvings + max(1, need) > HALVINGS:
-                return None
-            halvings += max(1, need)
-            finer = best.cost_s / FINER ** halvings
-            if finer >= bound:  # dearer than the explicit step that met the limits
-                return None
-            if self.found is None and finer > 0:  # the explicit ladder, below what the finer step will cost
-                self.found = self.explicit(finer)
-                if self.found is not None:
-                    return None
-            tried = [self.try_step(best.method, self.scene.sim.dt * FINER ** halvings, bound)]
+    def price(self, method: str, dt: float) -> float:
+        """The predicted cost of a candidate (`cost`) from the first `PRICE_SHARE` of its pilot (at least
+        `PILOT_STEPS` steps), where no pilot of it ran: to rank candidates before any is run whole. Its start,
+        not a shortened run: a shortened ramp-in is another, harsher motion (the quadruped's newton-midpoint at 2 ms
+        chatters under a 25 ms ramp, not under its own 0.5 s)."""
+        key = (method, dt)
+        if key not in self._rates:
+            start = time.perf_counter()
+            share = max(PRICE_SHARE * self.duration, PILOT_STEPS * dt) / self.window
+            try:
+                scene = self.at(method, dt)
+                self.prepare(scene)
+                run, self._rates[key] = self._timed(scene, self.window, min(1.0, share), min(1.0, share) / 2)
+            except SceneError as exc:  # as `_run`
+                if not dt > self.scene.sim.dt:
+                    raise
+                run, self._rates[key] = exc, math.nan
+            if run is not None:  # it failed there, or ran through: the pilot itself, the same run
+                self._runs[key] = run
+            self._walls[key] = time.perf_counter() - start
+            self.wall += self._walls[key]
+        return self.cost(method, dt)
 
-    def explicit(self, bound: float) -> Candidate | None:
-        """The explicit step from sim.dt down, while its predicted cost (from the cost of a step so far) stays below
-        ``bound`` (s): the first that meets the limits, or None."""
-        dt, per_step = self.scene.sim.dt, math.nan  # the whole run's predicted cost times its step
-        for _ in range(EXPLICIT_HALVINGS + 1):
-            if per_step / dt >= bound:
-                known = [c for c in self.candidates if (c.method, c.dt) == ("explicit", dt)]
-                if not known:
-                    self.candidates.append(Candidate("explicit", dt, cost_s=per_step / dt, skipped="not run: "
-                                                     "predicted from its cost per step to cost more than the "
-                                                     "implicit one"))
-                return None
-            candidate = self.try_step("explicit", dt, bound)
+    def _timed(self, scene: Any, span: float, share: float = 1.0, skip: float = 0.0) -> tuple[Any, float]:
+        """A pilot's result (or its step's failure; None where it stopped at ``share`` of its run) and its CPU time
+        per simulated second, from its first recorded sample at or past ``skip`` of it on (a run's set-up, a fixed
+        cost, would weigh on a short stretch) as far as it got (NaN: nowhere). CPU time, not wall time: the choice
+        must not follow the load of other processes."""
+        marks: list[tuple[float, float]] = []
+
+        def progress(fraction: float) -> None:
+            if not marks or marks[0][1] < skip:  # the first sample at or past ``skip`` opens the stretch timed
+                marks[:] = [(time.process_time(), fraction)]
+            marks[1:] = [(time.process_time(), fraction)]
+            if fraction >= share and share < 1:
+                raise _Enough
+            if marks[1][0] - begin > self.budget:
+                raise _Enough(f"stopped at {fraction * span:.3g} s: it cost more than {self.budget:.3g} s, more "
+                              f"than the cheaper candidate that met the limits")
+        begin = time.process_time()
+        try:
+            run: Any = self.pilot(scene, False, progress)
+            marks[1:] = [(time.process_time(), 1.0)]
+        except SimulationUnstable as exc:  # the step's failure; any other is the scene's, at every step
+            run = exc
+        except _Enough as exc:
+            run = exc if exc.args else None
+        if not marks:
+            return run, math.nan
+        if marks[1][1] <= marks[0][1]:  # one sample: the whole time over the whole stretch reached
+            return run, float((marks[1][0] - begin) / (marks[1][1] * span)) if marks[1][1] > 0 else math.nan
+        return run, float((marks[1][0] - marks[0][0]) / ((marks[1][1] - marks[0][1]) * span))
+
+    def predicted(self, method: str, dt: float) -> float:
+        """A candidate's predicted cost (s): from its own pilot, else from the nearest step of its method that ran
+        (a step's cost does not depend on its length), else priced (`price`) where it is the method's first."""
+        known = [h for (m, h), rate in self._rates.items() if m == method and not math.isnan(rate)]
+        if (method, dt) in self._rates or not known:
+            return self.price(method, dt)
+        near = min(known, key=lambda h: abs(math.log(h / dt)))
+        return self.cost(method, near) * near / dt
+
+    def search(self, allowed: tuple[str, ...]) -> list[Candidate]:
+        """The candidates of ``allowed`` methods that met the limits, cheapest first, found best first: each method's
+        ladder from START x sim.dt down, the cheapest predicted candidate measured next, until none left could cost
+        less than `SAVING` of the cheapest that met the limits. A step that misses them goes down one halving
+        (explicit: beyond its stability limit its error does not fall with the step) or, an implicit one, to the
+        step its error asks for (first order, aimed at SAFE of the limit)."""
+        finest = {m: self.top * FINER ** (EXPLICIT_HALVINGS if m == "explicit" else HALVINGS) for m in allowed}
+        ladder: dict[str, float | None] = {m: self.top for m in allowed}
+        best: Candidate | None = None
+        while True:
+            options = [(self.predicted(m, h), m, h) for m, h in ladder.items() if h is not None]
+            options = [(cost if cost == cost else 0.0, m, h) for cost, m, h in options]  # NaN: it failed at once
+            if not options:
+                break
+            cost, method, dt = min(options, key=lambda o: o[0])
+            if best is not None and not cost < SAVING * best.cost_s:
+                for cost, method, dt in options:
+                    if not any((c.method, c.dt) == (method, dt) for c in self.candidates):
+                        self.candidates.append(Candidate(method, dt, cost_s=cost, skipped="not run: predicted to "
+                                                         "cost more than the cheapest that met the limits"))
+                break
+            # once one met the limits, a pilot stops where it has cost what a cheaper candidate's pilots may
+            self.budget = math.inf if best is None else SAVING * best.cost_s * (1 - 1 / COMPANION_COST)
+            candidate = self.try_step(method, dt)
+            self.budget = math.inf
             if candidate.passed:
-                return candidate
-            for step in (dt, dt * FINER):  # the finest pilot that got anywhere
-                if not math.isnan(self.cost("explicit", step)):
-                    per_step = self.cost("explicit", step) * step
-            dt *= FINER
-        return None
+                best = candidate if best is None or candidate.cost_s < best.cost_s else best
+                ladder[method] = None  # its finer steps cost more
+                continue
+            need = 1
+            if method != "explicit" and candidate.measured and SAFE < candidate.excess < math.inf:
+                need = max(1, math.ceil(math.log2(candidate.excess / SAFE)))
+            finer = dt * FINER ** need
+            ladder[method] = finer if finer >= finest[method] * (1 - 1e-9) else None
+        return sorted((c for c in self.candidates if c.passed and c.method in allowed), key=lambda c: c.cost_s)
+
+    def coarsen(self, chosen: Candidate) -> Candidate:
+        """The chosen candidate at twice its step, while its estimate is below `COARSEN` of its limit and the
+        step at most `COARSEST` x sim.dt: the coarsest that meets the limits (its pilot at half the step is the
+        one that ran)."""
+        while chosen.excess < COARSEN and 2 * chosen.dt <= COARSEST * self.scene.sim.dt * (1 + 1e-9):
+            # its pilot should cost half the chosen's run: one that struggles (Newton's halvings, a step that chatters
+            # before its probe says so) stops at the whole of it
+            self.budget = chosen.cost_s / COMPANION_COST
+            coarser = self.try_step(chosen.method, 2 * chosen.dt, 1.25 * chosen.cost_s)
+            self.budget = math.inf
+            if not (coarser.passed and coarser.cost_s < chosen.cost_s):
+                break
+            chosen = coarser
+        return chosen
+
+
+class _Enough(Exception):
+    """Stops a pilot that prices a candidate (`Chooser.price`) once it has run far enough, or, with a message, one
+    that costs more than it may (`Chooser.budget`)."""
 
 
 def _first_line(exc: Exception) -> str:
@@ -270,28 +375,15 @@ def _first_line(exc: Exception) -> str:
 
 def choose(scene: Any, limits: ErrorLimits | None, pilot: Pilot, prepare: Callable[[Any], Any], duration: float,
            stroke_time: float, strokes: int) -> tuple[list[Candidate], Chooser]:
-    """The candidates that met the limits, cheapest first (the closest to them where none did), and the chooser that
-    measured them. The implicit step's cost at sim.dt bounds the explicit ladder, which runs first: where the
-    explicit step meets the limits for less, the implicit ones are measured only where they could cost less
-    still; where the implicit step needs a finer step than sim.dt, the explicit ladder goes on below its cost."""
+    """The candidates that met the limits, cheapest first, the cheapest at the longest step that still does
+    (`Chooser.coarsen`), or the closest to them where none did; and the chooser that measured them
+    (`Chooser.search`: the explicit step and, on MuJoCo's implicitfast integrator, the implicit methods)."""
     chooser = Chooser(scene, limits or ErrorLimits(), pilot, prepare, duration, stroke_time, strokes)
-    allowed = chooser.allowed
-    bound = math.inf
-    if allowed:
-        first = chooser.try_step(allowed[0], scene.sim.dt, 0.0, "measured after the explicit step")
-        bound = first.cost_s if first.cost_s > 0 else math.inf  # NaN (it failed at once): no bound
-    chooser.found = chooser.explicit(bound)
-    implicit = chooser.implicit(allowed, math.inf if chooser.found is None else chooser.found.cost_s) \
-        if allowed else None
-    explicit = chooser.found
-    if explicit is None and allowed:
-        costs = [c.cost_s for c in chooser.candidates if c.method != "explicit" and c.cost_s > 0]
-        # below the implicit step that met the limits, or, where none did, twice the dearest one tried
-        again = implicit.cost_s if implicit is not None else 2 * max(costs, default=math.inf)
-        if again > bound:
-            explicit = chooser.explicit(again)
-    passed = sorted((c for c in (implicit, explicit) if c is not None), key=lambda c: c.cost_s)
-    if not passed:  # the closest: the smallest excess, then the finest step
+    passed = chooser.search(("explicit", *chooser.allowed))
+    if passed:
+        coarser = chooser.coarsen(passed[0])
+        passed = [coarser, *(c for c in passed if c is not coarser)]
+    else:  # the closest: the smallest excess, then the finest step
         passed = [min(chooser.candidates, key=lambda c: (c.excess, c.dt))]
     return passed, chooser
 
@@ -335,16 +427,17 @@ def run_auto(scene: Any, limits: ErrorLimits | None, pilot: Pilot, prepare: Call
             chosen.failed = f"run whole, it was refused: {why}"
             fell_back.append(f"{chosen.method} at {chosen.dt:g} s, run whole, was refused: {why}")
             if not passed and chosen.method == "explicit" and chooser.allowed:
-                implicit = chooser.implicit(chooser.allowed, math.inf)
-                passed = [] if implicit is None else [implicit]
+                passed = chooser.search(chooser.allowed)
             if not passed:
                 raise
 
 
 def _chosen(full: Callable[[Any], Any], scene: Any, chosen: Candidate, chooser: Chooser,
             fell_back: list[str]) -> Any:
-    result = full(scene.replace(**{"sim.method": chosen.method, "sim.dt": chosen.dt}))
+    result = chooser.reused(chosen)
+    if result is None:
+        result = full(scene.replace(**{"sim.method": chosen.method, "sim.dt": chosen.dt}))
+        result.wall_s += chooser.wall
     result.method_choice = MethodChoice(chosen.method, chosen.dt, reason(chosen, chooser, fell_back),
                                         chooser.candidates, chooser.window, chooser.wall)
-    result.wall_s += chooser.wall
     return result

@@ -12,6 +12,8 @@ from finrft.convergence import ErrorLimits, FigureLimit
 from finrft.experiments.user_model import UserModel, example, run_robot
 from finrft.scene import SceneError, UserScene, load_scene
 
+from conftest import settling_box
+
 # A 2 kg sled on the sand (a 10 x 10 x 2 cm box, 9 mm deep, free to sink) pushed at 20 mm/s: its explicit step holds
 # where dt < 2 m v_reg / F = 2 x 2 kg x 10 mm/s / ~22 N = 1.8 ms, and an implicit step costs several explicit ones.
 SLED = """<mujoco><option gravity="0 0 -9.81"/><worldbody><body name="carriage">
@@ -102,3 +104,66 @@ def test_an_explicit_choice_its_whole_run_refuses_falls_back_to_an_implicit_step
     assert methods.get(choice.method).implicit and "run whole, was refused" in choice.reason
     assert any(c.method == "explicit" and c.failed.startswith("run whole") for c in choice.candidates)
     assert run.summary()["Fz_N"] == pytest.approx(21.0, rel=1e-3)  # the medium carries the load
+
+
+def test_pilots_that_span_the_run_are_the_run_and_its_companion(tmp_path, monkeypatch):
+    # Where the pilots' window would span most of the run they run whole, and the chosen candidate's pilots are
+    # its run and its companion: no run is made twice, and the result is the run of the method named.
+    from finrft import choice as choosing
+    monkeypatch.setattr(choosing, "WHOLE_SHARE", 0.05)  # the sled's 0.06 s window of its 0.6 s: whole
+    made = []  # the runs made through (a short pilot that prices a candidate stops early)
+    once = experiment._once
+
+    def counted(exp, s, *rest):
+        result = once(exp, s, *rest)
+        made.append((s.sim.method, s.sim.dt, s.sim.duration))
+        return result
+    monkeypatch.setattr(experiment, "_once", counted)
+    run = run_robot(load_scene(_sled(tmp_path), cls=UserScene))
+    choice = run.method_choice
+    assert choice.window_s == run.scene.sim.duration and len(made) == len(set(made))
+    named = run_robot(run.scene)  # the chosen method and step, named: no pilots
+    assert named.method_choice is None and named.summary()["com_velocity_m_s"] == run.summary()["com_velocity_m_s"]
+    # the means over every step estimated alike (the centre of mass's figures interpolate its start between the
+    # companion's samples, which the named run's records every fourth instant), every figure estimated
+    assert set(run.error_estimate) == set(named.error_estimate)
+    for key in ("medium_force_N", "drive_load", "positive_power_W"):
+        assert run.error_estimate[key] == pytest.approx(named.error_estimate[key], rel=1e-6, abs=1e-12), key
+    assert run.error_companion == named.error_companion
+
+
+def test_a_step_with_room_to_spare_is_lengthened(tmp_path):
+    # The sled at 0.25 ms: its explicit step meets the limits at 0.5 ms, which costs half as much.
+    run = run_robot(load_scene(_sled(tmp_path), cls=UserScene, overrides={"sim.dt": 0.00025}))
+    assert run.method_choice.dt > 0.00025 and run.scene.sim.dt == run.method_choice.dt
+    _converged(run, ErrorLimits())
+
+
+def test_a_resting_box_is_not_run_at_a_step_that_lifts_it_out_of_the_sand(tmp_path):
+    # Its speed is 0 and it reports no cost of transport: at twice its step the explicit step hops it out of the
+    # sand while those pass. A step longer than the scene's own keeps the medium's mean force too: the weight.
+    run = run_robot(load_scene(str(settling_box(tmp_path, "auto")), cls=UserScene))
+    assert run.summary()["medium_force_N"][2] == pytest.approx(0.05 * 9.81, rel=0.02)
+
+
+def test_a_pilot_stops_once_it_costs_more_than_it_may(tmp_path):
+    # A pilot that spends 20 ms of CPU between its samples, under a budget of 50 ms: it stops, as the step's
+    # failure, and its cost per simulated second is measured as far as it got.
+    import time
+
+    from finrft import choice as choosing
+    scene = load_scene(_sled(tmp_path), cls=UserScene)
+
+    def pilot(s, companion, progress):
+        for i in range(11):
+            end = time.process_time() + 0.02
+            while time.process_time() < end:
+                pass
+            progress(i / 10)
+        return "the run"
+    chooser = choosing.Chooser(scene, ErrorLimits(), pilot, lambda s: None, 0.6, 0.6, 1)
+    run, rate = chooser._timed(scene, 0.6)
+    assert run == "the run" and rate == pytest.approx(0.02 * 10 / 0.6, rel=0.5)
+    chooser.budget = 0.05
+    run, _ = chooser._timed(scene, 0.6)
+    assert isinstance(run, Exception) and "cost more than" in str(run)

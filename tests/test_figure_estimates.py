@@ -46,6 +46,19 @@ def test_means_do_not_depend_on_record_dt_and_are_the_integral_over_every_step(n
                                                     rel=1e-9, abs=1e-12)
 
 
+def test_the_mean_velocity_does_not_depend_on_the_instants_recorded():
+    # the window opens at 0.305 s, between two 10 ms samples: the centre of mass is taken where it opens, not
+    # interpolated between samples (a companion records every fourth instant of its run)
+    scene = load_scene(example("sand_swimmer"), cls=UserScene, overrides={
+        "sim.duration": 0.6, "sim.settle": 0.305, "sim.method": "newton-midpoint", "sim.dt": 1e-3,
+        "sim.record_dt": 0.01})
+    sparse, dense, every = _summaries(scene)
+    assert np.allclose(sparse["com_velocity_m_s"], dense["com_velocity_m_s"], rtol=1e-9, atol=1e-12)
+    start = every.com_position[np.argmin(abs(every.time - scene.sim.settle))]  # a sample at every step: 0.305 s
+    assert np.allclose(dense["com_velocity_m_s"], (every.com_position[-1] - start) / (0.6 - 0.305), rtol=1e-9)
+    assert sparse["cost_of_transport"] == pytest.approx(dense["cost_of_transport"], rel=1e-9)
+
+
 def test_a_figure_limit_is_relative_to_its_magnitude_with_a_floor():
     speed = FigureLimit("com_velocity_m_s", 2.0, floor=1e-4)
     assert speed.allowed([0.03, 0.04, 0.0]) == pytest.approx(0.02 * 0.05)  # 2 % of |v| = 50 mm/s

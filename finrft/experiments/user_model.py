@@ -223,10 +223,11 @@ class RobotTrial:
         def after_step(d: mujoco.MjData) -> None:
             if self._explicit:
                 if d.time - m.opt.timestep + self._span > scene.sim.settle:
-                    self.means.add(d.time - m.opt.timestep, rates(d, d, self._start_velocity))
+                    self.means.add(d.time - m.opt.timestep, rates(d, d, self._start_velocity),
+                                   d.subtree_com[0].copy())
             elif d.time + self._span > scene.sim.settle:
                 forward(m, d)
-                self.means.add(d.time, rates(d, self._applied(d), d.qvel[self.dofs]))
+                self.means.add(d.time, rates(d, self._applied(d), d.qvel[self.dofs]), d.subtree_com[0].copy())
 
         self.surface = deforming_surface(built, scene, d)
         if self.surface is not None:
@@ -371,17 +372,24 @@ class WindowMeans:
         self.time = -math.inf
         self.value: np.ndarray | None = None
         self.total: np.ndarray | None = None
+        self.com: np.ndarray | None = None      # the centre of mass at the last time added
+        self.opening: np.ndarray | None = None  # and at the window's start
 
-    def add(self, t: float, value: np.ndarray) -> None:
-        """The values at time t (after those at every earlier time)."""
+    def add(self, t: float, value: np.ndarray, com: np.ndarray | None = None) -> None:
+        """The values at time t (after those at every earlier time), and the centre of mass there: its position
+        where the window opens is kept (linear between the steps around it), so that the mean velocity does not
+        depend on the instants a run records (a companion's every fourth)."""
         if self.value is not None and t > self.start:
             if self.total is None:
                 self.total = np.zeros_like(value)
             before = self.value
-            if self.time < self.start:  # the window opens between two steps: linear between them
-                before = self.value + (value - self.value) * (self.start - self.time) / (t - self.time)
+            if self.time <= self.start:  # the window opens between two steps: linear between them
+                share = (self.start - self.time) / (t - self.time)
+                before = self.value + (value - self.value) * share
+                if com is not None and self.com is not None:
+                    self.opening = self.com + (com - self.com) * share
             self.total += 0.5 * (t - max(self.time, self.start)) * (before + value)
-        self.time, self.value = t, value
+        self.time, self.value, self.com = t, value, com
 
     def parts(self, end: float) -> dict[str, np.ndarray]:
         """The means over [start, end], by name (SI units)."""
@@ -391,7 +399,8 @@ class WindowMeans:
         cuts = np.cumsum([3 * bodies, drives, drives, actuators, actuators])
         force, load, drive_power, power, positive, readings = np.split(mean, cuts)
         return {"medium_force": force.reshape(bodies, 3), "drive_load": load, "drive_positive_power": drive_power,
-                "actuator_power": power, "actuator_positive_power": positive, "sensor": readings}
+                "actuator_power": power, "actuator_positive_power": positive, "sensor": readings,
+                "com_start": self.opening}
 
 
 def _unpack(flat: np.ndarray, m: mujoco.MjModel, attached: int, drives: int) -> dict[str, np.ndarray]:
@@ -641,9 +650,11 @@ def robot_summary(experiment: UserModel, run: Result) -> dict[str, Any]:
     scene = run.scene
     t, settle = run.time, scene.sim.settle
     com = run.com_position
-    start = np.array([np.interp(settle, t, com[:, i]) for i in range(3)])
-    velocity = (com[-1] - start) / (t[-1] - settle)
     means = run.window_means
+    start = means.get("com_start")
+    if start is None:  # a window the steps did not open (settle 0)
+        start = np.array([np.interp(settle, t, com[:, i]) for i in range(3)])
+    velocity = (com[-1] - start) / (t[-1] - settle)
     body_force = means["medium_force"]
     out: dict[str, Any] = {
         "model": scene.model.path, "bodies": list(experiment.bodies),

@@ -12,6 +12,7 @@ import pytest
 pytest.importorskip("warp", reason="the warp extra is not installed (pip install 'finrft[warp]')")
 pytest.importorskip("mujoco_warp", reason="the warp extra is not installed (pip install 'finrft[warp]')")
 
+import finrft.warp  # noqa: E402,F401  (Warp's kernel cache is set at its init: here, before the tests' own cache)
 from finrft.cli import main  # noqa: E402
 from finrft.errors import SceneError  # noqa: E402
 from finrft.experiments.user_model import example, run_robot  # noqa: E402
@@ -70,5 +71,11 @@ def test_a_warp_sweep_refuses_keys_it_cannot_set_per_world(capsys):
         assert main(["sweep", "--example", "sand_swimmer", "--grid", key, "--backend", "warp", "--quiet"]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and key.split("=")[0] in err[0] and "--backend native" in err[0], err
+    search = ["optimize", "--example", "sand_swimmer", "--backend", "warp", "--budget", "4", "--quiet"]
+    for extra, named in ((["--objective", "cost_of_transport", "--bounds", "control.*.frequency=1,2"], "cost_of_transport"),
+                         (["--objective", "com_speed_m_s", "--bounds", "sim.dt=1e-4,1e-3"], "sim.dt")):
+        assert main(search + extra) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and named in err[0] and "--backend native" in err[0], err
     with pytest.raises(SceneError, match="without \\[\\[drive\\]\\] joints"):
         sweep(load_scene(example("wheel_rig"), cls=UserScene), [{"medium.surface_z": 0.0}], backend="warp")

@@ -72,7 +72,8 @@ def test_a_warp_sweep_refuses_keys_it_cannot_set_per_world(capsys):
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and key.split("=")[0] in err[0] and "--backend native" in err[0], err
     search = ["optimize", "--example", "sand_swimmer", "--backend", "warp", "--budget", "4", "--quiet"]
-    for extra, named in ((["--objective", "cost_of_transport", "--bounds", "control.*.frequency=1,2"], "cost_of_transport"),
+    for extra, named in ((["--objective", "cost_of_transport", "--bounds", "control.*.frequency=1,2"],
+                          "cost_of_transport"),
                          (["--objective", "com_speed_m_s", "--bounds", "sim.dt=1e-4,1e-3"], "sim.dt")):
         assert main(search + extra) == 2
         err = capsys.readouterr().err.strip().splitlines()

@@ -54,8 +54,17 @@ def test_a_warp_sweep_follows_the_native_runs_one_by_one(capsys):
         assert np.abs(got[key] - expected[key]).max() < AGREE, (key, got[key], expected[key])
         assert r["figures"]["com_speed_m_s"] == pytest.approx(np.hypot(*got[key][:2]))
         assert r["figures"]["com_position_m.2"] == pytest.approx(native["com_position_m"][2], abs=AGREE)
-        # the companion at half the step, as the native run's: an estimate of the same size (not the same: the
-        # native companion reads the window's start from samples every 4 record_dt)
+        # the medium's mean force on each body: measured to 7e-7 of the largest (0.7 N), float32's rounding again
+        bodies = np.array(list(native["body_medium_force_N"].values()))
+        for i, body in enumerate(native["body_medium_force_N"]):
+            assert np.abs(_velocity(r["figures"], f"body_medium_force_N.{body}") - bodies[i]).max() \
+                <= 1e-5 * np.abs(bodies).max()
+        # its estimate is the native run's (both companions at half the step, means over every step): measured to
+        # 1e-3 of it
+        force_estimate = _velocity(r["estimates"], "medium_force_N")
+        assert force_estimate == pytest.approx(native["error_estimate"]["medium_force_N"], rel=0.01, abs=1e-6)
+        # the velocity's is of the same size, not the same: the native companion reads the window's start from
+        # samples every 4 record_dt
         ratio = np.linalg.norm(estimates[key]) / np.linalg.norm(native["error_estimate"]["com_velocity_m_s"])
         assert 0.2 < ratio < 5, (key, estimates[key], native["error_estimate"]["com_velocity_m_s"])
     # in the air the medium plays no part; in the sand the stronger medium holds the swimmer up otherwise, beyond

@@ -4,10 +4,11 @@ together for the scene's duration, its own medium set per world and its own open
 at every step. Only keys a world can take apart from its neighbours vary (`check_keys`): the medium's parameters
 (`MEDIUM_KEYS`) and the open-loop controls' (`CONTROL_FIELDS`).
 
-Each world reports the centre of mass's figures the native run names (`finrft.experiments.user_model
-.robot_summary`): ``com_velocity_m_s`` (its displacement over the window [sim.settle, end] / the window),
-``com_speed_m_s`` and ``com_position_m``, each with the native run's kind of estimate: a companion batch at half
-the step, SAFETY |run - companion| / (1 - 1/2) (`finrft.convergence`).
+Each world reports the figures the native run names (`finrft.experiments.user_model.robot_summary`) of its centre
+of mass, ``com_velocity_m_s`` (its displacement over the window [sim.settle, end] / the window), ``com_speed_m_s``
+and ``com_position_m``, and of the medium's force, ``medium_force_N`` and ``body_medium_force_N`` (means over the
+window), each with the native run's kind of estimate: a companion batch at half the step, SAFETY |run -
+companion| / (1 - 1/2) (`finrft.convergence`).
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from .. import laws, media
-from ..convergence import FINER, SAFETY, ErrorLimits, ROBOT_HEADLINE
+from ..convergence import FINER, ROBOT_HEADLINE, SAFETY, ErrorLimits, figure_map
 from ..errors import SceneError
 from ..laws import drft
 from ..scene import UserScene
@@ -33,7 +34,7 @@ MEDIUM_KEYS = ("medium.zeta", "medium.internal_friction", "medium.surface_fricti
                "medium.drft_lambda", "medium.surface_z")
 CONTROL_FIELDS = ("amplitude", "frequency", "phase", "offset", "value", "ramp")
 OPEN_LOOP = ("sine", "constant", "table")
-FIGURES = ("com_velocity_m_s", "com_speed_m_s", "com_position_m")
+FIGURES = ("com_velocity_m_s", "com_speed_m_s", "com_position_m", "medium_force_N", "body_medium_force_N")
 
 
 def check_keys(scene: UserScene, keys: Sequence[str]) -> None:
@@ -92,10 +93,12 @@ def _controller(worlds: WarpWorlds, scenes: Sequence[UserScene]) -> Callable[[fl
 
 
 def rollout(scene: UserScene, scenes: Sequence[UserScene], *, dt: float | None = None,
-            device: str | None = None) -> tuple[np.ndarray, np.ndarray, float]:
+            device: str | None = None) -> list[dict[str, Any]]:
     """Every scene a world of one `WarpWorlds` (the first scene's model; ``dt``: its step, None: sim.dt), stepped
-    for the scene's duration: each world's centre of mass at sim.settle (linear between the steps around it) and at
-    the end (worlds x 3 each, m), and the end's time. A world that became unstable ends in NaN."""
+    for the scene's duration: each world's figures (`FIGURES`) as `robot_summary` computes them, the centre of
+    mass's at sim.settle linear between the steps around it, the medium's force the mean over the window of its
+    value at every step (`WindowMeans`). A world that became unstable reports NaN."""
+    from ..experiments.user_model import WindowMeans
     sim = scene.sim
     dt = sim.dt if dt is None else dt
     stepped = copy.copy(scene)  # a step finer than the scene's limits is the companion's purpose: not replace
@@ -109,24 +112,28 @@ def rollout(scene: UserScene, scenes: Sequence[UserScene], *, dt: float | None =
     settle = min(sim.settle / dt, steps)
     before = min(int(math.floor(settle)), steps - 1)
     com: dict[int, np.ndarray] = {}
+    means = WindowMeans(sim.settle, len(scenes) * worlds.nbody, 0, 0)
     for k in range(steps):
         worlds.set_ctrl(ctrl(k * dt))
         worlds.step(1)
-        if k in (before, before + 1):  # the step's forward pass ran at its start: the state at k dt
+        # the step's forward pass ran at its start: the state, and the medium's force, at k dt
+        if k in (before, before + 1):
             com[k] = worlds.d.subtree_com.numpy()[:, 0].astype(float)
+        if (k + 1) * dt > sim.settle:
+            means.add(k * dt, worlds.forces().ravel())
     worlds.forward()
     com[steps] = worlds.d.subtree_com.numpy()[:, 0].astype(float)
+    means.add(steps * dt, worlds.forces().ravel())
+    force = means.parts(steps * dt)["medium_force"].reshape(len(scenes), worlds.nbody, 3)
     end = com[steps].copy()
-    end[~np.all(np.isfinite(worlds.qpos), axis=1)] = np.nan
+    unstable = ~np.all(np.isfinite(worlds.qpos), axis=1)
+    end[unstable], force[unstable] = np.nan, np.nan
     start = com[before] + (com[before + 1] - com[before]) * (settle - before)
-    return start, end, steps * dt
-
-
-def figures(start: np.ndarray, end: np.ndarray, duration: float, settle: float) -> list[dict[str, Any]]:
-    """Each world's figures (`FIGURES`), as `robot_summary` computes them from the centre of mass."""
-    velocity = (end - start) / (duration - settle)
-    return [{"com_velocity_m_s": v.tolist(), "com_speed_m_s": float(np.hypot(*v[:2])), "com_position_m": p.tolist()}
-            for v, p in zip(velocity, end)]
+    velocity = (end - start) / (steps * dt - sim.settle)
+    return [{"com_velocity_m_s": v.tolist(), "com_speed_m_s": float(np.hypot(*v[:2])), "com_position_m": p.tolist(),
+             "medium_force_N": f.sum(axis=0).tolist(),
+             "body_medium_force_N": {b: f[i].tolist() for i, b in enumerate(worlds.bodies)}}
+            for v, p, f in zip(velocity, end, force)]
 
 
 def _flat(figure: dict[str, Any]) -> dict[str, float]:
@@ -142,14 +149,12 @@ def evaluate(scene: UserScene, scenes: Sequence[UserScene], max_error: ErrorLimi
     check_keys(scene, [])
     begun = time.perf_counter()
     sim = scene.sim
-    start, end, duration = rollout(scene, scenes, device=device)
-    run = figures(start, end, duration, sim.settle)
-    start, end, duration = rollout(scene, scenes, dt=FINER * sim.dt, device=device)
-    companion = figures(start, end, duration, sim.settle)
+    run = rollout(scene, scenes, device=device)
+    companion = rollout(scene, scenes, dt=FINER * sim.dt, device=device)
     wall = time.perf_counter() - begun
     out = []
     for fine, half in zip(run, companion):
-        estimate = {key: (SAFETY * np.abs(np.subtract(fine[key], half[key])) / abs(FINER - 1)).tolist()
+        estimate = {key: figure_map(lambda a, b: SAFETY * abs(a - b) / abs(FINER - 1), fine[key], half[key])
                     for key in FIGURES}
         flat = _flat(fine)
         if not all(math.isfinite(v) for v in flat.values()) or not all(

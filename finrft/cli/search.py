@@ -82,7 +82,8 @@ def _allow_warp(p: argparse.ArgumentParser, what: str) -> None:
     action = p._option_string_actions["--backend"]
     action.choices = (*action.choices, "warp")
     action.help = (f"{action.help}; warp: {what} as the worlds of one batched rollout on MuJoCo Warp (needs "
-                   f"finrft[warp]; medium and open-loop control keys only; the centre of mass's figures)")
+                   f"finrft[warp]; medium and open-loop control keys only; the centre of mass's and the medium "
+                   f"force's figures)")
 
 
 def _batched(args: argparse.Namespace) -> str:

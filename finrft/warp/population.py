@@ -1,5 +1,5 @@
 """A population of one robot scene's variants in one batched rollout on MuJoCo Warp (``finrft sweep --backend
-warp``, ``finrft optimize --scene ... --backend warp``): every variant is a world of one `WarpWorlds`, stepped
+warp``, ``finrft optimize --objective ... --backend warp``): every variant is a world of one `WarpWorlds`, stepped
 together for the scene's duration, its own medium set per world and its own open-loop [[control]] applied to it
 at every step. Only keys a world can take apart from its neighbours vary (`check_keys`): the medium's parameters
 (`MEDIUM_KEYS`) and the open-loop controls' (`CONTROL_FIELDS`).

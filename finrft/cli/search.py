@@ -77,6 +77,23 @@ def interrupted(command: str, log: str | None, schema: str) -> Interrupted:
                        f"--resume {shlex.quote(log)}")
 
 
+def _allow_warp(p: argparse.ArgumentParser, what: str) -> None:
+    """--backend also takes warp: the population in one batched rollout on MuJoCo Warp (`finrft.warp.population`)."""
+    action = p._option_string_actions["--backend"]
+    action.choices = (*action.choices, "warp")
+    action.help = (f"{action.help}; warp: {what} as the worlds of one batched rollout on MuJoCo Warp (needs "
+                   f"finrft[warp]; medium and open-loop control keys only; the centre of mass's and the medium "
+                   f"force's figures)")
+
+
+def _batched(args: argparse.Namespace) -> str:
+    """The population's backend (warp, else native); --backend warp sets no scene key."""
+    if args.backend != "warp":
+        return "native"
+    args.backend = None
+    return "warp"
+
+
 def add_optimize(sub: Any) -> None:
     p = sub.add_parser("optimize", help="optimise the gait with CMA-ES",
                        description="Maximise the swimming efficiency eta over one flap cycle with CMA-ES (pycma): by "
@@ -112,6 +129,7 @@ def add_optimize(sub: Any) -> None:
     g.add_argument("--plot", metavar="OUT.png", help="with --objective: chart of the search (each evaluation's "
                    "objective and estimate by generation, the best so far); needs --out or --resume")
     add_max_error(p)
+    _allow_warp(p, "with --objective, each generation")
     p.set_defaults(handler=optimize)
 
 
@@ -140,6 +158,9 @@ def optimize(args: argparse.Namespace) -> int:
     for flag in ("constraint", "write_scene", "plot"):
         if getattr(args, flag):
             raise UsageError(f"--{flag.replace('_', '-')} goes with --objective (a robot scene's search)")
+    if args.backend == "warp":
+        raise UsageError("--backend warp goes with --objective (a robot scene's search); the gait's takes native "
+                         "or python")
     check_output(args.rrd, ".rrd", "--rrd", args.force)
     log = search_log(args, {"bounds": "--bounds", "scene": "--scene", "preset": "--preset", "set": "--set",
                             "fin": "--fin", "model": "--model", "backend": "--backend"})
@@ -186,6 +207,7 @@ def optimize_scene(args: argparse.Namespace) -> int:
     log = search_log(args, {"bounds": "--bounds", "scene": "--scene", "example": "--example", "set": "--set",
                             "backend": "--backend", "objective": "--objective", "constraint": "--constraint",
                             "max_error": "--max-error"})
+    backend = _batched(args)
     if args.resume:
         scene, variables, objective, constraints, max_error = logged_scene_problem(args.resume)
         past = read_scene_log(args.resume)
@@ -216,7 +238,8 @@ def optimize_scene(args: argparse.Namespace) -> int:
         try:
             result = optimize_scene(scene, variables, objective, constraints, budget=args.budget, seed=args.seed,
                                     log=log, resume=bool(args.resume), replace=args.force, executor=executor,
-                                    workers=args.workers, max_error=max_error, on_generation=on_generation)
+                                    workers=args.workers, max_error=max_error, on_generation=on_generation,
+                                    backend=backend)
         except KeyboardInterrupt:
             raise interrupted("optimize", log, searchlog.SCENE) from None
     if args.write_scene:
@@ -458,6 +481,7 @@ def add_sweep(sub: Any) -> None:
     add_force(p)
     add_json(p, "the table (a list of variants: keys, figures, estimates)")
     add_quiet(p)
+    _allow_warp(p, "every variant")
     p.set_defaults(handler=sweep)
 
 
@@ -476,6 +500,7 @@ def sweep(args: argparse.Namespace) -> int:
                          "--dist medium.zeta=uniform:0.4,0.8")
     if args.dist and not args.random:
         raise UsageError("--dist goes with --random N")
+    backend = _batched(args)
     scene = robot_scene(args)
     variants = (sweeps.grid_variants(sweeps.parse_grid(args.grid)) if args.grid
                 else sweeps.random_variants(sweeps.parse_dist(args.dist), args.random, args.seed))
@@ -490,7 +515,7 @@ def sweep(args: argparse.Namespace) -> int:
     with progress(args, len(variants), "sweep", "variants") as bar:
         try:
             result = sweeps.sweep(scene, variants, workers=args.workers, executor=executor, max_error=max_error,
-                                  progress=None if bar is None else lambda done, total: bar(done))
+                                  progress=None if bar is None else lambda done, total: bar(done), backend=backend)
         except KeyboardInterrupt:
             raise Interrupted("interrupted; nothing was written") from None
     if args.csv:

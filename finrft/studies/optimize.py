@@ -648,8 +648,8 @@ def optimize_scene(scene: UserScene, variables: Sequence[Variable], objective: O
                    log: str | Path | None = None, resume: bool = False, replace: bool = False,
                    executor: Executor | None = None, workers: int | None = None,
                    max_error: ErrorLimits | None = None,
-                   on_generation: Callable[[int, np.ndarray, dict[str, np.ndarray], Any], None] | None = None
-                   ) -> SceneSearch:
+                   on_generation: Callable[[int, np.ndarray, dict[str, np.ndarray], Any], None] | None = None,
+                   backend: str = "native") -> SceneSearch:
     """Optimise any figure of a robot scene's run over any of its keys (schema keys, ``control.*.frequency``,
     design keys of its model) with CMA-ES, under ``constraints``, from the scene's own values (the middle of the
     bounds where they lie outside).
@@ -660,15 +660,28 @@ def optimize_scene(scene: UserScene, variables: Sequence[Variable], objective: O
     end the best and every evaluation whose error bar overlaps the best's (`REFINED` at most, the closest first)
     are run again at half the step (`refine`), and the best is chosen by the refined figures, flagged
     ``best_ambiguous`` when their error bars still overlap. Budget, seed, log (schema `searchlog.SCENE`), resume,
-    replace, executor and workers as `optimize`."""
+    replace, executor and workers as `optimize`. ``backend`` "warp": each generation the worlds of one batched
+    rollout on MuJoCo Warp (`finrft.warp.population`: medium and open-loop control keys, the centre of mass's
+    figures); the refinement runs natively."""
     from .figures import evaluate_job
+    from .sweep import BACKENDS, warp_population
     check_limits(max_error)
     check_scene_problem(scene, variables, objective, constraints)
+    if backend not in BACKENDS:
+        raise SceneError(f"a search's backend is one of {', '.join(BACKENDS)}, got {backend!r}")
+    if backend == "warp":
+        worlds = warp_population()
+        worlds.check_keys(scene, [v.key for v in variables])
+        for figure in (objective.figure, *(c.figure for c in constraints)):
+            if figure.partition(".")[0] not in worlds.FIGURES:
+                raise SceneError(f"--backend warp reports {', '.join(worlds.FIGURES)}, not {figure}: use "
+                                 f"--backend native")
     seen: list[dict[str, np.ndarray]] = []
 
     def population(values: np.ndarray) -> tuple[list[float], dict[str, np.ndarray]]:
         scenes = [scene.replace(**{v.key: float(x) for v, x in zip(variables, row)}) for row in values]
-        results = batch.map_jobs(evaluate_job, [(s, max_error) for s in scenes], executor=pool, workers=1)
+        results = worlds.evaluate(scene, scenes, max_error) if backend == "warp" else \
+            batch.map_jobs(evaluate_job, [(s, max_error) for s in scenes], executor=pool, workers=1)
         costs, figure, error, flags = _costs(objective, constraints, results)
         columns = {"objective": figure, "objective_error": error, "ambiguous": flags,
                    "usable": (costs < INFEASIBLE).astype(np.int64)}

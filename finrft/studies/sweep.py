@@ -35,6 +35,9 @@ DISTRIBUTIONS: dict[str, tuple[str, Callable[[np.random.Generator, float, float]
     "normal": ("mean, standard deviation", lambda rng, a, b: rng.normal(a, b)),
 }
 MAX_VARIANTS = 100_000
+# Where a population's runs go: native (each variant a whole run, in processes or on Dask) or warp (every
+# variant a world of one batched rollout).
+BACKENDS = ("native", "warp")
 
 
 @dataclass(frozen=True)
@@ -146,17 +149,38 @@ def variant_scenes(scene: UserScene, variants: list[dict[str, Any]]) -> list[Use
 
 def sweep(scene: UserScene, variants: list[dict[str, Any]], *, workers: int | None = None,
           executor: Executor | None = None, max_error: ErrorLimits | None = None,
-          progress: Callable[[int, int], None] | None = None) -> Sweep:
+          progress: Callable[[int, int], None] | None = None, backend: str = "native") -> Sweep:
     """Run every variant of ``scene`` (its keys set as `UserScene.replace`) with its error estimate, on ``workers``
     local processes (default: every core) or ``executor`` (a Dask client's); a variant that fails, or whose
-    estimate exceeds ``max_error`` (None: reported only), keeps its row with the reason and no figures."""
+    estimate exceeds ``max_error`` (None: reported only), keeps its row with the reason and no figures.
+    ``backend`` "warp": every variant a world of one batched rollout on MuJoCo Warp (`finrft.warp.population`:
+    medium and open-loop control keys only; the centre of mass's figures)."""
     check_limits(max_error)
     if not variants:
         raise SceneError("a sweep needs at least one variant")
+    if backend not in BACKENDS:
+        raise SceneError(f"a sweep's backend is one of {', '.join(BACKENDS)}, got {backend!r}")
+    if backend == "warp":
+        population = warp_population()
+        population.check_keys(scene, list(variants[0]))
     scenes = variant_scenes(scene, variants)
-    results = batch.map_jobs(evaluate_job, [(s, max_error) for s in scenes], workers=workers, executor=executor,
-                             progress=progress)
+    if backend == "warp":
+        results = population.evaluate(scene, scenes, max_error)
+        if progress is not None:
+            progress(len(scenes), len(scenes))
+    else:
+        results = batch.map_jobs(evaluate_job, [(s, max_error) for s in scenes], workers=workers,
+                                 executor=executor, progress=progress)
     return Sweep(list(variants[0]), variants, scenes, results)
+
+
+def warp_population() -> Any:
+    """`finrft.warp.population`, or SceneError in one line where the warp extra is absent."""
+    try:
+        from ..warp import population
+    except ImportError as exc:
+        raise SceneError(f"--backend warp: {exc}") from None
+    return population
 
 
 def _cell(value: Any) -> Any:

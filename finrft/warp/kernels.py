@@ -270,6 +270,20 @@ def body_states(body: wp.array(dtype=int), rootid: wp.array(dtype=int), xpos: wp
     twist[world, b] = wp.spatial_vectord(angular[0], angular[1], angular[2], lin[0], lin[1], lin[2])
 
 
+@wp.func
+def element_pose(R: wp.mat33d, o: wp.vec3d, c: wp.vec3d, normal: wp.vec3d, surface_z: f64):
+    """An element's depth below the flat surface, its offset from the body's origin and its normal, world frame,
+    from the body's rotation and origin and the element's centre and normal in the body's frame."""
+    arm = R * c
+    return surface_z - (o[2] + arm[2]), arm, R * normal
+
+
+@wp.func
+def point_velocity(t: wp.spatial_vectord, arm: wp.vec3d) -> wp.vec3d:
+    """The velocity of the point at ``arm`` from a body's origin, of the body's twist (angular, linear)."""
+    return wp.cross(wp.spatial_top(t), arm) + wp.spatial_bottom(t)
+
+
 @wp.kernel
 def element_wrenches(law: int, coef: wp.array(dtype=f64), v_reg: f64, element_body: wp.array(dtype=int),
                      centre: wp.array(dtype=wp.vec3d), normal: wp.array(dtype=wp.vec3d),
@@ -281,16 +295,11 @@ def element_wrenches(law: int, coef: wp.array(dtype=f64), v_reg: f64, element_bo
     (finrft_surface_wrench; ``wrench`` zeroed before). Only elements below the surface do any work."""
     world, e = wp.tid()
     b = element_body[e]
-    R = rotation[world, b]
     o = origin[world, b]
-    c = centre[e]
-    depth = surface_z[world] - (o[2] + (R[2, 0] * c[0] + R[2, 1] * c[1] + R[2, 2] * c[2]))
+    depth, arm, n = element_pose(rotation[world, b], o, centre[e], normal[e], surface_z[world])
     if not (depth > ZERO):
         return
-    arm = R * c
-    n = R * normal[e]
-    t = twist[world, b]
-    v = wp.cross(wp.spatial_top(t), arm) + wp.spatial_bottom(t)
+    v = point_velocity(twist[world, b], arm)
     f = element_force(law, coef, scale[world], mu_surf[world], drft_lambda[world], rho_c[world], v_reg, n, v,
                       depth, area[e])
     torque = wp.cross(arm, f)
@@ -362,16 +371,11 @@ def element_damping(law: int, coef: wp.array(dtype=f64), v_reg: f64, element_bod
     v = S u = linear - [r]x angular, so J^T dF/dv J of a dof pair is s_i^T G s_j."""
     world, e = wp.tid()
     b = element_body[e]
-    R = rotation[world, b]
     o = origin[world, b]
-    c = centre[e]
-    depth = surface_z[world] - (o[2] + (R[2, 0] * c[0] + R[2, 1] * c[1] + R[2, 2] * c[2]))
+    depth, arm, n = element_pose(rotation[world, b], o, centre[e], normal[e], surface_z[world])
     if not (depth > ZERO):
         return
-    arm = R * c
-    n = R * normal[e]
-    t = twist[world, b]
-    v = wp.cross(wp.spatial_top(t), arm) + wp.spatial_bottom(t)
+    v = point_velocity(twist[world, b], arm)
     k = element_slope(law, coef, scale[world], mu_surf[world], drft_lambda[world], rho_c[world], v_reg, n, v, depth,
                       area[e], trailing)
     r = o + arm - com[world, b]

@@ -16,6 +16,8 @@ candidate at its step and at half of it, their reported figures compared as the 
 - the candidate predicted cheapest is measured next; one that misses the limits gives its method's next step:
   half of it for ``explicit`` (beyond its stability limit its error does not fall with the step), the step its
   error asks for (first order, aimed at `SAFE` of the limit) for an implicit one;
+- an explicit step beyond the bodies' explicit limit (`explicit_limit`, at the state the implicit methods' prices
+  left) is not piloted: its candidate is skipped, and the ladder goes on below the limit;
 - once one meets the limits, only candidates predicted to cost less than `SAVING` of it are measured;
 - the cheapest that met them is tried at twice its step while its estimate is below `COARSEN` of its limit.
 
@@ -68,6 +70,10 @@ SAVING = 0.85
 # its second half: a robot's first moments (a sled landing on the sand) can cost a Newton step several times its
 # gait's (the paddle sled's newton-midpoint priced at 4 times its cost from its first 5 %).
 PRICE_SHARE = 0.1
+# An explicit candidate whose step exceeds this share of the bodies' explicit limit (`explicit_limit`) is not
+# piloted: beyond it a light link's velocity reverses each step, and its figures are off however they pass the
+# chatter probe (the sandfish's 10 g links at 1 ms: 35 % off its speed).
+EXPLICIT_ROOM = 1.0
 # A run's cost against its pilot's: the run itself and its companion at half the step (`convergence.checked`).
 COMPANION_COST = 1 + 1 / FINER
 
@@ -146,6 +152,46 @@ def window(scene: Any, duration: float, stroke_time: float, strokes: int) -> tup
 
 
 Pilot = Callable[[Any, bool, Callable[[float], None]], Any]
+# The state the bodies' explicit limit is taken at: (model, data, force groups, attached surfaces or None), or None
+State = Callable[[Any], Any]
+
+
+def explicit_limit(m: Any, d: Any, groups: Any, attached: Any) -> float:
+    """The longest explicit step that keeps every RFT body's velocity from reversing in one step (s; inf where no
+    element carries a force), at the positions and velocities of ``d``: min over the bodies of 2 m / k, m the body's
+    mass and k the medium force's slope, sum over its elements of |F| / max(|v|, v_reg) (a rate-independent law's
+    force turns with the velocity: its slope across it is |F| / |v|, F / v_reg inside the regularisation). An
+    explicit step damps a damper of slope k on a mass m only for dt < 2 m / k."""
+    import mujoco
+    import numpy as np
+
+    from . import laws
+    from .integrate import SURFACE_SPEED
+    slope = np.zeros(m.nbody)
+    mujoco.mj_kinematics(m, d)  # positions and velocities alone: no force (a Python callback) runs
+    mujoco.mj_comPos(m, d)
+    mujoco.mj_comVel(m, d)
+    jacp = np.zeros((3, m.nv))
+    for group in groups:
+        law = laws.bind(group.law)
+        for site in group.sites:
+            mujoco.mj_jacSite(m, d, jacp, None, site)
+            v = jacp @ d.qvel
+            frame = d.site_xmat[site].reshape(3, 3)
+            f = law(v[None], frame[None, :, 0], frame[None, :, 1])[0]
+            slope[m.site_bodyid[site]] += np.linalg.norm(f) / max(np.linalg.norm(v), group.law.v_reg)
+    if attached is not None:
+        forces = attached.callback(m)
+        floor = attached.v_reg if attached.v_reg > 0 else SURFACE_SPEED
+        twist = np.zeros(6)
+        for body, surface in forces.bodies:
+            mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_XBODY, body, twist, 0)
+            f, arm = forces.twist_forces(d, body, surface, twist)
+            v = twist[3:] + np.cross(twist[:3], arm)
+            slope[body] += float(np.sum(np.linalg.norm(f, axis=1) / np.maximum(np.linalg.norm(v, axis=1), floor)))
+    limits = 2 * m.body_mass[slope > 0] / slope[slope > 0]
+    return float(limits.min()) if len(limits) else math.inf
+
 
 
 class Chooser:
@@ -154,8 +200,10 @@ class Chooser:
     its cost is measured in CPU seconds (`cost`)."""
 
     def __init__(self, scene: Any, limits: ErrorLimits, pilot: Pilot, prepare: Callable[[Any], Any],
-                 duration: float, stroke_time: float, strokes: int) -> None:
+                 duration: float, stroke_time: float, strokes: int, state: State | None = None) -> None:
         self.scene, self.limits, self.pilot, self.prepare = scene, limits, pilot, prepare
+        self.state = state
+        self._limit: float | None = None  # `explicit_limit`, once taken
         self.duration, self.stroke_time, self.strokes_n = duration, stroke_time, strokes
         self.window, self.settle = window(scene, duration, stroke_time, strokes)
         # A run of one stroke is cut short by shortening its stroke (the same motion up to the window's end); one
@@ -312,6 +360,29 @@ class Chooser:
         near = min(known, key=lambda h: abs(math.log(h / dt)))
         return self.cost(method, near) * near / dt
 
+    def explicit_limit(self) -> float:
+        """The bodies' explicit limit (`explicit_limit`, s) at the state the pilots priced so far left, where the
+        implicit methods are an alternative and that state is one a stable step reached; inf otherwise."""
+        if self._limit is None:
+            self._limit = math.inf
+            state = self.state(self.at(self.allowed[-1], self.top)) if self.state and self.allowed else None
+            if state is not None and all(math.isfinite(x) for x in state[1].qvel):
+                self._limit = explicit_limit(*state)
+        return self._limit
+
+    def screen(self, dt: float, finest: float) -> float | None:
+        """The explicit ladder's next step from ``dt`` within `EXPLICIT_ROOM` of the bodies' explicit limit (None:
+        none down to ``finest``); each step beyond it is a candidate skipped, not piloted."""
+        limit = EXPLICIT_ROOM * self.explicit_limit()
+        while dt > limit * (1 + 1e-9):
+            if not any((c.method, c.dt) == ("explicit", dt) for c in self.candidates):
+                self.candidates.append(Candidate("explicit", dt, skipped=f"skipped: explicit limit "
+                                                 f"{self._limit:.3g} s < dt"))
+            dt *= FINER
+            if dt < finest * (1 - 1e-9):
+                return None
+        return dt
+
     def search(self, allowed: tuple[str, ...]) -> list[Candidate]:
         """The candidates of ``allowed`` methods that met the limits, cheapest first, found best first: each method's
         ladder from START x sim.dt down, the cheapest predicted candidate measured next, until none left could cost
@@ -333,6 +404,11 @@ class Chooser:
                         self.candidates.append(Candidate(method, dt, cost_s=cost, skipped="not run: predicted to "
                                                          "cost more than the cheapest that met the limits"))
                 break
+            if method == "explicit" and self.screen(dt, finest[method]) != dt:
+                # priced, not piloted: every method is priced before one is measured (the explicit limit is taken
+                # where the implicit methods' prices left the state)
+                ladder[method] = self.screen(dt, finest[method])
+                continue
             # once one met the limits, a pilot stops where it has cost what a cheaper candidate's pilots may
             self.budget = math.inf if best is None else SAVING * best.cost_s * (1 - 1 / COMPANION_COST)
             candidate = self.try_step(method, dt)
@@ -374,11 +450,11 @@ def _first_line(exc: Exception) -> str:
 
 
 def choose(scene: Any, limits: ErrorLimits | None, pilot: Pilot, prepare: Callable[[Any], Any], duration: float,
-           stroke_time: float, strokes: int) -> tuple[list[Candidate], Chooser]:
+           stroke_time: float, strokes: int, state: State | None = None) -> tuple[list[Candidate], Chooser]:
     """The candidates that met the limits, cheapest first, the cheapest at the longest step that still does
     (`Chooser.coarsen`), or the closest to them where none did; and the chooser that measured them
     (`Chooser.search`: the explicit step and, on MuJoCo's implicitfast integrator, the implicit methods)."""
-    chooser = Chooser(scene, limits or ErrorLimits(), pilot, prepare, duration, stroke_time, strokes)
+    chooser = Chooser(scene, limits or ErrorLimits(), pilot, prepare, duration, stroke_time, strokes, state)
     passed = chooser.search(("explicit", *chooser.allowed))
     if passed:
         coarser = chooser.coarsen(passed[0])
@@ -409,13 +485,14 @@ def reason(chosen: Candidate, chooser: Chooser, fell_back: list[str]) -> str:
 
 
 def run_auto(scene: Any, limits: ErrorLimits | None, pilot: Pilot, prepare: Callable[[Any], Any],
-             full: Callable[[Any], Any], duration: float, stroke_time: float, strokes: int) -> Any:
+             full: Callable[[Any], Any], duration: float, stroke_time: float, strokes: int,
+             state: State | None = None) -> Any:
     """Choose (`choose`), then run the choice at the whole length with ``full(scene)`` (its companion estimate
     included); where its estimate refuses it or it goes unstable, the next candidate that met the limits, or, after
     the explicit step, the implicit one measured then (a failure of the scene's own, a drive that cannot hold its
     profile, is raised as it comes). The result carries ``method_choice``, and the pilots' wall time in its
     ``wall_s``."""
-    passed, chooser = choose(scene, limits, pilot, prepare, duration, stroke_time, strokes)
+    passed, chooser = choose(scene, limits, pilot, prepare, duration, stroke_time, strokes, state)
     fell_back: list[str] = []
     while True:
         chosen, *passed = passed

@@ -281,8 +281,14 @@ def run(experiment: Experiment, scene: Any, *, progress: Callable[[float], None]
             drive = experiment.drive_for(scene)
             return run_auto(scene, max_error, lambda s, companion, p: once(s, build(s), p, companion), build,
                             lambda s: checked(build, once, s, progress, max_error, estimate_error),
-                            drive.duration, drive.stroke_time, drive.strokes)
+                            drive.duration, drive.stroke_time, drive.strokes, lambda s: _left(build(s), datas))
         return checked(build, once, scene, progress, max_error, estimate_error)
+
+
+def _left(built: Any, datas: dict[int, mujoco.MjData]) -> tuple | None:
+    """The state the last run on a built model left (`choice.explicit_limit`'s arguments), None before any."""
+    d = datas.get(id(built.model))
+    return None if d is None else (built.model, d, built.groups, getattr(built, "attached", None))
 
 
 def python_forces(built: Any) -> Callable[[mujoco.MjModel, mujoco.MjData], None]:

@@ -167,3 +167,45 @@ def test_a_pilot_stops_once_it_costs_more_than_it_may(tmp_path):
     chooser.budget = 0.05
     run, _ = chooser._timed(scene, 0.6)
     assert isinstance(run, Exception) and "cost more than" in str(run)
+
+
+def test_the_explicit_limit_of_a_box_dragged_through_the_sand_is_2_m_v_over_its_force():
+    # A 0.2 kg box 40 x 20 x 30 mm, its top 5 mm below the surface, moving along +x at 0.1 m/s: only its leading face
+    # (depths 5-35 mm, 20 mm wide) takes a force, li2013's (alpha_x, alpha_z)(pi/2, 0) |z| on each element. A
+    # rate-independent force turns with the velocity, so its slope across it is |F| / v: dt < 2 m v / |F|.
+    import math
+
+    import mujoco
+    import numpy as np
+
+    from finrft import attach
+    from finrft.choice import explicit_limit
+    from finrft.laws import li2013
+    spec = mujoco.MjSpec.from_string("""<mujoco><worldbody><body name="box" pos="0 0 -0.02"><freejoint/>
+      <geom type="box" size="0.02 0.01 0.015" mass="0.2"/></body></worldbody></mujoco>""")
+    attached = attach(spec, ["box"], backend="python", element_size=0.005)
+    m = spec.compile()
+    d = mujoco.MjData(m)
+    d.qvel[0] = 0.1
+    alpha_x, alpha_z = li2013.alpha(math.pi / 2, 0.0)
+    force = math.hypot(float(alpha_x), float(alpha_z)) * 0.02 * (0.035 ** 2 - 0.005 ** 2) / 2
+    assert explicit_limit(m, d, (), attached) == pytest.approx(2 * 0.2 * 0.1 / force, rel=1e-6)
+    d.qvel[0] = 0.0
+    assert explicit_limit(m, d, (), attached) == np.inf  # at rest no element leads: no force, no limit
+
+
+def test_auto_pilots_no_explicit_step_beyond_a_light_robots_limit_and_does_below_a_heavy_ones(tmp_path):
+    # The sandfish's 10 g links swim at ~0.13 ms; at 1 ms its explicit step ran through 35 % off and was piloted.
+    # The 2 kg sled's limit is ~1.8 ms (module docstring): its explicit step at the scene's 1 ms is still piloted.
+    from finrft.studies.frontier import battery_scene
+    fish = load_scene(battery_scene("sandfish"), cls=UserScene,
+                      overrides={"sim.method": "auto", "sim.duration": 0.6, "sim.settle": 0.3})
+    candidates = run_robot(fish).method_choice.candidates
+    skipped = [c for c in candidates if c.method == "explicit" and c.skipped.startswith("skipped: explicit limit")]
+    assert skipped
+    limit = float(skipped[0].skipped.split()[3])
+    assert all(c.dt > limit for c in skipped)
+    assert not any(c.method == "explicit" and c.dt > limit and (c.measured or c.failed) for c in candidates)
+    sled = run_robot(load_scene(_sled(tmp_path), cls=UserScene)).method_choice.candidates
+    assert any(c.method == "explicit" and c.measured for c in sled)
+    assert not any(c.skipped.startswith("skipped: explicit limit") and c.dt <= 0.001 for c in sled)

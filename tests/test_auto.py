@@ -97,6 +97,8 @@ def test_an_explicit_choice_its_whole_run_refuses_falls_back_to_an_implicit_step
     cost = choosing.Chooser.cost
     monkeypatch.setattr(choosing.Chooser, "cost", lambda self, method, dt:
                         0.0 if method == "explicit" else cost(self, method, dt))
+    # and its explicit limit not taken (its steps down to 0.16 ms are beyond it, and would not be piloted)
+    monkeypatch.setattr(choosing, "EXPLICIT_ROOM", float("inf"))
     scene = wheel.default_scene(**{"sim.method": "auto", "sim.duration": 1.0, "sim.settle": 0.5, "wheel.slip": 0.3,
                                    "wheel.load": 21.0})
     run = experiment.run(wheel.Wheel.of(scene), scene)

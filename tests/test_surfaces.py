@@ -246,17 +246,6 @@ def test_c_twin_of_the_deforming_surface_agrees_over_many_updates(library):
     assert abs(twin.sum()) <= 1e-6 * np.abs(twin).sum() and abs(heights.sum()) <= 1e-6 * np.abs(heights).sum()
 
 
-def test_c_relaxation_of_regions_rows_apart_agrees_with_the_whole_grids(library):
-    # two spikes in rows far apart, in one box: the C relaxation skips the rows between, where nothing flows
-    spikes = np.zeros((33, 41))
-    spikes[4, 8], spikes[28, 30], spikes[16, 20] = 0.05, -0.04, 0.002
-    relaxed, twin = deforming.relax(spikes, SIZE, REPOSE), _c(spikes)
-    iterations = library.finrft_deforming_relax(33, 41, _p(twin), _p(_c(SIZE)), REPOSE, None, deforming.TOLERANCE,
-                                                deforming.MAX_ITERATIONS)
-    assert relaxed.iterations > 3 and iterations == relaxed.iterations
-    assert np.abs(twin - relaxed.heights).max() < 1e-12
-
-
 def test_the_surfaces_are_installed_with_finrft():
     import tomllib
     from pathlib import Path

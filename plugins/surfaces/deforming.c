@@ -232,26 +232,16 @@ int finrft_deforming_sweep(int nrow, int ncol, double* heights, const double siz
 // at the cost of the disturbed region. `box` (rows r0..r1, columns c0..c1) holds at the start every edge that may
 // flow, and at the end those that still would (r0 > r1: none). The iterations taken, or -1.
 static int relax_box(int nrow, int ncol, double* heights, double dx, double dy, double slope,
-                     const unsigned char* blocked, double tolerance, int max_iterations, double* flow,
-                     unsigned char* rows, int box[4]) {
+                     const unsigned char* blocked, double tolerance, int max_iterations, double* flow, int box[4]) {
   // flow[i]: from point i to i + 1 (x), flow[cells + i]: from i to i + ncol (y), written for the edges in the box
   double* flow_x = flow;
   double* flow_y = flow + nrow * ncol;
   int result = -1, r0 = box[0], r1 = box[1], c0 = box[2], c1 = box[3];  // the box of points to look at
   int cr0 = nrow, cr1 = -1, cc0 = ncol, cc1 = -1;  // the box of points that change
   double rise_x = slope * dx, rise_y = slope * dy, over_x = tolerance * dx, over_y = tolerance * dy;
-  // rows[r] & 1: row r has a point that changed in the last iteration (at first, every row of the box); & 2: row r
-  // is looked at in this one, being within a row of such a row; & 4: a point of row r changes in this one. A row
-  // not looked at has no edge that flows (neither its points nor its neighbours' changed), so it is skipped.
-  for (int r = r0; r <= r1; r++) rows[r] = 1;
   for (int iteration = 0; iteration <= max_iterations; iteration++) {
     cr0 = nrow, cr1 = -1, cc0 = ncol, cc1 = -1;
     for (int r = r0; r <= r1; r++) {
-      int near = (rows[r] & 1) || (r > r0 && (rows[r - 1] & 1)) || (r < r1 && (rows[r + 1] & 1));
-      rows[r] = (unsigned char)((rows[r] & 1) | (near ? 2 : 0));
-    }
-    for (int r = r0; r <= r1; r++) {
-      if (!(rows[r] & 2)) continue;
       const double* h = heights + r * ncol;
       double* fx = flow_x + r * ncol;
       int first = ncol, last = -1;  // the row's points at an edge that flows
@@ -274,12 +264,10 @@ static int relax_box(int nrow, int ncol, double* heights, double dx, double dy, 
             if (first > c) first = c;
             if (last < c) last = c;
             if (cr1 < r + 1) cr1 = r + 1;
-            rows[r + 1] |= 4;
           }
         }
       }
       if (last >= 0) {
-        rows[r] |= 4;
         if (cr0 > r) cr0 = r;
         if (cr1 < r) cr1 = r;
         if (cc0 > first) cc0 = first;
@@ -294,23 +282,18 @@ static int relax_box(int nrow, int ncol, double* heights, double dx, double dy, 
     // each point takes what flows in from its neighbours in the box and gives what flows out (edges leaving the box
     // have no flow: both their points are as the last iteration left them, without excess between)
     for (int r = r0; r <= r1; r++) {
-      if (!(rows[r] & 2)) continue;
       double* h = heights + r * ncol;
       const double* fx = flow_x + r * ncol;
       const double* fy = flow_y + r * ncol;
-      int from_below = r > r0 && (rows[r - 1] & 2);  // the row below's y flows were written in this iteration
       for (int c = c0; c <= c1; c++) {
         double change = 0;
         if (c < c1) change -= fx[c];
         if (c > c0) change += fx[c - 1];
         if (r < r1) change -= fy[c];
-        if (from_below) change += fy[c - ncol];
+        if (r > r0) change += fy[c - ncol];
         h[c] += change;
       }
     }
-    for (int r = r0; r <= r1; r++) rows[r] = (unsigned char)((rows[r] & 4) ? 1 : 0);
-    if (r0 > 0) rows[r0 - 1] = 0;  // the next box is at most a row wider, on rows without change
-    if (r1 < nrow - 1) rows[r1 + 1] = 0;
     r0 = cr0 > 0 ? cr0 - 1 : 0;
     r1 = cr1 < nrow - 1 ? cr1 + 1 : nrow - 1;
     c0 = cc0 > 0 ? cc0 - 1 : 0;
@@ -329,11 +312,11 @@ static int relax_checked(int nrow, int ncol, const double size[2], double repose
 int finrft_deforming_relax(int nrow, int ncol, double* heights, const double size[2], double repose,
                            const unsigned char* blocked, double tolerance, int max_iterations) {
   if (relax_checked(nrow, ncol, size, repose, tolerance)) return FINRFT_SURFACE_BAD_INPUT;
-  double* flow = malloc(sizeof(double) * 2 * nrow * ncol + nrow);  // and relax_box's rows
+  double* flow = malloc(sizeof(double) * 2 * nrow * ncol);
   if (!flow) return FINRFT_SURFACE_BAD_INPUT;
   int box[4] = {0, nrow - 1, 0, ncol - 1};
   int result = relax_box(nrow, ncol, heights, 2 * size[0] / (ncol - 1), 2 * size[1] / (nrow - 1), tan(repose),
-                         blocked, tolerance, max_iterations, flow, (unsigned char*)(flow + 2 * nrow * ncol), box);
+                         blocked, tolerance, max_iterations, flow, box);
   free(flow);
   return result;
 }
@@ -354,9 +337,8 @@ int finrft_deforming_step(FinrftDeforming* s, const double g[3], int n, const do
     return FINRFT_SURFACE_BAD_INPUT;
   }
   double dx = 2 * s->size[0] / (ncol - 1), dy = 2 * s->size[1] / (nrow - 1);
-  // before (cells), the relaxation's flows (2 cells), the points under the body before (cells bytes), the
-  // relaxation's rows (nrow bytes)
-  double* before = malloc(sizeof(double) * 3 * cells + cells + nrow);
+  // before (cells), the relaxation's flows (2 cells), the points under the body before (cells bytes)
+  double* before = malloc(sizeof(double) * 3 * cells + cells);
   if (!before) return FINRFT_SURFACE_BAD_INPUT;
   double* flow = before + cells;
   unsigned char* was = (unsigned char*)(flow + 2 * cells);
@@ -401,7 +383,7 @@ int finrft_deforming_step(FinrftDeforming* s, const double g[3], int n, const do
     box[2] = box[2] > 0 ? box[2] - 1 : 0;
     box[3] = box[3] < ncol - 1 ? box[3] + 1 : ncol - 1;
     relax_box(nrow, ncol, s->heights, dx, dy, tan(s->repose), s->occupied, s->tolerance, s->step_iterations, flow,
-              was + cells, box);
+              box);
   }
   double lost = 0;
   for (int i = 0; i < cells; i++) {

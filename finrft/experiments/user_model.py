@@ -233,7 +233,8 @@ class RobotTrial:
         if self.surface is not None:
             surface, stepped = self.surface, after_step
             if not companion:  # its error estimate compares positions and forces; the surface is the run's record
-                self.reads["surface_height"] = lambda d: surface.heights.copy()
+                # the recording copies what a read returns into its own array: the heights themselves, not a copy
+                self.reads["surface_height"] = lambda d: surface.heights
 
             def after_step(d: mujoco.MjData) -> None:
                 surface.step_model(built.attached, m, d)

@@ -182,7 +182,8 @@ def _applied_lag(m: mujoco.MjModel, method: str) -> float:
     return (1 - chosen.midpoint) * m.opt.timestep if chosen.implicit and not chosen.adaptive else 0.0
 
 
-def applied_state(built: AttachedModel, method: str) -> Callable[[mujoco.MjData], mujoco.MjData]:
+def applied_state(built: AttachedModel, method: str,
+                  surface: deforming.DeformingSurface | None = None) -> Callable[[mujoco.MjData], mujoco.MjData]:
     """Where the forces of the step that led to an MjData's state were taken, as an MjData after mj_forward: with a
     fixed-step implicit ``method``, its new velocity v at the positions the method took the medium's force at, the
     step's start or half a step ahead (newton-midpoint): q - (1 - midpoint) dt v from the positions q after it,
@@ -190,19 +191,34 @@ def applied_state(built: AttachedModel, method: str) -> Callable[[mujoco.MjData]
     with the state's ctrl, applied forces and activations (a scratch MjData: MuJoCo's control callback must leave
     it alone); else the MjData itself. A force read at the state itself instead (one that ripples as elements enter
     the medium, correlated with the velocity it drives) averages to other than the impulse the steps applied, by an
-    amount first order in dt: the wheel rig free under its 21 N load came out 0.12 N short at 20 ms."""
+    amount first order in dt: the wheel rig free under its 21 N load came out 0.12 N short at 20 ms. With the run's
+    deforming ``surface``, its level (the instances' plugin state, most of it) is copied only when the surface has
+    set it since the last copy from the same MjData."""
     m = built.model
     lag = _applied_lag(m, method)
     if lag == 0:
         return lambda d: d
     where = mujoco.MjData(m)
+    # the plugin state's ranges the surface sets (each instance's level), and the rest, copied at every call
+    levels = [slice(int(m.plugin_stateadr[i]), int(m.plugin_stateadr[i] + m.plugin_statenum[i]))
+              for i in (surface.instances if surface is not None else ())]
+    others, start = [], 0
+    for kept in sorted(levels, key=lambda r: r.start):
+        others.append(slice(start, kept.start))
+        start = kept.stop
+    others = [r for r in others + [slice(start, m.npluginstate)] if r.stop > r.start]
+    copied: list[Any] = [None, -1]  # the MjData and the surface's level_sets of the last copy of the levels
 
     def applied(d: mujoco.MjData) -> mujoco.MjData:
         where.time = d.time - lag
-        # plugin_state: a deforming surface's level, the native plugin's state
-        for name in ("qpos", "qvel", "act", "ctrl", "qfrc_applied", "xfrc_applied", "mocap_pos", "mocap_quat",
-                     "plugin_state"):
+        for name in ("qpos", "qvel", "act", "ctrl", "qfrc_applied", "xfrc_applied", "mocap_pos", "mocap_quat"):
             getattr(where, name)[:] = getattr(d, name)
+        for r in others:  # plugin_state: the native plugins' state
+            where.plugin_state[r] = d.plugin_state[r]
+        if levels and (copied[0] is not d or copied[1] != surface.level_sets):
+            for r in levels:
+                where.plugin_state[r] = d.plugin_state[r]
+            copied[:] = [d, surface.level_sets]
         mujoco.mj_integratePos(m, where.qpos, where.qvel, -lag)
         mujoco.mj_forward(m, where)
         return where

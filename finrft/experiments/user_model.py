@@ -179,7 +179,6 @@ class RobotTrial:
             self._checked(self.controller(0.0, d))
         self.watch = [i for i in range(m.nv) if i not in self.dofs]
         force = medium_forces(built)
-        self._applied = applied_state(built, scene.sim.method)
         self.forward = record_forward(built, scene.sim.method)
         bodies = np.arange(1, m.nbody)
 
@@ -230,10 +229,12 @@ class RobotTrial:
                 self.means.add(d.time, rates(d, self._applied(d), d.qvel[self.dofs]), d.subtree_com[0].copy())
 
         self.surface = deforming_surface(built, scene, d)
+        self._applied = applied_state(built, scene.sim.method, self.surface)
         if self.surface is not None:
             surface, stepped = self.surface, after_step
             if not companion:  # its error estimate compares positions and forces; the surface is the run's record
-                self.reads["surface_height"] = lambda d: surface.heights.copy()
+                # the recording copies what a read returns into its own array: the heights themselves, not a copy
+                self.reads["surface_height"] = lambda d: surface.heights
 
             def after_step(d: mujoco.MjData) -> None:
                 surface.step_model(built.attached, m, d)

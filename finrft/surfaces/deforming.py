@@ -236,6 +236,9 @@ class DeformingSurface:
         self.repose, self.pile_factor, self.front_share = float(repose), pile_factor, float(front_share)
         self.tolerance, self.step_iterations, self.native = float(tolerance), int(step_iterations), bool(native)
         self.displaced = 0.0
+        # how many times the level was set in the native instances' state: a copy of that state is current while
+        # this has not changed (`finrft.experiments.attached_model.applied_state`)
+        self.level_sets = 0
         self.instances = tuple(instances)
         self._model: Any = None
         self._pose: np.ndarray | None = None  # the bodies' positions and orientations at the last step_model
@@ -266,6 +269,7 @@ class DeformingSurface:
             return
         set_level = _native_functions()[1]
         nrow, ncol = self.level.shape
+        self.level_sets += 1
         for instance in self.instances:
             if set_level(self._model._address, self._data._address, instance, nrow, ncol, self.level.ctypes.data):
                 raise SceneError("the model's finrft.surface instances do not measure from this deforming surface "
@@ -306,6 +310,7 @@ class DeformingSurface:
         if stepped < 0:
             raise SceneError("the model's finrft.surface instances do not measure from this deforming surface "
                              "(attach it with its field: finrft.surfaces.deforming.field)")
+        self.level_sets += stepped
         self.displaced += removed.value
         return removed.value
 

@@ -44,16 +44,19 @@ def _converged(run, limits: ErrorLimits) -> None:
             assert abs(ours[limit.key] - theirs[limit.key]) <= limit.allowed(theirs[limit.key]), limit.key
 
 
-@pytest.mark.slow  # its pilots and its run at an eighth of a millisecond: ten seconds
-def test_the_sand_swimmer_gets_an_implicit_method():
-    # Its 10 g links: the explicit step chatters or misses the speed at every step cheaper than the implicit one.
+@pytest.mark.slow  # its pilots, and the chosen method at an eighth of its step: about a minute
+def test_the_sand_swimmers_choice_meets_its_limit_against_the_converged_run():
+    # Which method wins depends on this machine's prices (the explicit step at an eighth of a millisecond or an
+    # implicit one at the scene's): whichever it is, its speed is within 2 % of the same method at an eighth of its
+    # step, and no explicit step as long as the scene's passes (its 10 g links chatter there).
     over = {"sim.method": "auto", "sim.duration": 0.6, "sim.settle": 0.3,
             **{f"control.{i}.{key}": value for i in range(6) for key, value in (("ramp", 0.1), ("frequency", 2.0))}}
     run = run_robot(load_scene(example("sand_swimmer"), cls=UserScene, overrides=over), max_error=SPEED)
     choice = run.method_choice
-    assert methods.get(choice.method).implicit and run.scene.sim.method == choice.method
-    assert any(c.method == "explicit" and not c.passed for c in choice.candidates)
+    assert run.scene.sim.method == choice.method
+    assert not any(c.passed for c in choice.candidates if c.method == "explicit" and c.dt >= 1e-3)
     assert run.error_estimate["com_speed_m_s"] <= SPEED.figures[0].allowed(run.summary()["com_speed_m_s"])
+    _converged(run, SPEED)
 
 
 def test_a_heavy_slow_sled_gets_the_explicit_step_and_says_why(tmp_path, capsys):

@@ -193,7 +193,6 @@ def explicit_limit(m: Any, d: Any, groups: Any, attached: Any) -> float:
     return float(limits.min()) if len(limits) else math.inf
 
 
-
 class Chooser:
     """The pilots of one run: ``pilot(scene, companion, progress)`` runs a scene without an estimate (a companion
     records the state only) on the model ``prepare(scene)`` built, each candidate's figures judged by ``limits``;

@@ -45,8 +45,6 @@ from .flags import add_max_error, add_result_files, add_scene_flags, number
 from .user_model import RobotTrial, Schedule, UserModel, window_mean
 
 GRAVITY = 9.81  # m/s^2, MuJoCo's default, which the rig keeps
-# Straight grousers: plates across the rim, this thick along it.
-GROUSER_THICKNESS = 0.004  # m
 # The rig's parts other than the wheel and the load (the fork), and the generated wheel's mass.
 FORK_MASS, WHEEL_MASS = 0.1, 0.5  # kg
 RIG = "wheel_rig"  # the example robot this experiment is (mjcf/wheel_rig.xml, .toml)
@@ -54,13 +52,17 @@ RIG = "wheel_rig"  # the example robot this experiment is (mjcf/wheel_rig.xml, .
 
 @dataclass(frozen=True)
 class WheelRig:
-    radius: float = _f(0.0625, "m", "the generated wheel's rim radius, which the slip is defined with (a user's "
-                       "wheel's: its outer radius, measured)", minimum=0.0)
+    radius: float = _f(0.0625, "m", "the generated wheel's rim radius, which the slip is defined with unless "
+                       "wheel.slip_radius is set (a user's wheel's: its outer radius, measured)", minimum=0.0)
     width: float = _f(0.06, "m", "the generated wheel's width", minimum=0.0)
     grousers: int = _f(0, "", "straight grousers across the generated wheel's rim, evenly spaced",
                        minimum=0, exclusive=False)
-    grouser_height: float = _f(0.0, "m", "their height above the rim (they are 4 mm thick)", minimum=0.0,
-                               exclusive=False)
+    grouser_height: float = _f(0.0, "m", "their height above the rim", minimum=0.0, exclusive=False)
+    grouser_thickness: float = _f(0.004, "m", "their thickness along the rim (boxes: their faces across the rim "
+                                  "are parallel)", minimum=0.0)
+    slip_radius: float = _f(0.0, "m", "the radius R the slip and the rim speed omega R are defined with; 0: the "
+                            "generated wheel's rim radius, a user's wheel's outer radius (measured)", minimum=0.0,
+                            exclusive=False)
     model: str = _f("", "", "a user's MJCF holding a body 'wheel' on a hinge 'axle' (instead of the generated "
                     "wheel)")
     slip: float = _f(0.5, "", "slip s: driving 1 - v/(omega R), braking omega R/v - 1; -1 locked, 0 rolling",
@@ -105,13 +107,16 @@ def check_generated(rig: WheelRig, element_size: float) -> None:
     if rig.grousers and not rig.grouser_height > 0:
         raise SceneError(f"wheel.grousers = {rig.grousers} needs their height: set wheel.grouser_height (--grouser-"
                          f"height MM), or grousers = 0 for a smooth wheel")
-    fit = math.floor(2 * math.pi * rig.radius / GROUSER_THICKNESS)
+    t = rig.grouser_thickness
+    fit = math.floor(2 * math.pi * rig.radius / t)
     if rig.grousers > fit:
         raise SceneError(f"wheel.grousers = {rig.grousers}: at most {fit} fit side by side on the rim "
-                         f"({1e3 * 2 * math.pi * rig.radius:.4g} mm round, each {1e3 * GROUSER_THICKNESS:g} mm thick)")
+                         f"({1e3 * 2 * math.pi * rig.radius:.4g} mm round, each {1e3 * t:g} mm thick)")
+    if rig.grousers and not t < 2 * rig.radius:
+        raise SceneError(f"wheel.grouser_thickness = {1e3 * t:g} mm is wider than the rim "
+                         f"({1e3 * 2 * rig.radius:g} mm across): give a thinner grouser (--grouser-thickness MM)")
     # each grouser's outer face alone is cut into this many elements (its other faces and the rim add more)
-    least = rig.grousers * math.ceil(rig.width / element_size - 1e-9) * math.ceil(
-        GROUSER_THICKNESS / element_size - 1e-9)
+    least = rig.grousers * math.ceil(rig.width / element_size - 1e-9) * math.ceil(t / element_size - 1e-9)
     if least > MAX_ELEMENTS:
         raise SceneError(f"wheel.grousers = {rig.grousers} at medium.element_size = {element_size:g} m gives more "
                          f"than {least} surface elements, above {MAX_ELEMENTS}: use fewer grousers or a larger "
@@ -141,6 +146,18 @@ MAX_SINKAGE = 1.0  # m: deeper, a free wheel has no equilibrium worth reporting
 # and berms of a wheel at any slip angle over a few seconds at 10 mm/s.
 DEFORMING_GRID = {"medium.surface_point": (0.05, 0.0, 0.0), "medium.hfield_extent": 0.15,
                   "medium.hfield_spacing": 0.0025}
+
+
+# The wheels of the wheel group's experiments (finrft/data/wheel/README.md), `finrft wheel --wheel NAME`: the smooth
+# one (the defaults) and the grousered one, as their mesh has it (qishuny/3D-RFT-wheel at cdd8f8f,
+# data/grousered_wheel_125.mat, measured by scripts/wheel_grouser_data.py): a 57.5 mm rim, 60 mm wide, 24 grousers
+# 5 mm high to a 62.5 mm tip radius, each a sector 7.55 deg wide (7.6 mm at the rim, 8.2 mm at the tips; here a box
+# 7.9 mm thick, its width at mid-height), the slip taken at the tips as their code takes it (omega = rim speed /
+# 62.5 mm, RFT3D/testRFT3D.m). Their 1.5 mm root fillets are left out.
+GROUSERED = {"wheel.radius": 0.0575, "wheel.grousers": 24, "wheel.grouser_height": 0.005,
+             "wheel.grouser_thickness": 0.0079, "wheel.slip_radius": 0.0625}
+WHEELS = {"smooth": {key: getattr(WheelRig(), key.removeprefix("wheel.")) for key in GROUSERED},
+          "grouser": GROUSERED}
 
 
 def default_scene(**overrides: Any) -> WheelScene:
@@ -184,17 +201,25 @@ HEADER = """<!--
 """
 
 
+def grouser_base(rig: WheelRig) -> float:
+    """The distance from the axle of a generated grouser's inner face: its edges on the rim, so that its faces
+    across the rim stand on the rim from the rim to its top, none of them inside the cylinder (where `attach` would
+    keep or drop a whole element row by where its centre falls)."""
+    return math.sqrt(rig.radius ** 2 - (rig.grouser_thickness / 2) ** 2)
+
+
 def wheel_body(rig: WheelRig) -> str:
-    """The generated wheel: a cylinder about its y axis and straight grousers across its rim (boxes from inside
-    the rim to grouser_height above it; attach drops the faces inside the cylinder)."""
+    """The generated wheel: a cylinder about its y axis and straight grousers across its rim (boxes from the rim
+    to grouser_height above it, `grouser_base`; attach drops the faces and the rim they cover)."""
     r, half = rig.radius, rig.width / 2
     lines = [f'<geom name="wheel" type="cylinder" size="{r!r} {half!r}" quat="0.7071068 0.7071068 0 0" '
              f'mass="{WHEEL_MASS!r}"\n                  rgba="0.75 0.75 0.78 1"/>']
-    h, t = rig.grouser_height, GROUSER_THICKNESS
+    h, t = rig.grouser_height, rig.grouser_thickness
+    base = grouser_base(rig) if rig.grousers and h > 0 else r
     for k in range(rig.grousers if h > 0 else 0):
         a = 2 * math.pi * k / rig.grousers
-        centre = r + h / 2 - t / 4  # from t/2 inside the rim to h above it
-        lines.append(f'<geom name="grouser{k}" type="box" size="{t / 2!r} {half!r} {(h + t / 2) / 2!r}" '
+        centre = (base + r + h) / 2
+        lines.append(f'<geom name="grouser{k}" type="box" size="{t / 2!r} {half!r} {(r + h - base) / 2!r}" '
                      f'pos="{centre * math.sin(a)!r} 0 {centre * math.cos(a)!r}" '
                      f'euler="0 {a!r} 0" mass="0" rgba="0.6 0.6 0.65 1"/>')
     # A mark on the side, to see the wheel turn: a site, so the medium does not act on it.
@@ -211,7 +236,7 @@ def rig_xml(rig: WheelRig, *, wheel: bool = True) -> str:
     load = rig.load / GRAVITY - FORK_MASS - WHEEL_MASS
     what = (f"a smooth wheel, radius {1e3 * rig.radius:g} mm, {1e3 * rig.width:g} mm wide" if not rig.grousers else
             f"a wheel of radius {1e3 * rig.radius:g} mm, {1e3 * rig.width:g} mm wide, {rig.grousers} grousers "
-            f"{1e3 * rig.grouser_height:g} mm high")
+            f"{1e3 * rig.grouser_height:g} mm high, {1e3 * rig.grouser_thickness:g} mm thick")
     body = (f"""<body name="wheel">
             <joint name="axle" type="hinge" axis="0 1 0"/>
             {wheel_body(rig)}
@@ -320,7 +345,7 @@ def wheel_model(rig: WheelRig, surface_z: float = 0.0) -> WheelModel:
         spec = mujoco.MjSpec.from_string(rig_xml(rig))
         outer = rig.radius + rig.grouser_height
         spec.body("carriage").pos = [0, 0, outer + surface_z]
-        return WheelModel(spec, rig.radius, outer, 1.0)
+        return WheelModel(spec, rig.slip_radius or rig.radius, outer, 1.0)
     spec = user_wheel(rig)
     model = compile_spec(spec)
     d = mujoco.MjData(model)
@@ -340,7 +365,7 @@ def wheel_model(rig: WheelRig, surface_z: float = 0.0) -> WheelModel:
         raise SceneError(f"wheel.load {rig.load:g} N is less than the weight of the fork and the wheel "
                          f"({carried * GRAVITY:.3g} N)")
     spec.body("load").mass = load
-    return WheelModel(spec, outer, outer, math.copysign(1, along))
+    return WheelModel(spec, rig.slip_radius or outer, outer, math.copysign(1, along))
 
 
 def robot_scene(scene: WheelScene, radius: float, spin_sign: float) -> UserScene:
@@ -650,7 +675,8 @@ class WheelCommand(Command):
                    "wheel_rig.xml): the hub at wheel.speed (10 mm/s) along a direction at slip angle beta to the "
                    "wheel's heading, the wheel spun at the rate its slip s asks (driving s = 1 - v/(omega R), braking "
                    "s = omega R/v - 1; -1 locked, 0 rolling), its vertical axis held at --sinkage or free under "
-                   "--load. The wheel is generated (--radius, --width, --grousers, --grouser-height) or is the body "
+                   "--load. The wheel is generated (--wheel smooth or grouser, --radius, --width, --grousers, "
+                   "--grouser-height, --grouser-thickness) or is the body "
                    "'wheel' on the hinge 'axle' of --model. It reports, averaged over [sim.settle, sim.duration], "
                    "the sand's force on the wheel in the wheel's frame (X heading, Y along the axle to the left, Z "
                    "up) and the sinkage, with the run's estimated discretisation error. --data runs every row of a "
@@ -674,6 +700,11 @@ class WheelCommand(Command):
                        help="straight grousers across the rim (default 0)")
         g.add_argument("--grouser-height", type=number("mm", inclusive=True), metavar="MM",
                        help="their height above the rim, mm")
+        g.add_argument("--grouser-thickness", type=number("mm"), metavar="MM",
+                       help="their thickness along the rim, mm (default 4)")
+        g.add_argument("--wheel", choices=tuple(WHEELS), help="the wheel group's wheel: smooth (the default: "
+                       "radius 62.5 mm) or grouser (a 57.5 mm rim, 24 grousers 5 mm high and 7.9 mm thick, the "
+                       "slip at the tips' 62.5 mm); --radius and the grouser flags change it")
         g.add_argument("--model", metavar="WHEEL.xml", help="your wheel instead: the body 'wheel' on the hinge "
                        "'axle' of this MJCF (radius: its outer radius, measured)")
         g = p.add_argument_group("data")
@@ -716,10 +747,11 @@ class WheelCommand(Command):
             raise UsageError("give --sinkage MM (held) or --load N (free vertical axis), not both")
         if not args.data and args.sinkage is None and args.load is None and not args.scene:
             raise UsageError("give --sinkage MM (held) or --load N (free vertical axis)")
-        overrides: dict[str, Any] = {}
+        overrides: dict[str, Any] = dict(WHEELS[args.wheel]) if args.wheel else {}
         for key, value, scale in (("wheel.slip", args.slip, 1.0), ("wheel.radius", args.radius, MM),
                                   ("wheel.width", args.width, MM), ("wheel.grousers", args.grousers, None),
                                   ("wheel.grouser_height", args.grouser_height, MM),
+                                  ("wheel.grouser_thickness", args.grouser_thickness, MM),
                                   ("wheel.sinkage", args.sinkage, MM), ("wheel.load", args.load, 1.0)):
             if value is not None:
                 overrides[key] = value if scale is None else value * scale
@@ -730,6 +762,8 @@ class WheelCommand(Command):
         if args.load is not None:
             overrides["wheel.sinkage"] = 0.0
         if args.model:
+            if args.wheel:
+                raise UsageError("give --wheel or --model, not both (--model is your own wheel)")
             overrides["wheel.model"] = args.model
         if args.medium:
             overrides["medium.name"] = args.medium

@@ -45,7 +45,13 @@ VARIANTS = {
     "li2013-cmu-free": ["--medium", "wheel_sand_cmu", *FREE],
     "rft3d-free": [*RFT3D, *FREE],
     "li2013-cmu-deforming-held": ["--medium", "wheel_sand_cmu", "--sinkage-from-data", *DEFORMING],
+    "li2013-cmu-deforming-free": ["--medium", "wheel_sand_cmu", "--load-from-data", *DEFORMING],
 }
+# The grousered wheel (`--wheel grouser`, its own measurements, grouser_wheel_by_condition.csv) with the smooth
+# wheel's constants, nothing refitted: plain RFT held and free, and the deforming surface with the pile factor 0.7.
+GROUSER_DATA = str(wheel_dir() / "grouser_wheel_by_condition.csv")
+for _name in ("li2013-cmu-held", "li2013-cmu-free", "li2013-cmu-deforming-held", "li2013-cmu-deforming-free"):
+    VARIANTS[f"grouser-{_name}"] = ["--wheel", "grouser", *VARIANTS[_name]]
 # DRFT's term at the experiments' 10 mm/s: lambda = 1 on an assumed bulk density of 1600 kg/m^3 (the sand's is not
 # known), on the locked wheel at 60 deg (its largest leading normal speeds, 10 mm/s).
 DRFT = ["--slip", "-1", "--slip-angle", "60", "--sinkage", "30", "--medium", "wheel_sand_plate", "--set",
@@ -97,9 +103,9 @@ def main(names: list[str]) -> None:
     for name, args in VARIANTS.items():
         if names and name not in names:
             continue
-        out = finrft(["--data", DATA, *args])
-        results[name] = {"command": "finrft wheel --data smooth_wheel_by_condition.csv " + " ".join(args),
-                         **out}
+        data = GROUSER_DATA if name.startswith("grouser-") else DATA
+        out = finrft(["--data", data, *args])
+        results[name] = {"command": f"finrft wheel --data {Path(data).name} " + " ".join(args), **out}
         plot(name, results[name])
         path.write_text(json.dumps(results, indent=1) + "\n")
     if not names or "drft_check" in names:

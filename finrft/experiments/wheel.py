@@ -215,9 +215,9 @@ def wheel_body(rig: WheelRig) -> str:
     lines = [f'<geom name="wheel" type="cylinder" size="{r!r} {half!r}" quat="0.7071068 0.7071068 0 0" '
              f'mass="{WHEEL_MASS!r}"\n                  rgba="0.75 0.75 0.78 1"/>']
     h, t = rig.grouser_height, rig.grouser_thickness
-    base = grouser_base(rig) if rig.grousers and h > 0 else r
     for k in range(rig.grousers if h > 0 else 0):
         a = 2 * math.pi * k / rig.grousers
+        base = grouser_base(rig)
         centre = (base + r + h) / 2
         lines.append(f'<geom name="grouser{k}" type="box" size="{t / 2!r} {half!r} {(r + h - base) / 2!r}" '
                      f'pos="{centre * math.sin(a)!r} 0 {centre * math.cos(a)!r}" '

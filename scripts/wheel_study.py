@@ -3,7 +3,8 @@ wheel data run by `finrft wheel --data` for each law, medium and mode, the stati
 the figures docs/results/wheel-NAME.png, the table printed as markdown. DRFT's term checked on one condition.
 
     python scripts/wheel_study.py [VARIANT ...]    # all: about 25 minutes on one idle core, and the deforming
-                                                   # surface's held wheel 13 minutes on a busy one
+                                                   # surface's held wheel 13 minutes on a busy one; the grousered
+                                                   # wheel's (grouser-*) 30 minutes more there
 
 Each variant is one command line (printed as it runs), the JSON of its last line kept whole; naming variants runs
 only those and merges them into docs/results/wheel.json; --plots draws the figures again from that file.

@@ -302,3 +302,16 @@ def test_a_conditions_file_that_is_no_text_is_refused_in_one_line(tmp_path, caps
         assert main(["wheel", "--data", str(path), "--quiet"]) == 2
         err = capsys.readouterr().err
         assert message in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_a_failed_condition_of_a_conditions_file_is_named(tmp_path, capsys):
+    # Among 63 conditions, "the error is too large" alone does not say which row to rerun or leave out.
+    with open(wheel_dir() / "smooth_wheel_by_condition.csv", newline="") as f:
+        lines = f.read().splitlines()
+    path = tmp_path / "two.csv"
+    path.write_text("\n".join(lines[:3]) + "\n")
+    first = read_conditions(str(path))[0]
+    assert main(["wheel", "--data", str(path), "--quiet", "--max-error", "Fx_N=1e-9%", *SHORT]) == 1
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert f"run 1 of 2 (slip {first.slip:.3g}, slip angle {math.degrees(first.slip_angle):.3g} deg)" in err

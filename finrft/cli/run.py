@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from ..errors import SimulationFailed
 from ..experiment import Result, run as run_experiment
 from ..experiments.command import Command
 from ..experiments.flags import limits
@@ -25,7 +26,7 @@ def run_command(command: Command, args: argparse.Namespace) -> int:
     for output in outputs:
         check_output(output.path, output.suffix, output.flag, args.force, append=output.append)
     scene = command.scene(args)
-    runs = _run_all(args, command.name, command.jobs(args, scene))
+    runs = _run_all(args, command, command.jobs(args, scene))
     for output in outputs:
         if output.path:
             with keep_existing(not (args.force or output.append)):  # a file added to is replaced by design
@@ -36,11 +37,18 @@ def run_command(command: Command, args: argparse.Namespace) -> int:
     return 0
 
 
-def _run_all(args: argparse.Namespace, name: str, jobs: list[tuple[Any, Any]]) -> list[Result]:
-    """Each job in turn, one progress bar over all, with the error limits of --max-error."""
+def _run_all(args: argparse.Namespace, command: Command, jobs: list[tuple[Any, Any]]) -> list[Result]:
+    """Each job in turn, one progress bar over all, with the error limits of --max-error; a failure among several
+    jobs names the one that failed."""
     runs = []
-    with progress(args, 1, name, "%") as bar:
+    with progress(args, 1, command.name, "%") as bar:
         for i, (experiment, scene) in enumerate(jobs):
             part = None if bar is None else (lambda f, i=i: bar((i + f) / len(jobs)))
-            runs.append(run_experiment(experiment, scene, progress=part, max_error=limits(args)))
+            try:
+                runs.append(run_experiment(experiment, scene, progress=part, max_error=limits(args)))
+            except SimulationFailed as exc:
+                if len(jobs) == 1:
+                    raise
+                name = command.job_name(experiment, scene)
+                raise type(exc)(f"run {i + 1} of {len(jobs)}{f' ({name})' if name else ''}: {exc}") from exc
     return runs

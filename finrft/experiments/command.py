@@ -67,6 +67,10 @@ class Command:
     def outputs(self, args: argparse.Namespace) -> list[Output]:
         return result_files(args)
 
+    def job_name(self, experiment: Experiment, scene: Any) -> str:
+        """What tells one of several jobs from the others, in a failure's message."""
+        return ""
+
     def describe(self, args: argparse.Namespace, runs: list[Result]) -> str:
         """The summary text, in the CLI's units."""
         raise NotImplementedError

@@ -788,6 +788,10 @@ class WheelCommand(Command):
             jobs.append((dataclasses.replace(Wheel.of(s), condition=c), s))
         return jobs
 
+    def job_name(self, experiment: Wheel, scene: WheelScene) -> str:
+        c = experiment.condition
+        return "" if c is None else f"slip {c.slip:.3g}, slip angle {np.degrees(c.slip_angle):.3g} deg"
+
     def outputs(self, args: argparse.Namespace) -> list[Output]:
         if args.data:
             return [Output("--plot", args.plot, ".png", "figure",

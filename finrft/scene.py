@@ -166,6 +166,14 @@ Medium = schema.section("Medium", (
     ("pile_factor", float, _f(0.0, "", "deforming: the wheel group's pile rule, an element in raised sand takes its "
                               "depth times this factor (finrft.surfaces.deforming; theirs 0.2843); 0: none",
                               minimum=0.0, exclusive=False, used_by=("surface", ("deforming",)))),
+    ("compaction", float, _f(0.0, "", "deforming: the share of the sand the body sweeps that is compacted under it "
+                             "instead of going to the berm (finrft.surfaces.deforming); 0: all to the berm, the wheel "
+                             "group's model", minimum=0.0, exclusive=False, maximum=1.0,
+                             why_maximum="a share of the swept sand", used_by=("surface", ("deforming",)))),
+    ("berm", str, _f("velocity", "", "deforming: where the sand the body sweeps goes (finrft.surfaces.deforming): "
+                     "velocity, ahead of each element along its horizontal motion and to its sides; facing, a leading "
+                     "element's along its outward normal (the side it faces)", choices=("velocity", "facing"),
+                     used_by=("surface", ("deforming",)))),
     ("angle_of_repose", float, _f(0.0, "rad", "deforming: the slope the surface relaxes to; 0: the medium's "
                                   "catalogued angle_of_repose", minimum=0.0, exclusive=False,
                                   used_by=("surface", ("deforming",)))),

@@ -1188,9 +1188,9 @@ FINRFT_EXPORT int finrft_surface_deforming_step(const mjModel* m, mjData* d, Fin
   mj_kinematics(m, d);
   mj_comPos(m, d);
   mj_comVel(m, d);
-  double* buffer = (double*)malloc(sizeof(double) * 7 * (n > 0 ? n : 1));
+  double* buffer = (double*)malloc(sizeof(double) * 10 * (n > 0 ? n : 1));
   if (!buffer) return -1;
-  double *points = buffer, *velocities = buffer + 3 * n, *areas = buffer + 6 * n;
+  double *points = buffer, *velocities = buffer + 3 * n, *areas = buffer + 6 * n, *normals = buffer + 7 * n;
   int j = 0;
   for (int k = 0; k < ninstance; k++) {
     const FinrftSurface* p = ps[k];
@@ -1206,9 +1206,10 @@ FINRFT_EXPORT int finrft_surface_deforming_step(const mjModel* m, mjData* d, Fin
       mju_cross(spin, twist, arm);
       mju_add3(velocities + 3 * j, twist + 3, spin);
       areas[j] = e[6];
+      mju_mulMatVec3(normals + 3 * j, R, e + 3);
     }
   }
-  int failed = finrft_deforming_step(s, m->opt.gravity, n, points, areas, velocities, first, removed);
+  int failed = finrft_deforming_step(s, m->opt.gravity, n, points, areas, velocities, normals, first, removed);
   free(buffer);
   if (failed) return -1;
   for (int k = 0; k < ninstance; k++) {

@@ -18,13 +18,13 @@ G = np.array([0.0, 0.0, -9.81])
 REPOSE = media.medium("wheel_sand_cmu").get("angle_of_repose").value
 
 
-def _wheel(backend: str, duration: float = 0.4) -> object:
+def _wheel(backend: str, duration: float = 0.4, **settings: object) -> object:
     # a braked wheel held 30 mm deep, on a coarse grid: a few surface steps
     scene = wheel.default_scene(**{"wheel.slip": -0.5, "wheel.slip_angle": math.radians(30), "wheel.sinkage": 0.03,
                                    "medium.name": "wheel_sand_cmu", "medium.surface": "deforming",
                                    "medium.surface_point": (0.05, 0.0, 0.0), "medium.hfield_extent": 0.12,
                                    "medium.hfield_spacing": 0.004, "sim.duration": duration, "sim.settle": 0.1,
-                                   "sim.backend": backend})
+                                   "sim.backend": backend, **settings})
     return wheel.run_wheel(scene, max_error=None)
 
 
@@ -47,6 +47,15 @@ def test_a_run_conserves_the_sand(runs):
     # between samples, and the whole volume's change
     displaced = np.clip(h[1:-1] - h[2:], 0.0, None).sum()
     assert displaced > 0 and abs(h[-1].sum() - h[1].sum()) <= 1e-6 * displaced
+
+
+def test_native_and_numpy_runs_agree_on_compaction_and_facing_berms():
+    # the plugin gathers the elements' normals for the facing rule as the numpy backend does (body_elements)
+    settings = {"medium.compaction": 0.3, "medium.berm": "facing"}
+    native, numpy = (_wheel(backend, **settings).series["surface_height"] for backend in ("native", "python"))
+    plain = _wheel("native").series["surface_height"]
+    assert np.abs(native[-1] - plain[-1]).max() > 1e-3  # the options change the surface
+    assert np.abs(native - numpy).max() < 1e-6
 
 
 def test_the_surface_is_recorded(runs, tmp_path):

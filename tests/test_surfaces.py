@@ -285,3 +285,93 @@ def test_the_c_step_of_a_run_agrees_with_its_twin():
     assert np.abs(native.heights - twin.heights).max() < 1e-9 and np.abs(native.level - twin.level).max() < 1e-9
     assert abs(removed[0] - removed[1]) < 1e-9 * removed[0] and np.abs(native.original - twin.original).max() < 1e-9
     assert abs(native.volume() - twin.volume()) < 1e-6 * removed[0]
+
+
+def _plough(surface: deforming.DeformingSurface, normal: tuple[float, float, float],
+            steps: int = 25) -> tuple[float, float]:
+    """A row of nine elements 15 mm deep dragged along +x across ``surface`` at 10 mm/s, each facing ``normal``:
+    the volume (m^3) the surface lost from under them and its sand (`sand`) after the first step, the body's
+    imprint."""
+    y = np.linspace(-0.016, 0.016, 9)
+    removed, imprinted = 0.0, 0.0
+    for step in range(steps):
+        points = np.c_[np.full(9, -0.05 + 0.002 * step), y, np.full(9, -0.015)]
+        removed += surface.step(points, np.full(9, 1.6e-5), np.tile([0.01, 0.0, 0.0], (9, 1)), G,
+                                imprint=step == 0, normals=np.tile(normal, (9, 1)))
+        imprinted = surface.sand() if step == 0 else imprinted
+    return removed, imprinted
+
+
+def test_compaction_keeps_its_share_of_the_swept_sand_under_the_body():
+    # one sweep (no relaxation): the sand lost from under the elements goes (1 - c) to the berm, c compacted
+    x, y = _grid_xy(33, 41)
+    heights = 0.002 * np.cos(60 * x) * np.sin(40 * y)
+    points = np.c_[np.linspace(-0.03, 0.03, 13), np.linspace(-0.01, 0.02, 13), np.full(13, -0.012)]
+    velocities = np.tile([0.01, -0.004, -0.002], (13, 1))
+    for c in (0.0, 0.3, 1.0):
+        compacted = np.zeros(heights.shape)
+        swept, occupied = deforming.sweep(heights, points, np.full(13, 4e-5), velocities, G, SIZE, compaction=c,
+                                          compacted=compacted)
+        lost, berm = np.clip(heights - swept, 0, None).sum(), np.clip(swept - heights, 0, None).sum()
+        assert lost > 0 and occupied.any() and (swept[~occupied] >= heights[~occupied]).all()
+        assert berm == pytest.approx((1 - c) * lost, rel=1e-12) and compacted.sum() == pytest.approx(c * lost)
+
+
+@pytest.mark.parametrize("native", [True, False])
+def test_compaction_conserves_the_grains_not_the_volume(native):
+    for c in (0.0, 0.3, 1.0):
+        s = deforming.DeformingSurface(np.zeros((33, 41)), SIZE, REPOSE, native=native, compaction=c)
+        displaced, imprinted = _plough(s, (1.0, 0.0, 0.0))  # the first step, the imprint, is no flow of sand
+        # the grains are conserved: their volume at the bulk density, the heights' and the compacted
+        assert displaced > 0 and abs(s.sand() - imprinted) <= 1e-9 * displaced
+        assert s.volume() == pytest.approx(imprinted - s.cell * s.compacted.sum(), abs=1e-9 * displaced)
+        assert (s.compacted.sum() > 0) == (c > 0)
+        if c == 1.0:
+            assert s.heights.max() <= 0  # all compacted: no berm
+
+
+def test_a_facing_berm_goes_to_the_side_the_element_faces():
+    # elements dragged along +x: with the berm rule "velocity" their sand goes ahead (+x) and to both sides alike;
+    # facing +y (a wall dragged along its own plane, leading by a hair) its front share goes to +y, its side shares
+    # ahead and behind, and -y gets only what relaxation spills there
+    heights = {}
+    for berm, normal in (("velocity", (0.0, 1.0, 0.0)), ("facing", (0.02, 1.0, 0.0))):
+        s = deforming.DeformingSurface(np.zeros((33, 41)), SIZE, REPOSE, berm=berm)
+        _plough(s, np.array(normal) / np.linalg.norm(normal))
+        heights[berm] = s.heights
+    x, y = _grid_xy(33, 41)
+    berm = {k: np.clip(h, 0, None) for k, h in heights.items()}
+    side = {k: (h[y > 0.02].sum(), h[y < -0.02].sum(), h[(x > 0.01) & (np.abs(y) < 0.016)].sum())
+            for k, h in berm.items()}
+    assert side["velocity"][0] == pytest.approx(side["velocity"][1], rel=0.05) and side["velocity"][2] > 0
+    assert side["facing"][0] > 10 * side["facing"][1] and side["facing"][2] > 0
+
+
+def test_the_c_twin_agrees_on_compaction_and_facing_berms():
+    R = _rotation(9)
+    surfaces_ = [deforming.DeformingSurface(np.zeros((31, 37)), SIZE, REPOSE, (0.01, 0.0, 0.0), R, native=native,
+                                            compaction=0.35, berm="facing") for native in (True, False)]
+    rng = np.random.default_rng(2)
+    y = np.linspace(-0.0203, 0.0197, 9)
+    for step in range(30):
+        # depths apart: elements level to rounding at a shared grid point would give it either's direction
+        local = np.c_[np.full(9, -0.0713 + 0.0043 * step), y, -0.015 + rng.normal(0, 1e-4, 9)]
+        normals = rng.normal(size=(9, 3))
+        normals /= np.linalg.norm(normals, axis=1)[:, None]
+        for s in surfaces_:
+            s.step(local @ R.T + R @ [0.01, 0.0, 0.0], np.full(9, 3e-5), np.tile(R @ [0.1, 0.02, -0.01], (9, 1)),
+                   R @ G, imprint=step == 0, normals=normals @ R.T)
+    native, twin = surfaces_
+    assert native.compacted.sum() > 0 and np.abs(native.heights).max() > 0.005
+    assert np.abs(native.heights - twin.heights).max() < 1e-6 and np.abs(native.level - twin.level).max() < 1e-6
+    assert np.abs(native.compacted - twin.compacted).max() < 1e-6
+
+
+def test_bad_compaction_and_berm_rules_are_refused():
+    with pytest.raises(SceneError, match="compaction"):
+        deforming.DeformingSurface(np.zeros((5, 5)), SIZE, REPOSE, compaction=1.5)
+    with pytest.raises(SceneError, match="berm"):
+        deforming.DeformingSurface(np.zeros((5, 5)), SIZE, REPOSE, berm="sideways")
+    s = deforming.DeformingSurface(np.zeros((5, 5)), SIZE, REPOSE, berm="facing")
+    with pytest.raises(SceneError, match="normals"):
+        s.step(np.zeros((1, 3)), np.ones(1), np.ones((1, 3)), G)

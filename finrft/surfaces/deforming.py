@@ -8,7 +8,14 @@ the sand's volume is dx dy times the sum of the heights; both conserve it (to ro
   nearest to it), where the element is below the surface, is lowered to the element; what it loses goes to the
   first grid point not under the body along the element's horizontal velocity (``front_share`` of it) and across it
   on either side (half the rest each), or equally to the four directions of the grid for an element moving
-  straight down. An element coarser than the grid leaves points between footprints untouched.
+  straight down. An element coarser than the grid leaves points between footprints untouched. With
+  ``compaction`` c (the option "compaction"; 0, the wheel group's model, puts all of it in the berm), only (1 - c)
+  of what a point loses goes to the berm: the share c stays under the point, compacted into denser sand below the
+  floor the element leaves (``compacted``, a height of sand at its bulk density), so that the sand's mass, not its
+  volume, is conserved: the heights' volume plus the compacted volume (`DeformingSurface.sand`). With the berm
+  rule "facing" (`BERMS`; "velocity", the default, is the one above), an element leading into the sand (outward
+  normal . velocity > 0) pushes its sand along its normal's horizontal part, the side it faces, instead of along its
+  motion: a yawed wheel's rim pushes its sand ahead of the rim, and only its side wall pushes sand sideways.
 - `relax`: between neighbouring grid points (along x and along y) whose slope exceeds tan(repose) + ``tolerance``,
   sand flows from the higher to the lower, a quarter of the height above the angle of repose per iteration (the
   explicit diffusion limit), until no slope does. Points under the body (``blocked``) neither give nor take.
@@ -42,6 +49,8 @@ TOLERANCE = 1e-3   # slope (tan) above tan(repose) that relaxation leaves
 MAX_ITERATIONS = 100_000
 # An element moving horizontally slower than this share of its speed pushes its sand to all four sides.
 STRAIGHT_DOWN = 1e-9
+# Where an element's swept sand goes: along its horizontal motion, or (a leading element's) along its normal.
+BERMS = ("velocity", "facing")
 # An element this close above the surface (m) is on it, under the body: an element resting in its own rut would
 # otherwise be on or off it by rounding, and sand pushed onto it or not.
 TOUCH = 1e-9
@@ -73,13 +82,18 @@ def _local_motion(g: Grid, points: Any, velocities: Any) -> tuple[np.ndarray, np
 
 
 def sweep(heights: Any, points: Any, areas: Any, velocities: Any, gravity: Any, size: Any,
-          centre: Any = (0.0, 0.0, 0.0), frame: Any = None,
-          front_share: float = FRONT_SHARE) -> tuple[np.ndarray, np.ndarray]:
+          centre: Any = (0.0, 0.0, 0.0), frame: Any = None, front_share: float = FRONT_SHARE,
+          compaction: float = 0.0, compacted: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The heights after the elements at ``points`` (N, 3, m), of ``areas`` (N, m^2), moving at ``velocities``
-    (N, 3, m/s) have pushed the sand they are under into a berm, and the grid points under the body (bool grid)."""
+    (N, 3, m/s) have pushed the sand they are under into a berm, and the grid points under the body (bool grid).
+    With ``compaction`` > 0, that share of the sand each point loses is added to ``compacted`` (the heights' shape,
+    written in place) instead of the berm."""
     g = grid(heights, size, gravity, centre, frame)
     if not 0.0 <= front_share <= 1.0:
         raise SceneError(f"front_share {front_share!r} must be between 0 and 1")
+    _check_compaction(compaction)
+    if compaction > 0 and (compacted is None or compacted.shape != g.heights.shape):
+        raise SceneError(f"compaction {compaction} needs an array compacted= of the heights' shape {g.heights.shape}")
     p, v = _local_motion(g, points, velocities)
     a = np.asarray(areas, dtype=float)
     if a.shape != (len(p),) or v.shape != p.shape:
@@ -110,11 +124,20 @@ def sweep(heights: Any, points: Any, areas: Any, velocities: Any, gravity: Any, 
     occupied = target <= h + TOUCH
     removed = np.where(target < h, h - target, 0.0)
     h = np.where(target < h, target, h)
+    if compaction > 0:
+        compacted += compaction * removed
+        removed = (1.0 - compaction) * removed
     for r, c in zip(*np.nonzero(removed)):
         for share, (sx, sy) in _berm(direction[r, c], front_share):
             rr, cc = _march(occupied, r, c, sx, sy, dx, dy)
             h[rr, cc] += share * removed[r, c]
     return h, occupied
+
+
+def _check_compaction(compaction: float) -> None:
+    if not (np.isfinite(compaction) and 0.0 <= compaction <= 1.0):
+        raise SceneError(f"compaction {compaction!r} must be a share between 0 and 1 (0: all the swept sand to the "
+                         f"berm)")
 
 
 def _berm(d: np.ndarray, front_share: float) -> list[tuple[float, tuple[float, float]]]:
@@ -212,7 +235,8 @@ class DeformingSurface:
     ``centre`` with ``frame`` (`finrft.surfaces.hfield`'s layout), displaced by the body's elements at every step
     (`step`) and relaxed towards the angle of ``repose`` (rad) by at most ``step_iterations`` iterations a step.
     ``native`` steps it with the C twins (plugins/surfaces/deforming.c), else with this module's numpy functions:
-    the same heights to rounding. ``displaced`` is the volume (m^3) the sweeps have removed so far; ``level`` (an
+    the same heights to rounding. ``compaction``: the share of the swept sand compacted under the body (`sweep`),
+    accumulated in ``compacted``; ``berm``: where the rest goes (`BERMS`). ``displaced`` is the volume (m^3) the sweeps have removed so far; ``level`` (an
     array of the heights' shape, written in place: a `field`'s heights) the surface the elements' depths are
     measured from. ``instances``: the native plugin's finrft.surface instances that measure from it
     (`installed`)."""
@@ -220,7 +244,8 @@ class DeformingSurface:
     def __init__(self, heights: Any, size: Any, repose: float, centre: Any = (0.0, 0.0, 0.0), frame: Any = None,
                  pile_factor: float | None = None, front_share: float = FRONT_SHARE, tolerance: float = TOLERANCE,
                  step_iterations: int = STEP_ITERATIONS, native: bool = True, level: Any = None,
-                 instances: tuple[int, ...] | list[int] = ()) -> None:
+                 instances: tuple[int, ...] | list[int] = (), compaction: float = 0.0,
+                 berm: str = "velocity") -> None:
         g = grid(heights, size, (0.0, 0.0, -1.0) if frame is None else -np.asarray(frame, float)[:, 2], centre, frame)
         if not 0.0 < repose < np.pi / 2:
             raise SceneError(f"angle of repose {repose!r} rad must be between 0 and pi/2")
@@ -229,8 +254,13 @@ class DeformingSurface:
         if pile_factor is not None and not (np.isfinite(pile_factor) and pile_factor > 0):
             raise SceneError(f"pile_factor {pile_factor!r} must be a positive number (the wheel group's: "
                              f"{WHEEL_GROUP_PILE_FACTOR})")
+        _check_compaction(compaction)
+        if berm not in BERMS:
+            raise SceneError(f"berm {berm!r} is not a berm rule: one of {', '.join(BERMS)}")
         self.heights = np.ascontiguousarray(g.heights, dtype=float).copy()
         self.original = self.heights.copy()
+        self.compaction, self.compacted = float(compaction), np.zeros(self.heights.shape)
+        self.berm = berm
         self.size, self.centre, self.frame = g.size.copy(), g.centre.copy(), np.ascontiguousarray(g.frame)
         self._spacing = g.spacing
         self.repose, self.pile_factor, self.front_share = float(repose), pile_factor, float(front_share)
@@ -293,8 +323,8 @@ class DeformingSurface:
                 return 0.0
         first = self._pose is None
         self._pose = pose
-        points, velocities, areas = body_elements(attached, m, d)
-        removed = self.step(points, areas, velocities, m.opt.gravity, imprint=first)
+        points, velocities, areas, normals = body_elements(attached, m, d, normals=True)
+        removed = self.step(points, areas, velocities, m.opt.gravity, imprint=first, normals=normals)
         self._set_level()
         return removed
 
@@ -320,8 +350,13 @@ class DeformingSurface:
         return self._spacing[0] * self._spacing[1]
 
     def volume(self) -> float:
-        """The sand's volume above the grid's z = 0 (m^3): what every step conserves."""
+        """The sand's volume above the grid's z = 0 (m^3): what every step conserves without compaction."""
         return self.cell * float(self.heights.sum())
+
+    def sand(self) -> float:
+        """The sand's volume at its bulk density (m^3), the heights' and the compacted (`volume` plus the
+        ``compacted`` heights'): its mass over its bulk density, what every step conserves."""
+        return self.cell * float(self.heights.sum() + self.compacted.sum())
 
     def _covered(self, points: np.ndarray) -> np.ndarray:
         """The grid points under the body: those with an element below the sand's level at the point nearest to it
@@ -348,20 +383,28 @@ class DeformingSurface:
         return depth(points, gravity, self.level, self.size, self.centre, self.frame,
                      self.original if self.pile_factor else None, self.pile_factor)
 
-    def step(self, points: Any, areas: Any, velocities: Any, gravity: Any, imprint: bool = False) -> float:
+    def step(self, points: Any, areas: Any, velocities: Any, gravity: Any, imprint: bool = False,
+             normals: Any = None) -> float:
         """Sweep the sand under the elements at ``points`` (N, 3, m) of ``areas`` (N, m^2) moving at ``velocities``
-        (N, 3, m/s), then relax at most ``step_iterations`` times; the volume (m^3) this step displaced. With
+        (N, 3, m/s), of outward unit ``normals`` (N, 3; needed by the berm rule "facing"), then relax at most
+        ``step_iterations`` times; the volume (m^3) this step displaced. With
         ``imprint`` (a run's first step), the body's imprint instead: the sand under it lowered to it and no berm,
         a body that starts in the sand sitting in its own hole (its volume is not conserved: 0 displaced)."""
+        if self.berm == "facing" and normals is None:
+            raise SceneError("the berm rule 'facing' needs the elements' normals (normals=)")
         if self.native:
             removed = _native_step(self, points3(points), np.asarray(areas, float), points3(velocities),
-                                   np.asarray(gravity, float), imprint)
+                                   np.asarray(gravity, float), imprint, None if normals is None else points3(normals))
             self.displaced += removed
             return removed
         before, entered = self.heights.copy(), self._under == 0
         under = self._covered(points3(points))
+        if self.berm == "facing":  # a leading element pushes its sand along its normal (its sweep's direction)
+            n, v = points3(normals), points3(velocities)
+            velocities = np.where(((n * v).sum(axis=1) > 0)[:, None], n, v)
+        # the imprint is no flow of sand: nothing of it is compacted
         swept, occupied = sweep(self.heights, points, areas, velocities, gravity, self.size, self.centre,
-                                self.frame, self.front_share)
+                                self.frame, self.front_share, 0.0 if imprint else self.compaction, self.compacted)
         self._occupied[...] = occupied
         self.heights[...] = relax(swept, self.size, self.repose, occupied, self.tolerance,
                                   self.step_iterations).heights
@@ -385,19 +428,21 @@ class _Deforming(ctypes.Structure):
                 ("centre", ctypes.c_double * 3), ("frame", ctypes.c_double * 9), ("repose", ctypes.c_double),
                 ("front_share", ctypes.c_double), ("tolerance", ctypes.c_double), ("step_iterations", ctypes.c_int),
                 ("heights", ctypes.c_void_p), ("level", ctypes.c_void_p), ("original", ctypes.c_void_p),
-                ("under", ctypes.c_void_p), ("occupied", ctypes.c_void_p), ("dirty", ctypes.c_int * 4)]
+                ("under", ctypes.c_void_p), ("occupied", ctypes.c_void_p), ("dirty", ctypes.c_int * 4),
+                ("compaction", ctypes.c_double), ("compacted", ctypes.c_void_p), ("facing", ctypes.c_int)]
 
 
 def _state(s: DeformingSurface) -> _Deforming:
     """The C step's view of ``s``: its arrays, written in place (they must stay the same arrays)."""
     nrow, ncol = s.heights.shape
-    for a in (s.heights, s.level, s.original, s._under, s._occupied):
+    for a in (s.heights, s.level, s.original, s._under, s._occupied, s.compacted):
         if not a.flags.c_contiguous:
             raise SceneError("the deforming surface's arrays must be contiguous")
     return _Deforming(nrow, ncol, (ctypes.c_double * 2)(*s.size), (ctypes.c_double * 3)(*s.centre),
                       (ctypes.c_double * 9)(*np.ravel(s.frame)), s.repose, s.front_share, s.tolerance,
                       s.step_iterations, s.heights.ctypes.data, s.level.ctypes.data, s.original.ctypes.data,
-                      s._under.ctypes.data, s._occupied.ctypes.data, (ctypes.c_int * 4)(0, nrow - 1, 0, ncol - 1))
+                      s._under.ctypes.data, s._occupied.ctypes.data, (ctypes.c_int * 4)(0, nrow - 1, 0, ncol - 1),
+                      s.compaction, s.compacted.ctypes.data, int(s.berm == "facing"))
 
 
 @functools.cache
@@ -408,22 +453,25 @@ def _native_functions() -> tuple[Any, Any, Any]:
         raise SceneError("the native library is not available (reinstall finrft: pip install -e .), so the deforming "
                          "surface cannot step natively: use native=False")
     p, i, f = ctypes.c_void_p, ctypes.c_int, ctypes.c_double
-    return (native.function("finrft_deforming_step", i, p, p, i, p, p, p, i, p),
+    return (native.function("finrft_deforming_step", i, p, p, i, p, p, p, p, i, p),
             native.function("finrft_surface_set_level", i, p, p, i, i, i, p),
             native.function("finrft_surface_deforming_step", i, p, p, p, i, p, p, f, p))
 
 
 def _native_step(s: DeformingSurface, points: np.ndarray, areas: np.ndarray, velocities: np.ndarray,
-                 gravity: np.ndarray, imprint: bool) -> float:
-    if areas.shape != (len(points),) or velocities.shape != points.shape:
+                 gravity: np.ndarray, imprint: bool, normals: np.ndarray | None = None) -> float:
+    if areas.shape != (len(points),) or velocities.shape != points.shape or (
+            normals is not None and normals.shape != points.shape):
         raise SceneError(f"sweep needs one area and one velocity per point: {len(points)} points, areas of shape "
                          f"{areas.shape}, velocities of shape {velocities.shape}")
     arrays = [np.ascontiguousarray(a, float) for a in (gravity, points, areas, velocities)]
+    normals = None if normals is None else np.ascontiguousarray(normals, float)
     removed = ctypes.c_double(0.0)
     if _native_functions()[0](ctypes.byref(s._state), arrays[0].ctypes.data, len(points),
-                              *(a.ctypes.data for a in arrays[1:]), int(imprint), ctypes.byref(removed)):
+                              *(a.ctypes.data for a in arrays[1:]), None if normals is None else normals.ctypes.data,
+                              int(imprint), ctypes.byref(removed)):
         raise SceneError("the deforming surface's sweep refused its input (a grid whose z axis is not against "
-                         "gravity, or front_share outside 0..1)")
+                         "gravity, or front_share or compaction outside 0..1)")
     return removed.value
 
 
@@ -440,16 +488,17 @@ def field(grid: Any, pile_factor: float | None = None) -> Any:
                                "pile_factor": pile_factor})
 
 
-def body_elements(attached: Any, m: Any, d: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def body_elements(attached: Any, m: Any, d: Any, normals: bool = False) -> tuple[np.ndarray, ...]:
     """The world centres (N, 3, m), velocities (N, 3, m/s) and areas (N, m^2) of every element of an
     `finrft.attach.Attached` at the positions and velocities of ``d`` (its kinematics and velocities made here: after
-    a step MuJoCo's data holds the previous state's)."""
+    a step MuJoCo's data holds the previous state's); with ``normals``, their world outward unit normals (N, 3)
+    too."""
     import mujoco
 
     mujoco.mj_kinematics(m, d)
     mujoco.mj_comPos(m, d)
     mujoco.mj_comVel(m, d)
-    points, velocities, areas = [], [], []
+    points, velocities, areas, facing = [], [], [], []
     twist = np.zeros(6)
     for s in attached.surfaces:
         body = m.body(s.body).id
@@ -460,4 +509,6 @@ def body_elements(attached: Any, m: Any, d: Any) -> tuple[np.ndarray, np.ndarray
         velocities.append(twist[3:] + np.c_[w[1] * arm[:, 2] - w[2] * arm[:, 1], w[2] * arm[:, 0] - w[0] * arm[:, 2],
                                             w[0] * arm[:, 1] - w[1] * arm[:, 0]])
         areas.append(s.area)
-    return np.concatenate(points), np.concatenate(velocities), np.concatenate(areas)
+        facing.append(s.normal @ d.xmat[body].reshape(3, 3).T)
+    out = np.concatenate(points), np.concatenate(velocities), np.concatenate(areas)
+    return (*out, np.concatenate(facing)) if normals else out

@@ -112,12 +112,18 @@ static int march(const unsigned char* occupied, int nrow, int ncol, int r, int c
   return last;
 }
 
-int finrft_deforming_sweep(int nrow, int ncol, double* heights, const double size[2], const double centre[3],
-                           const double frame[9], const double g[3], int n, const double* points,
-                           const double* areas, const double* velocities, double front_share,
-                           unsigned char* occupied) {
+// The sweep (finrft_deforming_sweep's) with compaction: of the sand each point loses, the share `compaction` stays
+// under it, compacted (added to compacted[i], a height of sand at its bulk density; compacted may be NULL only when
+// compaction is 0), and the rest goes to the berm.
+static int sweep(int nrow, int ncol, double* heights, const double size[2], const double centre[3],
+                 const double frame[9], const double g[3], int n, const double* points, const double* areas,
+                 const double* velocities, double front_share, double compaction, double* compacted,
+                 unsigned char* occupied) {
   FinrftGrid grid = make_grid(nrow, ncol, heights, size, centre, frame);
-  if (finrft_grid_check(&grid, g) || !(front_share >= 0 && front_share <= 1)) return FINRFT_SURFACE_BAD_INPUT;
+  if (finrft_grid_check(&grid, g) || !(front_share >= 0 && front_share <= 1) ||
+      !(compaction >= 0 && compaction <= 1) || (compaction > 0 && !compacted)) {
+    return FINRFT_SURFACE_BAD_INPUT;
+  }
   double *target = NULL, *direction = NULL;
   int cells = nrow * ncol;
   double dx = 2 * size[0] / (ncol - 1), dy = 2 * size[1] / (nrow - 1), top = heights[0];
@@ -209,6 +215,10 @@ int finrft_deforming_sweep(int nrow, int ncol, double* heights, const double siz
     for (int c = box[2]; c <= box[3]; c++) {
       int i = r * ncol + c;
       if (removed[i] == 0) continue;
+      if (compaction > 0) {
+        compacted[i] += compaction * removed[i];
+        removed[i] *= 1 - compaction;
+      }
       double d0 = direction[2 * i], d1 = direction[2 * i + 1];
       if (d0 == 0 && d1 == 0) {
         heights[march(occupied, nrow, ncol, r, c, 1, 0, dx, dy)] += 0.25 * removed[i];
@@ -224,6 +234,14 @@ int finrft_deforming_sweep(int nrow, int ncol, double* heights, const double siz
   }
   free(target);
   return 0;
+}
+
+int finrft_deforming_sweep(int nrow, int ncol, double* heights, const double size[2], const double centre[3],
+                           const double frame[9], const double g[3], int n, const double* points,
+                           const double* areas, const double* velocities, double front_share,
+                           unsigned char* occupied) {
+  return sweep(nrow, ncol, heights, size, centre, frame, g, n, points, areas, velocities, front_share, 0, NULL,
+               occupied);
 }
 
 // Only an edge steeper than the tolerance flows, and only edges next to a point that changed in the last iteration
@@ -331,15 +349,31 @@ static void grow(int box[4], int ncol, int i) {
 }
 
 int finrft_deforming_step(FinrftDeforming* s, const double g[3], int n, const double* points, const double* areas,
-                          const double* velocities, int imprint, double* removed) {
+                          const double* velocities, const double* normals, int imprint, double* removed) {
   int nrow = s->nrow, ncol = s->ncol, cells = nrow * ncol;
-  if (relax_checked(nrow, ncol, s->size, s->repose, s->tolerance) || s->step_iterations < 0) {
+  if (relax_checked(nrow, ncol, s->size, s->repose, s->tolerance) || s->step_iterations < 0 ||
+      (s->facing && !normals)) {
     return FINRFT_SURFACE_BAD_INPUT;
+  }
+  // the direction each element pushes its sand along (the sweep takes its horizontal part): with `facing`, a leading
+  // element's normal, else its velocity
+  double* pushing = NULL;
+  if (s->facing) {
+    pushing = malloc(sizeof(double) * 3 * (n > 0 ? n : 1));
+    if (!pushing) return FINRFT_SURFACE_BAD_INPUT;
+    for (int e = 0; e < n; e++) {
+      const double *nn = normals + 3 * e, *v = velocities + 3 * e;
+      const double* d = nn[0] * v[0] + nn[1] * v[1] + nn[2] * v[2] > 0 ? nn : v;
+      for (int j = 0; j < 3; j++) pushing[3 * e + j] = d[j];
+    }
   }
   double dx = 2 * s->size[0] / (ncol - 1), dy = 2 * s->size[1] / (nrow - 1);
   // before (cells), the relaxation's flows (2 cells), the points under the body before (cells bytes)
   double* before = malloc(sizeof(double) * 3 * cells + cells);
-  if (!before) return FINRFT_SURFACE_BAD_INPUT;
+  if (!before) {
+    free(pushing);
+    return FINRFT_SURFACE_BAD_INPUT;
+  }
   double* flow = before + cells;
   unsigned char* was = (unsigned char*)(flow + 2 * cells);
   memcpy(before, s->heights, sizeof(double) * cells);
@@ -364,8 +398,11 @@ int finrft_deforming_step(FinrftDeforming* s, const double g[3], int n, const do
       }
     }
   }
-  int failed = finrft_deforming_sweep(nrow, ncol, s->heights, s->size, s->centre, s->frame, g, n, points, areas,
-                                      velocities, s->front_share, s->occupied);
+  // the imprint is no flow of sand: nothing of it is compacted
+  int failed = sweep(nrow, ncol, s->heights, s->size, s->centre, s->frame, g, n, points, areas,
+                     pushing ? pushing : velocities, s->front_share, imprint ? 0 : s->compaction, s->compacted,
+                     s->occupied);
+  free(pushing);
   if (failed) {
     for (int i = 0; i < cells; i++) under[i] &= 1;
     free(before);

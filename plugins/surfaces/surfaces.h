@@ -88,7 +88,11 @@ FINRFT_SURFACE_EXPORT int finrft_deforming_relax(int nrow, int ncol, double* hei
 // A run's deforming surface (finrft.surfaces.deforming.DeformingSurface, whose arrays these point into; its ctypes
 // twin _Deforming): the grid, the sand's heights, the level the elements measure from, the original heights (the
 // pile rule's), the points under the body at the last step and those the last sweep found so (bytes, 0 or 1), and
-// `dirty`, the box (r0, r1, c0, c1; r0 > r1: none) of the edges relaxation left with excess.
+// `dirty`, the box (r0, r1, c0, c1; r0 > r1: none) of the edges relaxation left with excess; `compaction`, the share
+// of the sand a sweep removes that is compacted under the body instead of going to the berm, added to `compacted`
+// (a height of sand at its bulk density, per grid point; may be NULL when compaction is 0); `facing` 1: an element
+// leading into the sand (outward normal . velocity > 0) pushes its sand along its normal's horizontal part (the side
+// it faces) rather than along its horizontal motion (0).
 typedef struct {
   int nrow, ncol;
   double size[2], centre[3], frame[9];
@@ -97,13 +101,17 @@ typedef struct {
   double *heights, *level, *original;
   unsigned char *under, *occupied;
   int dirty[4];
+  double compaction;
+  double* compacted;
+  int facing;
 } FinrftDeforming;
 
 // One step (DeformingSurface.step): the elements at `points` (world, m) of `areas` moving at `velocities` sweep the
 // sand, which relaxes at most step_iterations times, and the level follows; with `imprint` the body's imprint
-// instead. The volume displaced into *removed (m^3); 0, or FINRFT_SURFACE_BAD_INPUT (nothing changed).
+// instead. `normals` (world, unit; NULL only when s->facing is 0) the elements' outward normals. The volume displaced
+// into *removed (m^3); 0, or FINRFT_SURFACE_BAD_INPUT (nothing changed).
 FINRFT_SURFACE_EXPORT int finrft_deforming_step(FinrftDeforming* s, const double g[3], int n, const double* points,
-                                                const double* areas, const double* velocities, int imprint,
-                                                double* removed);
+                                                const double* areas, const double* velocities,
+                                                const double* normals, int imprint, double* removed);
 
 #endif  // FINRFT_SURFACES_H_

@@ -199,6 +199,39 @@ def test_the_explicit_limit_of_a_box_dragged_through_the_sand_is_2_m_v_over_its_
     assert explicit_limit(m, d, (), attached) == np.inf  # at rest no element leads: no force, no limit
 
 
+def test_the_explicit_limit_over_a_run_ignores_a_body_creeping_and_one_reversal_but_not_the_ramp_in():
+    # Two such boxes (the test above), one dragged along +x, one creeping at 2 mm/s (a foot standing in the sand):
+    # each takes the same rate-independent force F, so the creeping one's limit at one instant is 2 m 2 mm/s / F,
+    # the run's limit the dragged box's, 2 m v / F: at its slowest stretch, its ramp-in at 20 mm/s, not at one
+    # instant's reversal (5 mm/s) inside its gait at 0.1 m/s.
+    import math
+
+    import mujoco
+
+    from finrft import attach
+    from finrft.choice import body_limits, explicit_limit, window_limit
+    from finrft.laws import li2013
+    spec = mujoco.MjSpec.from_string("""<mujoco><worldbody>
+      <body name="a" pos="0 0 -0.02"><freejoint/><geom type="box" size="0.02 0.01 0.015" mass="0.2"/></body>
+      <body name="b" pos="0 0.5 -0.02"><freejoint/><geom type="box" size="0.02 0.01 0.015" mass="0.2"/></body>
+      </worldbody></mujoco>""")
+    attached = attach(spec, ["a", "b"], backend="python", element_size=0.005)
+    m = spec.compile()
+    d = mujoco.MjData(m)
+    alpha_x, alpha_z = li2013.alpha(math.pi / 2, 0.0)
+    force = math.hypot(float(alpha_x), float(alpha_z)) * 0.02 * (0.035 ** 2 - 0.005 ** 2) / 2
+
+    def at(t: float, v: float) -> tuple:
+        d.qvel[0], d.qvel[6] = v, 0.002
+        return (t, *body_limits(m, d, (), attached))
+    gait = [at(0.01 * i, 0.1 if i % 10 != 5 else 0.005) for i in range(10, 100)]
+    assert explicit_limit(m, d, (), attached) == pytest.approx(2 * 0.2 * 0.002 / force, rel=1e-6)  # one instant's
+    assert window_limit(gait, 1.0) == pytest.approx(2 * 0.2 * 0.1 / force, rel=1e-6)
+    ramp = [at(0.01 * i, 0.02) for i in range(10)]
+    assert window_limit(ramp + gait, 1.0) == pytest.approx(2 * 0.2 * 0.02 / force, rel=1e-6)
+    assert window_limit([], 1.0) == math.inf
+
+
 def test_auto_pilots_no_explicit_step_beyond_a_light_robots_limit_and_does_below_a_heavy_ones(tmp_path):
     # The sandfish's 10 g links swim at ~0.13 ms; at 1 ms its explicit step ran through 35 % off and was piloted.
     # The 2 kg sled's limit is ~1.8 ms (module docstring): its explicit step at the scene's 1 ms is still piloted.

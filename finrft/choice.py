@@ -16,8 +16,9 @@ candidate at its step and at half of it, their reported figures compared as the 
 - the candidate predicted cheapest is measured next; one that misses the limits gives its method's next step:
   half of it for ``explicit`` (beyond its stability limit its error does not fall with the step), the step its
   error asks for (first order, aimed at `SAFE` of the limit) for an implicit one;
-- an explicit step beyond the bodies' explicit limit (`explicit_limit`, at the state the implicit methods' prices
-  left) is not piloted: its candidate is skipped, and the ladder goes on below the limit;
+- an explicit step beyond the bodies' explicit limit (`window_limit`, over the implicit methods' pilots so far,
+  which are priced first) is neither priced nor piloted: its candidate is skipped, and the ladder goes on below
+  the limit;
 - once one meets the limits, only candidates predicted to cost less than `SAVING` of it are measured;
 - the cheapest that met them is tried at twice its step while its estimate is below `COARSEN` of its limit.
 
@@ -70,7 +71,7 @@ SAVING = 0.85
 # its second half: a robot's first moments (a sled landing on the sand) can cost a Newton step several times its
 # gait's (the paddle sled's newton-midpoint priced at 4 times its cost from its first 5 %).
 PRICE_SHARE = 0.1
-# An explicit candidate whose step exceeds this share of the bodies' explicit limit (`explicit_limit`) is not
+# An explicit candidate whose step exceeds this share of the bodies' explicit limit (`window_limit`) is not
 # piloted: beyond it a light link's velocity reverses each step, and its figures are off however they pass the
 # chatter probe (the sandfish's 10 g links at 1 ms: 35 % off its speed).
 EXPLICIT_ROOM = 1.0
@@ -453,8 +454,15 @@ class Chooser:
         ladder: dict[str, float | None] = {m: self.top for m in allowed}
         best: Candidate | None = None
         while True:
-            options = [(self.predicted(m, h), m, h) for m, h in ladder.items() if h is not None]
-            options = [(cost if cost == cost else 0.0, m, h) for cost, m, h in options]  # NaN: it failed at once
+            options = []
+            # the implicit methods priced first: their pilots sample the bodies' explicit limit, and the explicit
+            # step is priced at the first of its ladder within it, not at steps that will be skipped
+            for m in sorted(ladder, key=lambda m: m == "explicit"):
+                if m == "explicit" and ladder[m] is not None:
+                    ladder[m] = self.screen(ladder[m], finest[m])
+                if ladder[m] is not None:
+                    cost = self.predicted(m, ladder[m])
+                    options.append((cost if cost == cost else 0.0, m, ladder[m]))  # NaN: it failed at once
             if not options:
                 break
             cost, method, dt = min(options, key=lambda o: o[0])
@@ -464,11 +472,6 @@ class Chooser:
                         self.candidates.append(Candidate(method, dt, cost_s=cost, skipped="not run: predicted to "
                                                          "cost more than the cheapest that met the limits"))
                 break
-            if method == "explicit" and self.screen(dt, finest[method]) != dt:
-                # priced, not piloted: every method is priced before one is measured (the explicit limit is taken
-                # where the implicit methods' prices left the state)
-                ladder[method] = self.screen(dt, finest[method])
-                continue
             # once one met the limits, a pilot stops where it has cost what a cheaper candidate's pilots may
             self.budget = math.inf if best is None else SAVING * best.cost_s * (1 - 1 / COMPANION_COST)
             candidate = self.try_step(method, dt)

@@ -80,9 +80,12 @@ EXPLICIT_ROOM = 1.0
 # the bodies moving at MOVING of the fastest one's speed or more. A foot standing in the sand (the quadruped's,
 # 7-60 mm/s against its swinging feet's 200-1000 mm/s) sets a limit of 0.01-0.8 ms where its explicit step at 2 ms
 # is 1.6 % off; one instant's limit is a foot's or a joint's reversal, or the start of the ramp-in, or neither.
+# A body slower than STILL counts as standing too: the rover's 150 g wheels starting from rest at 3-7 mm/s set
+# 0.04-0.18 ms where its explicit step at 0.25 ms is 0.5 % off; the slowest gaits here are 30 mm/s.
 LIMIT_SAMPLES = 40
 LIMIT_STRETCH = 0.1
 MOVING = 0.25
+STILL = 0.01
 # A run's cost against its pilot's: the run itself and its companion at half the step (`convergence.checked`).
 COMPANION_COST = 1 + 1 / FINER
 
@@ -178,15 +181,15 @@ def window_limit(samples: list[tuple[float, Any, Any]], span: float) -> float:
     """The bodies' explicit limit over a run (s; inf where no body moved in the sand), from ``samples`` (time s,
     and each body's `body_limits` then) over a run of ``span`` s: the least over stretches of `LIMIT_STRETCH` x
     ``span`` of the median limit of the bodies moving there, at least `MOVING` times the fastest body's speed of
-    their instant. A median ignores one foot that stands in the sand and one link reversing; the least stretch is
-    the harshest phase of the gait: the ramp-in, where the links move slowly against the full force."""
+    their instant and `STILL`. A median ignores one foot that stands in the sand and one link reversing; the least
+    stretch is the harshest phase of the gait: the ramp-in, where the links move slowly against the full force."""
     import numpy as np
     stretches: dict[int, list[Any]] = {}
     for t, limits, speeds in samples:
         held = np.isfinite(limits)
-        if not held.any():
+        moving = held & (speeds >= max(MOVING * speeds[held].max(initial=0.0), STILL))
+        if not moving.any():
             continue
-        moving = held & (speeds >= MOVING * speeds[held].max())
         stretches.setdefault(int(t / (LIMIT_STRETCH * span)), []).append(limits[moving])
     return min((float(np.median(np.concatenate(v))) for v in stretches.values()), default=math.inf)
 

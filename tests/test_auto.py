@@ -202,8 +202,8 @@ def test_the_explicit_limit_of_a_box_dragged_through_the_sand_is_2_m_v_over_its_
 def test_the_explicit_limit_over_a_run_ignores_a_body_creeping_and_one_reversal_but_not_the_ramp_in():
     # Two such boxes (the test above), one dragged along +x, one creeping at 2 mm/s (a foot standing in the sand):
     # each takes the same rate-independent force F, so the creeping one's limit at one instant is 2 m 2 mm/s / F,
-    # the run's limit the dragged box's, 2 m v / F: at its slowest stretch, its ramp-in at 20 mm/s, not at one
-    # instant's reversal (15 mm/s) inside its gait at 0.1 m/s.
+    # the run's limit the dragged box's, 2 m v / F: at its slowest stretch, its ramp-in at 30 mm/s, not at one
+    # instant's reversal (25 mm/s) inside its gait at 0.1 m/s.
     import math
 
     import mujoco
@@ -224,11 +224,11 @@ def test_the_explicit_limit_over_a_run_ignores_a_body_creeping_and_one_reversal_
     def at(t: float, v: float) -> tuple:
         d.qvel[0], d.qvel[6] = v, 0.002
         return (t, *body_limits(m, d, (), attached))
-    gait = [at(0.01 * i, 0.1 if i % 10 != 5 else 0.015) for i in range(10, 100)]
+    gait = [at(0.01 * i, 0.1 if i % 10 != 5 else 0.025) for i in range(10, 100)]
     assert explicit_limit(m, d, (), attached) == pytest.approx(2 * 0.2 * 0.002 / force, rel=1e-6)  # one instant's
     assert window_limit(gait, 1.0) == pytest.approx(2 * 0.2 * 0.1 / force, rel=1e-6)
-    ramp = [at(0.01 * i, 0.02) for i in range(10)]
-    assert window_limit(ramp + gait, 1.0) == pytest.approx(2 * 0.2 * 0.02 / force, rel=1e-6)
+    ramp = [at(0.01 * i, 0.03) for i in range(10)]
+    assert window_limit(ramp + gait, 1.0) == pytest.approx(2 * 0.2 * 0.03 / force, rel=1e-6)
     assert window_limit([], 1.0) == math.inf
     assert window_limit([at(0.0, 0.005)], 1.0) == math.inf  # nothing moves: both slower than STILL
 

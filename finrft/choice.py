@@ -87,6 +87,10 @@ LIMIT_SAMPLES = 40
 LIMIT_STRETCH = 0.1
 MOVING = 0.25
 STILL = 0.02
+# The power of the step a step's cost goes with, as measured between two pilots of a method (`Chooser.predicted`),
+# kept within these: a Newton step costs less where it is shorter (fewer iterations: the sand-swimmer's `newton` at
+# 0.5 ms costs 0.57 of its step at 2 ms per step), none costs more.
+PER_STEP = (0.0, 1.0)
 # A run's cost against its pilot's: the run itself and its companion at half the step (`convergence.checked`).
 COMPANION_COST = 1 + 1 / FINER
 
@@ -270,6 +274,7 @@ class Chooser:
         self._runs: dict[tuple[str, float], Any] = {}    # each pilot that ran (or its failure), for reuse
         self._rates: dict[tuple[str, float], float] = {}  # its CPU time per simulated second, as far as it got
         self._walls: dict[tuple[str, float], float] = {}  # its wall time
+        self._whole: set[tuple[str, float]] = set()       # the pilots timed over the window, not a price's stretch
 
     def at(self, method: str, dt: float) -> Any:
         """The scene of a candidate's pilot."""
@@ -284,6 +289,7 @@ class Chooser:
                 scene = self.at(method, dt)
                 self.prepare(scene)  # the model's build, outside the cost of a step
                 self._runs[key], self._rates[key] = self._timed(scene, self.window, sample=method in IMPLICIT)
+                self._whole.add(key)
             except SceneError as exc:  # a step longer than the scene's that does not resolve its strokes
                 if not dt > self.scene.sim.dt:
                     raise
@@ -413,13 +419,21 @@ class Chooser:
         return run, float((marks[1][0] - marks[0][0]) / ((marks[1][1] - marks[0][1]) * span))
 
     def predicted(self, method: str, dt: float) -> float:
-        """A candidate's predicted cost (s): from its own pilot, else from the nearest step of its method that ran
-        (a step's cost does not depend on its length), else priced (`price`) where it is the method's first."""
-        known = [h for (m, h), rate in self._rates.items() if m == method and not math.isnan(rate)]
+        """A candidate's predicted cost (s): from its own pilot, else from the nearest step of its method that ran,
+        its cost per step scaled as a power of the step measured between the two nearest whole pilots of the method
+        (a Newton step costs less where it is shorter: fewer iterations; `PER_STEP`), else priced (`price`) where it
+        is the method's first."""
+        known = sorted((h for (m, h), rate in self._rates.items() if m == method and not math.isnan(rate)),
+                       key=lambda h: abs(math.log(h / dt)))
         if (method, dt) in self._rates or not known:
             return self.price(method, dt)
-        near = min(known, key=lambda h: abs(math.log(h / dt)))
-        return self.cost(method, near) * near / dt
+        near = known[0]
+        whole = [h for h in known if (method, h) in self._whole and h != near]
+        power = 0.0
+        if (method, near) in self._whole and whole:
+            step = self.cost(method, near) * near, self.cost(method, whole[0]) * whole[0]  # per step, alike
+            power = min(max(math.log(step[0] / step[1]) / math.log(near / whole[0]), PER_STEP[0]), PER_STEP[1])
+        return self.cost(method, near) * near / dt * (dt / near) ** power
 
     def _sample(self, scene: Any, t: float) -> None:
         """The bodies' limits at time ``t`` of an implicit pilot (`body_limits`), where its state is finite and no

@@ -174,6 +174,25 @@ def test_a_pilot_stops_once_it_costs_more_than_it_may(tmp_path):
     assert isinstance(run, Exception) and "cost more than" in str(run)
 
 
+def test_a_step_is_priced_by_the_cost_per_step_its_method_showed_at_two_steps(tmp_path):
+    # Whole pilots at 2 and 1 ms whose cost per step goes as the square root of the step (Newton's iterations fewer
+    # at shorter steps): the step at 0.25 ms costs c sqrt(0.25 ms) per step, not the 1 ms step's per step.
+    import math
+
+    from finrft import choice as choosing
+    chooser = choosing.Chooser(load_scene(_sled(tmp_path), cls=UserScene), ErrorLimits(), None, lambda s: None,
+                               0.6, 0.6, 1)
+    per_step = lambda h: 1e-4 * math.sqrt(h)  # noqa: E731  CPU s a step
+    for h in (2e-3, 1e-3):
+        chooser._rates[("newton", h)] = per_step(h) / h
+        chooser._whole.add(("newton", h))
+    assert chooser.predicted("newton", 2.5e-4) == pytest.approx(
+        per_step(2.5e-4) / 2.5e-4 * 0.6 * choosing.COMPANION_COST, rel=1e-9)
+    chooser._whole.clear()  # a price's stretch, not a whole pilot: the nearest step's cost per step
+    assert chooser.predicted("newton", 2.5e-4) == pytest.approx(
+        per_step(1e-3) / 2.5e-4 * 0.6 * choosing.COMPANION_COST, rel=1e-9)
+
+
 def test_the_explicit_limit_of_a_box_dragged_through_the_sand_is_2_m_v_over_its_force():
     # A 0.2 kg box 40 x 20 x 30 mm, its top 5 mm below the surface, moving along +x at 0.1 m/s: only its leading face
     # (depths 5-35 mm, 20 mm wide) takes a force, li2013's (alpha_x, alpha_z)(pi/2, 0) |z| on each element. A

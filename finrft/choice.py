@@ -12,7 +12,7 @@ candidate at its step and at half of it, their reported figures compared as the 
 ``newton-midpoint`` and ``newton``, each on a ladder of steps from `START` x sim.dt down (`Chooser.search`):
 
 - each method is priced by the start of its first pilot (the second half of `PRICE_SHARE` of the run), its
-  other steps by its cost per step;
+  other steps by its cost per step, as it went with the step between two whole pilots of the method (`PER_STEP`);
 - the candidate predicted cheapest is measured next; one that misses the limits gives its method's next step:
   half of it for ``explicit`` (beyond its stability limit its error does not fall with the step), the step its
   error asks for (first order, aimed at `SAFE` of the limit) for an implicit one;

@@ -430,8 +430,8 @@ class Chooser:
         near = known[0]
         whole = [h for h in known if (method, h) in self._whole and h != near]
         power = 0.0
-        if (method, near) in self._whole and whole:
-            step = self.cost(method, near) * near, self.cost(method, whole[0]) * whole[0]  # per step, alike
+        step = (self.cost(method, near) * near, self.cost(method, whole[0]) * whole[0]) if whole else (0.0, 0.0)
+        if (method, near) in self._whole and min(step) > 0:  # per step, alike
             power = min(max(math.log(step[0] / step[1]) / math.log(near / whole[0]), PER_STEP[0]), PER_STEP[1])
         return self.cost(method, near) * near / dt * (dt / near) ** power
 

@@ -12,12 +12,13 @@ candidate at its step and at half of it, their reported figures compared as the 
 ``newton-midpoint`` and ``newton``, each on a ladder of steps from `START` x sim.dt down (`Chooser.search`):
 
 - each method is priced by the start of its first pilot (the second half of `PRICE_SHARE` of the run), its
-  other steps by its cost per step;
+  other steps by its cost per step, as it went with the step between two whole pilots of the method (`PER_STEP`);
 - the candidate predicted cheapest is measured next; one that misses the limits gives its method's next step:
   half of it for ``explicit`` (beyond its stability limit its error does not fall with the step), the step its
   error asks for (first order, aimed at `SAFE` of the limit) for an implicit one;
-- an explicit step beyond the bodies' explicit limit (`explicit_limit`, at the state the implicit methods' prices
-  left) is not piloted: its candidate is skipped, and the ladder goes on below the limit;
+- an explicit step beyond the bodies' explicit limit (`window_limit`, over the implicit methods' pilots so far,
+  which are priced first) is neither priced nor piloted: its candidate is skipped, and the ladder goes on below
+  the limit;
 - once one meets the limits, only candidates predicted to cost less than `SAVING` of it are measured;
 - the cheapest that met them is tried at twice its step while its estimate is below `COARSEN` of its limit.
 
@@ -70,10 +71,26 @@ SAVING = 0.85
 # its second half: a robot's first moments (a sled landing on the sand) can cost a Newton step several times its
 # gait's (the paddle sled's newton-midpoint priced at 4 times its cost from its first 5 %).
 PRICE_SHARE = 0.1
-# An explicit candidate whose step exceeds this share of the bodies' explicit limit (`explicit_limit`) is not
+# An explicit candidate whose step exceeds this share of the bodies' explicit limit (`window_limit`) is not
 # piloted: beyond it a light link's velocity reverses each step, and its figures are off however they pass the
 # chatter probe (the sandfish's 10 g links at 1 ms: 35 % off its speed).
 EXPLICIT_ROOM = 1.0
+# The bodies' explicit limit is taken over the implicit pilots' run (`window_limit`), not at one instant: sampled
+# LIMIT_SAMPLES times over the pilots' window, in stretches of LIMIT_STRETCH of it, each stretch's the median over
+# the bodies moving at MOVING of the fastest one's speed or more. A foot standing in the sand (the quadruped's,
+# 7-60 mm/s against its swinging feet's 200-1000 mm/s) sets a limit of 0.01-0.8 ms where its explicit step at 2 ms
+# is 1.6 % off; one instant's limit is a foot's or a joint's reversal, or the start of the ramp-in, or neither.
+# A body slower than STILL counts as standing too: the rover's 150 g wheels starting from rest at 3-7 mm/s set
+# 0.04-0.18 ms where its explicit step at 0.5 ms is within 2 %, the hexapod's 4 g legs at 9-12 mm/s 0.1 ms where
+# its explicit step at 0.5 ms is 1 % off; the slowest gaits here are 30 mm/s.
+LIMIT_SAMPLES = 40
+LIMIT_STRETCH = 0.1
+MOVING = 0.25
+STILL = 0.02
+# The power of the step a step's cost goes with, as measured between two pilots of a method (`Chooser.predicted`),
+# kept within these: a Newton step costs less where it is shorter (fewer iterations: the sand-swimmer's `newton` at
+# 1 ms costs 0.82 of its step at 2 ms), none costs more.
+PER_STEP = (0.0, 1.0)
 # A run's cost against its pilot's: the run itself and its companion at half the step (`convergence.checked`).
 COMPANION_COST = 1 + 1 / FINER
 
@@ -162,24 +179,53 @@ def explicit_limit(m: Any, d: Any, groups: Any, attached: Any) -> float:
     mass and k the medium force's slope, sum over its elements of |F| / max(|v|, v_reg) (a rate-independent law's
     force turns with the velocity: its slope across it is |F| / |v|, F / v_reg inside the regularisation). An
     explicit step damps a damper of slope k on a mass m only for dt < 2 m / k."""
+    return float(body_limits(m, d, groups, attached)[0].min(initial=math.inf))
+
+
+def window_limit(samples: list[tuple[float, Any, Any]], span: float) -> float:
+    """The bodies' explicit limit over a run (s; inf where no body moved in the sand), from ``samples`` (time s,
+    and each body's `body_limits` then) over a run of ``span`` s: the least over stretches of `LIMIT_STRETCH` x
+    ``span`` of the median limit of the bodies moving there, at least `MOVING` times the fastest body's speed of
+    their instant and `STILL`. A median ignores one foot that stands in the sand and one link reversing; the least
+    stretch is the harshest phase of the gait: the ramp-in, where the links move slowly against the full force."""
+    import numpy as np
+    stretches: dict[int, list[Any]] = {}
+    for t, limits, speeds in samples:
+        held = np.isfinite(limits)
+        moving = held & (speeds >= max(MOVING * speeds[held].max(initial=0.0), STILL))
+        if not moving.any():
+            continue
+        stretches.setdefault(int(t / (LIMIT_STRETCH * span)), []).append(limits[moving])
+    return min((float(np.median(np.concatenate(v))) for v in stretches.values()), default=math.inf)
+
+
+def body_limits(m: Any, d: Any, groups: Any, attached: Any) -> tuple[Any, Any]:
+    """Each body's explicit limit 2 m / k (`explicit_limit`; inf where none of its elements carries a force) and
+    its speed, the force-weighted mean of its elements' (m/s; 0 where none does), at the state of ``d``, indexed
+    by body id."""
     import mujoco
     import numpy as np
 
     from . import laws
     from .integrate import SURFACE_SPEED
-    slope = np.zeros(m.nbody)
+    slope, force, power = np.zeros(m.nbody), np.zeros(m.nbody), np.zeros(m.nbody)
     mujoco.mj_kinematics(m, d)  # positions and velocities alone: no force (a Python callback) runs
     mujoco.mj_comPos(m, d)
     mujoco.mj_comVel(m, d)
     jacp = np.zeros((3, m.nv))
     for group in groups:
-        law = laws.bind(group.law)
-        for site in group.sites:
+        sites = np.asarray(group.sites, dtype=int)
+        v = np.empty((len(sites), 3))
+        for i, site in enumerate(sites):
             mujoco.mj_jacSite(m, d, jacp, None, site)
-            v = jacp @ d.qvel
-            frame = d.site_xmat[site].reshape(3, 3)
-            f = law(v[None], frame[None, :, 0], frame[None, :, 1])[0]
-            slope[m.site_bodyid[site]] += np.linalg.norm(f) / max(np.linalg.norm(v), group.law.v_reg)
+            v[i] = jacp @ d.qvel
+        frames = d.site_xmat[sites].reshape(-1, 3, 3)
+        fn = np.linalg.norm(laws.bind(group.law)(v, frames[:, :, 0], frames[:, :, 1]), axis=1)
+        vn = np.linalg.norm(v, axis=1)
+        bodies = m.site_bodyid[sites]
+        np.add.at(slope, bodies, fn / np.maximum(vn, group.law.v_reg))
+        np.add.at(force, bodies, fn)
+        np.add.at(power, bodies, fn * vn)
     if attached is not None:
         forces = attached.callback(m)
         floor = attached.v_reg if attached.v_reg > 0 else SURFACE_SPEED
@@ -188,9 +234,16 @@ def explicit_limit(m: Any, d: Any, groups: Any, attached: Any) -> float:
             mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_XBODY, body, twist, 0)
             f, arm = forces.twist_forces(d, body, surface, twist)
             v = twist[3:] + np.cross(twist[:3], arm)
-            slope[body] += float(np.sum(np.linalg.norm(f, axis=1) / np.maximum(np.linalg.norm(v, axis=1), floor)))
-    limits = 2 * m.body_mass[slope > 0] / slope[slope > 0]
-    return float(limits.min()) if len(limits) else math.inf
+            fn, vn = np.linalg.norm(f, axis=1), np.linalg.norm(v, axis=1)
+            slope[body] += float(np.sum(fn / np.maximum(vn, floor)))
+            force[body] += float(fn.sum())
+            power[body] += float(fn @ vn)
+    held = slope > 0
+    limits = np.full(m.nbody, np.inf)
+    limits[held] = 2 * m.body_mass[held] / slope[held]
+    speeds = np.zeros(m.nbody)
+    speeds[force > 0] = power[force > 0] / force[force > 0]
+    return limits, speeds
 
 
 class Chooser:
@@ -202,7 +255,8 @@ class Chooser:
                  duration: float, stroke_time: float, strokes: int, state: State | None = None) -> None:
         self.scene, self.limits, self.pilot, self.prepare = scene, limits, pilot, prepare
         self.state = state
-        self._limit: float | None = None  # `explicit_limit`, once taken
+        self._samples: list[tuple[float, Any, Any]] = []  # `body_limits` over the implicit pilots (`window_limit`)
+        self._slots: set[int] = set()                       # the sampled times, in 1 / LIMIT_SAMPLES of the window
         self.duration, self.stroke_time, self.strokes_n = duration, stroke_time, strokes
         self.window, self.settle = window(scene, duration, stroke_time, strokes)
         # A run of one stroke is cut short by shortening its stroke (the same motion up to the window's end); one
@@ -220,6 +274,7 @@ class Chooser:
         self._runs: dict[tuple[str, float], Any] = {}    # each pilot that ran (or its failure), for reuse
         self._rates: dict[tuple[str, float], float] = {}  # its CPU time per simulated second, as far as it got
         self._walls: dict[tuple[str, float], float] = {}  # its wall time
+        self._whole: set[tuple[str, float]] = set()       # the pilots timed over the window, not a price's stretch
 
     def at(self, method: str, dt: float) -> Any:
         """The scene of a candidate's pilot."""
@@ -233,7 +288,8 @@ class Chooser:
             try:
                 scene = self.at(method, dt)
                 self.prepare(scene)  # the model's build, outside the cost of a step
-                self._runs[key], self._rates[key] = self._timed(scene, self.window)
+                self._runs[key], self._rates[key] = self._timed(scene, self.window, sample=method in IMPLICIT)
+                self._whole.add(key)
             except SceneError as exc:  # a step longer than the scene's that does not resolve its strokes
                 if not dt > self.scene.sim.dt:
                     raise
@@ -309,7 +365,8 @@ class Chooser:
             try:
                 scene = self.at(method, dt)
                 self.prepare(scene)
-                run, self._rates[key] = self._timed(scene, self.window, min(1.0, share), min(1.0, share) / 2)
+                run, self._rates[key] = self._timed(scene, self.window, min(1.0, share), min(1.0, share) / 2,
+                                                    sample=method in IMPLICIT)
             except SceneError as exc:  # as `_run`
                 if not dt > self.scene.sim.dt:
                     raise
@@ -320,26 +377,37 @@ class Chooser:
             self.wall += self._walls[key]
         return self.cost(method, dt)
 
-    def _timed(self, scene: Any, span: float, share: float = 1.0, skip: float = 0.0) -> tuple[Any, float]:
+    def _timed(self, scene: Any, span: float, share: float = 1.0, skip: float = 0.0,
+               sample: bool = False) -> tuple[Any, float]:
         """A pilot's result (or its step's failure; None where it stopped at ``share`` of its run) and its CPU time
         per simulated second, from its first recorded sample at or past ``skip`` of it on (a run's set-up, a fixed
         cost, would weigh on a short stretch) as far as it got (NaN: nowhere). CPU time, not wall time: the choice
-        must not follow the load of other processes."""
+        must not follow the load of other processes. With ``sample``, the bodies' limits (`body_limits`) are
+        sampled as it goes, outside its timing, once in `LIMIT_SAMPLES` of the window."""
         marks: list[tuple[float, float]] = []
+        spent = [0.0]  # CPU time spent sampling
+
+        def clock() -> float:
+            return time.process_time() - spent[0]
+        sample = sample and self.state is not None and bool(self.allowed)
 
         def progress(fraction: float) -> None:
+            if sample:
+                start = time.process_time()
+                self._sample(scene, fraction * span)
+                spent[0] += time.process_time() - start
             if not marks or marks[0][1] < skip:  # the first sample at or past ``skip`` opens the stretch timed
-                marks[:] = [(time.process_time(), fraction)]
-            marks[1:] = [(time.process_time(), fraction)]
+                marks[:] = [(clock(), fraction)]
+            marks[1:] = [(clock(), fraction)]
             if fraction >= share and share < 1:
                 raise _Enough
             if marks[1][0] - begin > self.budget:
                 raise _Enough(f"stopped at {fraction * span:.3g} s: it cost more than {self.budget:.3g} s, more "
                               f"than the cheaper candidate that met the limits")
-        begin = time.process_time()
+        begin = clock()
         try:
             run: Any = self.pilot(scene, False, progress)
-            marks[1:] = [(time.process_time(), 1.0)]
+            marks[1:] = [(clock(), 1.0)]
         except SimulationUnstable as exc:  # the step's failure; any other is the scene's, at every step
             run = exc
         except _Enough as exc:
@@ -351,32 +419,44 @@ class Chooser:
         return run, float((marks[1][0] - marks[0][0]) / ((marks[1][1] - marks[0][1]) * span))
 
     def predicted(self, method: str, dt: float) -> float:
-        """A candidate's predicted cost (s): from its own pilot, else from the nearest step of its method that ran
-        (a step's cost does not depend on its length), else priced (`price`) where it is the method's first."""
-        known = [h for (m, h), rate in self._rates.items() if m == method and not math.isnan(rate)]
+        """A candidate's predicted cost (s): from its own pilot, else from the nearest step of its method that ran,
+        its cost per step scaled as a power of the step measured between the two nearest whole pilots of the method
+        (a Newton step costs less where it is shorter: fewer iterations; `PER_STEP`), else priced (`price`) where it
+        is the method's first."""
+        known = sorted((h for (m, h), rate in self._rates.items() if m == method and not math.isnan(rate)),
+                       key=lambda h: abs(math.log(h / dt)))
         if (method, dt) in self._rates or not known:
             return self.price(method, dt)
-        near = min(known, key=lambda h: abs(math.log(h / dt)))
-        return self.cost(method, near) * near / dt
+        near = known[0]
+        whole = [h for h in known if (method, h) in self._whole and h != near]
+        power = 0.0
+        step = (self.cost(method, near) * near, self.cost(method, whole[0]) * whole[0]) if whole else (0.0, 0.0)
+        if (method, near) in self._whole and min(step) > 0:  # per step, alike
+            power = min(max(math.log(step[0] / step[1]) / math.log(near / whole[0]), PER_STEP[0]), PER_STEP[1])
+        return self.cost(method, near) * near / dt * (dt / near) ** power
+
+    def _sample(self, scene: Any, t: float) -> None:
+        """The bodies' limits at time ``t`` of an implicit pilot (`body_limits`), where its state is finite and no
+        pilot was sampled within half a `LIMIT_SAMPLES`-th of the window (a pilot at half the step follows its own)."""
+        slot = round(t * LIMIT_SAMPLES / self.window)
+        state = self.state(scene) if slot not in self._slots else None
+        if state is not None and all(math.isfinite(x) for x in state[1].qvel):
+            self._slots.add(slot)
+            self._samples.append((t, *body_limits(*state)))
 
     def explicit_limit(self) -> float:
-        """The bodies' explicit limit (`explicit_limit`, s) at the state the pilots priced so far left, where the
-        implicit methods are an alternative and that state is one a stable step reached; inf otherwise."""
-        if self._limit is None:
-            self._limit = math.inf
-            state = self.state(self.at(self.allowed[-1], self.top)) if self.state and self.allowed else None
-            if state is not None and all(math.isfinite(x) for x in state[1].qvel):
-                self._limit = explicit_limit(*state)
-        return self._limit
+        """The bodies' explicit limit over the implicit pilots so far (`window_limit`, s); inf where none ran."""
+        return window_limit(self._samples, self.window)
 
     def screen(self, dt: float, finest: float) -> float | None:
         """The explicit ladder's next step from ``dt`` within `EXPLICIT_ROOM` of the bodies' explicit limit (None:
         none down to ``finest``); each step beyond it is a candidate skipped, not piloted."""
-        limit = EXPLICIT_ROOM * self.explicit_limit()
+        found = self.explicit_limit()
+        limit = EXPLICIT_ROOM * found
         while dt > limit * (1 + 1e-9):
             if not any((c.method, c.dt) == ("explicit", dt) for c in self.candidates):
                 self.candidates.append(Candidate("explicit", dt, skipped=f"skipped: explicit limit "
-                                                 f"{self._limit:.3g} s < dt"))
+                                                 f"{found:.3g} s < dt"))
             dt *= FINER
             if dt < finest * (1 - 1e-9):
                 return None
@@ -392,8 +472,15 @@ class Chooser:
         ladder: dict[str, float | None] = {m: self.top for m in allowed}
         best: Candidate | None = None
         while True:
-            options = [(self.predicted(m, h), m, h) for m, h in ladder.items() if h is not None]
-            options = [(cost if cost == cost else 0.0, m, h) for cost, m, h in options]  # NaN: it failed at once
+            options = []
+            # the implicit methods priced first: their pilots sample the bodies' explicit limit, and the explicit
+            # step is priced at the first of its ladder within it, not at steps that will be skipped
+            for m in sorted(ladder, key=lambda m: m == "explicit"):
+                if m == "explicit" and ladder[m] is not None:
+                    ladder[m] = self.screen(ladder[m], finest[m])
+                if ladder[m] is not None:
+                    cost = self.predicted(m, ladder[m])
+                    options.append((cost if cost == cost else 0.0, m, ladder[m]))  # NaN: it failed at once
             if not options:
                 break
             cost, method, dt = min(options, key=lambda o: o[0])
@@ -403,11 +490,6 @@ class Chooser:
                         self.candidates.append(Candidate(method, dt, cost_s=cost, skipped="not run: predicted to "
                                                          "cost more than the cheapest that met the limits"))
                 break
-            if method == "explicit" and self.screen(dt, finest[method]) != dt:
-                # priced, not piloted: every method is priced before one is measured (the explicit limit is taken
-                # where the implicit methods' prices left the state)
-                ladder[method] = self.screen(dt, finest[method])
-                continue
             # once one met the limits, a pilot stops where it has cost what a cheaper candidate's pilots may
             self.budget = math.inf if best is None else SAVING * best.cost_s * (1 - 1 / COMPANION_COST)
             candidate = self.try_step(method, dt)

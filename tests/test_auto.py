@@ -174,6 +174,25 @@ def test_a_pilot_stops_once_it_costs_more_than_it_may(tmp_path):
     assert isinstance(run, Exception) and "cost more than" in str(run)
 
 
+def test_a_step_is_priced_by_the_cost_per_step_its_method_showed_at_two_steps(tmp_path):
+    # Whole pilots at 2 and 1 ms whose cost per step goes as the square root of the step (Newton's iterations fewer
+    # at shorter steps): the step at 0.25 ms costs c sqrt(0.25 ms) per step, not the 1 ms step's per step.
+    import math
+
+    from finrft import choice as choosing
+    chooser = choosing.Chooser(load_scene(_sled(tmp_path), cls=UserScene), ErrorLimits(), None, lambda s: None,
+                               0.6, 0.6, 1)
+    per_step = lambda h: 1e-4 * math.sqrt(h)  # noqa: E731  CPU s a step
+    for h in (2e-3, 1e-3):
+        chooser._rates[("newton", h)] = per_step(h) / h
+        chooser._whole.add(("newton", h))
+    assert chooser.predicted("newton", 2.5e-4) == pytest.approx(
+        per_step(2.5e-4) / 2.5e-4 * 0.6 * choosing.COMPANION_COST, rel=1e-9)
+    chooser._whole.clear()  # a price's stretch, not a whole pilot: the nearest step's cost per step
+    assert chooser.predicted("newton", 2.5e-4) == pytest.approx(
+        per_step(1e-3) / 2.5e-4 * 0.6 * choosing.COMPANION_COST, rel=1e-9)
+
+
 def test_the_explicit_limit_of_a_box_dragged_through_the_sand_is_2_m_v_over_its_force():
     # A 0.2 kg box 40 x 20 x 30 mm, its top 5 mm below the surface, moving along +x at 0.1 m/s: only its leading face
     # (depths 5-35 mm, 20 mm wide) takes a force, li2013's (alpha_x, alpha_z)(pi/2, 0) |z| on each element. A
@@ -197,6 +216,40 @@ def test_the_explicit_limit_of_a_box_dragged_through_the_sand_is_2_m_v_over_its_
     assert explicit_limit(m, d, (), attached) == pytest.approx(2 * 0.2 * 0.1 / force, rel=1e-6)
     d.qvel[0] = 0.0
     assert explicit_limit(m, d, (), attached) == np.inf  # at rest no element leads: no force, no limit
+
+
+def test_the_explicit_limit_over_a_run_ignores_a_body_creeping_and_one_reversal_but_not_the_ramp_in():
+    # Two such boxes (the test above), one dragged along +x, one creeping at 2 mm/s (a foot standing in the sand):
+    # each takes the same rate-independent force F, so the creeping one's limit at one instant is 2 m 2 mm/s / F,
+    # the run's limit the dragged box's, 2 m v / F: at its slowest stretch, its ramp-in at 30 mm/s, not at one
+    # instant's reversal (25 mm/s) inside its gait at 0.1 m/s.
+    import math
+
+    import mujoco
+
+    from finrft import attach
+    from finrft.choice import body_limits, explicit_limit, window_limit
+    from finrft.laws import li2013
+    spec = mujoco.MjSpec.from_string("""<mujoco><worldbody>
+      <body name="a" pos="0 0 -0.02"><freejoint/><geom type="box" size="0.02 0.01 0.015" mass="0.2"/></body>
+      <body name="b" pos="0 0.5 -0.02"><freejoint/><geom type="box" size="0.02 0.01 0.015" mass="0.2"/></body>
+      </worldbody></mujoco>""")
+    attached = attach(spec, ["a", "b"], backend="python", element_size=0.005)
+    m = spec.compile()
+    d = mujoco.MjData(m)
+    alpha_x, alpha_z = li2013.alpha(math.pi / 2, 0.0)
+    force = math.hypot(float(alpha_x), float(alpha_z)) * 0.02 * (0.035 ** 2 - 0.005 ** 2) / 2
+
+    def at(t: float, v: float) -> tuple:
+        d.qvel[0], d.qvel[6] = v, 0.002
+        return (t, *body_limits(m, d, (), attached))
+    gait = [at(0.01 * i, 0.1 if i % 10 != 5 else 0.025) for i in range(10, 100)]
+    assert explicit_limit(m, d, (), attached) == pytest.approx(2 * 0.2 * 0.002 / force, rel=1e-6)  # one instant's
+    assert window_limit(gait, 1.0) == pytest.approx(2 * 0.2 * 0.1 / force, rel=1e-6)
+    ramp = [at(0.01 * i, 0.03) for i in range(10)]
+    assert window_limit(ramp + gait, 1.0) == pytest.approx(2 * 0.2 * 0.03 / force, rel=1e-6)
+    assert window_limit([], 1.0) == math.inf
+    assert window_limit([at(0.0, 0.005)], 1.0) == math.inf  # nothing moves: both slower than STILL
 
 
 def test_auto_pilots_no_explicit_step_beyond_a_light_robots_limit_and_does_below_a_heavy_ones(tmp_path):

@@ -119,7 +119,6 @@ SURFACE_DECREASE = 0.1
 # change, scaled to the step, and stops once Newton's change is below this share of how far it lies from that
 # prediction (PREDICTOR_SHARE in steppers.c).
 PREDICTOR_SHARE = 1e-3
-PREDICTED_RESIDUAL = 1e-5  # and its residual at most this share of dt times its largest force (steppers.c)
 
 
 def _native(name: str, *argtypes) -> Callable[..., int]:
@@ -614,11 +613,9 @@ class PythonImplicit:
             at[0] = self._forces(forces, qvel + dv, dt, False)[0]
             return matrix @ dv - dt * (other + at[0])
 
-        share = NEWTON_RESIDUAL if guess is None else PREDICTED_RESIDUAL
-
         def small(g: np.ndarray) -> bool:  # residual_small in steppers.c
-            return np.abs(g).max(initial=0.0) <= share * dt * max(np.abs(other).max(initial=0.0),
-                                                                   np.abs(at[0]).max(initial=0.0))
+            return np.abs(g).max(initial=0.0) <= NEWTON_RESIDUAL * dt * max(np.abs(other).max(initial=0.0),
+                                                                              np.abs(at[0]).max(initial=0.0))
         def converged(change: float, next_dv: np.ndarray) -> bool:  # change_small in steppers.c
             miss = 0.0 if guess is None else PREDICTOR_SHARE * np.abs(next_dv - guess).max(initial=0.0)
             return change <= max(self.tolerance * (1 + np.abs(qvel + next_dv).max(initial=0.0)), miss)

@@ -64,10 +64,6 @@
 // Euler's local error in the velocity. Newton's method then stops once its change is below this share of that
 // miss (or below the fixed tolerance), a thousandth of what the step's own error is.
 #define PREDICTOR_SHARE 1e-3
-// The residual such a step stops at, a share of dt times the step's largest force (`residual_small`): a rate-
-// independent law's force moves by its whole size across v_reg, so a stop at the looser NEWTON_RESIDUAL moved the
-// sand-swimmer's mean medium force by twice its error estimate, where this moves it by a hundredth of it.
-#define PREDICTED_RESIDUAL 1e-5
 
 // The forces the implicit methods take at the new velocity, as items: every RFT segment of the model (its instance,
 // site Jacobian and axes at the current positions), every body with attached surfaces (its finrft.surface instance
@@ -611,15 +607,15 @@ static mjtNum newton_residual(const Items* s, Newton* w, const mjtNum* qvel, con
   return mju_norm(out, nv);
 }
 
-// Whether the residual g (of the iterate whose RFT and stop forces are w->force) is at most `share` of dt times the
-// step's largest force, w->other's or w->force's.
-static int residual_small(const Newton* w, const mjtNum* g, int nv, mjtNum dt, mjtNum share) {
+// Whether the residual g (of the iterate whose RFT and stop forces are w->force) is at most NEWTON_RESIDUAL of dt
+// times the step's largest force, w->other's or w->force's.
+static int residual_small(const Newton* w, const mjtNum* g, int nv, mjtNum dt) {
   mjtNum size = 0, scale = 0;
   for (int i = 0; i < nv; i++) {
     size = mju_max(size, fabs(g[i]));
     scale = mju_max(scale, mju_max(fabs(w->other[i]), fabs(w->force[i])));
   }
-  return size <= share * dt * scale;
+  return size <= NEWTON_RESIDUAL * dt * scale;
 }
 
 // Whether a change of Newton's method as large as `change` (its largest component) that brings the velocity change
@@ -642,7 +638,7 @@ static int newton_solve(Workspace* ws, const mjtNum* qvel, mjtNum dt, int iterat
   const Items* s = &ws->items;
   Newton* w = &ws->w;
   int nv = s->nv;
-  mjtNum ahead = iterations > 1 ? dt : 0, residual = ws->predicted ? PREDICTED_RESIDUAL : NEWTON_RESIDUAL;
+  mjtNum ahead = iterations > 1 ? dt : 0;
   const mjtNum* rhs = ws->rhs;
   if (ws->predicted) {
     // from the predicted change: the force and its slope there (one pass of the law) start Newton's method
@@ -691,7 +687,7 @@ static int newton_solve(Workspace* ws, const mjtNum* qvel, mjtNum dt, int iterat
         size = mju_max(size, fabs(w->step[i]));
         w->candidate[i] = w->dv[i] + w->step[i];
       }
-      if (change_small(ws, qvel, w->candidate, size) && residual_small(w, w->g, nv, dt, residual)) {
+      if (change_small(ws, qvel, w->candidate, size) && residual_small(w, w->g, nv, dt)) {
         mju_copy(w->dv, w->candidate, nv);
         return 0;
       }
@@ -711,9 +707,7 @@ static int newton_solve(Workspace* ws, const mjtNum* qvel, mjtNum dt, int iterat
     }
     mjtNum before = norm;
     norm = trial_norm;
-    if (change_small(ws, qvel, w->dv, change) && (fresh || alpha >= 1e-6) && residual_small(w, w->g, nv, dt, residual)) {
-      return 0;
-    }
+    if (change_small(ws, qvel, w->dv, change) && (fresh || alpha >= 1e-6) && residual_small(w, w->g, nv, dt)) return 0;
     // On attached surfaces, a search that fails on a fresh slope has met a kink of a law (an element switching
     // on) with no descent left: iterating on creeps across it by 1e-6 of a step per iteration, at 20 residuals
     // each, so the step is halved at once instead (the sand-swimmer's steps: half the calls of the law).

@@ -16,7 +16,12 @@
   penalty stops are taken at the step's end too, at the deflection d + dt (v + dv). With attached surfaces alone
   (no segments) it keeps its slope while each full step cuts the residual by SURFACE_DECREASE (fresh again when
   that stops, or when a search stalls on a kept one) and takes a step below the tolerance without a residual to
-  confirm it: the same root for fewer law calls.
+  confirm it: the same root for fewer law calls. There a step that follows the stepper's last one (its time where
+  that one ended) starts Newton's method from that step's velocity change, scaled to the step, the force and slope
+  taken there, and stops once its change is below PREDICTOR_SHARE (a thousandth) of how far it lies from that
+  prediction: the prediction misses by about twice backward Euler's local error in the velocity, so the stop is a
+  thousandth of the step's own error, where the fixed one (1e-10) took four to six more passes of the law. A step
+  whose Newton's method fails starts its halves afresh.
 - ``newton-midpoint``: the newton step with the RFT force taken at the positions half a step ahead at the
   starting velocity, q + (dt / 2) v (the segments' and bodies' Jacobians and the elements below the surface; the
   stops stay where they are), and taken out of MuJoCo's forces where MuJoCo applied it, at q. The positions then
@@ -110,6 +115,10 @@ SURFACE_SPEED = 1e-3
 # Newton's method on attached surfaces alone keeps its slope while each full step cuts the residual at least this
 # much (SURFACE_DECREASE in steppers.c).
 SURFACE_DECREASE = 0.1
+# A newton step on attached surfaces alone that follows the stepper's last one starts from that step's velocity
+# change, scaled to the step, and stops once Newton's change is below this share of how far it lies from that
+# prediction (PREDICTOR_SHARE in steppers.c).
+PREDICTOR_SHARE = 1e-3
 
 
 def _native(name: str, *argtypes) -> Callable[..., int]:
@@ -281,10 +290,13 @@ class Implicit(_Counted):
         super().__init__()
         self.m, self.iterations, self.midpoint, self.peak = m, iterations, midpoint, peak
         self._traces = backend == "native" and peak is not None
+        # the last step's time after it, size and velocity change: the next step's prediction (PREDICTOR_SHARE)
+        self.history = np.full(m.nv + 2, np.nan)
         if backend == "native":
             # finrft_implicit_peak calls the method's own stepper, finrft_implicit_step, one step at a time
             self._native = _native(native_stepper if peak is None else "finrft_implicit_peak", ctypes.c_int,
                                    ctypes.c_int, ctypes.c_double, ctypes.POINTER(ctypes.c_int64),
+                                   ctypes.POINTER(ctypes.c_double),
                                    *(() if peak is None else (*_PEAK_ARGS, *_TRACE_ARGS)))
         else:
             self._native, self._python = None, PythonImplicit(m, groups, attached)
@@ -292,11 +304,14 @@ class Implicit(_Counted):
     def __call__(self, d: mujoco.MjData, n: int) -> int:
         if self._native is not None:
             return self._native(self.m._address, d._address, n, self.iterations, self.midpoint, self.counts,
+                                self.history.ctypes.data_as(ctypes.POINTER(ctypes.c_double)),
                                 *(() if self.peak is None else (*self.peak.native_args, *self._trace)))
         if self.peak is None:
-            return self._python.steps(d, n, self.m.opt.timestep, self.iterations, self.counts, self.midpoint)
+            return self._python.steps(d, n, self.m.opt.timestep, self.iterations, self.counts, self.midpoint,
+                                      self.history)
         for _ in range(n):
-            failed = self._python.steps(d, 1, self.m.opt.timestep, self.iterations, self.counts, self.midpoint)
+            failed = self._python.steps(d, 1, self.m.opt.timestep, self.iterations, self.counts, self.midpoint,
+                                        self.history)
             if failed:
                 return failed
             self.peak.take(self.m, d)
@@ -569,12 +584,14 @@ class PythonImplicit:
         mujoco.mj_comPos(m, d)
         return segments, stops, bodies
 
-    def velocity_change(self, d: mujoco.MjData, dt: float, iterations: int, midpoint: float = 0.0
-                        ) -> np.ndarray | None:
+    def velocity_change(self, d: mujoco.MjData, dt: float, iterations: int, midpoint: float = 0.0,
+                        guess: np.ndarray | None = None) -> np.ndarray | None:
         """The step's velocity change (after mj_forward): the linearly implicit step in the RFT force when
         ``iterations`` is 1; else the root of G with the penalty stops taken at the new positions too, by Newton's
         method, or None if it does not converge. With ``midpoint`` > 0 the RFT force is taken at the positions that
-        far ahead at the present velocity (as step_prepare in steppers.c)."""
+        far ahead at the present velocity (as step_prepare in steppers.c). Given ``guess`` (a predicted velocity
+        change; attached surfaces alone), Newton's method starts there and stops once its change is below
+        PREDICTOR_SHARE of how far it lies from the guess (or below the tolerance)."""
         m = self.m
         mujoco.mj_mulM(m, d, self._rhs, d.qacc)
         mujoco.mj_fullM(m, d, self._mass)
@@ -586,7 +603,8 @@ class PythonImplicit:
         taken = self._forces(forces, qvel, 0.0, False)[0] if ahead or midpoint > 0 else None
         if midpoint > 0:
             forces = self._segments_ahead(d, midpoint, forces[1])
-        force, slope = self._forces(forces, qvel, ahead, True, forward=iterations > 1)
+        start = qvel if guess is None else qvel + guess
+        force, slope = self._forces(forces, start, ahead, True, forward=iterations > 1)
         other = self._rhs - (force if taken is None else taken)
 
         at = [force]  # the RFT and stop forces at the last iterate whose residual was taken
@@ -598,15 +616,18 @@ class PythonImplicit:
         def small(g: np.ndarray) -> bool:  # residual_small in steppers.c
             return np.abs(g).max(initial=0.0) <= NEWTON_RESIDUAL * dt * max(np.abs(other).max(initial=0.0),
                                                                               np.abs(at[0]).max(initial=0.0))
-        dv = np.zeros(m.nv)
-        g = -dt * (other + force)
+        def converged(change: float, next_dv: np.ndarray) -> bool:  # change_small in steppers.c
+            miss = 0.0 if guess is None else PREDICTOR_SHARE * np.abs(next_dv - guess).max(initial=0.0)
+            return change <= max(self.tolerance * (1 + np.abs(qvel + next_dv).max(initial=0.0)), miss)
+        dv = np.zeros(m.nv) if guess is None else guess.copy()
+        g = matrix @ dv - dt * (other + force)
         # attached surfaces alone: the leaner Newton's method of newton_solve in steppers.c (the same root)
         lean, fresh = not self.laws, True
         for _ in range(iterations):
             step = np.linalg.solve(matrix - dt * slope, -g)
             if iterations == 1:
                 return step
-            if lean and np.abs(step).max() <= self.tolerance * (1 + np.abs(qvel + dv + step).max()) and small(g):
+            if lean and converged(np.abs(step).max(initial=0.0), dv + step) and small(g):
                 return dv + step
             norm, alpha = np.linalg.norm(g), 1.0
             while True:
@@ -615,8 +636,7 @@ class PythonImplicit:
                     break
                 alpha /= 2
             dv, g = dv + alpha * step, trial
-            if (np.abs(alpha * step).max() <= self.tolerance * (1 + np.abs(qvel + dv).max())
-                    and (fresh or alpha >= 1e-6) and small(g)):
+            if converged(np.abs(alpha * step).max(initial=0.0), dv) and (fresh or alpha >= 1e-6) and small(g):
                 return dv
             if lean and fresh and np.linalg.norm(trial) > (1 - 1e-4 * alpha) * norm:  # a kink: halve (steppers.c)
                 return None
@@ -626,30 +646,36 @@ class PythonImplicit:
         return None
 
     def steps(self, d: mujoco.MjData, n: int, dt: float, iterations: int, counts: Counts | None = None,
-              midpoint: float = 0.0) -> int:
+              midpoint: float = 0.0, history: np.ndarray | None = None) -> int:
         """``n`` steps of ``dt``, the RFT force at the positions a fraction ``midpoint`` of a step ahead; the steps
-        taken and rejected are added to ``counts`` when given."""
+        taken and rejected are added to ``counts`` when given; ``history`` as finrft_implicit_step's."""
         for _ in range(n):
-            failed = self.step(d, dt, iterations, 0, counts, midpoint)
+            failed = self.step(d, dt, iterations, 0, counts, midpoint, history)
             if failed:
                 return failed
         return 0
 
     def step(self, d: mujoco.MjData, dt: float, iterations: int, halvings: int, counts: Counts | None = None,
-             midpoint: float = 0.0) -> int:
+             midpoint: float = 0.0, history: np.ndarray | None = None) -> int:
         """One step of ``dt``; where Newton's method finds no root (forces that feed energy in, such as
         f_par < 0, can leave the implicit equation without one near v) it halves the step, at most
-        NEWTON_HALVINGS times (the step is rejected, its halves taken)."""
+        NEWTON_HALVINGS times (the step is rejected, its halves taken). ``history`` (or None): the last step's
+        time after it, size and velocity change, the prediction a newton step on attached surfaces alone that
+        starts at that time starts from (as implicit_step in steppers.c), which the step leaves for the next."""
         m = self.m
         mujoco.mj_forward(m, d)
-        dv = self.velocity_change(d, dt, iterations, midpoint * dt)
+        predicted = history is not None and iterations > 1 and not self.laws and history[0] == d.time
+        guess = history[2:] * (dt / history[1]) if predicted else None
+        dv = self.velocity_change(d, dt, iterations, midpoint * dt, guess)
+        if history is not None:
+            history[0] = np.nan  # the halves start afresh: a prediction may be what led Newton's method astray
         if dv is None:
             if iterations == 1 or halvings == NEWTON_HALVINGS:
                 return Code.NOT_CONVERGED
             if counts is not None:
                 counts[1] += 1
-            return (self.step(d, dt / 2, iterations, halvings + 1, counts, midpoint)
-                    or self.step(d, dt / 2, iterations, halvings + 1, counts, midpoint))
+            return (self.step(d, dt / 2, iterations, halvings + 1, counts, midpoint, history)
+                    or self.step(d, dt / 2, iterations, halvings + 1, counts, midpoint, history))
         for a in range(m.nu):
             adr = m.actuator_actadr[a]
             if adr < 0:
@@ -666,4 +692,6 @@ class PythonImplicit:
         d.qacc_warmstart[:] = d.qacc
         mujoco.mj_integratePos(m, d.qpos, d.qvel, dt)
         d.time += dt
+        if history is not None:
+            history[0], history[1], history[2:] = d.time, dt, dv
         return 0

@@ -211,7 +211,8 @@ void finrft_surface_law_force(const FinrftSurface* p, const mjtNum normal[3], co
 int finrft_surface_submerged(const FinrftSurface* p, const mjData* d, mjtNum* out);
 
 // The steppers (steppers.c), which the peak-keeping steppers (peaks.c) call.
-int finrft_implicit_step(const mjModel* m, mjData* d, int nstep, int iterations, mjtNum midpoint, int64_t* counts);
+int finrft_implicit_step(const mjModel* m, mjData* d, int nstep, int iterations, mjtNum midpoint, int64_t* counts,
+                         mjtNum* history);
 int finrft_adaptive_advance(const mjModel* m, mjData* d, mjtNum duration, mjtNum hmax, mjtNum tol, int iterations,
                             mjtNum* h, int64_t* counts);
 

@@ -65,10 +65,10 @@ FINRFT_EXPORT int finrft_explicit_peak(const mjModel* m, mjData* d, int nstep, i
 // finrft_implicit_step's steps, one at a time, the load taken after each (its forward pass leaves the medium's
 // force out: a full one is needed).
 FINRFT_EXPORT int finrft_implicit_peak(const mjModel* m, mjData* d, int nstep, int iterations, mjtNum midpoint,
-                                       int64_t* counts, int ndof, const int* dofs, mjtNum armature, mjtNum* peak,
-                                       int nwatch, const int* watch, mjtNum* trace) {
+                                       int64_t* counts, mjtNum* history, int ndof, const int* dofs,
+                                       mjtNum armature, mjtNum* peak, int nwatch, const int* watch, mjtNum* trace) {
   for (int i = 0; i < nstep; i++) {
-    int failed = finrft_implicit_step(m, d, 1, iterations, midpoint, counts);
+    int failed = finrft_implicit_step(m, d, 1, iterations, midpoint, counts, history);
     if (failed) return failed;
     trace_take(d, i, nwatch, watch, trace);
     mj_forward(m, d);

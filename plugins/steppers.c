@@ -58,6 +58,12 @@
 // Newton's method on attached surfaces alone keeps its slope while each full step cuts the residual at least this
 // much (see newton_solve).
 #define SURFACE_DECREASE 0.1
+// A newton step on attached surfaces alone, following a step of the same call (or of the same stepper's last call
+// that ended where it starts), starts from the velocity change that step made, scaled to the step: the predicted
+// change, which misses the root by about the change of the velocity change from step to step, twice backward
+// Euler's local error in the velocity. Newton's method then stops once its change is below this share of that
+// miss (or below the fixed tolerance), a thousandth of what the step's own error is.
+#define PREDICTOR_SHARE 1e-3
 
 // The forces the implicit methods take at the new velocity, as items: every RFT segment of the model (its instance,
 // site Jacobian and axes at the current positions), every body with attached surfaces (its finrft.surface instance
@@ -119,6 +125,12 @@ typedef struct {
   int has_applied;
   mjtNum* applied;
   mjtNum newton_tolerance;  // Newton's method stops when the change is below this times (1 + |qvel|)
+  // NULL, or the last step's time after it, its size and its velocity change (nv), which the newton method on
+  // attached surfaces alone takes as its next step's start (PREDICTOR_SHARE); guess (nv) holds that start, scaled to
+  // the step, and predicted says whether the step at hand has one
+  mjtNum* history;
+  mjtNum* guess;
+  int predicted;
   mjtNum* body_slopes;      // 36 per body: dW/dtwist at the start's velocity, taken with its wrench (rft_force)
 } Workspace;
 
@@ -161,7 +173,7 @@ static int workspace_make(const mjModel* m, mjData* d, Workspace* ws, int extra,
   int items = s->n + s->nbody;
   size_t rows = 3 * (size_t)s->n + 6 * (size_t)s->nbody;
   size_t numbers = rows * nv + 6 * (size_t)s->n + 2 * rows + (FINRFT_SUBMERGED + 3) * (size_t)nelement +
-                   2 * (size_t)s->nstop + 5 * (size_t)nv * nv + 14 * (size_t)nv + m->nq + (size_t)s->nstop + extra +
+                   2 * (size_t)s->nstop + 5 * (size_t)nv * nv + 15 * (size_t)nv + m->nq + (size_t)s->nstop + extra +
                    36 * (size_t)s->nbody;
   size_t ints = (size_t)items * (nv + 1) + s->n + s->nbody + 1 + s->nstop;
   size_t pointers = s->ninst + s->n + s->nbody;
@@ -206,10 +218,10 @@ static int workspace_make(const mjModel* m, mjData* d, Workspace* ws, int extra,
   }
   Newton* w = &ws->w;
   mjtNum** squares[] = {&w->matrix, &w->jacobian, &w->slope, &ws->mass, &ws->start_slope};
-  mjtNum** vectors[] = {&w->other, &w->force,     &w->dv, &w->step, &w->g,
-                        &w->trial, &w->candidate, &w->u,  &ws->rhs, &ws->start_force};
+  mjtNum** vectors[] = {&w->other, &w->force, &w->dv,  &w->step,  &w->g,           &w->trial,
+                        &w->candidate, &w->u, &ws->rhs, &ws->guess, &ws->start_force};
   for (int i = 0; i < 5; i++) *squares[i] = mj_stackAllocNum(d, (size_t)nv * nv + 1);
-  for (int i = 0; i < 10; i++) *vectors[i] = mj_stackAllocNum(d, nv + 1);
+  for (int i = 0; i < 11; i++) *vectors[i] = mj_stackAllocNum(d, nv + 1);
   ws->start_ready = 0;
   ws->midpoint = 0;
   ws->applied = mj_stackAllocNum(d, nv + 1);
@@ -220,6 +232,8 @@ static int workspace_make(const mjModel* m, mjData* d, Workspace* ws, int extra,
   if (extra_out) *extra_out = mj_stackAllocNum(d, extra);
   ws->counts = NULL;
   ws->newton_tolerance = NEWTON_TOLERANCE;
+  ws->history = NULL;
+  ws->predicted = 0;
   return 0;
 }
 
@@ -604,6 +618,18 @@ static int residual_small(const Newton* w, const mjtNum* g, int nv, mjtNum dt) {
   return size <= NEWTON_RESIDUAL * dt * scale;
 }
 
+// Whether a change of Newton's method as large as `change` (its largest component) that brings the velocity change
+// to `next` ends it: below the tolerance times (1 + |qvel + next|), or, from a predicted start, below
+// PREDICTOR_SHARE of how far next lies from the prediction.
+static int change_small(const Workspace* ws, const mjtNum* qvel, const mjtNum* next, mjtNum change) {
+  mjtNum scale = 0, miss = 0;
+  for (int i = 0; i < ws->items.nv; i++) {
+    scale = mju_max(scale, fabs(qvel[i] + next[i]));
+    if (ws->predicted) miss = mju_max(miss, fabs(next[i] - ws->guess[i]));
+  }
+  return change <= mju_max(ws->newton_tolerance * (1 + scale), PREDICTOR_SHARE * miss);
+}
+
 // The velocity change of one step from the start step_prepare saw into ws->w.dv (ws->rhs = M qacc at v). With
 // iterations == 1 the linearly implicit step in the RFT force (the first Newton iterate, no line search, stops as
 // MuJoCo computed them); otherwise the root of G, with the stops' torque taken at the new positions too, by
@@ -612,16 +638,23 @@ static int newton_solve(Workspace* ws, const mjtNum* qvel, mjtNum dt, int iterat
   const Items* s = &ws->items;
   Newton* w = &ws->w;
   int nv = s->nv;
-  mjtNum ahead = iterations > 1 ? dt : 0, tolerance = ws->newton_tolerance;
+  mjtNum ahead = iterations > 1 ? dt : 0;
   const mjtNum* rhs = ws->rhs;
-  if (!ws->start_ready) {
-    rft_force(s, qvel, ws->start_force, ws->body_slopes);
-    rft_slope(s, ws->start_slope, iterations > 1, ws->body_slopes);
-    if (iterations == 1) add_trailing_slopes(s, ws->start_slope);
-    ws->start_ready = 1;
+  if (ws->predicted) {
+    // from the predicted change: the force and its slope there (one pass of the law) start Newton's method
+    for (int i = 0; i < nv; i++) w->u[i] = qvel[i] + ws->guess[i];
+    rft_force(s, w->u, w->force, ws->body_slopes);
+    rft_slope(s, w->slope, 1, ws->body_slopes);
+  } else {
+    if (!ws->start_ready) {
+      rft_force(s, qvel, ws->start_force, ws->body_slopes);
+      rft_slope(s, ws->start_slope, iterations > 1, ws->body_slopes);
+      if (iterations == 1) add_trailing_slopes(s, ws->start_slope);
+      ws->start_ready = 1;
+    }
+    mju_copy(w->force, ws->start_force, nv);
+    mju_copy(w->slope, ws->start_slope, nv * nv);
   }
-  mju_copy(w->force, ws->start_force, nv);
-  mju_copy(w->slope, ws->start_slope, nv * nv);
   // other: every force but F and the stops', taken out where step_prepare's forward pass applied them
   mju_copy(w->other, rhs, nv);
   if (ws->has_applied) {
@@ -629,11 +662,10 @@ static int newton_solve(Workspace* ws, const mjtNum* qvel, mjtNum dt, int iterat
     stops_add(s, qvel, 0, w->trial, NULL);
     for (int i = 0; i < nv; i++) w->other[i] -= w->trial[i];
   }
-  stops_add(s, qvel, ahead, w->force, w->slope);
-  for (int i = 0; i < nv; i++) {
-    w->dv[i] = 0;
-    w->g[i] = -dt * (w->other[i] + w->force[i]);
-  }
+  stops_add(s, ws->predicted ? w->u : qvel, ahead, w->force, w->slope);
+  for (int i = 0; i < nv; i++) w->dv[i] = ws->predicted ? ws->guess[i] : 0;
+  mju_mulMatVec(w->g, w->matrix, w->dv, nv, nv);
+  for (int i = 0; i < nv; i++) w->g[i] -= dt * (w->other[i] + w->force[i]);
   mjtNum norm = mju_norm(w->g, nv);
   // With attached surfaces alone, a leaner Newton's method, to the same root: the slope is kept while full steps
   // cut the residual by SURFACE_DECREASE each (made fresh when they stop doing so, or when a search stalls on a
@@ -650,13 +682,13 @@ static int newton_solve(Workspace* ws, const mjtNum* qvel, mjtNum dt, int iterat
       return 0;
     }
     if (lean) {
-      mjtNum size = 0, scale = 0;
+      mjtNum size = 0;
       for (int i = 0; i < nv; i++) {
         size = mju_max(size, fabs(w->step[i]));
-        scale = mju_max(scale, fabs(qvel[i] + w->dv[i] + w->step[i]));
+        w->candidate[i] = w->dv[i] + w->step[i];
       }
-      if (size <= tolerance * (1 + scale) && residual_small(w, w->g, nv, dt)) {
-        for (int i = 0; i < nv; i++) w->dv[i] += w->step[i];
+      if (change_small(ws, qvel, w->candidate, size) && residual_small(w, w->g, nv, dt)) {
+        mju_copy(w->dv, w->candidate, nv);
         return 0;
       }
     }
@@ -667,16 +699,15 @@ static int newton_solve(Workspace* ws, const mjtNum* qvel, mjtNum dt, int iterat
       if (trial_norm <= (1 - 1e-4 * alpha) * norm || alpha < 1e-6) break;
       alpha /= 2;
     }
-    mjtNum change = 0, scale = 0;
+    mjtNum change = 0;
     for (int i = 0; i < nv; i++) {
       w->dv[i] += alpha * w->step[i];
       w->g[i] = w->trial[i];
       change = mju_max(change, fabs(alpha * w->step[i]));
-      scale = mju_max(scale, fabs(qvel[i] + w->dv[i]));
     }
     mjtNum before = norm;
     norm = trial_norm;
-    if (change <= tolerance * (1 + scale) && (fresh || alpha >= 1e-6) && residual_small(w, w->g, nv, dt)) return 0;
+    if (change_small(ws, qvel, w->dv, change) && (fresh || alpha >= 1e-6) && residual_small(w, w->g, nv, dt)) return 0;
     // On attached surfaces, a search that fails on a fresh slope has met a kink of a law (an element switching
     // on) with no descent left: iterating on creeps across it by 1e-6 of a step per iteration, at 20 residuals
     // each, so the step is halved at once instead (the sand-swimmer's steps: half the calls of the law).
@@ -788,8 +819,18 @@ static int step_take(const mjModel* m, mjData* d, mjtNum dt, int iterations, Wor
 static int implicit_step(const mjModel* m, mjData* d, mjtNum dt, int iterations, mjtNum midpoint, Workspace* ws,
                          int halvings) {
   step_prepare(m, d, ws, midpoint * dt);
+  mjtNum* history = ws->history;
+  ws->predicted = history && iterations > 1 && ws->items.n == 0 && history[0] == d->time;
+  for (int i = 0; ws->predicted && i < m->nv; i++) ws->guess[i] = history[2 + i] * (dt / history[1]);
   int failed = step_take(m, d, dt, iterations, ws);
+  if (history && !failed) {
+    history[0] = d->time;
+    history[1] = dt;
+    mju_copy(history + 2, ws->w.dv, m->nv);
+  }
   if (failed != FINRFT_NOT_CONVERGED) return failed;
+  // the halves start afresh: a prediction may be what led Newton's method astray
+  if (history) history[0] = NAN;
   if (iterations == 1 || halvings == NEWTON_HALVINGS) return FINRFT_NOT_CONVERGED;
   if (ws->counts) ws->counts[1]++;
   failed = implicit_step(m, d, dt / 2, iterations, midpoint, ws, halvings + 1);
@@ -798,13 +839,16 @@ static int implicit_step(const mjModel* m, mjData* d, mjtNum dt, int iterations,
 
 // The implicit (iterations == 1), newton and newton-midpoint (midpoint 0.5, else 0) methods: nstep steps of the
 // model's time step. counts (or NULL): the steps taken (a halved step counts as two) and rejected (halved) are
-// added to counts[0] and counts[1].
+// added to counts[0] and counts[1]. history (or NULL; nv + 2 numbers, NaN first before the first call): the last
+// step's time after it, size and velocity change, which a newton step on attached surfaces alone that starts at
+// that time takes as its start (PREDICTOR_SHARE), and which each step leaves there for the next.
 FINRFT_EXPORT int finrft_implicit_step(const mjModel* m, mjData* d, int nstep, int iterations, mjtNum midpoint,
-                                       int64_t* counts) {
+                                       int64_t* counts, mjtNum* history) {
   Workspace ws;
   mj_markStack(d);
   int failed = workspace_make(m, d, &ws, 0, NULL);
   ws.counts = counts;
+  ws.history = history;
   for (int step = 0; step < nstep && !failed; step++) {
     failed = implicit_step(m, d, m->opt.timestep, iterations, midpoint, &ws, 0);
   }

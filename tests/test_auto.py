@@ -199,6 +199,7 @@ def test_the_explicit_limit_of_a_box_dragged_through_the_sand_is_2_m_v_over_its_
     assert explicit_limit(m, d, (), attached) == np.inf  # at rest no element leads: no force, no limit
 
 
+@pytest.mark.slow  # two robots' auto runs end to end; explicit_limit itself is checked above
 def test_auto_pilots_no_explicit_step_beyond_a_light_robots_limit_and_does_below_a_heavy_ones(tmp_path):
     # The sandfish's 10 g links swim at ~0.13 ms; at 1 ms its explicit step ran through 35 % off and was piloted.
     # The 2 kg sled's limit is ~1.8 ms (module docstring): its explicit step at the scene's 1 ms is still piloted.

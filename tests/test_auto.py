@@ -76,6 +76,7 @@ def test_a_heavy_slow_sled_gets_the_explicit_step_and_says_why(tmp_path, capsys)
     assert s["wall_s"] >= choice["pilot_wall_s"] > 0
 
 
+@pytest.mark.slow  # the chosen method at an eighth of its step: a convergence check
 def test_the_sleds_choice_is_within_its_limits_of_a_converged_run(tmp_path):
     run = run_robot(load_scene(_sled(tmp_path), cls=UserScene))
     assert run.method_choice.method == "explicit"

@@ -76,6 +76,7 @@ def test_a_heavy_slow_sled_gets_the_explicit_step_and_says_why(tmp_path, capsys)
     assert s["wall_s"] >= choice["pilot_wall_s"] > 0
 
 
+@pytest.mark.slow  # the chosen method at an eighth of its step: a convergence check
 def test_the_sleds_choice_is_within_its_limits_of_a_converged_run(tmp_path):
     run = run_robot(load_scene(_sled(tmp_path), cls=UserScene))
     assert run.method_choice.method == "explicit"
@@ -252,6 +253,7 @@ def test_the_explicit_limit_over_a_run_ignores_a_body_creeping_and_one_reversal_
     assert window_limit([at(0.0, 0.005)], 1.0) == math.inf  # nothing moves: both slower than STILL
 
 
+@pytest.mark.slow  # two robots' auto runs end to end; explicit_limit itself is checked above
 def test_auto_pilots_no_explicit_step_beyond_a_light_robots_limit_and_does_below_a_heavy_ones(tmp_path):
     # The sandfish's 10 g links swim at ~0.13 ms; at 1 ms its explicit step ran through 35 % off and was piloted.
     # The 2 kg sled's limit is ~1.8 ms (module docstring): its explicit step at the scene's 1 ms is still piloted.

@@ -8,6 +8,7 @@ from finrft.experiments.swim import RobotScene
 from finrft.scene import preset
 
 
+@pytest.mark.slow  # the bench's gait and its converged reference, end to end
 def test_physical_gait_is_measured_against_a_converged_run():
     scene = preset("physical", RobotScene)
     out = bench.robot(scene, budget=2, workers=1, repeat=1, log=lambda text: None)

@@ -78,7 +78,7 @@ def test_a_block_hopping_at_rest_is_caught_and_a_resolved_rest_carries_its_weigh
     1 %, and nothing chatters."""
     t, message = reached(block("explicit", 1e-4))
     assert message and t < 1.0
-    run = finrft.run_robot(block("newton", 1e-3), max_error=None)
+    run = physics_run(block("newton", 1e-3))
     s = run.summary()
     weight = 0.5 * 9.81
     assert s["medium_force_N"][2] == pytest.approx(weight, rel=0.01)

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from finrft import media
+from finrft import experiment
 from finrft.experiments import wheel
 from finrft.laws import li2013
 from finrft.record import write_h5
@@ -25,7 +26,8 @@ def _wheel(backend: str, duration: float = 0.4, **settings: object) -> object:
                                    "medium.surface_point": (0.05, 0.0, 0.0), "medium.hfield_extent": 0.12,
                                    "medium.hfield_spacing": 0.004, "sim.duration": duration, "sim.settle": 0.1,
                                    "sim.backend": backend, **settings})
-    return wheel.run_wheel(scene, max_error=None)
+    # without the companion run of its error estimate: these tests check the surface, not the step
+    return experiment.run(wheel.Wheel.of(scene), scene, max_error=None, estimate_error=False)
 
 
 @pytest.fixture(scope="module")
@@ -169,6 +171,7 @@ def test_the_level_is_the_plugins_state():
     assert np.allclose(read(other)[0, 3:], flat, rtol=1e-12)
 
 
+@pytest.mark.slow  # a bench row: the wheel run on both surfaces, end to end
 def test_the_modelling_bench_compares_the_wheel_on_both_surfaces():
     from finrft.studies.bench import _wheel_surfaces
 

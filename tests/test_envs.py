@@ -15,6 +15,7 @@ import finrft  # noqa: E402
 import finrft.envs as envs  # noqa: E402
 from finrft.errors import SceneError  # noqa: E402
 from finrft.experiments.user_model import example  # noqa: E402
+from conftest import physics_run  # noqa: E402
 
 
 @pytest.mark.parametrize("env_id", list(envs.EXAMPLE_IDS))
@@ -56,7 +57,7 @@ def test_the_scenes_gait_as_actions_swims_as_the_run_does():
         action = env.world.scene_action(t)
         assert action == pytest.approx(np.array(ctrl) / 1.2, abs=1e-6)  # the servos' ctrlrange is +-1.2 rad
         rewards.append(env.step(action)[1])
-    run = finrft.run_robot(scene.replace(**{"sim.settle": 1.0}), max_error=None)
+    run = physics_run(scene.replace(**{"sim.settle": 1.0}))
     assert np.mean(rewards[1000:]) == pytest.approx(run.summary()["com_velocity_m_s"][0], rel=0.02)
     assert np.mean(rewards[1000:]) > 0.03  # it swims forward
 

@@ -8,7 +8,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from conftest import settling_box
+from conftest import physics_run, settling_box
 from finrft import integrate, methods
 from finrft.attach import attach
 from finrft.errors import Chatter
@@ -289,14 +289,13 @@ def test_the_linearly_implicit_step_holds_a_light_plate_settling(tmp_path):
     # takes as it leads again: the 50 g plate at 1 ms chattered (Chatter at 0.04 s) where central differences had
     # held it. Across the ramp's kink its slope is a secant (finrft_surface_trailing_slope): it rests, the
     # medium carrying its weight, in both twins.
-    import finrft
     from finrft.scene import UserScene, load_scene
     path = settling_box(tmp_path, "implicit")
     weight = 0.05 * 9.81
     forces = []
     for backend in ("native", "python"):
         scene = load_scene(str(path), cls=UserScene, overrides={"sim.backend": backend})
-        summary = finrft.run_robot(scene, max_error=None).summary()
+        summary = physics_run(scene).summary()
         assert summary["chatter"] is None
         assert summary["medium_force_N"][2] == pytest.approx(weight, rel=1e-3)
         assert abs(summary["com_velocity_m_s"][2]) < 1e-4  # at rest: creep at about li2013's v_reg

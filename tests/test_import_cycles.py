@@ -7,6 +7,8 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
+import pytest
+
 import finrft
 
 PACKAGE = Path(finrft.__file__).resolve().parent
@@ -44,7 +46,10 @@ def _imported(name: str, path: Path) -> set[str]:
     return found
 
 
-GRAPH = {name: _imported(name, path) for name, path in MODULES.items()}
+@pytest.fixture(scope="module")
+def graph() -> dict[str, set[str]]:
+    """Each finrft module's finrft imports: parsed when a test asks, not as every test process collects."""
+    return {name: _imported(name, path) for name, path in MODULES.items()}
 
 
 def _cycle(graph: dict[str, set[str]]) -> list[str]:
@@ -84,31 +89,31 @@ def floors(graph: dict[str, set[str]]) -> dict[str, int]:
     return level
 
 
-def test_the_walk_sees_relative_absolute_and_local_imports():
-    assert "finrft.scene" in GRAPH["finrft.models"]            # from .scene import ...
-    assert "finrft.laws" in GRAPH["finrft.scene"]              # from . import laws
-    assert "finrft.reference" in GRAPH["finrft.experiments.plate"]      # inside a function
-    assert "finrft.errors" in GRAPH["finrft.laws.table"]       # from ..errors import ...
-    assert "finrft.cli" in GRAPH["finrft.__main__"]
+def test_the_walk_sees_relative_absolute_and_local_imports(graph):
+    assert "finrft.scene" in graph["finrft.models"]            # from .scene import ...
+    assert "finrft.laws" in graph["finrft.scene"]              # from . import laws
+    assert "finrft.reference" in graph["finrft.experiments.plate"]      # inside a function
+    assert "finrft.errors" in graph["finrft.laws.table"]       # from ..errors import ...
+    assert "finrft.cli" in graph["finrft.__main__"]
     assert _cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
     assert floors({"a": {"b"}, "b": set()}) == {"a": 1, "b": 0}
 
 
-def test_no_import_cycle():
-    cycle = _cycle(GRAPH)
+def test_no_import_cycle(graph):
+    cycle = _cycle(graph)
     assert not cycle, "import cycle: " + " -> ".join(cycle)
 
 
-def test_the_floor_imports_only_the_floor():
+def test_the_floor_imports_only_the_floor(graph):
     for name in FLOOR:
-        assert GRAPH[name] <= set(FLOOR), f"{name} imports {sorted(GRAPH[name] - set(FLOOR))}"
+        assert graph[name] <= set(FLOOR), f"{name} imports {sorted(graph[name] - set(FLOOR))}"
 
 
-def test_laws_import_only_the_floor_and_their_registry():
+def test_laws_import_only_the_floor_and_their_registry(graph):
     allowed = set(FLOOR) | {"finrft.laws"}
     # li2013-planar is Li's fit in another plane: it takes the fit (coefficients, alpha, parameters) from li2013
     shared = {"finrft.laws.li2013_planar": {"finrft.laws.li2013"}}
     for name in MODULES:
         if name.startswith("finrft.laws."):
             extra = shared.get(name, set())
-            assert GRAPH[name] <= allowed | extra, f"{name} imports {sorted(GRAPH[name] - allowed - extra)}"
+            assert graph[name] <= allowed | extra, f"{name} imports {sorted(graph[name] - allowed - extra)}"

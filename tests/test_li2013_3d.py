@@ -4,6 +4,7 @@ continuity where its plane degenerates, the wheel experimenters' own predictions
 and the planar form's warning."""
 
 import csv
+import functools
 import math
 import warnings
 
@@ -91,18 +92,29 @@ def test_continuous_where_the_plane_degenerates():
     assert np.abs(np.diff(force, axis=0)).max() < 1e-3
 
 
+WHEEL_RADIUS = 0.0625
+
+
+@functools.cache
+def _wheel_model(h: float) -> mujoco.MjModel:
+    """The cylinder of `_wheel_force`, its hub at the origin (a row's sinkage is its state): one build for every
+    row."""
+    spec = mujoco.MjSpec.from_string(f"""<mujoco><option gravity="0 0 0"/><worldbody>
+      <body name="wheel"><freejoint/>
+      <geom type="cylinder" size="{WHEEL_RADIUS} 0.03" euler="90 0 0" mass="1"/></body></worldbody></mujoco>""")
+    attach(spec, ["wheel"], law="li2013", zeta=0.6, element_size=h, v_reg=1e-6)
+    return spec.compile()
+
+
 def _wheel_force(row: dict, h: float) -> np.ndarray:
     """The force (N) of li2013 (zeta 0.6) on an exact cylinder in the condition of a row, regularised over 1 um/s
     only: enough that the side discs, which move in their own plane at beta = 0, do not lead by rounding (their
     normals carry 1e-16 of z), too little to change anything else at 10 mm/s: radius 62.5 mm, width 60 mm, its lowest point sinkage below the surface, the hub moving at
     10 mm/s at the slip angle, spinning forward about the axle (+y) at omega."""
-    radius, sinkage, beta = 0.0625, float(row["sinkage_mm"]) * 1e-3, math.radians(float(row["beta_deg"]))
-    spec = mujoco.MjSpec.from_string(f"""<mujoco><option gravity="0 0 0"/><worldbody>
-      <body name="wheel" pos="0 0 {radius - sinkage}"><freejoint/>
-      <geom type="cylinder" size="{radius} 0.03" euler="90 0 0" mass="1"/></body></worldbody></mujoco>""")
-    attach(spec, ["wheel"], law="li2013", zeta=0.6, element_size=h, v_reg=1e-6)
-    model = spec.compile()
+    sinkage, beta = float(row["sinkage_mm"]) * 1e-3, math.radians(float(row["beta_deg"]))
+    model = _wheel_model(h)
     state = mujoco.MjData(model)
+    state.qpos[2] = WHEEL_RADIUS - sinkage
     state.qvel[:] = [0.01 * math.cos(beta), 0.01 * math.sin(beta), 0, 0, float(row["omega_model_rad_s"]), 0]
     mujoco.mj_forward(model, state)
     return state.qfrc_passive[:3].copy()

@@ -168,7 +168,8 @@ def test_newton_on_light_segments_matches_reference_at_large_steps(backend):
     ref = None
     for dt, angle, force in ((1e-3, 0.01, 0.005), (1e-2, 0.05, 0.03)):
         run = simulate(light.replace(**{"sim.dt": dt}), drive, estimate_error=False)
-        ref = ref or reference.solve(light, drive, run.time, rtol=1e-7, atol=1e-10)
+        # Radau at rtol 1e-5 is within 2e-6 deg and 1e-6 of the peak force of its solution at 1e-7
+        ref = ref or reference.solve(light, drive, run.time, rtol=1e-5, atol=1e-8)
         assert np.degrees(np.abs(run.segment_angle - ref.segment_angle)).max() < angle
         assert np.abs(run.drive_force - ref.drive_force).max() < force * run.peak_drive_force
     assert np.degrees(run.hinge_angle.min()) < -8  # the plate did fold
@@ -258,6 +259,7 @@ def test_adaptive_newton_converges_to_newton_on_the_light_plate():
     assert np.degrees(fine.hinge_angle.min()) < -8  # the plate did fold
 
 
+@pytest.mark.slow  # four swims of the physical robot, two at 1e5 steps a stroke: a convergence study
 def test_adaptive_newton_converges_to_newton_on_the_physical_robot():
     # Newton at strokes of 5e4 and 1e5 steps (reversals on the grid), extrapolated to dt -> 0 as a first-order
     # method: adaptive-newton's eta and hinge angles at the preset's tolerance and at 1/10 of it.

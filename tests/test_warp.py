@@ -210,11 +210,10 @@ def test_implicit_step_is_the_native_one(method):
 def test_implicit_step_settles_a_light_box_at_1_ms(tmp_path):
     """A 50 g box settling into the medium at 1 ms (conftest.settling_box): the Warp implicit and newton steps come
     to the native newton run's depth, where the explicit step, light as the box is, throws it out of the medium."""
-    from conftest import settling_box
-    from finrft.experiments.user_model import run_robot
+    from conftest import physics_run, settling_box
     path = settling_box(tmp_path, "newton")
     scene = load_scene(str(path), cls=UserScene)
-    depth = run_robot(scene, max_error=None).com_position[-1, 2]
+    depth = physics_run(scene).com_position[-1, 2]
     built = build_attached(scene_spec(scene), [], scene.model.bodies, scene.medium,
                            dataclasses.replace(scene.sim, backend="warp"), scene.model.geoms)
     steps = int(round(scene.duration / scene.sim.dt))

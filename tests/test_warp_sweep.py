@@ -38,6 +38,8 @@ def _velocity(figures: dict, name: str = "com_velocity_m_s") -> np.ndarray:
     return np.array([figures[f"{name}.{i}"] for i in range(3)])
 
 
+# a Warp sweep and four native runs with their companions, end to end: with the slow studies
+@pytest.mark.slow
 def test_a_warp_sweep_follows_the_native_runs_one_by_one(capsys):
     args = ["sweep", "--example", "sand_swimmer", *(f"--set={k}={v}" for k, v in SETS.items()),
             *(f"--grid={g}" for g in GRID), "--backend", "warp", "--json", "--quiet"]

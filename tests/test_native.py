@@ -206,7 +206,8 @@ for method in ("implicit", "newton", "newton-midpoint", "adaptive", "adaptive-ne
             args = (robot.model._address, d._address, n * scene.sim.dt, advance.max_step, advance.tolerance,
                     advance.iterations, ctypes.byref(h), advance.counts)
         else:
-            args = (robot.model._address, d._address, n, advance.iterations, advance.midpoint, advance.counts)
+            args = (robot.model._address, d._address, n, advance.iterations, advance.midpoint, advance.counts,
+                    advance.history.ctypes.data_as(ctypes.POINTER(ctypes.c_double)))
         counter.count_start()
         code = advance._native(*args)
         out[f"{method}/{n}"] = counter.count_stop()

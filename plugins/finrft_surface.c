@@ -1000,9 +1000,9 @@ static void deforming_reach(FinrftSurface* p) {
 }
 
 // Every element's depth below a deforming surface's level, into p->scratch + 3 n: an element's height in the grid's
-// frame costs three products, and only those below the highest grid point of their part of the body's reach are
-// interpolated (finrft_deforming_body_depths); the rest (most of a wheel's) get a depth <= 0, no force. As
-// finrft_deforming_depth where the depth is positive.
+// frame costs three products, and only those below the highest grid point within the body's reach are interpolated
+// (finrft_deforming_body_depths); the rest (most of a wheel's) get a depth <= 0, no force. As finrft_deforming_depth
+// where the depth is positive.
 static const double* deforming_element_depths(const FinrftSurface* p, const mjData* d) {
   const FinrftField* f = &p->field;
   const mjtNum* origin = d->xpos + 3 * p->body;

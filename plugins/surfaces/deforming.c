@@ -58,20 +58,10 @@ static inline double local_depth(const FinrftDeformingGrid* g, const double loca
   return pile ? g->pile_factor * deformed : fmin(deformed, below_original);
 }
 
-// A body's box split into this many tiles a side, each with its own highest grid point: an element above its tile's
-// is out of the sand without interpolating the grid (a wheel's rear over its rut, below the berm ahead).
-#define TILES 4
-
 void finrft_deforming_body_depths(const FinrftDeformingGrid* g, const double at[3], const double turn[9], double reach,
                                   int n, const double* element, int stride, double* depth) {
-  double tops[TILES * TILES], top = -INFINITY, side = 2 * reach / TILES;
-  for (int b = 0; b < TILES; b++) {
-    for (int a = 0; a < TILES; a++) {
-      double low[2] = {at[0] - reach + a * side, at[1] - reach + b * side}, high[2] = {low[0] + side, low[1] + side};
-      tops[b * TILES + a] = finrft_deforming_top(g, low, high) - at[2];  // as the elements' heights, from `at`
-      top = fmax(top, tops[b * TILES + a]);
-    }
-  }
+  double low[2] = {at[0] - reach, at[1] - reach}, high[2] = {at[0] + reach, at[1] + reach};
+  double top = finrft_deforming_top(g, low, high) - at[2];  // as the elements' heights, from `at`
   for (int i = 0; i < n; i++) {
     const double* e = element + stride * i;
     double height = turn[6] * e[0] + turn[7] * e[1] + turn[8] * e[2];
@@ -79,16 +69,8 @@ void finrft_deforming_body_depths(const FinrftDeformingGrid* g, const double at[
       depth[i] = top - height;
       continue;
     }
-    double x = turn[0] * e[0] + turn[1] * e[1] + turn[2] * e[2], y = turn[3] * e[0] + turn[4] * e[1] + turn[5] * e[2];
-    double u = (x + reach) / side, v = (y + reach) / side;
-    if (u >= 0 && u < TILES && v >= 0 && v < TILES) {
-      double tile = tops[(int)v * TILES + (int)u];
-      if (height >= tile) {
-        depth[i] = tile - height;
-        continue;
-      }
-    }
-    double local[3] = {at[0] + x, at[1] + y, at[2] + height};
+    double local[3] = {at[0] + turn[0] * e[0] + turn[1] * e[1] + turn[2] * e[2],
+                       at[1] + turn[3] * e[0] + turn[4] * e[1] + turn[5] * e[2], at[2] + height};
     depth[i] = local_depth(g, local, 1);
   }
 }

@@ -618,23 +618,26 @@ static int read_field(const mjModel* m, int instance, FinrftSurface* p) {
   }
   if (f->kind != FINRFT_FIELD_HFIELD && f->kind != FINRFT_FIELD_DEFORMING) return 0;
   const char* text = mj_getPluginConfig(m, instance, "hfield");
-  int count = text ? read_numbers(text, NULL, 0) : -1;
-  double head[16];
-  if (count < 16 || read_numbers(text, head, 16) < 16 || head[0] < 2 || head[1] < 2 ||
-      head[0] != floor(head[0]) || head[1] != floor(head[1]) || count != 16 + head[0] * head[1]) {
+  // read once (a grid's text is long): a number takes at least a character and a separator
+  int capacity = text ? (int)(strlen(text) / 2 + 1) : 0;
+  double* all = capacity ? (double*)malloc(capacity * sizeof(double)) : NULL;
+  if (text && !all) return -1;
+  int count = all ? read_numbers(text, all, capacity) : -1;
+  if (count < 16 || all[0] < 2 || all[1] < 2 || all[0] != floor(all[0]) || all[1] != floor(all[1]) ||
+      count != 16 + all[0] * all[1]) {
+    free(all);
     mju_warning("finrft.surface: config 'hfield' must be nrow ncol (at least 2 each), size (2), centre (3), frame "
                 "(9) and nrow x ncol heights");
     return -1;
   }
-  double* all = (double*)malloc(count * sizeof(double));
-  if (!all) return -1;
-  read_numbers(text, all, count);
-  f->nrow = (int)head[0];
-  f->ncol = (int)head[1];
+  f->nrow = (int)all[0];
+  f->ncol = (int)all[1];
   memcpy(f->size, all + 2, 2 * sizeof(double));
   memcpy(f->centre, all + 4, 3 * sizeof(double));
   memcpy(f->frame, all + 7, 9 * sizeof(double));
   memmove(all, all + 16, (count - 16) * sizeof(double));
+  double* heights = (double*)realloc(all, (count - 16) * sizeof(double));  // the heights only
+  if (heights) all = heights;
   if (f->kind == FINRFT_FIELD_DEFORMING) {
     f->original = all;  // its heights, the level, are state: in d->plugin_state (finrft_surface_instance)
   } else {
@@ -781,9 +784,12 @@ static int surface_init(const mjModel* m, mjData* d, int instance) {
 static int surface_nstate(const mjModel* m, int instance) {
   const char* kind = mj_getPluginConfig(m, instance, "surface");
   const char* text = mj_getPluginConfig(m, instance, "hfield");
-  double head[2];
-  if (!kind || strcmp(kind, "deforming") || !text || read_numbers(text, head, 2) < 2) return 0;
-  return head[0] >= 2 && head[1] >= 2 ? (int)head[0] * (int)head[1] : 0;
+  if (!kind || strcmp(kind, "deforming") || !text) return 0;
+  // the grid's first two numbers, without reading its heights (read_field checks the rest)
+  char *end = NULL, *next = NULL;
+  double nrow = strtod(text, &end), ncol = strtod(end, &next);
+  if (end == text || next == end) return 0;
+  return nrow >= 2 && ncol >= 2 ? (int)nrow * (int)ncol : 0;
 }
 
 static void surface_destroy(mjData* d, int instance) {
@@ -994,9 +1000,9 @@ static void deforming_reach(FinrftSurface* p) {
 }
 
 // Every element's depth below a deforming surface's level, into p->scratch + 3 n: an element's height in the grid's
-// frame costs three products (w . e, w the grid's up axis in the body's frame), and only those below the highest
-// grid point within the body's reach are placed on the grid and interpolated; the rest (most of a wheel's) get that
-// height less theirs, <= 0, no force. As finrft_deforming_depth where the depth is positive.
+// frame costs three products, and only those below the highest grid point within the body's reach are interpolated
+// (finrft_deforming_body_depths); the rest (most of a wheel's) get a depth <= 0, no force. As finrft_deforming_depth
+// where the depth is positive.
 static const double* deforming_element_depths(const FinrftSurface* p, const mjData* d) {
   const FinrftField* f = &p->field;
   const mjtNum* origin = d->xpos + 3 * p->body;
@@ -1006,28 +1012,15 @@ static const double* deforming_element_depths(const FinrftSurface* p, const mjDa
   finrft_deforming_grid(&grid, f->nrow, f->ncol, f->heights, f->original, f->pile_factor, f->size, f->centre,
                         f->frame);
   if (!(p->reach > 0)) deforming_reach((FinrftSurface*)p);
-  // the body's origin in the grid's frame, its up axis in the body's
-  double at[3], w[3], up[3] = {f->frame[2], f->frame[5], f->frame[8]};
+  // the body's origin in the grid's frame, and its axes turned into the grid's: frame^T R
+  double at[3], turn[9];
   finrft_grid_local(&grid.grid, origin, at);
-  mju_mulMatTVec3(w, R, up);
-  double low[2] = {at[0] - p->reach, at[1] - p->reach}, high[2] = {at[0] + p->reach, at[1] + p->reach};
-  double top = finrft_deforming_top(&grid, low, high) - at[2];  // as the elements' heights, from the origin
-  for (int i = 0; i < p->n; i++) {
-    const double* e = p->element + 7 * i;
-    double height = w[0] * e[0] + w[1] * e[1] + w[2] * e[2];
-    if (height >= top) {
-      depth[i] = top - height;
-      continue;
+  for (int j = 0; j < 3; j++) {
+    for (int k = 0; k < 3; k++) {
+      turn[3 * j + k] = f->frame[j] * R[k] + f->frame[3 + j] * R[3 + k] + f->frame[6 + j] * R[6 + k];
     }
-    // the element's place in the grid's frame: the origin's, plus its arm R e turned into the grid's frame
-    double arm[3] = {R[0] * e[0] + R[1] * e[1] + R[2] * e[2], R[3] * e[0] + R[4] * e[1] + R[5] * e[2],
-                     R[6] * e[0] + R[7] * e[1] + R[8] * e[2]};
-    double local[3];
-    for (int j = 0; j < 3; j++) {
-      local[j] = at[j] + arm[0] * f->frame[j] + arm[1] * f->frame[3 + j] + arm[2] * f->frame[6 + j];
-    }
-    depth[i] = finrft_deforming_local_depth(&grid, local, 1);
   }
+  finrft_deforming_body_depths(&grid, at, turn, p->reach, p->n, p->element, 7, depth);
   return depth;
 }
 // ---- end of the deforming surface's elements ----

@@ -47,7 +47,7 @@ static inline double bilinear(const double* h, int ncol, int i, double fu, doubl
          fu * fv * h[i + ncol + 1];
 }
 
-double finrft_deforming_local_depth(const FinrftDeformingGrid* g, const double local[3], int submerged_only) {
+static inline double local_depth(const FinrftDeformingGrid* g, const double local[3], int submerged_only) {
   int i, ncol = g->grid.ncol;
   double fu, fv;
   cell_of(g, local[0], local[1], &i, &fu, &fv);
@@ -56,6 +56,23 @@ double finrft_deforming_local_depth(const FinrftDeformingGrid* g, const double l
   double below_original = bilinear(g->original, ncol, i, fu, fv) - local[2];
   int pile = deformed > 0 && below_original <= 0;
   return pile ? g->pile_factor * deformed : fmin(deformed, below_original);
+}
+
+void finrft_deforming_body_depths(const FinrftDeformingGrid* g, const double at[3], const double turn[9], double reach,
+                                  int n, const double* element, int stride, double* depth) {
+  double low[2] = {at[0] - reach, at[1] - reach}, high[2] = {at[0] + reach, at[1] + reach};
+  double top = finrft_deforming_top(g, low, high) - at[2];  // as the elements' heights, from `at`
+  for (int i = 0; i < n; i++) {
+    const double* e = element + stride * i;
+    double height = turn[6] * e[0] + turn[7] * e[1] + turn[8] * e[2];
+    if (height >= top) {
+      depth[i] = top - height;
+      continue;
+    }
+    double local[3] = {at[0] + turn[0] * e[0] + turn[1] * e[1] + turn[2] * e[2],
+                       at[1] + turn[3] * e[0] + turn[4] * e[1] + turn[5] * e[2], at[2] + height};
+    depth[i] = local_depth(g, local, 1);
+  }
 }
 
 double finrft_deforming_top(const FinrftDeformingGrid* g, const double low[2], const double high[2]) {
@@ -84,7 +101,7 @@ int finrft_deforming_depth(int nrow, int ncol, const double* heights, const doub
   for (int k = 0; k < n; k++) {
     double local[3];
     finrft_grid_local(&grid.grid, points + 3 * k, local);
-    depth[k] = finrft_deforming_local_depth(&grid, local, 0);
+    depth[k] = local_depth(&grid, local, 0);
   }
   return 0;
 }
@@ -244,81 +261,79 @@ int finrft_deforming_sweep(int nrow, int ncol, double* heights, const double siz
                occupied);
 }
 
+// The box (r0, r1, c0, c1) grown to hold the point i.
+static void grow(int box[4], int ncol, int i) {
+  int r = i / ncol, c = i % ncol;
+  if (r < box[0]) box[0] = r;
+  if (r > box[1]) box[1] = r;
+  if (c < box[2]) box[2] = c;
+  if (c > box[3]) box[3] = c;
+}
+
 // Only an edge steeper than the tolerance flows, and only edges next to a point that changed in the last iteration
-// can start to (one that did not change kept its excess, and one with excess moved sand), so each iteration looks
-// at the box of the points that changed, one point wider: the same heights as the twin's sweep over the whole grid,
-// at the cost of the disturbed region. `box` (rows r0..r1, columns c0..c1) holds at the start every edge that may
-// flow, and at the end those that still would (r0 > r1: none). The iterations taken, or -1.
+// can start to (one that did not change kept its excess, and one with excess moved sand), so the first iteration
+// looks at the edges of the points in `box` and each later one at those of the points the last one changed: the
+// same heights as the twin's sweep over the whole grid, at the cost of the flowing edges. `box` (rows r0..r1,
+// columns c0..c1) holds at the start every edge that may flow, and at the end those that still would (r0 > r1:
+// none). The iterations taken, or -1 (also when out of memory, the heights as they were).
 static int relax_box(int nrow, int ncol, double* heights, double dx, double dy, double slope,
-                     const unsigned char* blocked, double tolerance, int max_iterations, double* flow, int box[4]) {
-  // flow[i]: from point i to i + 1 (x), flow[cells + i]: from i to i + ncol (y), written for the edges in the box
-  double* flow_x = flow;
-  double* flow_y = flow + nrow * ncol;
-  int result = -1, r0 = box[0], r1 = box[1], c0 = box[2], c1 = box[3];  // the box of points to look at
-  int cr0 = nrow, cr1 = -1, cc0 = ncol, cc1 = -1;  // the box of points that change
-  double rise_x = slope * dx, rise_y = slope * dy, over_x = tolerance * dx, over_y = tolerance * dy;
+                     const unsigned char* blocked, double tolerance, int max_iterations, int box[4]) {
+  int cells = nrow * ncol, result = -1, npoint = 0, nedge = 0;
+  // the points whose edges are looked at, the flowing edges (2 i: from point i along x, 2 i + 1: along y) and their
+  // flows (from the edge's first point to its second), whether a point is listed
+  int* points = malloc(sizeof(int) * 3 * cells);
+  double* flows = malloc(sizeof(double) * 2 * cells);
+  unsigned char* listed = calloc(cells, 1);
+  if (!points || !flows || !listed) {
+    free(points), free(flows), free(listed);
+    return -1;
+  }
+  int* edges = points + cells;
+  double rise[2] = {slope * dx, slope * dy}, over[2] = {tolerance * dx, tolerance * dy};
+  for (int r = box[0]; r <= box[1]; r++) {
+    for (int i = r * ncol + box[2]; i <= r * ncol + box[3]; i++) points[npoint++] = i, listed[i] = 1;
+  }
   for (int iteration = 0; iteration <= max_iterations; iteration++) {
-    cr0 = nrow, cr1 = -1, cc0 = ncol, cc1 = -1;
-    for (int r = r0; r <= r1; r++) {
-      const double* h = heights + r * ncol;
-      double* fx = flow_x + r * ncol;
-      int first = ncol, last = -1;  // the row's points at an edge that flows
-      for (int c = c0; c < c1; c++) {
-        double step = h[c + 1] - h[c], excess = fabs(step) - rise_x;
-        fx[c] = 0;
-        if (excess > over_x && (!blocked || (!blocked[r * ncol + c] && !blocked[r * ncol + c + 1]))) {
-          fx[c] = -copysign(RELAX_RATE * excess, step);
-          if (first > c) first = c;
-          last = c + 1;
+    nedge = 0;
+    for (int k = 0; k < npoint; k++) {
+      int i = points[k], r = i / ncol, c = i - r * ncol;
+      // the edges to the next point along x and y, and from the previous ones unless those are listed themselves
+      int from[4] = {i, i - 1, i, i - ncol}, axis[4] = {0, 0, 1, 1};
+      int has[4] = {c < ncol - 1, c > 0 && !listed[i - 1], r < nrow - 1, r > 0 && !listed[i - ncol]};
+      for (int j = 0; j < 4; j++) {
+        if (!has[j]) continue;
+        int a = from[j], b = a + (axis[j] ? ncol : 1);
+        double step = heights[b] - heights[a], excess = fabs(step) - rise[axis[j]];
+        if (excess > over[axis[j]] && (!blocked || (!blocked[a] && !blocked[b]))) {
+          edges[nedge] = 2 * a + axis[j];
+          flows[nedge++] = -copysign(RELAX_RATE * excess, step);
         }
-      }
-      if (r < r1) {
-        double* fy = flow_y + r * ncol;
-        for (int c = c0; c <= c1; c++) {
-          double step = h[c + ncol] - h[c], excess = fabs(step) - rise_y;
-          fy[c] = 0;
-          if (excess > over_y && (!blocked || (!blocked[r * ncol + c] && !blocked[(r + 1) * ncol + c]))) {
-            fy[c] = -copysign(RELAX_RATE * excess, step);
-            if (first > c) first = c;
-            if (last < c) last = c;
-            if (cr1 < r + 1) cr1 = r + 1;
-          }
-        }
-      }
-      if (last >= 0) {
-        if (cr0 > r) cr0 = r;
-        if (cr1 < r) cr1 = r;
-        if (cc0 > first) cc0 = first;
-        if (cc1 < last) cc1 = last;
       }
     }
-    if (cr1 < 0) {
+    for (int k = 0; k < npoint; k++) listed[points[k]] = 0;
+    if (!nedge) {
       result = iteration;
       break;
     }
     if (iteration == max_iterations) break;
-    // each point takes what flows in from its neighbours in the box and gives what flows out (edges leaving the box
-    // have no flow: both their points are as the last iteration left them, without excess between)
-    for (int r = r0; r <= r1; r++) {
-      double* h = heights + r * ncol;
-      const double* fx = flow_x + r * ncol;
-      const double* fy = flow_y + r * ncol;
-      for (int c = c0; c <= c1; c++) {
-        double change = 0;
-        if (c < c1) change -= fx[c];
-        if (c > c0) change += fx[c - 1];
-        if (r < r1) change -= fy[c];
-        if (r > r0) change += fy[c - ncol];
-        h[c] += change;
-      }
+    // every flow from the heights the check saw; the points it changes are the next iteration's
+    npoint = 0;
+    for (int k = 0; k < nedge; k++) {
+      int a = edges[k] >> 1, b = a + (edges[k] & 1 ? ncol : 1);
+      heights[a] -= flows[k];
+      heights[b] += flows[k];
+      if (!listed[a]) listed[a] = 1, points[npoint++] = a;
+      if (!listed[b]) listed[b] = 1, points[npoint++] = b;
     }
-    r0 = cr0 > 0 ? cr0 - 1 : 0;
-    r1 = cr1 < nrow - 1 ? cr1 + 1 : nrow - 1;
-    c0 = cc0 > 0 ? cc0 - 1 : 0;
-    c1 = cc1 < ncol - 1 ? cc1 + 1 : ncol - 1;
   }
   // where sand would still flow: the points of the edges the last check found steeper than the tolerance
-  box[0] = cr0, box[1] = cr1, box[2] = cc0, box[3] = cc1;
+  box[0] = nrow, box[1] = -1, box[2] = ncol, box[3] = -1;
+  for (int k = 0; k < nedge; k++) {
+    int a = edges[k] >> 1, b = a + (edges[k] & 1 ? ncol : 1);
+    grow(box, ncol, a);
+    grow(box, ncol, b);
+  }
+  free(points), free(flows), free(listed);
   return result;
 }
 
@@ -330,22 +345,9 @@ static int relax_checked(int nrow, int ncol, const double size[2], double repose
 int finrft_deforming_relax(int nrow, int ncol, double* heights, const double size[2], double repose,
                            const unsigned char* blocked, double tolerance, int max_iterations) {
   if (relax_checked(nrow, ncol, size, repose, tolerance)) return FINRFT_SURFACE_BAD_INPUT;
-  double* flow = malloc(sizeof(double) * 2 * nrow * ncol);
-  if (!flow) return FINRFT_SURFACE_BAD_INPUT;
   int box[4] = {0, nrow - 1, 0, ncol - 1};
-  int result = relax_box(nrow, ncol, heights, 2 * size[0] / (ncol - 1), 2 * size[1] / (nrow - 1), tan(repose),
-                         blocked, tolerance, max_iterations, flow, box);
-  free(flow);
-  return result;
-}
-
-// The box (r0, r1, c0, c1) grown to hold the point i.
-static void grow(int box[4], int ncol, int i) {
-  int r = i / ncol, c = i % ncol;
-  if (r < box[0]) box[0] = r;
-  if (r > box[1]) box[1] = r;
-  if (c < box[2]) box[2] = c;
-  if (c > box[3]) box[3] = c;
+  return relax_box(nrow, ncol, heights, 2 * size[0] / (ncol - 1), 2 * size[1] / (nrow - 1), tan(repose), blocked,
+                   tolerance, max_iterations, box);
 }
 
 int finrft_deforming_step(FinrftDeforming* s, const double g[3], int n, const double* points, const double* areas,
@@ -368,34 +370,31 @@ int finrft_deforming_step(FinrftDeforming* s, const double g[3], int n, const do
     }
   }
   double dx = 2 * s->size[0] / (ncol - 1), dy = 2 * s->size[1] / (nrow - 1);
-  // before (cells), the relaxation's flows (2 cells), the points under the body before (cells bytes)
-  double* before = malloc(sizeof(double) * 3 * cells + cells);
+  // before (cells), the points under the body before (cells bytes)
+  double* before = malloc(sizeof(double) * cells + cells);
   if (!before) {
     free(pushing);
     return FINRFT_SURFACE_BAD_INPUT;
   }
-  double* flow = before + cells;
-  unsigned char* was = (unsigned char*)(flow + 2 * cells);
+  unsigned char* was = (unsigned char*)(before + cells);
   memcpy(before, s->heights, sizeof(double) * cells);
   memcpy(was, s->occupied, cells);
   // the grid points under the body (DeformingSurface._covered): nearest to an element below the level, and their
   // neighbours; `entered` (was not under before) is read from s->under before it is replaced
-  unsigned char* under = s->under;  // 1: under at the last step; 2: near an element now; 4: under now
+  unsigned char* under = s->under;  // 1: under at the last step; 4: under now
   FinrftGrid grid = make_grid(nrow, ncol, s->heights, s->size, s->centre, s->frame);
   for (int e = 0; e < n; e++) {
     double p[3];
     finrft_grid_local(&grid, points + 3 * e, p);
     int c = (int)floor((p[0] + s->size[0]) / dx + 0.5), r = (int)floor((p[1] + s->size[1]) / dy + 0.5);
     if (c < 0 || c >= ncol || r < 0 || r >= nrow) continue;
-    if (p[2] < s->level[r * ncol + c] + TOUCH) under[r * ncol + c] |= 2;
-  }
-  for (int r = 0; r < nrow; r++) {
-    for (int c = 0; c < ncol; c++) {
-      int i = r * ncol + c;
-      if ((under[i] & 2) || (r > 0 && (under[i - ncol] & 2)) || (r < nrow - 1 && (under[i + ncol] & 2)) ||
-          (c > 0 && (under[i - 1] & 2)) || (c < ncol - 1 && (under[i + 1] & 2))) {
-        under[i] |= 4;
-      }
+    int i = r * ncol + c;
+    if (p[2] < s->level[i] + TOUCH) {  // the point near the element and its neighbours, without a pass over the grid
+      under[i] |= 4;
+      if (r > 0) under[i - ncol] |= 4;
+      if (r < nrow - 1) under[i + ncol] |= 4;
+      if (c > 0) under[i - 1] |= 4;
+      if (c < ncol - 1) under[i + 1] |= 4;
     }
   }
   // the imprint is no flow of sand: nothing of it is compacted
@@ -419,8 +418,7 @@ int finrft_deforming_step(FinrftDeforming* s, const double g[3], int n, const do
     box[1] = box[1] < nrow - 1 ? box[1] + 1 : nrow - 1;
     box[2] = box[2] > 0 ? box[2] - 1 : 0;
     box[3] = box[3] < ncol - 1 ? box[3] + 1 : ncol - 1;
-    relax_box(nrow, ncol, s->heights, dx, dy, tan(s->repose), s->occupied, s->tolerance, s->step_iterations, flow,
-              box);
+    relax_box(nrow, ncol, s->heights, dx, dy, tan(s->repose), s->occupied, s->tolerance, s->step_iterations, box);
   }
   double lost = 0;
   for (int i = 0; i < cells; i++) {

@@ -64,9 +64,12 @@ typedef struct {
 void finrft_deforming_grid(FinrftDeformingGrid* g, int nrow, int ncol, const double* heights,
                            const double* original, double pile_factor, const double size[2], const double centre[3],
                            const double frame[9]);
-// The depth (finrft_deforming_depth's) of a point given in the grid's frame (finrft_grid_local); with
-// `submerged_only` not through the pile rule where it is <= 0 (no force either way).
-double finrft_deforming_local_depth(const FinrftDeformingGrid* g, const double local[3], int submerged_only);
+// The depths (finrft_deforming_depth's, but not through the pile rule where <= 0: no force either way) of n points
+// of a body, `element` (every `stride` doubles, its first three) in the body's frame, whose origin is `at` in the
+// grid's frame and whose axes turn into the grid's by `turn` (3 x 3, row-major), all within `reach` of its origin;
+// a point above every grid point under it gets a depth <= 0 without interpolating the grid.
+void finrft_deforming_body_depths(const FinrftDeformingGrid* g, const double at[3], const double turn[9], double reach,
+                                  int n, const double* element, int stride, double* depth);
 // The highest height of the grid points around the box [low, high] of the grid's frame (x, y; beyond the grid, of
 // its nearest edge): no point of the surface over the box is higher.
 double finrft_deforming_top(const FinrftDeformingGrid* g, const double low[2], const double high[2]);

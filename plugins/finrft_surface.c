@@ -1077,11 +1077,15 @@ int finrft_surface_submerged(const FinrftSurface* p, const mjData* d, mjtNum* ou
   const mjtNum* R = d->xmat + 9 * p->body;
   int count = 0;
   const double* depths = element_depths(p, d);
+  // element_depth's arithmetic on its numbers held in locals: writing `out` may alias them, and reloading them for
+  // every element was half the scan of a legged robot's elements, most of them above the surface
+  const double surface_z = p->surface_z, z = origin[2], r6 = R[6], r7 = R[7], r8 = R[8];
   for (int i = 0; i < p->n; i++) {
     const double* e = p->element + 7 * i;
+    double depth = depths ? depths[i] : surface_z - (z + (r6 * e[0] + r7 * e[1] + r8 * e[2]));
+    if (!(depth > 0)) continue;
     mjtNum* o = out + FINRFT_SUBMERGED * count;
-    o[6] = depths ? depths[i] : element_depth(p, origin, R, e);
-    if (!(o[6] > 0)) continue;
+    o[6] = depth;
     finrft_mul_mat_vec3(o, R, e);
     finrft_mul_mat_vec3(o + 3, R, e + 3);
     o[7] = e[6];

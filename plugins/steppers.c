@@ -305,7 +305,9 @@ static void element_force(const FinrftSurface* p, const mjtNum* element, const m
 // k (3 x 3) the element's dF/dv: its share of dW/dtwist. By cross products, as A_e^T = ([arm]x ; I): k A_e's row r
 // is (arm x k_r, k_r), k_r the row r of k, and [arm]x takes each column of k A_e to arm x it (a sixth of the
 // multiplications of the products with A_e's zeros and ones).
-static void add_element_slope(const mjtNum arm[3], const mjtNum k[9], mjtNum dw[36]) {
+static void add_element_slope(const mjtNum arm_in[3], const mjtNum k[9], mjtNum dw[36]) {
+  // the arm in locals: dw may alias it, and its reloads after every sum were a third of the function
+  const mjtNum arm[3] = {arm_in[0], arm_in[1], arm_in[2]};
   mjtNum ka[18];
   for (int r = 0; r < 3; r++) {
     finrft_cross(ka + 6 * r, arm, k + 3 * r);

@@ -189,14 +189,15 @@ void finrft_surface_element_force(const FinrftSurface* p, const mjtNum normal[3]
 int finrft_surface_has_slope(const FinrftSurface* p);
 
 // finrft_surface_element_force into f and its derivative in v into k (3 x 3, row-major: k[3 i + j] = df_i/dv_j),
-// analytic; only for an instance whose law has one (finrft_surface_has_slope).
-void finrft_surface_element_slope(const FinrftSurface* p, const mjtNum normal[3], const mjtNum v[3], mjtNum depth,
+// analytic; only for an instance whose law has one (finrft_surface_has_slope). 0 where both are 0 without a call of
+// the law (below the ramp's floor), else 1.
+int finrft_surface_element_slope(const FinrftSurface* p, const mjtNum normal[3], const mjtNum v[3], mjtNum depth,
                                   mjtNum area, mjtNum f[3], mjtNum k[9]);
-// The linearly implicit step's slope k (3 x 3, row-major) of an element trailing by less than the ramp's width
-// (-v_reg < n . v <= FINRFT_RAMP_FLOOR v_reg): the secant to where it leads by v_reg (as Attached.trailing_slopes).
-// 1 where it wrote k, 0 for any other element or without a ramp.
+// The linearly implicit step's slope of an element trailing by less than the ramp's width (-v_reg < n . v <=
+// FINRFT_RAMP_FLOOR v_reg): the secant to where it leads by v_reg (as Attached.trailing_slopes), of rank one, s n^T,
+// its s into secant. 1 where it wrote s, 0 for any other element or without a ramp.
 int finrft_surface_trailing_slope(const FinrftSurface* p, const mjtNum normal[3], const mjtNum v[3], mjtNum depth,
-                                  mjtNum area, mjtNum k[9]);
+                                  mjtNum area, mjtNum secant[3]);
 
 // The instance's law alone on one element (no DRFT term, no ramp), as finrft_surface_element_force's arguments:
 // every surface law is rate-independent, a function of the direction of v alone.

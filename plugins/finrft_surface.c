@@ -929,13 +929,13 @@ int finrft_surface_has_slope(const FinrftSurface* p) {
 // finrft_surface_element_force and its derivative in v, k (3 x 3, row-major), analytic (as
 // Attached.element_slopes): d(r F)/dv = r dF/dv + r'(n . v) F n^T, DRFT's term's -2 lambda rho (n . v) area n n^T
 // in F's.
-void finrft_surface_element_slope(const FinrftSurface* p, const mjtNum normal[3], const mjtNum v[3], mjtNum depth,
-                                  mjtNum area, mjtNum f[3], mjtNum k[9]) {
+int finrft_surface_element_slope(const FinrftSurface* p, const mjtNum normal[3], const mjtNum v[3], mjtNum depth,
+                                 mjtNum area, mjtNum f[3], mjtNum k[9]) {
   mjtNum v_n = finrft_dot3(normal, v);
   if (p->v_reg > 0 && !(v_n > FINRFT_RAMP_FLOOR * p->v_reg)) {
     f[0] = f[1] = f[2] = 0;
     for (int i = 0; i < 9; i++) k[i] = 0;
-    return;
+    return 0;
   }
   if (p->upright) {
     kLaws[p->law].slope(p, normal, v, depth, area, f, k);
@@ -967,21 +967,21 @@ void finrft_surface_element_slope(const FinrftSurface* p, const mjtNum normal[3]
       mju_scl3(f, f, ramp);
     }
   }
+  return 1;
 }
 
 // An element that trails has force and slope 0, so a linearly implicit step at its velocity sees nothing of the force
 // it takes as it leads again, and a light body settling chatters: within the ramp's width of leading, its slope is
-// the secant F(v_s) n^T / (v_reg - n . v) to v_s = v + (v_reg - n . v) n, where it leads by v_reg.
+// the secant F(v_s) n^T / (v_reg - n . v) to v_s = v + (v_reg - n . v) n, where it leads by v_reg: s = F(v_s) /
+// (v_reg - n . v) into secant.
 int finrft_surface_trailing_slope(const FinrftSurface* p, const mjtNum normal[3], const mjtNum v[3], mjtNum depth,
-                                  mjtNum area, mjtNum k[9]) {
+                                  mjtNum area, mjtNum secant[3]) {
   mjtNum v_n = finrft_dot3(normal, v);
   if (!(p->v_reg > 0) || !(v_n > -p->v_reg) || v_n > FINRFT_RAMP_FLOOR * p->v_reg) return 0;
   mjtNum gap = p->v_reg - v_n, ahead[3], f[3];
   for (int i = 0; i < 3; i++) ahead[i] = v[i] + gap * normal[i];
   finrft_surface_element_force(p, normal, ahead, depth, area, f);
-  for (int i = 0; i < 3; i++) {
-    for (int j = 0; j < 3; j++) k[3 * i + j] = f[i] * normal[j] / gap;
-  }
+  for (int i = 0; i < 3; i++) secant[i] = f[i] / gap;
   return 1;
 }
 
@@ -1070,11 +1070,15 @@ int finrft_surface_submerged(const FinrftSurface* p, const mjData* d, mjtNum* ou
   const mjtNum* R = d->xmat + 9 * p->body;
   int count = 0;
   const double* depths = element_depths(p, d);
+  // element_depth's arithmetic on its numbers held in locals: writing `out` may alias them, and reloading them for
+  // every element was half the scan of a legged robot's elements, most of them above the surface
+  const double surface_z = p->surface_z, z = origin[2], r6 = R[6], r7 = R[7], r8 = R[8];
   for (int i = 0; i < p->n; i++) {
     const double* e = p->element + 7 * i;
+    double depth = depths ? depths[i] : surface_z - (z + (r6 * e[0] + r7 * e[1] + r8 * e[2]));
+    if (!(depth > 0)) continue;
     mjtNum* o = out + FINRFT_SUBMERGED * count;
-    o[6] = depths ? depths[i] : element_depth(p, origin, R, e);
-    if (!(o[6] > 0)) continue;
+    o[6] = depth;
     finrft_mul_mat_vec3(o, R, e);
     finrft_mul_mat_vec3(o + 3, R, e + 3);
     o[7] = e[6];

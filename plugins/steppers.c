@@ -319,7 +319,9 @@ static void element_force(const FinrftSurface* p, const mjtNum* element, const m
 // k (3 x 3) the element's dF/dv: its share of dW/dtwist. By cross products, as A_e^T = ([arm]x ; I): k A_e's row r
 // is (arm x k_r, k_r), k_r the row r of k, and [arm]x takes each column of k A_e to arm x it (a sixth of the
 // multiplications of the products with A_e's zeros and ones).
-static void add_element_slope(const mjtNum arm[3], const mjtNum k[9], mjtNum dw[36]) {
+static void add_element_slope(const mjtNum arm_in[3], const mjtNum k[9], mjtNum dw[36]) {
+  // the arm in locals: dw may alias it, and its reloads after every sum were a third of the function
+  const mjtNum arm[3] = {arm_in[0], arm_in[1], arm_in[2]};
   mjtNum ka[18];
   for (int r = 0; r < 3; r++) {
     finrft_cross(ka + 6 * r, arm, k + 3 * r);
@@ -349,8 +351,10 @@ static void body_wrench(const Items* s, int j, const mjtNum t[6], mjtNum w[6], m
     mjtNum v[3], moment[3], k[9], *f = s->element_force + 3 * (size_t)e;
     element_velocity(t, element, v);
     if (analytic && finrft_dot3(element + 3, v) > 0) {
-      finrft_surface_element_slope(p, element + 3, v, element[6], element[7], f, k);
-      add_element_slope(element, k, dw);
+      // below the ramp's floor (a third of a rolling wheel's leading elements) both are 0: nothing to add
+      if (finrft_surface_element_slope(p, element + 3, v, element[6], element[7], f, k)) {
+        add_element_slope(element, k, dw);
+      }
     } else {
       element_force(p, element, v, f);
     }
@@ -454,8 +458,10 @@ static void body_slope(const Items* s, int j, const mjtNum t[6], int forward, mj
     if (analytic) {
       // the law's own Jacobian: nothing for an element that trails (n . v <= 0, where every surface law is 0)
       mjtNum f[3];
-      if (!(finrft_dot3(element + 3, v) > 0)) continue;
-      finrft_surface_element_slope(p, element + 3, v, element[6], element[7], f, k);
+      if (!(finrft_dot3(element + 3, v) > 0) || !finrft_surface_element_slope(p, element + 3, v, element[6], element[7],
+                                                                                f, k)) {
+        continue;
+      }
     } else if (forward && p->drft_lambda == 0 && (f0[0] != 0 || f0[1] != 0 || f0[2] != 0)) {
       leading_slope(p, element, v, f0, h, k);
     } else if (!probed_slope(p, element, v, f0, h, forward, k)) {
@@ -536,21 +542,36 @@ static void rft_slope(const Items* s, mjtNum* slope, int forward, const mjtNum* 
   }
 }
 
+// Add A_e^T s n^T A_e = (A_e^T s) (A_e^T n)^T to dw (6 x 6, row-major): add_element_slope for an element's slope of
+// rank one, s n^T, in a sixth of its arithmetic (A_e^T x = (arm x x, x)).
+static void add_rank_one_slope(const mjtNum arm[3], const mjtNum s[3], const mjtNum n[3], mjtNum dw[36]) {
+  mjtNum a[6], b[6];
+  finrft_cross(a, arm, s);
+  finrft_cross(b, arm, n);
+  for (int r = 0; r < 3; r++) {
+    a[3 + r] = s[r];
+    b[3 + r] = n[r];
+  }
+  for (int r = 0; r < 6; r++) {
+    for (int c = 0; c < 6; c++) dw[6 * r + c] += a[r] * b[c];
+  }
+}
+
 // The linearly implicit step's slope at the velocity of the last rft_force: the secants of the elements that trail
 // by less than the ramp's width (finrft_surface_trailing_slope; as the numpy twin's trailing_slopes), added to slope.
 static void add_trailing_slopes(const Items* s, mjtNum* slope) {
   for (int j = 0; j < s->nbody; j++) {
     const FinrftSurface* p = s->surface[j];
     if (!finrft_surface_has_slope(p)) continue;
-    mjtNum c[36], k[9];
+    mjtNum c[36], secant[3];
     int any = 0;
     mju_zero(c, 36);
     for (int e = s->first[j]; e < s->first[j + 1]; e++) {
       const mjtNum* element = s->element + FINRFT_SUBMERGED * (size_t)e;
       mjtNum v[3];
       element_velocity(s->vel + item_offset(s, s->n + j), element, v);
-      if (finrft_surface_trailing_slope(p, element + 3, v, element[6], element[7], k)) {
-        add_element_slope(element, k, c);
+      if (finrft_surface_trailing_slope(p, element + 3, v, element[6], element[7], secant)) {
+        add_rank_one_slope(element, secant, element + 3, c);
         any = 1;
       }
     }

@@ -103,6 +103,7 @@ def test_a_ramp_of_the_oscillation_alone_holds_the_offset(arm):
     assert scaled.ctrl[:, 0] == pytest.approx((0.002 + wave) * ramp, abs=1e-12)
 
 
+@pytest.mark.slow  # a whole command with its files; the sensor loop itself is checked above
 def test_sensors_are_reported_recorded_and_estimated_by_their_names(arm, tmp_path, capsys):
     scene = _loop(arm, "pd", joint="hinge")
     (tmp_path / "s.toml").write_text(finrft.to_toml(scene))

@@ -233,7 +233,7 @@ def test_newton_from_the_last_steps_change_halves_the_law_passes_and_keeps_the_r
         d.ctrl[0] = DRAG_SPEED
         advance = integrate.stepper(m, Sim(method="newton", dt=dt), "python", [], attached)
         passes[True] = passes[False] = 0
-        n = round(0.2 / dt)
+        n = round(0.1 / dt)
         with attached.installed(m):
             for _ in range(n):
                 if not predicted:

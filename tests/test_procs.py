@@ -89,9 +89,9 @@ def _signal_mid_run(argv: list[str], log: Path, sig: int, group: bool = False) -
     return proc, err.decode()
 
 
-# SIGTERM and SIGHUP take Ctrl-C's path, which test_logs sends to the whole group in the fast suite: those three run
-# with the slow studies, SIGKILL (no handler at all) here
-@pytest.mark.parametrize("sig,group", [(signal.SIGKILL, False),
+# SIGTERM and SIGHUP take Ctrl-C's path, which test_logs sends to the whole group; each is a whole optimisation
+# in processes of its own, so all four run with the slow studies (SIGKILL: no handler at all)
+@pytest.mark.parametrize("sig,group", [pytest.param(signal.SIGKILL, False, marks=pytest.mark.slow),
                                        pytest.param(signal.SIGTERM, False, marks=pytest.mark.slow),
                                        pytest.param(signal.SIGHUP, False, marks=pytest.mark.slow),
                                        pytest.param(signal.SIGTERM, True, marks=pytest.mark.slow)])
@@ -109,7 +109,7 @@ def test_optimize_workers_end_with_their_parent(tmp_path, sig, group, errors_onl
     searchlog.read(log, searchlog.OPTIMIZE)  # a complete log, its digest intact
 
 
-@pytest.mark.slow  # the optimisation's workers end with their parent in the fast suite; the fit's pool is the same
+@pytest.mark.slow  # the optimisation's workers end with their parent (above, with the slow studies); the fit's pool is the same
 def test_fit_workers_end_with_their_parent(tmp_path, errors_only):
     log = tmp_path / "fit.h5"
     proc, err = _signal_mid_run([*FIT, "--budget", "1000", "--data", str(DATA)], log, signal.SIGKILL)

@@ -34,7 +34,8 @@ def _stopped(run: subprocess.Popen, sig: int, errors_only) -> float:
     return took
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+# SIGTERM takes the same path as SIGINT (finrft.interrupts); it runs with the slow studies.
+@pytest.mark.parametrize("sig", [signal.SIGINT, pytest.param(signal.SIGTERM, marks=pytest.mark.slow)])
 def test_a_robot_run_stops_on_a_signal(tmp_path, sig, errors_only):
     run = _started(["run", "--example", "sand_swimmer"], tmp_path)
     time.sleep(3)  # into its steps
@@ -42,7 +43,7 @@ def test_a_robot_run_stops_on_a_signal(tmp_path, sig, errors_only):
     assert not any(tmp_path.iterdir())
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+@pytest.mark.parametrize("sig", [signal.SIGINT, pytest.param(signal.SIGTERM, marks=pytest.mark.slow)])
 def test_a_signal_inside_a_long_native_call_stops_the_process(tmp_path, tmp_path_factory, sig, errors_only):
     # A mesh of 300,000 points: MuJoCo takes its convex hull for many seconds, in one C call that no Python handler
     # interrupts.

@@ -109,7 +109,7 @@ def test_optimize_workers_end_with_their_parent(tmp_path, sig, group, errors_onl
     searchlog.read(log, searchlog.OPTIMIZE)  # a complete log, its digest intact
 
 
-@pytest.mark.slow  # the optimisation's workers end with their parent (above, with the slow studies); the fit's pool is the same
+@pytest.mark.slow  # the optimisation's workers end with their parent (above); the fit's pool is the same
 def test_fit_workers_end_with_their_parent(tmp_path, errors_only):
     log = tmp_path / "fit.h5"
     proc, err = _signal_mid_run([*FIT, "--budget", "1000", "--data", str(DATA)], log, signal.SIGKILL)

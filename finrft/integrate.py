@@ -18,10 +18,11 @@
   that stops, or when a search stalls on a kept one) and takes a step below the tolerance without a residual to
   confirm it: the same root for fewer law calls. There a step that follows the stepper's last one (its time where
   that one ended) starts Newton's method from that step's velocity change, scaled to the step, the force and slope
-  taken there, and stops once its change is below PREDICTOR_SHARE (a thousandth) of how far it lies from that
-  prediction: the prediction misses by about twice backward Euler's local error in the velocity, so the stop is a
-  thousandth of the step's own error, where the fixed one (1e-10) took four to six more passes of the law. A step
-  whose Newton's method fails starts its halves afresh.
+  taken there, and stops once its change is below PREDICTOR_SHARE (1e-5) of how far it lies from that
+  prediction: the prediction misses by about twice backward Euler's local error in the velocity, so the stop is
+  1e-5 of the step's own error (at 1e-3 the solver's error spoilt a companion run's estimate), where the fixed
+  one (1e-10) took four to six more passes of the law. A step whose Newton's method fails starts its halves
+  afresh.
 - ``newton-midpoint``: the newton step with the RFT force taken at the positions half a step ahead at the
   starting velocity, q + (dt / 2) v (the segments' and bodies' Jacobians and the elements below the surface; the
   stops stay where they are), and taken out of MuJoCo's forces where MuJoCo applied it, at q. The positions then
@@ -118,7 +119,7 @@ SURFACE_DECREASE = 0.1
 # A newton step on attached surfaces alone that follows the stepper's last one starts from that step's velocity
 # change, scaled to the step, and stops once Newton's change is below this share of how far it lies from that
 # prediction (PREDICTOR_SHARE in steppers.c).
-PREDICTOR_SHARE = 1e-3
+PREDICTOR_SHARE = 1e-5
 
 
 def _native(name: str, *argtypes) -> Callable[..., int]:

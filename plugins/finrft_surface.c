@@ -985,12 +985,12 @@ int finrft_surface_trailing_slope(const FinrftSurface* p, const mjtNum normal[3]
   return 1;
 }
 
-// The depth below the surface of the element whose centre (body frame) is e, the body at origin with rotation R,
-// when level: the arm's z alone, as mju_mulMatVec3 sums it, so that the elements above the surface (most of a
-// legged robot's) cost no more.
-static inline double element_depth(const FinrftSurface* p, const mjtNum origin[3], const mjtNum R[9],
-                                   const double e[3]) {
-  return p->surface_z - (origin[2] + (R[6] * e[0] + R[7] * e[1] + R[8] * e[2]));
+// The depth below a level surface at surface_z of the element whose centre (body frame) is e, the body's origin at
+// height z and the last row of its rotation r6 r7 r8: the arm's z alone, as mju_mulMatVec3 sums it, so that the
+// elements above the surface (most of a legged robot's) cost no more. Numbers, not the instance and mjData: a
+// caller that writes through a pointer keeps them in locals rather than reloading them for every element.
+static inline double level_depth(double surface_z, double z, double r6, double r7, double r8, const double e[3]) {
+  return surface_z - (z + (r6 * e[0] + r7 * e[1] + r8 * e[2]));
 }
 
 // ---- The deforming surface's elements ----
@@ -1026,7 +1026,7 @@ static const double* deforming_element_depths(const FinrftSurface* p, const mjDa
 // ---- end of the deforming surface's elements ----
 
 // Every element's depth along gravity below the free surface at the positions of d, into p->scratch + 3 n (the
-// world centres before them); NULL when level, where element_depth takes each. The instance's surface was checked
+// world centres before them); NULL when level, where level_depth takes each. The instance's surface was checked
 // under this gravity (refresh_gravity), so its kind's function cannot refuse it.
 static const double* element_depths(const FinrftSurface* p, const mjData* d) {
   if (p->level) return NULL;
@@ -1050,7 +1050,7 @@ void finrft_surface_wrench(const FinrftSurface* p, const mjData* d, const mjtNum
   for (int i = 0; i < p->n; i++) {
     const double* e = p->element + 7 * i;
     mjtNum arm[3], normal[3], v[3], f[3], moment[3];
-    double depth = depths ? depths[i] : element_depth(p, origin, R, e);
+    double depth = depths ? depths[i] : level_depth(p->surface_z, origin[2], R[6], R[7], R[8], e);
     if (!(depth > 0)) continue;
     finrft_mul_mat_vec3(arm, R, e);
     finrft_mul_mat_vec3(normal, R, e + 3);
@@ -1070,12 +1070,12 @@ int finrft_surface_submerged(const FinrftSurface* p, const mjData* d, mjtNum* ou
   const mjtNum* R = d->xmat + 9 * p->body;
   int count = 0;
   const double* depths = element_depths(p, d);
-  // element_depth's arithmetic on its numbers held in locals: writing `out` may alias them, and reloading them for
-  // every element was half the scan of a legged robot's elements, most of them above the surface
+  // level_depth's numbers held in locals: writing `out` may alias them, and reloading them for every element was
+  // half the scan of a legged robot's elements, most of them above the surface
   const double surface_z = p->surface_z, z = origin[2], r6 = R[6], r7 = R[7], r8 = R[8];
   for (int i = 0; i < p->n; i++) {
     const double* e = p->element + 7 * i;
-    double depth = depths ? depths[i] : surface_z - (z + (r6 * e[0] + r7 * e[1] + r8 * e[2]));
+    double depth = depths ? depths[i] : level_depth(surface_z, z, r6, r7, r8, e);
     if (!(depth > 0)) continue;
     mjtNum* o = out + FINRFT_SUBMERGED * count;
     o[6] = depth;

@@ -236,10 +236,10 @@ class DeformingSurface:
     (`step`) and relaxed towards the angle of ``repose`` (rad) by at most ``step_iterations`` iterations a step.
     ``native`` steps it with the C twins (plugins/surfaces/deforming.c), else with this module's numpy functions:
     the same heights to rounding. ``compaction``: the share of the swept sand compacted under the body (`sweep`),
-    accumulated in ``compacted``; ``berm``: where the rest goes (`BERMS`). ``displaced`` is the volume (m^3) the sweeps have removed so far; ``level`` (an
-    array of the heights' shape, written in place: a `field`'s heights) the surface the elements' depths are
-    measured from. ``instances``: the native plugin's finrft.surface instances that measure from it
-    (`installed`)."""
+    accumulated in ``compacted``; ``berm``: where the rest goes (`BERMS`). ``displaced`` is the volume (m^3) the
+    sweeps have removed so far; ``level`` (an array of the heights' shape, written in place: a `field`'s heights)
+    the surface the elements' depths are measured from. ``instances``: the native plugin's finrft.surface
+    instances that measure from it (`installed`)."""
 
     def __init__(self, heights: Any, size: Any, repose: float, centre: Any = (0.0, 0.0, 0.0), frame: Any = None,
                  pile_factor: float | None = None, front_share: float = FRONT_SHARE, tolerance: float = TOLERANCE,
@@ -323,7 +323,7 @@ class DeformingSurface:
                 return 0.0
         first = self._pose is None
         self._pose = pose
-        points, velocities, areas, normals = body_elements(attached, m, d, normals=True)
+        points, velocities, areas, normals = body_elements(attached, m, d)
         removed = self.step(points, areas, velocities, m.opt.gravity, imprint=first, normals=normals)
         self._set_level()
         return removed
@@ -488,11 +488,10 @@ def field(grid: Any, pile_factor: float | None = None) -> Any:
                                "pile_factor": pile_factor})
 
 
-def body_elements(attached: Any, m: Any, d: Any, normals: bool = False) -> tuple[np.ndarray, ...]:
-    """The world centres (N, 3, m), velocities (N, 3, m/s) and areas (N, m^2) of every element of an
-    `finrft.attach.Attached` at the positions and velocities of ``d`` (its kinematics and velocities made here: after
-    a step MuJoCo's data holds the previous state's); with ``normals``, their world outward unit normals (N, 3)
-    too."""
+def body_elements(attached: Any, m: Any, d: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The world centres (N, 3, m), velocities (N, 3, m/s), areas (N, m^2) and outward unit normals (N, 3) of every
+    element of an `finrft.attach.Attached` at the positions and velocities of ``d`` (its kinematics and velocities
+    made here: after a step MuJoCo's data holds the previous state's)."""
     import mujoco
 
     mujoco.mj_kinematics(m, d)
@@ -510,5 +509,4 @@ def body_elements(attached: Any, m: Any, d: Any, normals: bool = False) -> tuple
                                             w[0] * arm[:, 1] - w[1] * arm[:, 0]])
         areas.append(s.area)
         facing.append(s.normal @ d.xmat[body].reshape(3, 3).T)
-    out = np.concatenate(points), np.concatenate(velocities), np.concatenate(areas)
-    return (*out, np.concatenate(facing)) if normals else out
+    return np.concatenate(points), np.concatenate(velocities), np.concatenate(areas), np.concatenate(facing)

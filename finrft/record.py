@@ -89,6 +89,14 @@ def write_h5(run: Result, path: str | Path, *, extra_attrs: dict[str, Any] | Non
             if quantity.per == "sample":
                 ds.dims[0].label = "time"
                 ds.dims[0].attach_scale(t)
+        # a series indexed by another (a deforming surface's heights by surface_time) on that one as its scale
+        for name, quantity in run.quantities.items():
+            if quantity.per in run.quantities and quantity.per != name:
+                scale = f[quantity.per]
+                if not scale.is_scale:
+                    scale.make_scale(quantity.per)
+                f[name].dims[0].label = quantity.per
+                f[name].dims[0].attach_scale(scale)
         feeds = laws.feeds_energy(geometry.segment_law(run.scene))
         f.attrs.update({"schema": experiment.schema, **_provenance(run.scene, run.summary()), **experiment.attrs(),
                         "sign_convention": experiment.sign_convention, "law_feeds_energy": feeds, **extra})

@@ -144,7 +144,7 @@ SURFACE_FRAMES = 60
 
 
 def _draw_deforming(rec: Any, run: Result, field: Any, entity: str) -> None:
-    """The deforming surface as a mesh of its grid at up to SURFACE_FRAMES recorded instants, each vertex coloured
+    """The deforming surface as a mesh of its grid at up to SURFACE_FRAMES of its records, each vertex coloured
     by its change since the start: blue where the sand went down (a rut), red where it rose (a berm), sand-coloured
     where it is unchanged; full colour at the largest change of the run."""
     import rerun as rr
@@ -160,8 +160,9 @@ def _draw_deforming(rec: Any, run: Result, field: Any, entity: str) -> None:
     change = heights - heights[0]
     largest = max(float(np.abs(change).max()), 1e-12)
     sand, down, up = np.array([200, 170, 110]), np.array([40, 90, 220]), np.array([220, 50, 30])
-    for k in np.unique(np.linspace(0, len(run.time) - 1, SURFACE_FRAMES).round().astype(int)):
-        rec.set_time("sim_time", duration=float(run.time[k]))
+    times = run.series["surface_time"]
+    for k in np.unique(np.linspace(0, len(times) - 1, SURFACE_FRAMES).round().astype(int)):
+        rec.set_time("sim_time", duration=float(times[k]))
         local = np.c_[x.ravel(), y.ravel(), heights[k].ravel()]
         share = (change[k] / largest).ravel()[:, None]
         colour = np.where(share < 0, sand + (down - sand) * -share, sand + (up - sand) * share)

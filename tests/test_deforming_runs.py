@@ -64,9 +64,20 @@ def test_the_surface_is_recorded(runs, tmp_path):
     path = tmp_path / "wheel.h5"
     write_h5(runs["native"], path)
     with h5py.File(path) as f:
-        heights = f["surface_height"]
-        assert heights.attrs["units"] == "m" and heights.shape == (len(f["time"]), 61, 61)
+        heights, times = f["surface_height"], f["surface_time"]
+        assert heights.attrs["units"] == "m" and heights.shape == (len(times), 61, 61)
+        assert heights.dims[0].label == "surface_time" and times.attrs["units"] == "s"
         assert np.array_equal(heights[-1], runs["native"].series["surface_height"][-1])
+
+
+def test_the_surface_is_recorded_where_it_changed(runs):
+    run = runs["native"]
+    times, heights = run.series["surface_time"], run.series["surface_height"]
+    # a copy at the start, then no two within record_dt (but the last), each one changed from the one before
+    assert times[0] == run.time[0] and times[-1] == pytest.approx(run.time[-1])
+    assert np.all(np.diff(times[:-1]) >= run.scene.sim.record_dt * (1 - 1e-9))
+    assert all(np.abs(heights[k + 1] - heights[k]).max() > 0 for k in range(len(times) - 1))
+    assert len(times) < len(run.time)
 
 
 def _press(surface: deforming.DeformingSurface, depth: float) -> float:

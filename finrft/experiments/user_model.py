@@ -232,12 +232,16 @@ class RobotTrial:
         self._applied = applied_state(built, scene.sim.method, self.surface)
         if self.surface is not None:
             surface, stepped = self.surface, after_step
-            if not companion:  # its error estimate compares positions and forces; the surface is the run's record
-                # the recording copies what a read returns into its own array: the heights themselves, not a copy
-                self.reads["surface_height"] = lambda d: surface.heights
+            # its error estimate compares positions and forces; the surface is the run's record: a copy of its
+            # heights as the run starts and after each change, at most one every record_dt (and the last), not at
+            # every recorded instant (a wheel's 121 x 121 grid, 632 instants, was a fifth of its run)
+            record = None if companion else SurfaceRecord(surface, scene.sim.record_dt, d.time)
+            self._surface_record = record
 
             def after_step(d: mujoco.MjData) -> None:
                 surface.step_model(built.attached, m, d)
+                if record is not None:
+                    record.after_step(d.time)
                 stepped(d)
 
         self.after_step = after_step
@@ -335,12 +339,40 @@ class RobotTrial:
         if self.means.time < d.time - 1e-12:
             self._close(d)
         series = self._unpack(readings["state"])
-        if "surface_height" in readings:
-            series["surface_height"] = readings["surface_height"]
+        record = getattr(self, "_surface_record", None)
+        if record is not None:
+            series["surface_time"], series["surface_height"] = record.finish(d.time)
         return series, {"model_size": model_size(self.built, m),
                                                  "model_mass": float(m.body_mass.sum()),
                                                  "gravity": float(np.linalg.norm(m.opt.gravity)),
                                                  "window_means": self.means.parts(d.time)}
+
+
+class SurfaceRecord:
+    """A deforming surface's heights over a run where they change: they change only as the surface steps, so a
+    copy as the run starts, after a change once record_dt has passed since the last copy, and at the end (when
+    changed since) give the surface at every instant to within record_dt, as a copy at each recorded instant did,
+    at the cost of the changes alone."""
+
+    def __init__(self, surface: DeformingSurface, record_dt: float, start: float) -> None:
+        self.surface, self.record_dt = surface, record_dt
+        self.times, self.heights = [start], [surface.heights.copy()]
+        self._seen = surface.updates
+
+    def after_step(self, time: float) -> None:
+        if self.surface.updates != self._seen and time >= self.times[-1] + self.record_dt * (1 - 1e-9):
+            self._take(time)
+
+    def _take(self, time: float) -> None:
+        self.times.append(time)
+        self.heights.append(self.surface.heights.copy())
+        self._seen = self.surface.updates
+
+    def finish(self, time: float) -> tuple[np.ndarray, np.ndarray]:
+        """The instants (s) and the heights (m, instants x rows x columns)."""
+        if self.surface.updates != self._seen:
+            self._take(time)
+        return np.array(self.times), np.stack(self.heights)
 
 
 def deforming_surface(built: AttachedModel, scene: UserScene, d: mujoco.MjData) -> DeformingSurface | None:
@@ -560,9 +592,13 @@ class UserModel:
                                                  "drive", tuple(j.joint for j in scene.drive))),
             })
         if scene.medium.surface == "deforming":
+            out["surface_time"] = Quantity("s", "simulated time of each record of the deforming surface: as the run "
+                                           "starts, after a change once sim.record_dt has passed since the last, "
+                                           "and at the end", per="surface_time")
             out["surface_height"] = Quantity("m", "height of the deforming free surface at each point of its grid "
                                              "(rows along the grid's y, columns along its x; medium.surface_point, "
-                                             "hfield_extent, hfield_spacing), along its z axis, against gravity",
+                                             "hfield_extent, hfield_spacing), along its z axis, against gravity, at "
+                                             "each surface_time (it holds until the next)", per="surface_time",
                                              attrs=world)
         if self.actuators:
             names = {"actuators": ",".join(self.actuators)}

@@ -269,6 +269,7 @@ class DeformingSurface:
         # how many times the level was set in the native instances' state: a copy of that state is current while
         # this has not changed (`finrft.experiments.attached_model.applied_state`)
         self.level_sets = 0
+        self.updates = 0  # how many times the surface has stepped (`step`, `step_model`)
         self.instances = tuple(instances)
         self._model: Any = None
         self._pose: np.ndarray | None = None  # the bodies' positions and orientations at the last step_model
@@ -341,6 +342,7 @@ class DeformingSurface:
             raise SceneError("the model's finrft.surface instances do not measure from this deforming surface "
                              "(attach it with its field: finrft.surfaces.deforming.field)")
         self.level_sets += stepped
+        self.updates += stepped
         self.displaced += removed.value
         return removed.value
 
@@ -392,6 +394,7 @@ class DeformingSurface:
         a body that starts in the sand sitting in its own hole (its volume is not conserved: 0 displaced)."""
         if self.berm == "facing" and normals is None:
             raise SceneError("the berm rule 'facing' needs the elements' normals (normals=)")
+        self.updates += 1
         if self.native:
             removed = _native_step(self, points3(points), np.asarray(areas, float), points3(velocities),
                                    np.asarray(gravity, float), imprint, None if normals is None else points3(normals))

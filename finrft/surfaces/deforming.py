@@ -432,7 +432,8 @@ class _Deforming(ctypes.Structure):
                 ("front_share", ctypes.c_double), ("tolerance", ctypes.c_double), ("step_iterations", ctypes.c_int),
                 ("heights", ctypes.c_void_p), ("level", ctypes.c_void_p), ("original", ctypes.c_void_p),
                 ("under", ctypes.c_void_p), ("occupied", ctypes.c_void_p), ("dirty", ctypes.c_int * 4),
-                ("compaction", ctypes.c_double), ("compacted", ctypes.c_void_p), ("facing", ctypes.c_int)]
+                ("compaction", ctypes.c_double), ("compacted", ctypes.c_void_p), ("facing", ctypes.c_int),
+                ("held", ctypes.c_int * 4)]
 
 
 def _state(s: DeformingSurface) -> _Deforming:
@@ -445,7 +446,8 @@ def _state(s: DeformingSurface) -> _Deforming:
                       (ctypes.c_double * 9)(*np.ravel(s.frame)), s.repose, s.front_share, s.tolerance,
                       s.step_iterations, s.heights.ctypes.data, s.level.ctypes.data, s.original.ctypes.data,
                       s._under.ctypes.data, s._occupied.ctypes.data, (ctypes.c_int * 4)(0, nrow - 1, 0, ncol - 1),
-                      s.compaction, s.compacted.ctypes.data, int(s.berm == "facing"))
+                      s.compaction, s.compacted.ctypes.data, int(s.berm == "facing"),
+                      (ctypes.c_int * 4)(0, nrow - 1, 0, ncol - 1))
 
 
 @functools.cache

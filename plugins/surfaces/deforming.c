@@ -129,13 +129,42 @@ static int march(const unsigned char* occupied, int nrow, int ncol, int r, int c
   return last;
 }
 
+// The box (r0, r1, c0, c1) grown to hold the point i.
+static void grow(int box[4], int ncol, int i) {
+  int r = i / ncol, c = i % ncol;
+  if (r < box[0]) box[0] = r;
+  if (r > box[1]) box[1] = r;
+  if (c < box[2]) box[2] = c;
+  if (c > box[3]) box[3] = c;
+}
+
+// The box grown by one point each way within the grid (none stays none).
+static void widen(int box[4], int nrow, int ncol) {
+  if (box[0] > box[1]) return;
+  box[0] = box[0] > 0 ? box[0] - 1 : 0;
+  box[1] = box[1] < nrow - 1 ? box[1] + 1 : nrow - 1;
+  box[2] = box[2] > 0 ? box[2] - 1 : 0;
+  box[3] = box[3] < ncol - 1 ? box[3] + 1 : ncol - 1;
+}
+
+// The box grown to hold the box `other`.
+static void join(int box[4], const int other[4]) {
+  if (other[0] > other[1]) return;
+  if (other[0] < box[0]) box[0] = other[0];
+  if (other[1] > box[1]) box[1] = other[1];
+  if (other[2] < box[2]) box[2] = other[2];
+  if (other[3] > box[3]) box[3] = other[3];
+}
+
 // The sweep (finrft_deforming_sweep's) with compaction: of the sand each point loses, the share `compaction` stays
 // under it, compacted (added to compacted[i], a height of sand at its bulk density; compacted may be NULL only when
-// compaction is 0), and the rest goes to the berm.
+// compaction is 0), and the rest goes to the berm. `changed` (rows r0..r1, columns c0..c1; r0 > r1: none) holds
+// every point whose height or occupation it set: the footprints' box, and one point beyond it, where a berm's march
+// ends (its first point not under the body, next to one that is, or the last on the grid).
 static int sweep(int nrow, int ncol, double* heights, const double size[2], const double centre[3],
                  const double frame[9], const double g[3], int n, const double* points, const double* areas,
                  const double* velocities, double front_share, double compaction, double* compacted,
-                 unsigned char* occupied) {
+                 unsigned char* occupied, int changed[4]) {
   FinrftGrid grid = make_grid(nrow, ncol, heights, size, centre, frame);
   if (finrft_grid_check(&grid, g) || !(front_share >= 0 && front_share <= 1) ||
       !(compaction >= 0 && compaction <= 1) || (compaction > 0 && !compacted)) {
@@ -217,6 +246,8 @@ static int sweep(int nrow, int ncol, double* heights, const double size[2], cons
     }
   }
   memset(occupied, 0, cells);
+  for (int j = 0; j < 4; j++) changed[j] = box[j];
+  widen(changed, nrow, ncol);
   if (!target) return 0;
   double* removed = target;  // reused in place: the height each point loses
   for (int r = box[0]; r <= box[1]; r++) {
@@ -257,17 +288,30 @@ int finrft_deforming_sweep(int nrow, int ncol, double* heights, const double siz
                            const double frame[9], const double g[3], int n, const double* points,
                            const double* areas, const double* velocities, double front_share,
                            unsigned char* occupied) {
+  int changed[4];
   return sweep(nrow, ncol, heights, size, centre, frame, g, n, points, areas, velocities, front_share, 0, NULL,
-               occupied);
+               occupied, changed);
 }
 
-// The box (r0, r1, c0, c1) grown to hold the point i.
-static void grow(int box[4], int ncol, int i) {
-  int r = i / ncol, c = i % ncol;
-  if (r < box[0]) box[0] = r;
-  if (r > box[1]) box[1] = r;
-  if (c < box[2]) box[2] = c;
-  if (c > box[3]) box[3] = c;
+
+// The edges that flow (2 a: from point a along x, 2 a + 1: along y), their first points' columns and their flows
+// (from the first point to the second), n of them.
+typedef struct {
+  int *edge, *column;
+  double* flow;
+  int n;
+} Flows;
+
+// The edge from point a (in column c) to a + offset (1: along x, ncol: along y) added to `flows` when it is steeper
+// than `rise` by more than `over` and neither end is blocked.
+static inline void add_if_flowing(Flows* flows, const double* heights, const unsigned char* blocked, int a,
+                                  int offset, double rise, double over, int c) {
+  int b = a + offset;
+  double step = heights[b] - heights[a], excess = fabs(step) - rise;
+  if (!(excess > over) || (blocked && (blocked[a] || blocked[b]))) return;
+  flows->edge[flows->n] = 2 * a + (offset != 1);
+  flows->column[flows->n] = c;
+  flows->flow[flows->n++] = -copysign(RELAX_RATE * excess, step);
 }
 
 // Only an edge steeper than the tolerance flows, and only edges next to a point that changed in the last iteration
@@ -275,65 +319,73 @@ static void grow(int box[4], int ncol, int i) {
 // looks at the edges of the points in `box` and each later one at those of the points the last one changed: the
 // same heights as the twin's sweep over the whole grid, at the cost of the flowing edges. `box` (rows r0..r1,
 // columns c0..c1) holds at the start every edge that may flow, and at the end those that still would (r0 > r1:
-// none). The iterations taken, or -1 (also when out of memory, the heights as they were).
+// none); `touched`, when not NULL, grows to hold every point whose height changed. The iterations taken, or -1
+// (also when out of memory, the heights as they were).
 static int relax_box(int nrow, int ncol, double* heights, double dx, double dy, double slope,
-                     const unsigned char* blocked, double tolerance, int max_iterations, int box[4]) {
-  int cells = nrow * ncol, result = -1, npoint = 0, nedge = 0;
-  // the points whose edges are looked at, the flowing edges (2 i: from point i along x, 2 i + 1: along y) and their
-  // flows (from the edge's first point to its second), whether a point is listed
-  int* points = malloc(sizeof(int) * 3 * cells);
-  double* flows = malloc(sizeof(double) * 2 * cells);
+                     const unsigned char* blocked, double tolerance, int max_iterations, int box[4], int touched[4]) {
+  int cells = nrow * ncol, result = -1, npoint = 0, low = cells, high = -1, left = ncol, right = -1;
+  // the points whose edges are looked at and their columns (carried along: an integer division per point was a
+  // third of the check's time), the flowing edges, whether a point is listed
+  int* points = malloc(sizeof(int) * 6 * cells);
+  double* flow = malloc(sizeof(double) * 2 * cells);
   unsigned char* listed = calloc(cells, 1);
-  if (!points || !flows || !listed) {
-    free(points), free(flows), free(listed);
+  if (!points || !flow || !listed) {
+    free(points), free(flow), free(listed);
     return -1;
   }
-  int* edges = points + cells;
+  int* columns = points + cells;
+  Flows flows = {points + 2 * cells, points + 4 * cells, flow, 0};
   double rise[2] = {slope * dx, slope * dy}, over[2] = {tolerance * dx, tolerance * dy};
   for (int r = box[0]; r <= box[1]; r++) {
-    for (int i = r * ncol + box[2]; i <= r * ncol + box[3]; i++) points[npoint++] = i, listed[i] = 1;
+    for (int c = box[2]; c <= box[3]; c++) {
+      columns[npoint] = c;
+      points[npoint++] = r * ncol + c;
+      listed[r * ncol + c] = 1;
+    }
   }
   for (int iteration = 0; iteration <= max_iterations; iteration++) {
-    nedge = 0;
+    flows.n = 0;
     for (int k = 0; k < npoint; k++) {
-      int i = points[k], r = i / ncol, c = i - r * ncol;
       // the edges to the next point along x and y, and from the previous ones unless those are listed themselves
-      int from[4] = {i, i - 1, i, i - ncol}, axis[4] = {0, 0, 1, 1};
-      int has[4] = {c < ncol - 1, c > 0 && !listed[i - 1], r < nrow - 1, r > 0 && !listed[i - ncol]};
-      for (int j = 0; j < 4; j++) {
-        if (!has[j]) continue;
-        int a = from[j], b = a + (axis[j] ? ncol : 1);
-        double step = heights[b] - heights[a], excess = fabs(step) - rise[axis[j]];
-        if (excess > over[axis[j]] && (!blocked || (!blocked[a] && !blocked[b]))) {
-          edges[nedge] = 2 * a + axis[j];
-          flows[nedge++] = -copysign(RELAX_RATE * excess, step);
-        }
-      }
+      int i = points[k], c = columns[k];
+      if (c < ncol - 1) add_if_flowing(&flows, heights, blocked, i, 1, rise[0], over[0], c);
+      if (c > 0 && !listed[i - 1]) add_if_flowing(&flows, heights, blocked, i - 1, 1, rise[0], over[0], c - 1);
+      if (i + ncol < cells) add_if_flowing(&flows, heights, blocked, i, ncol, rise[1], over[1], c);
+      if (i >= ncol && !listed[i - ncol]) add_if_flowing(&flows, heights, blocked, i - ncol, ncol, rise[1], over[1], c);
     }
     for (int k = 0; k < npoint; k++) listed[points[k]] = 0;
-    if (!nedge) {
+    if (!flows.n) {
       result = iteration;
       break;
     }
     if (iteration == max_iterations) break;
     // every flow from the heights the check saw; the points it changes are the next iteration's
     npoint = 0;
-    for (int k = 0; k < nedge; k++) {
-      int a = edges[k] >> 1, b = a + (edges[k] & 1 ? ncol : 1);
-      heights[a] -= flows[k];
-      heights[b] += flows[k];
-      if (!listed[a]) listed[a] = 1, points[npoint++] = a;
-      if (!listed[b]) listed[b] = 1, points[npoint++] = b;
+    for (int k = 0; k < flows.n; k++) {
+      int a = flows.edge[k] >> 1, along_y = flows.edge[k] & 1, b = a + (along_y ? ncol : 1), c = flows.column[k];
+      heights[a] -= flows.flow[k];
+      heights[b] += flows.flow[k];
+      if (!listed[a]) listed[a] = 1, columns[npoint] = c, points[npoint++] = a;
+      if (!listed[b]) listed[b] = 1, columns[npoint] = c + !along_y, points[npoint++] = b;
+      // (edges run from lower to higher indices and columns)
+      if (a < low) low = a;
+      if (b > high) high = b;
+      if (c < left) left = c;
+      if (c + !along_y > right) right = c + !along_y;
     }
+  }
+  if (touched && high >= 0) {
+    int changed[4] = {low / ncol, high / ncol, left, right};
+    join(touched, changed);
   }
   // where sand would still flow: the points of the edges the last check found steeper than the tolerance
   box[0] = nrow, box[1] = -1, box[2] = ncol, box[3] = -1;
-  for (int k = 0; k < nedge; k++) {
-    int a = edges[k] >> 1, b = a + (edges[k] & 1 ? ncol : 1);
+  for (int k = 0; k < flows.n; k++) {
+    int a = flows.edge[k] >> 1;
     grow(box, ncol, a);
-    grow(box, ncol, b);
+    grow(box, ncol, a + (flows.edge[k] & 1 ? ncol : 1));
   }
-  free(points), free(flows), free(listed);
+  free(points), free(flow), free(listed);
   return result;
 }
 
@@ -347,7 +399,7 @@ int finrft_deforming_relax(int nrow, int ncol, double* heights, const double siz
   if (relax_checked(nrow, ncol, size, repose, tolerance)) return FINRFT_SURFACE_BAD_INPUT;
   int box[4] = {0, nrow - 1, 0, ncol - 1};
   return relax_box(nrow, ncol, heights, 2 * size[0] / (ncol - 1), 2 * size[1] / (nrow - 1), tan(repose), blocked,
-                   tolerance, max_iterations, box);
+                   tolerance, max_iterations, box, NULL);
 }
 
 int finrft_deforming_step(FinrftDeforming* s, const double g[3], int n, const double* points, const double* areas,
@@ -370,18 +422,20 @@ int finrft_deforming_step(FinrftDeforming* s, const double g[3], int n, const do
     }
   }
   double dx = 2 * s->size[0] / (ncol - 1), dy = 2 * s->size[1] / (nrow - 1);
-  // before (cells), the points under the body before (cells bytes)
-  double* before = malloc(sizeof(double) * cells + cells);
+  double* before = malloc(sizeof(double) * cells);
   if (!before) {
     free(pushing);
     return FINRFT_SURFACE_BAD_INPUT;
   }
-  unsigned char* was = (unsigned char*)(before + cells);
   memcpy(before, s->heights, sizeof(double) * cells);
-  memcpy(was, s->occupied, cells);
   // the grid points under the body (DeformingSurface._covered): nearest to an element below the level, and their
-  // neighbours; `entered` (was not under before) is read from s->under before it is replaced
+  // neighbours; `entered` (was not under before) is read from s->under before it is replaced. `region` grows to
+  // hold every point whose height, level or being under the body may change: those under it at the last step
+  // (s->held), those under it now, and those the sweep and the relaxation change; elsewhere the level is the height
+  // already, and nothing is looked at
   unsigned char* under = s->under;  // 1: under at the last step; 4: under now
+  int region[4];
+  for (int j = 0; j < 4; j++) region[j] = s->held[j];
   FinrftGrid grid = make_grid(nrow, ncol, s->heights, s->size, s->centre, s->frame);
   for (int e = 0; e < n; e++) {
     double p[3];
@@ -395,42 +449,53 @@ int finrft_deforming_step(FinrftDeforming* s, const double g[3], int n, const do
       if (r < nrow - 1) under[i + ncol] |= 4;
       if (c > 0) under[i - 1] |= 4;
       if (c < ncol - 1) under[i + 1] |= 4;
+      int near[4] = {r, r, c, c};
+      widen(near, nrow, ncol);
+      join(region, near);
     }
   }
   // the imprint is no flow of sand: nothing of it is compacted
+  int swept[4];
   int failed = sweep(nrow, ncol, s->heights, s->size, s->centre, s->frame, g, n, points, areas,
                      pushing ? pushing : velocities, s->front_share, imprint ? 0 : s->compaction, s->compacted,
-                     s->occupied);
+                     s->occupied, swept);
   free(pushing);
   if (failed) {
     for (int i = 0; i < cells; i++) under[i] &= 1;
     free(before);
     return failed;
   }
+  join(region, swept);
   // what relaxation must look at: the excess left by the last step, and every point the sweep changed or whose
-  // being under the body did (an edge elsewhere is as the last relaxation left it, without excess)
+  // being under the body did, with their edges (an edge elsewhere is as the last relaxation left it, without excess)
   int* box = s->dirty;
-  for (int i = 0; i < cells; i++) {
-    if (s->heights[i] != before[i] || s->occupied[i] != was[i]) grow(box, ncol, i);
-  }
+  join(box, swept);
+  join(box, s->held);
+  widen(box, nrow, ncol);
   if (box[0] <= box[1]) {
-    box[0] = box[0] > 0 ? box[0] - 1 : 0;
-    box[1] = box[1] < nrow - 1 ? box[1] + 1 : nrow - 1;
-    box[2] = box[2] > 0 ? box[2] - 1 : 0;
-    box[3] = box[3] < ncol - 1 ? box[3] + 1 : ncol - 1;
-    relax_box(nrow, ncol, s->heights, dx, dy, tan(s->repose), s->occupied, s->tolerance, s->step_iterations, box);
+    relax_box(nrow, ncol, s->heights, dx, dy, tan(s->repose), s->occupied, s->tolerance, s->step_iterations, box,
+              region);
   }
+  if (imprint) region[0] = 0, region[1] = nrow - 1, region[2] = 0, region[3] = ncol - 1;
   double lost = 0;
-  for (int i = 0; i < cells; i++) {
-    if (imprint) {
-      s->heights[i] = fmin(before[i], s->heights[i]);
-      s->original[i] = fmin(s->original[i], s->heights[i]);
+  int held[4] = {nrow, -1, ncol, -1};
+  for (int r = region[0]; r <= region[1]; r++) {
+    for (int c = region[2], i = r * ncol + c; c <= region[3]; c++, i++) {
+      if (imprint) {
+        s->heights[i] = fmin(before[i], s->heights[i]);
+        s->original[i] = fmin(s->original[i], s->heights[i]);
+      }
+      int now = (under[i] & 4) || s->occupied[i], entered = now && !(under[i] & 1);
+      under[i] = (unsigned char)now;
+      s->level[i] = entered ? before[i] : (now ? s->level[i] : s->heights[i]);
+      if (before[i] > s->heights[i]) lost += before[i] - s->heights[i];
+      if (now) {
+        int point[4] = {r, r, c, c};
+        join(held, point);
+      }
     }
-    int now = (under[i] & 4) || s->occupied[i], entered = now && !(under[i] & 1);
-    under[i] = (unsigned char)now;
-    s->level[i] = entered ? before[i] : (now ? s->level[i] : s->heights[i]);
-    if (before[i] > s->heights[i]) lost += before[i] - s->heights[i];
   }
+  for (int j = 0; j < 4; j++) s->held[j] = held[j];
   if (imprint) {  // the imprint lowered points anywhere under the body: every edge may have excess
     box[0] = 0, box[1] = nrow - 1, box[2] = 0, box[3] = ncol - 1;
   }

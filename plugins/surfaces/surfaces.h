@@ -107,6 +107,7 @@ typedef struct {
   double compaction;
   double* compacted;
   int facing;
+  int held[4];  // the box (rows r0..r1, columns c0..c1) of the points under the body at the last step; r0 > r1: none
 } FinrftDeforming;
 
 // One step (DeformingSurface.step): the elements at `points` (world, m) of `areas` moving at `velocities` sweep the

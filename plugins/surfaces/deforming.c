@@ -295,23 +295,24 @@ int finrft_deforming_sweep(int nrow, int ncol, double* heights, const double siz
 
 
 // The edges that flow (2 a: from point a along x, 2 a + 1: along y), their first points' columns and their flows
-// (from the first point to the second), n of them.
+// (from the first point to the second).
 typedef struct {
   int *edge, *column;
   double* flow;
-  int n;
 } Flows;
 
-// The edge from point a (in column c) to a + offset (1: along x, ncol: along y) added to `flows` when it is steeper
-// than `rise` by more than `over` and neither end is blocked.
-static inline void add_if_flowing(Flows* flows, const double* heights, const unsigned char* blocked, int a,
-                                  int offset, double rise, double over, int c) {
+// Whether the edge from point a (in column c) to a + offset (1: along x, ncol: along y) is steeper than `rise` by
+// more than `over` with neither end blocked: then it is entry n of `flows`. (The count is the caller's, in a
+// register: kept in the struct, every entry's store might have changed it.)
+static inline int add_if_flowing(Flows flows, int n, const double* heights, const unsigned char* blocked, int a,
+                                 int offset, double rise, double over, int c) {
   int b = a + offset;
   double step = heights[b] - heights[a], excess = fabs(step) - rise;
-  if (!(excess > over) || (blocked && (blocked[a] || blocked[b]))) return;
-  flows->edge[flows->n] = 2 * a + (offset != 1);
-  flows->column[flows->n] = c;
-  flows->flow[flows->n++] = -copysign(RELAX_RATE * excess, step);
+  if (!(excess > over) || (blocked && (blocked[a] || blocked[b]))) return 0;
+  flows.edge[n] = 2 * a + (offset != 1);
+  flows.column[n] = c;
+  flows.flow[n] = -copysign(RELAX_RATE * excess, step);
+  return 1;
 }
 
 // Only an edge steeper than the tolerance flows, and only edges next to a point that changed in the last iteration
@@ -334,7 +335,8 @@ static int relax_box(int nrow, int ncol, double* heights, double dx, double dy, 
     return -1;
   }
   int* columns = points + cells;
-  Flows flows = {points + 2 * cells, points + 4 * cells, flow, 0};
+  Flows flows = {points + 2 * cells, points + 4 * cells, flow};
+  int nflow = 0;
   double rise[2] = {slope * dx, slope * dy}, over[2] = {tolerance * dx, tolerance * dy};
   for (int r = box[0]; r <= box[1]; r++) {
     for (int c = box[2]; c <= box[3]; c++) {
@@ -344,24 +346,28 @@ static int relax_box(int nrow, int ncol, double* heights, double dx, double dy, 
     }
   }
   for (int iteration = 0; iteration <= max_iterations; iteration++) {
-    flows.n = 0;
+    nflow = 0;
     for (int k = 0; k < npoint; k++) {
       // the edges to the next point along x and y, and from the previous ones unless those are listed themselves
       int i = points[k], c = columns[k];
-      if (c < ncol - 1) add_if_flowing(&flows, heights, blocked, i, 1, rise[0], over[0], c);
-      if (c > 0 && !listed[i - 1]) add_if_flowing(&flows, heights, blocked, i - 1, 1, rise[0], over[0], c - 1);
-      if (i + ncol < cells) add_if_flowing(&flows, heights, blocked, i, ncol, rise[1], over[1], c);
-      if (i >= ncol && !listed[i - ncol]) add_if_flowing(&flows, heights, blocked, i - ncol, ncol, rise[1], over[1], c);
+      if (c < ncol - 1) nflow += add_if_flowing(flows, nflow, heights, blocked, i, 1, rise[0], over[0], c);
+      if (c > 0 && !listed[i - 1]) {
+        nflow += add_if_flowing(flows, nflow, heights, blocked, i - 1, 1, rise[0], over[0], c - 1);
+      }
+      if (i + ncol < cells) nflow += add_if_flowing(flows, nflow, heights, blocked, i, ncol, rise[1], over[1], c);
+      if (i >= ncol && !listed[i - ncol]) {
+        nflow += add_if_flowing(flows, nflow, heights, blocked, i - ncol, ncol, rise[1], over[1], c);
+      }
     }
     for (int k = 0; k < npoint; k++) listed[points[k]] = 0;
-    if (!flows.n) {
+    if (!nflow) {
       result = iteration;
       break;
     }
     if (iteration == max_iterations) break;
     // every flow from the heights the check saw; the points it changes are the next iteration's
     npoint = 0;
-    for (int k = 0; k < flows.n; k++) {
+    for (int k = 0; k < nflow; k++) {
       int a = flows.edge[k] >> 1, along_y = flows.edge[k] & 1, b = a + (along_y ? ncol : 1), c = flows.column[k];
       heights[a] -= flows.flow[k];
       heights[b] += flows.flow[k];
@@ -380,7 +386,7 @@ static int relax_box(int nrow, int ncol, double* heights, double dx, double dy, 
   }
   // where sand would still flow: the points of the edges the last check found steeper than the tolerance
   box[0] = nrow, box[1] = -1, box[2] = ncol, box[3] = -1;
-  for (int k = 0; k < flows.n; k++) {
+  for (int k = 0; k < nflow; k++) {
     int a = flows.edge[k] >> 1;
     grow(box, ncol, a);
     grow(box, ncol, a + (flows.edge[k] & 1 ? ncol : 1));

@@ -208,10 +208,18 @@ def applied_state(built: AttachedModel, method: str,
         start = kept.stop
     others = [r for r in others + [slice(start, m.npluginstate)] if r.stop > r.start]
     copied: list[Any] = [None, -1]  # the MjData and the surface's level_sets of the last copy of the levels
+    names = ("qpos", "qvel", "act", "ctrl", "qfrc_applied", "xfrc_applied", "mocap_pos", "mocap_quat")
+    # what the last call read: a run asks again at the same state (a recorded instant that is also a step of the
+    # means' window), a quarter of the calls of a wheel's run, and gets the same MjData without a forward pass
+    last: list[Any] = [None]
 
     def applied(d: mujoco.MjData) -> mujoco.MjData:
+        state = (d.time, *(getattr(d, name) for name in names), *(d.plugin_state[r] for r in others))
+        if (last[0] is not None and last[0][0] is d and copied[1] == (surface.level_sets if levels else -1)
+                and state[0] == last[0][1] and all(np.array_equal(a, b) for a, b in zip(state[1:], last[0][2:]))):
+            return where
         where.time = d.time - lag
-        for name in ("qpos", "qvel", "act", "ctrl", "qfrc_applied", "xfrc_applied", "mocap_pos", "mocap_quat"):
+        for name in names:
             getattr(where, name)[:] = getattr(d, name)
         for r in others:  # plugin_state: the native plugins' state
             where.plugin_state[r] = d.plugin_state[r]
@@ -221,6 +229,7 @@ def applied_state(built: AttachedModel, method: str,
             copied[:] = [d, surface.level_sets]
         mujoco.mj_integratePos(m, where.qpos, where.qvel, -lag)
         mujoco.mj_forward(m, where)
+        last[0] = (d, state[0], *(np.copy(a) for a in state[1:]))
         return where
     return applied
 

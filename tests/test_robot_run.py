@@ -288,3 +288,35 @@ def test_geoms_chosen_by_name_in_the_scene(tmp_path):
     assert s["drive_load"][0] == pytest.approx(DRAG_N, rel=1e-6)
     with pytest.raises(SceneError, match="no geom named 'wing'"):
         finrft.run_robot(scene.replace(**{"model.geoms": ["wing"]}))
+
+
+def test_the_forces_behind_a_state_are_taken_once_per_state(monkeypatch):
+    # a recorded instant that is also a step of the means' window asks twice at one state: one forward pass, and a
+    # new one as soon as anything it reads changes (the velocity, the plugins' state)
+    import mujoco
+
+    from finrft.experiments.attached_model import applied_state
+    from finrft.experiments.user_model import UserModel, example
+    from finrft.scene import UserScene, load_scene
+
+    scene = load_scene(example("wheel_rig"), cls=UserScene)
+    built = UserModel.of(scene).build(scene)
+    m = built.model
+    d = mujoco.MjData(m)
+    mujoco.mj_resetDataKeyframe(m, d, m.key(scene.model.keyframe).id)
+    d.qvel[:] = 0.01
+    applied = applied_state(built, "newton")
+    calls = []
+    forward = mujoco.mj_forward
+    monkeypatch.setattr(mujoco, "mj_forward", lambda m, d: (calls.append(d), forward(m, d))[1])
+    first = applied(d).qfrc_passive.copy()
+    assert np.abs(first).max() > 0 and applied(d).qfrc_passive.tolist() == first.tolist() and len(calls) == 1
+    d.qvel[:] = 0.02
+    assert np.abs(applied(d).qfrc_passive - first).max() > 0 and len(calls) == 2
+    d.plugin_state[:] += 0.0  # the same state: no new pass
+    applied(d)
+    assert len(calls) == 2
+    other = mujoco.MjData(m)
+    other.qpos[:], other.qvel[:] = d.qpos, d.qvel
+    applied(other)  # another MjData at the same state is another state
+    assert len(calls) == 3

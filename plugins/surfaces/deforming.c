@@ -161,13 +161,11 @@ static void join(int box[4], const int other[4]) {
 // compaction is 0), and the rest goes to the berm. `changed` (rows r0..r1, columns c0..c1; r0 > r1: none) holds
 // every point whose height or occupation it set: the footprints' box, and one point beyond it, where a berm's march
 // ends (its first point not under the body, next to one that is, or the last on the grid).
-static int sweep(int nrow, int ncol, double* heights, const double size[2], const double centre[3],
-                 const double frame[9], const double g[3], int n, const double* points, const double* areas,
-                 const double* velocities, double front_share, double compaction, double* compacted,
-                 unsigned char* occupied, int changed[4]) {
-  FinrftGrid grid = make_grid(nrow, ncol, heights, size, centre, frame);
-  if (finrft_grid_check(&grid, g) || !(front_share >= 0 && front_share <= 1) ||
-      !(compaction >= 0 && compaction <= 1) || (compaction > 0 && !compacted)) {
+static int sweep(int nrow, int ncol, double* heights, const double size[2], const double frame[9], int n,
+                 const double* local, const double* areas, const double* velocities, double front_share,
+                 double compaction, double* compacted, unsigned char* occupied, int changed[4]) {
+  if (!(front_share >= 0 && front_share <= 1) || !(compaction >= 0 && compaction <= 1) ||
+      (compaction > 0 && !compacted)) {
     return FINRFT_SURFACE_BAD_INPUT;
   }
   double *target = NULL, *direction = NULL;
@@ -175,76 +173,84 @@ static int sweep(int nrow, int ncol, double* heights, const double size[2], cons
   double dx = 2 * size[0] / (ncol - 1), dy = 2 * size[1] / (nrow - 1), top = heights[0];
   for (int i = 1; i < cells; i++) top = heights[i] > top ? heights[i] : top;
   // Each element's footprint: its disc's grid points and the nearest one. The elements above every point lower
-  // none and are over none; the rest's footprints lie in one box, the only points this sweep reads or changes.
-  int box[4] = {nrow, -1, ncol, -1};
-  for (int pass = 0; pass < 2; pass++) {
-    for (int e = 0; e < n; e++) {
-      double p[3];
-      finrft_grid_local(&grid, points + 3 * e, p);
-      if (p[2] > top + TOUCH) continue;
-      double radius = sqrt((areas[e] > 0 ? areas[e] : 0) / M_PI);
-      double u = (p[0] + size[0]) / dx, w = (p[1] + size[1]) / dy;
-      int cn = (int)floor(u + 0.5), rn = (int)floor(w + 0.5);
-      cn = cn < 0 ? 0 : (cn > ncol - 1 ? ncol - 1 : cn);
-      rn = rn < 0 ? 0 : (rn > nrow - 1 ? nrow - 1 : rn);
-      int c0 = (int)ceil(u - radius / dx), c1 = (int)floor(u + radius / dx);
-      int r0 = (int)ceil(w - radius / dy), r1 = (int)floor(w + radius / dy);
-      if (c0 < 0) c0 = 0;
-      if (r0 < 0) r0 = 0;
-      if (c1 > ncol - 1) c1 = ncol - 1;
-      if (r1 > nrow - 1) r1 = nrow - 1;
-      if (pass == 0) {
-        int lo_r = r0 < rn ? r0 : rn, hi_r = r1 > rn ? r1 : rn, lo_c = c0 < cn ? c0 : cn, hi_c = c1 > cn ? c1 : cn;
-        if (lo_r < box[0]) box[0] = lo_r;
-        if (hi_r > box[1]) box[1] = hi_r;
-        if (lo_c < box[2]) box[2] = lo_c;
-        if (hi_c > box[3]) box[3] = hi_c;
-        continue;
+  // none and are over none; the rest's footprints (rows r0..r1, columns c0..c1, the nearest point's row and column,
+  // kept for the second pass with the element) lie in one box, the only points this sweep reads or changes.
+  int box[4] = {nrow, -1, ncol, -1}, nlow = 0;
+  int* footprint = malloc(sizeof(int) * 7 * (n > 0 ? n : 1));
+  if (!footprint) return FINRFT_SURFACE_BAD_INPUT;
+  for (int e = 0; e < n; e++) {
+    const double* p = local + 3 * e;
+    if (p[2] > top + TOUCH) continue;
+    double radius = sqrt((areas[e] > 0 ? areas[e] : 0) / M_PI);
+    double u = (p[0] + size[0]) / dx, w = (p[1] + size[1]) / dy;
+    int cn = (int)floor(u + 0.5), rn = (int)floor(w + 0.5);
+    cn = cn < 0 ? 0 : (cn > ncol - 1 ? ncol - 1 : cn);
+    rn = rn < 0 ? 0 : (rn > nrow - 1 ? nrow - 1 : rn);
+    int c0 = (int)ceil(u - radius / dx), c1 = (int)floor(u + radius / dx);
+    int r0 = (int)ceil(w - radius / dy), r1 = (int)floor(w + radius / dy);
+    if (c0 < 0) c0 = 0;
+    if (r0 < 0) r0 = 0;
+    if (c1 > ncol - 1) c1 = ncol - 1;
+    if (r1 > nrow - 1) r1 = nrow - 1;
+    int lo_r = r0 < rn ? r0 : rn, hi_r = r1 > rn ? r1 : rn, lo_c = c0 < cn ? c0 : cn, hi_c = c1 > cn ? c1 : cn;
+    if (lo_r < box[0]) box[0] = lo_r;
+    if (hi_r > box[1]) box[1] = hi_r;
+    if (lo_c < box[2]) box[2] = lo_c;
+    if (hi_c > box[3]) box[3] = hi_c;
+    int* f = footprint + 7 * nlow++;
+    f[0] = e, f[1] = r0, f[2] = r1, f[3] = c0, f[4] = c1, f[5] = rn, f[6] = cn;
+  }
+  if (box[1] >= 0) {  // some element below the highest point
+    target = malloc(sizeof(double) * 3 * cells);  // the lowest element's height, then its direction
+    if (!target) {
+      free(footprint);
+      return FINRFT_SURFACE_BAD_INPUT;
+    }
+    direction = target + cells;
+    for (int r = box[0]; r <= box[1]; r++) {
+      for (int i = r * ncol + box[2]; i <= r * ncol + box[3]; i++) {
+        target[i] = INFINITY;
+        direction[2 * i] = direction[2 * i + 1] = 0;
       }
-      double v[3];
-      const double* vw = velocities + 3 * e;
-      for (int j = 0; j < 3; j++) v[j] = vw[0] * frame[j] + vw[1] * frame[3 + j] + vw[2] * frame[6 + j];
-      double speed = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]), horizontal = hypot(v[0], v[1]);
-      double d[2] = {0, 0};
-      if (horizontal > STRAIGHT_DOWN * speed && horizontal > 0) {
-        d[0] = v[0] / horizontal;
-        d[1] = v[1] / horizontal;
-      }
-      // the footprint's points row by row, then the nearest point should the disc miss it (as the twin appends it)
-      int nearest_seen = 0;
-      for (int again = 0; again < 2; again++) {
-        for (int r = again ? rn : r0; r <= (again ? rn : r1); r++) {
-          for (int c = again ? cn : c0; c <= (again ? cn : c1); c++) {
-            if (!again) {
-              double ex = c * dx - size[0] - p[0], ey = r * dy - size[1] - p[1];
-              if (!(ex * ex + ey * ey <= radius * radius || (r == rn && c == cn))) continue;
-              if (r == rn && c == cn) nearest_seen = 1;
-            } else if (nearest_seen) {
-              continue;
-            }
-            int i = r * ncol + c;
-            if (p[2] < target[i]) {
-              target[i] = p[2];
-              direction[2 * i] = d[0];
-              direction[2 * i + 1] = d[1];
-            }
+    }
+  }
+  for (int k = 0; k < nlow; k++) {
+    const int* f = footprint + 7 * k;
+    int e = f[0], r0 = f[1], r1 = f[2], c0 = f[3], c1 = f[4], rn = f[5], cn = f[6];
+    const double* p = local + 3 * e;
+    double radius = sqrt((areas[e] > 0 ? areas[e] : 0) / M_PI);
+    double v[3];
+    const double* vw = velocities + 3 * e;
+    for (int j = 0; j < 3; j++) v[j] = vw[0] * frame[j] + vw[1] * frame[3 + j] + vw[2] * frame[6 + j];
+    double speed = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]), horizontal = hypot(v[0], v[1]);
+    double d[2] = {0, 0};
+    if (horizontal > STRAIGHT_DOWN * speed && horizontal > 0) {
+      d[0] = v[0] / horizontal;
+      d[1] = v[1] / horizontal;
+    }
+    // the footprint's points row by row, then the nearest point should the disc miss it (as the twin appends it)
+    int nearest_seen = 0;
+    for (int again = 0; again < 2; again++) {
+      for (int r = again ? rn : r0; r <= (again ? rn : r1); r++) {
+        for (int c = again ? cn : c0; c <= (again ? cn : c1); c++) {
+          if (!again) {
+            double ex = c * dx - size[0] - p[0], ey = r * dy - size[1] - p[1];
+            if (!(ex * ex + ey * ey <= radius * radius || (r == rn && c == cn))) continue;
+            if (r == rn && c == cn) nearest_seen = 1;
+          } else if (nearest_seen) {
+            continue;
+          }
+          int i = r * ncol + c;
+          if (p[2] < target[i]) {
+            target[i] = p[2];
+            direction[2 * i] = d[0];
+            direction[2 * i + 1] = d[1];
           }
         }
       }
     }
-    if (pass == 0) {
-      if (box[1] < 0) break;  // no element below the highest point
-      target = malloc(sizeof(double) * 3 * cells);  // the lowest element's height, then its direction
-      if (!target) return FINRFT_SURFACE_BAD_INPUT;
-      direction = target + cells;
-      for (int r = box[0]; r <= box[1]; r++) {
-        for (int i = r * ncol + box[2]; i <= r * ncol + box[3]; i++) {
-          target[i] = INFINITY;
-          direction[2 * i] = direction[2 * i + 1] = 0;
-        }
-      }
-    }
   }
+  free(footprint);
   memset(occupied, 0, cells);
   for (int j = 0; j < 4; j++) changed[j] = box[j];
   widen(changed, nrow, ncol);
@@ -288,9 +294,16 @@ int finrft_deforming_sweep(int nrow, int ncol, double* heights, const double siz
                            const double frame[9], const double g[3], int n, const double* points,
                            const double* areas, const double* velocities, double front_share,
                            unsigned char* occupied) {
+  FinrftGrid grid = make_grid(nrow, ncol, heights, size, centre, frame);
+  if (finrft_grid_check(&grid, g)) return FINRFT_SURFACE_BAD_INPUT;
+  double* local = malloc(sizeof(double) * 3 * (n > 0 ? n : 1));
+  if (!local) return FINRFT_SURFACE_BAD_INPUT;
+  for (int e = 0; e < n; e++) finrft_grid_local(&grid, points + 3 * e, local + 3 * e);
   int changed[4];
-  return sweep(nrow, ncol, heights, size, centre, frame, g, n, points, areas, velocities, front_share, 0, NULL,
-               occupied, changed);
+  int failed = sweep(nrow, ncol, heights, size, frame, n, local, areas, velocities, front_share, 0, NULL, occupied,
+                     changed);
+  free(local);
+  return failed;
 }
 
 
@@ -411,8 +424,9 @@ int finrft_deforming_relax(int nrow, int ncol, double* heights, const double siz
 int finrft_deforming_step(FinrftDeforming* s, const double g[3], int n, const double* points, const double* areas,
                           const double* velocities, const double* normals, int imprint, double* removed) {
   int nrow = s->nrow, ncol = s->ncol, cells = nrow * ncol;
+  FinrftGrid grid = make_grid(nrow, ncol, s->heights, s->size, s->centre, s->frame);
   if (relax_checked(nrow, ncol, s->size, s->repose, s->tolerance) || s->step_iterations < 0 ||
-      (s->facing && !normals)) {
+      (s->facing && !normals) || finrft_grid_check(&grid, g)) {
     return FINRFT_SURFACE_BAD_INPUT;
   }
   // the direction each element pushes its sand along (the sweep takes its horizontal part): with `facing`, a leading
@@ -428,12 +442,15 @@ int finrft_deforming_step(FinrftDeforming* s, const double g[3], int n, const do
     }
   }
   double dx = 2 * s->size[0] / (ncol - 1), dy = 2 * s->size[1] / (nrow - 1);
-  double* before = malloc(sizeof(double) * cells);
+  // the heights before (cells), and each element in the grid's frame (3 n), once for the marks and the sweep
+  double* before = malloc(sizeof(double) * (cells + 3 * n));
   if (!before) {
     free(pushing);
     return FINRFT_SURFACE_BAD_INPUT;
   }
+  double* local = before + cells;
   memcpy(before, s->heights, sizeof(double) * cells);
+  for (int e = 0; e < n; e++) finrft_grid_local(&grid, points + 3 * e, local + 3 * e);
   // the grid points under the body (DeformingSurface._covered): nearest to an element below the level, and their
   // neighbours; `entered` (was not under before) is read from s->under before it is replaced. `region` grows to
   // hold every point whose height, level or being under the body may change: those under it at the last step
@@ -442,10 +459,8 @@ int finrft_deforming_step(FinrftDeforming* s, const double g[3], int n, const do
   unsigned char* under = s->under;  // 1: under at the last step; 4: under now
   int region[4];
   for (int j = 0; j < 4; j++) region[j] = s->held[j];
-  FinrftGrid grid = make_grid(nrow, ncol, s->heights, s->size, s->centre, s->frame);
   for (int e = 0; e < n; e++) {
-    double p[3];
-    finrft_grid_local(&grid, points + 3 * e, p);
+    const double* p = local + 3 * e;
     int c = (int)floor((p[0] + s->size[0]) / dx + 0.5), r = (int)floor((p[1] + s->size[1]) / dy + 0.5);
     if (c < 0 || c >= ncol || r < 0 || r >= nrow) continue;
     int i = r * ncol + c;
@@ -462,9 +477,8 @@ int finrft_deforming_step(FinrftDeforming* s, const double g[3], int n, const do
   }
   // the imprint is no flow of sand: nothing of it is compacted
   int swept[4];
-  int failed = sweep(nrow, ncol, s->heights, s->size, s->centre, s->frame, g, n, points, areas,
-                     pushing ? pushing : velocities, s->front_share, imprint ? 0 : s->compaction, s->compacted,
-                     s->occupied, swept);
+  int failed = sweep(nrow, ncol, s->heights, s->size, s->frame, n, local, areas, pushing ? pushing : velocities,
+                     s->front_share, imprint ? 0 : s->compaction, s->compacted, s->occupied, swept);
   free(pushing);
   if (failed) {
     for (int i = 0; i < cells; i++) under[i] &= 1;

@@ -686,6 +686,30 @@ static const struct {
              {"rft3d", NCOEF_RFT3D, read_xi, rft3d_force, rft3d_slope}};
 #define NLAWS ((int)(sizeof(kLaws) / sizeof(kLaws[0])))
 
+// The law named `law` (kLaws) on n elements (normal, velocity: 3 n each; depth, area: n), `repeat` passes over
+// them, each element's force into force (3 n), called as the plugin calls it (an upright instance's framed_force):
+// what `finrft bench laws` times, one call a round, so that no caller's overhead counts per element. coef holds the
+// law's coefficients (kLaws' ncoef), scale its zeta (li2013) or xi (rft3d). 0, or -1 for an unknown law.
+FINRFT_EXPORT int finrft_law_forces(const char* law, const double* coef, double scale, double mu_surf, int n,
+                                    const double* normal, const double* velocity, const double* depth,
+                                    const double* area, int repeat, double* force) {
+  int index = 0;
+  while (index < NLAWS && strcmp(law, kLaws[index].name)) index++;
+  if (index == NLAWS) return -1;
+  FinrftSurface p;
+  memset(&p, 0, sizeof(p));
+  p.law = index;
+  memcpy(p.coef, coef, kLaws[index].ncoef * sizeof(double));
+  p.zeta = p.xi = scale;
+  p.mu_surf = mu_surf;
+  for (int r = 0; r < repeat; r++) {
+    for (int i = 0; i < n; i++) {
+      kLaws[index].force(&p, normal + 3 * i, velocity + 3 * i, depth[i], area[i], force + 3 * i);
+    }
+  }
+  return 0;
+}
+
 static int surface_init(const mjModel* m, mjData* d, int instance) {
   const char* law = mj_getPluginConfig(m, instance, "law");
   int index = 0;

@@ -1,6 +1,5 @@
 """`finrft bench laws`: the native entry point it times gives each law's forces, as the numpy twins give them."""
 
-import ctypes
 import math
 
 import numpy as np
@@ -10,19 +9,10 @@ from finrft import media, native
 from finrft.laws import li2013, li2013_planar, rft3d
 from finrft.studies import bench
 
-DOUBLES = ctypes.POINTER(ctypes.c_double)
-
 
 def _law_forces(law: str, elements: dict[str, np.ndarray], repeat: int = 2) -> tuple[int, np.ndarray]:
-    run = native.function("finrft_law_forces", ctypes.c_int, ctypes.c_char_p, DOUBLES, ctypes.c_double,
-                          ctypes.c_double, ctypes.c_int, DOUBLES, DOUBLES, DOUBLES, DOUBLES, ctypes.c_int, DOUBLES)
-    coef, scale, mu_surf = bench._law_constants(law if law in bench.LAW_MEDIA else "li2013")
-    n = len(elements["depth"])
-    force = np.full((n, 3), np.nan)
-    code = run(law.encode(), coef.ctypes.data_as(DOUBLES), scale, mu_surf, n,
-               *(elements[key].ctypes.data_as(DOUBLES) for key in ("normal", "velocity", "depth", "area")), repeat,
-               force.ctypes.data_as(DOUBLES))
-    return code, force
+    force = np.full((len(elements["depth"]), 3), np.nan)
+    return bench.law_forces_call(law, elements, force, repeat)(), force
 
 
 def test_the_elements_lead_below_the_surface_facing_every_way():

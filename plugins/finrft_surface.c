@@ -54,23 +54,24 @@ static inline double norm2(double x, double y) { return sqrt(x * x + y * y); }
 // (alpha_x, alpha_z), N/m^3, at the angles beta and gamma given by their cosines and sines: see
 // finrft/laws/li2013.py for the signs and the folding. The series' terms come from cos 2beta and sin 2beta by the
 // angle-sum formulas, so a call costs no trigonometric function: the laws are called several times per element per
-// Newton step, and sin, cos and atan2 were a third of a wheel's step.
-static inline void alpha_unit(const double coef[NCOEF], double zeta, double cb, double sb, double cg, double sg,
-                              double out[2]) {
-  // gamma beyond +-pi/2 (cos gamma < 0) is folded to pi - gamma with beta to -beta: cos gamma and sin 2beta change
-  // sign
-  int mirrored = cg < 0;
-  if (mirrored) {
-    cg = -cg;
-    sb = -sb;
-  }
-  double c2 = cb * cb - sb * sb, s2 = 2 * sb * cb;
+// Newton step, and sin, cos and atan2 were a third of a wheel's step. gamma beyond +-pi/2 needs no folding here: the
+// mirror (beta -> -beta, gamma -> pi - gamma, alpha_x -> -alpha_x) changes the sign of cos gamma and sin 2beta, and
+// every term of alpha_x holds one of them, every term of alpha_z none or both, so the folded sums are these to the
+// last bit (a branch on the sign of cos gamma, mispredicted on elements that face every way, was a tenth of a call).
+// alpha_double takes beta by cos 2beta and sin 2beta (c2, s2), alpha_unit by its cosine and sine.
+static inline void alpha_double(const double coef[NCOEF], double zeta, double c2, double s2, double cg, double sg,
+                                double out[2]) {
   double sum_sin = s2 * cg + c2 * sg, diff_sin = c2 * sg - s2 * cg;  // sin(2b + g), sin(-2b + g)
   double sum_cos = c2 * cg - s2 * sg, diff_cos = c2 * cg + s2 * sg;  // cos(2b + g), cos(-2b + g)
   double az = coef[0] + coef[1] * c2 + coef[2] * sum_sin + coef[3] * sg + coef[4] * diff_sin;
   double ax = coef[5] * sum_cos + coef[6] * cg + coef[7] * diff_cos + coef[8] * s2;
-  out[0] = zeta * (mirrored ? -ax : ax);
+  out[0] = zeta * ax;
   out[1] = zeta * az;
+}
+
+static inline void alpha_unit(const double coef[NCOEF], double zeta, double cb, double sb, double cg, double sg,
+                              double out[2]) {
+  alpha_double(coef, zeta, cb * cb - sb * sb, 2 * sb * cb, cg, sg, out);
 }
 
 // The cosine and sine of atan2(y, x) (1 and 0 at the origin, as atan2(0, 0) = 0).
@@ -172,16 +173,22 @@ static void horizontal_unit(const double a[3], const double b[3], double e[2]) {
 }
 
 // Treers et al.'s stress per unit depth in the vertical plane of the horizontal unit vector e2 (as _stress in
-// li2013.py): `side` is f1(|v1|) sign(v^.e1) of the unit velocity's part across the plane, f23 the weight of its
-// part within it, beta the face's angle and gamma the motion's there, given by their cosines and sines.
-static void plane_stress(const double coef[NCOEF], double zeta, const double e2[2], double side, double f23,
-                         double cb, double sb, double cg, double sg, double stress[3]) {
-  double a[2], e1[2] = {e2[1], -e2[0]};
+// li2013.py) is f1(|v1|) sign(v^.e1) across + f23 within, f1 the weight of the unit velocity's part across the
+// plane and f23 of its part within it: its two parts, across = -alpha_1 e1 (2) and within = (-alpha_x e2, alpha_z)
+// (3), beta the face's angle (by cos 2beta and sin 2beta) and gamma the motion's there (by its cosine and sine).
+// The parts come before the weights: the weights' exp and log are calls, and what the parts are computed from would
+// otherwise be held across them (saved to memory and loaded again).
+static inline void plane_parts(const double coef[NCOEF], double zeta, const double e2[2], double c2, double s2,
+                               double cg, double sg, double across[2], double within[3]) {
+  double a[2];
   // alpha_1 = alpha_x(0, 0), alpha_unit's sum at beta = gamma = 0 without its call
-  side *= zeta * (coef[5] + coef[6] + coef[7]);
-  alpha_unit(coef, zeta, cb, sb, cg, sg, a);
-  for (int i = 0; i < 2; i++) stress[i] = -side * e1[i] - f23 * a[0] * e2[i];
-  stress[2] = f23 * a[1];
+  double alpha_1 = zeta * (coef[5] + coef[6] + coef[7]);
+  alpha_double(coef, zeta, c2, s2, cg, sg, a);
+  across[0] = -alpha_1 * e2[1];
+  across[1] = alpha_1 * e2[0];
+  within[0] = -a[0] * e2[0];
+  within[1] = -a[0] * e2[1];
+  within[2] = a[1];
 }
 
 // The force on one element (world frame, z up) of Li's law in 3D (Treers, Cao & Stuart 2021): outward unit normal
@@ -191,42 +198,52 @@ static void plane_stress(const double coef[NCOEF], double zeta, const double e2[
 // a log, the law's price on a robot's step).
 //   In the normal's plane, e2 = n_h / |n_h|: with P = |n_h| |v|, v^.e1 = (v_h x n_h)_z / P and the size of v^'s
 //   part within the plane is |(v_h.n_h, v_z |n_h|)| / P; gamma's cosine and sine are that vector's over its size,
-//   and beta = atan2(-|n_h|, n_z) has cosine n_z and sine -|n_h| (|n| = 1).
+//   and beta = atan2(-|n_h|, n_z), so cos 2beta = n_z^2 - |n_h|^2 and sin 2beta = -2 |n_h| n_z (|n| = 1).
 //   In the velocity's own plane, e2 = v_h / |v_h| (n's or x when v is vertical): v has no part across it and all
 //   of it within (f1's weight 0, f23's f23(1)), and gamma's cosine and sine are |v_h| / |v| and -v_z / |v|.
-FINRFT_EXPORT void finrft_li2013_element_force(const double coef[NCOEF], double zeta, const double n[3],
-                                               const double v[3], double depth, double area,
-                                               double force[3]) {
-  force[0] = force[1] = force[2] = 0;
-  if (!(depth > 0) || !(n[0] * v[0] + n[1] * v[1] + n[2] * v[2] > 0)) return;
-  double speed = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
-  // (a product: the constant's inverse is folded, where a division by it cost one of the call's divisions)
-  double sideways = norm2(n[0], n[1]), tilt = sideways * (1 / sqrt(1 - (1 - 1e-3) * (1 - 1e-3)));
-  if (tilt > 1) tilt = 1;
-  double w = tilt * tilt * (3 - 2 * tilt);
-  double stress[3] = {0, 0, 0};
-  if (w > 0) {
-    double inverse = 1 / (sideways * speed);
-    double across = (v[0] * n[1] - v[1] * n[0]) * inverse, along = v[0] * n[0] + v[1] * n[1];
-    double lift = v[2] * sideways, within = norm2(along, lift), cg = 1, sg = 0;
-    if (within > 0) {
-      double scale = 1 / within;
-      cg = along * scale;
-      sg = -lift * scale;
+// The own plane's part comes first, so that nothing of it is held across the normal plane's weights.
+static inline void li2013_element_force(const double coef[NCOEF], double zeta, const double n[3], const double v[3],
+                                        double depth, double area, double force[3]) {
+  double out[3] = {0, 0, 0};
+  if (depth > 0 && n[0] * v[0] + n[1] * v[1] + n[2] * v[2] > 0) {
+    double speed = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]), flat = n[0] * n[0] + n[1] * n[1];
+    // (a product: the constant's inverse is folded, where a division by it cost one of the call's divisions)
+    double sideways = sqrt(flat), tilt = sideways * (1 / sqrt(1 - (1 - 1e-3) * (1 - 1e-3)));
+    if (tilt > 1) tilt = 1;
+    double w = tilt * tilt * (3 - 2 * tilt), scale = area * depth;
+    if (w < 1) {
+      double across[2], within[3], e2[2], cb, sb, inverse = 1 / speed;
+      horizontal_unit(v, n, e2);
+      unit_angle(-(n[0] * e2[0] + n[1] * e2[1]), n[2], &cb, &sb);
+      plane_parts(coef, zeta, e2, cb * cb - sb * sb, 2 * sb * cb, (v[0] * e2[0] + v[1] * e2[1]) * inverse,
+                  -v[2] * inverse, across, within);
+      for (int i = 0; i < 3; i++) out[i] = (1 - w) * scale * F23_ONE * within[i];
     }
-    double e2[2] = {n[0] * speed * inverse, n[1] * speed * inverse};
-    double side = weight_across(fabs(across), NULL) * (across > 0 ? 1 : across < 0 ? -1 : 0);
-    plane_stress(coef, zeta, e2, side, weight_within(within * inverse, NULL), n[2], -sideways, cg, sg, stress);
+    if (w > 0) {
+      double inverse = 1 / (sideways * speed), turn = speed * inverse;  // turn = 1 / |n_h|
+      double v1 = (v[0] * n[1] - v[1] * n[0]) * inverse, along = v[0] * n[0] + v[1] * n[1];
+      // |(along, lift)| from |n_h|^2, not from its square root: one step less before the log
+      double lift = v[2] * sideways, size = sqrt(along * along + v[2] * v[2] * flat), cg = 1, sg = 0;
+      if (size > 0) {
+        double unit = 1 / size;
+        cg = along * unit;
+        sg = -lift * unit;
+      }
+      double e2[2] = {n[0] * turn, n[1] * turn}, across[2], within[3];
+      plane_parts(coef, zeta, e2, n[2] * n[2] - flat, -2 * sideways * n[2], cg, sg, across, within);
+      // f1 sign(v^.e1): f1(0) = 0, so the sign of 0 is none's
+      double f1 = w * scale * copysign(weight_across(fabs(v1), NULL), v1);
+      double f23 = w * scale * weight_within(size * inverse, NULL);
+      for (int i = 0; i < 2; i++) out[i] += f1 * across[i] + f23 * within[i];
+      out[2] += f23 * within[2];
+    }
   }
-  if (w < 1) {
-    double own[3], e2[2], cb, sb, inverse = 1 / speed;
-    horizontal_unit(v, n, e2);
-    unit_angle(-(n[0] * e2[0] + n[1] * e2[1]), n[2], &cb, &sb);
-    plane_stress(coef, zeta, e2, 0, F23_ONE, cb, sb, (v[0] * e2[0] + v[1] * e2[1]) * inverse,
-                 -v[2] * inverse, own);
-    for (int i = 0; i < 3; i++) stress[i] = w * stress[i] + (1 - w) * own[i];
-  }
-  for (int i = 0; i < 3; i++) force[i] = area * depth * stress[i];
+  for (int i = 0; i < 3; i++) force[i] = out[i];
+}
+
+FINRFT_EXPORT void finrft_li2013_element_force(const double coef[NCOEF], double zeta, const double n[3],
+                                               const double v[3], double depth, double area, double force[3]) {
+  li2013_element_force(coef, zeta, n, v, depth, area, force);
 }
 
 // alpha_unit and its partial derivatives d[a][j] of alpha_x (a = 0), alpha_z (a = 1) in (cb, sb, cg, sg), from
@@ -648,7 +665,7 @@ static int read_field(const mjModel* m, int instance, FinrftSurface* p) {
 
 static void li2013_force(const FinrftSurface* p, const double n[3], const double v[3], double depth, double area,
                          double f[3]) {
-  finrft_li2013_element_force(p->coef, p->zeta, n, v, depth, area, f);
+  li2013_element_force(p->coef, p->zeta, n, v, depth, area, f);
 }
 
 static void li2013_planar_force(const FinrftSurface* p, const double n[3], const double v[3], double depth,
@@ -685,6 +702,30 @@ static const struct {
              {"li2013-planar", NCOEF, read_zeta, li2013_planar_force, NULL},
              {"rft3d", NCOEF_RFT3D, read_xi, rft3d_force, rft3d_slope}};
 #define NLAWS ((int)(sizeof(kLaws) / sizeof(kLaws[0])))
+
+// The law named `law` (kLaws) on n elements (normal, velocity: 3 n each; depth, area: n), `repeat` passes over
+// them, each element's force into force (3 n), called as the plugin calls it (an upright instance's framed_force):
+// what `finrft bench laws` times, one call a round, so that no caller's overhead counts per element. coef holds the
+// law's coefficients (kLaws' ncoef), scale its zeta (li2013) or xi (rft3d). 0, or -1 for an unknown law.
+FINRFT_EXPORT int finrft_law_forces(const char* law, const double* coef, double scale, double mu_surf, int n,
+                                    const double* normal, const double* velocity, const double* depth,
+                                    const double* area, int repeat, double* force) {
+  int index = 0;
+  while (index < NLAWS && strcmp(law, kLaws[index].name)) index++;
+  if (index == NLAWS) return -1;
+  FinrftSurface p;
+  memset(&p, 0, sizeof(p));
+  p.law = index;
+  memcpy(p.coef, coef, kLaws[index].ncoef * sizeof(double));
+  p.zeta = p.xi = scale;
+  p.mu_surf = mu_surf;
+  for (int r = 0; r < repeat; r++) {
+    for (int i = 0; i < n; i++) {
+      kLaws[index].force(&p, normal + 3 * i, velocity + 3 * i, depth[i], area[i], force + 3 * i);
+    }
+  }
+  return 0;
+}
 
 static int surface_init(const mjModel* m, mjData* d, int instance) {
   const char* law = mj_getPluginConfig(m, instance, "law");

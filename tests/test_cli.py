@@ -420,6 +420,7 @@ JSON_ARGS = {
     "bench backends": pytest.param(["--batch", "1", "--workers", "1"], marks=SLOW),
     "bench robots": pytest.param(["--robot", "sand_swimmer", "--duration", "0.6"], marks=SLOW),
     "bench steps": ["--robot", "wheel_rig"],
+    "bench laws": [],
     "bench modelling": pytest.param([], marks=SLOW),
     "bench fit": pytest.param(["--budget", "1", "--workers", "1"], marks=SLOW),
     "bench warp": pytest.param(["--worlds", "1", "--steps", "5"], marks=NEEDS_WARP),

@@ -278,6 +278,83 @@ def fit_speed(paths: list[str] | None = None, *, budget: int = 300, workers: int
     return out
 
 
+# The laws' cost per call (`laws`): this many leading elements below the surface, each law called on all of them
+# LAW_PASSES times in one native call, the best of LAW_ROUNDS such calls, the laws taken in turn.
+LAW_ELEMENTS = 1024
+LAW_PASSES = 16
+LAW_ROUNDS = 1000
+# Each law with the medium and intruder of a shipped example: the sand-swimmer's glass beads (li2013, li2013-planar),
+# the hexapod's sand and surface friction (rft3d).
+LAW_MEDIA = {"li2013": "glass_beads_treers2021", "li2013-planar": "glass_beads_treers2021",
+             "rft3d": "sand_3d_rft_code"}
+RFT3D_MU_SURF = 0.1806
+
+
+def law_elements(n: int = LAW_ELEMENTS, seed: int = 0) -> dict[str, np.ndarray]:
+    """``n`` leading elements below the surface, seeded: unit normals and the directions of velocities uniform
+    over the sphere (a velocity turned round where it trails), speeds 1 to 100 mm/s, depths 1 to 50 mm, areas 1
+    to 100 mm^2."""
+    rng = np.random.default_rng(seed)
+    normal, direction = rng.normal(size=(2, n, 3))
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    direction *= np.sign(np.einsum("ij,ij->i", normal, direction))[:, None]
+    return {"normal": normal, "velocity": direction * rng.uniform(1e-3, 0.1, (n, 1)),
+            "depth": rng.uniform(1e-3, 0.05, n), "area": rng.uniform(1e-6, 1e-4, n)}
+
+
+def _law_constants(law: str) -> tuple[np.ndarray, float, float]:
+    """The coefficients, scale (zeta or xi) and surface friction the plugin takes for ``law`` (`LAW_MEDIA`)."""
+    from .. import media
+    from ..laws import li2013, rft3d
+    medium = media.medium(LAW_MEDIA[law])
+    if law == "rft3d":
+        return np.array(rft3d.DEFAULT.values()), rft3d.medium_xi(medium), RFT3D_MU_SURF
+    zeta, coefficients = li2013.medium_parameters(medium)
+    return np.array(coefficients.values()), zeta, 0.0
+
+
+def law_forces_call(law: str, elements: dict[str, np.ndarray], force: np.ndarray,
+                    passes: int) -> Callable[[], int]:
+    """One native call (``finrft_law_forces``) of ``law`` (`LAW_MEDIA`'s constants) on ``elements`` (as
+    `law_elements` gives them), ``passes`` passes over them, the forces into ``force`` (n x 3, C-contiguous): its
+    arguments made once, so that a call from Python costs only ctypes'. The call returns 0, or -1 for an unknown
+    law."""
+    import ctypes
+    doubles = ctypes.POINTER(ctypes.c_double)
+    run = native.function("finrft_law_forces", ctypes.c_int, ctypes.c_char_p, doubles, ctypes.c_double,
+                          ctypes.c_double, ctypes.c_int, doubles, doubles, doubles, doubles, ctypes.c_int, doubles)
+    coef, scale, mu_surf = _law_constants(law if law in LAW_MEDIA else "li2013")
+    # (numpy's pointers hold their arrays)
+    pointers = [np.ascontiguousarray(a, dtype=float).ctypes.data_as(doubles)
+                for a in (coef, elements["normal"], elements["velocity"], elements["depth"], elements["area"])]
+    arguments = (law.encode(), pointers[0], scale, mu_surf, len(elements["depth"]), *pointers[1:], passes,
+                 force.ctypes.data_as(doubles))
+    return lambda: run(*arguments)
+
+
+def laws(*, log: Callable[[str], None] = print, progress: Progress = None) -> dict[str, Any]:
+    """The native surface laws' element force, ns per call: each law as the plugin calls it (``finrft_law_forces``)
+    on `law_elements`, `LAW_PASSES` passes over them in one call from Python, the best of `LAW_ROUNDS` calls, the
+    laws taken in turn so that the machine's load weighs on each alike."""
+    elements = law_elements()
+    force = np.zeros((LAW_ELEMENTS, 3))
+    calls = {law: law_forces_call(law, elements, force, LAW_PASSES) for law in LAW_MEDIA}
+    times = {law: [] for law in calls}
+    for i in range(LAW_ROUNDS):
+        for law, call in calls.items():
+            times[law].append(_best(call, 1))
+        _tick(progress, i + 1, LAW_ROUNDS)
+    out: dict[str, Any] = {"date": date.today().isoformat(), "machine": f"{platform.machine()}, "
+                           f"{batch.default_workers()} cores", "elements": LAW_ELEMENTS, "passes": LAW_PASSES,
+                           "rounds": LAW_ROUNDS, "media": LAW_MEDIA, "ns_per_call": {}}
+    for law, walls in times.items():
+        out["ns_per_call"][law] = 1e9 * min(walls) / (LAW_ELEMENTS * LAW_PASSES)
+        log(f"{law:>14}: {out['ns_per_call'][law]:6.1f} ns per element force (median round "
+            f"{1e9 * float(np.median(walls)) / (LAW_ELEMENTS * LAW_PASSES):.1f} ns)")
+    return out
+
+
 # ---------------------------------------------------------------------------------------------------------
 # What each modelling choice costs and changes
 

@@ -359,11 +359,13 @@ def laws(*, log: Callable[[str], None] = print, progress: Progress = None) -> di
 # What each modelling choice costs and changes
 
 
-MODELLING_CASES = 10  # chain x 2 presets, rigid plate x 2, origami stop x 3, robot x 2, surface
+MODELLING_CASES = 11  # chain x 2 presets, rigid plate x 2, origami stop x 3, robot x 2, surface x 2
 # The wheel on a deforming surface against the flat one: held 30 mm deep at slip -0.5 for 6 s (60 mm) with its error
-# estimate, as the wheel study runs it (docs/results/wheel.md).
+# estimate, as the wheel study runs it (docs/results/wheel.md), and driven at slip 0.5, 22 mm deep (its rim's turn
+# steps the surface twice as often).
 WHEEL_SURFACE_RUN = {"wheel.slip": -0.5, "wheel.sinkage": 0.03, "medium.name": "wheel_sand_cmu", "sim.duration": 6.0,
                      "sim.settle": 4.0}
+WHEEL_SURFACE_DRIVEN = {**WHEEL_SURFACE_RUN, "wheel.slip": 0.5, "wheel.sinkage": 0.022}
 
 
 def _plate_pair(a: Scene, b: Scene, drive: Drive, repeat: int) -> dict[str, float]:
@@ -377,14 +379,13 @@ def _plate_pair(a: Scene, b: Scene, drive: Drive, repeat: int) -> dict[str, floa
             "wall_b_s": _best(lambda: simulate(b, drive, estimate_error=False), repeat)}
 
 
-def _wheel_surfaces(repeat: int) -> dict[str, float]:
-    """The wheel run on the flat and the deforming surface (`WHEEL_SURFACE_RUN`): the change of its drawbar pull
-    Fx (N) and the best wall times of each, taken in turn."""
+def _wheel_surfaces(repeat: int, run: dict[str, Any] = WHEEL_SURFACE_RUN) -> dict[str, float]:
+    """The wheel ``run`` (`WHEEL_SURFACE_RUN`, `WHEEL_SURFACE_DRIVEN`) on the flat and the deforming surface: the
+    change of its drawbar pull Fx (N) and the best wall times of each, taken in turn."""
     from ..experiments.wheel import DEFORMING_GRID, default_scene, run_wheel
 
-    flat = default_scene(**WHEEL_SURFACE_RUN)
-    deforming = default_scene(**WHEEL_SURFACE_RUN, **{"medium.surface": "deforming", "medium.pile_factor": 0.7},
-                              **DEFORMING_GRID)
+    flat = default_scene(**run)
+    deforming = default_scene(**run, **{"medium.surface": "deforming", "medium.pile_factor": 0.7}, **DEFORMING_GRID)
     pull = [run_wheel(scene).summary()["Fx_N"] for scene in (flat, deforming)]
     times = _interleaved({"flat": lambda: run_wheel(flat), "deforming": lambda: run_wheel(deforming)}, repeat)
     return {"fx_diff_N": pull[1] - pull[0], "wall_a_s": min(times["flat"]), "wall_b_s": min(times["deforming"])}
@@ -436,6 +437,8 @@ def modelling(*, repeat: int = 3, log: Callable[[str], None] = print, progress: 
         add("robot", f"robot {name}, optimised gait, one cycle", "half", "full", pair)
     add("surface", "wheel rig, held 30 mm deep at slip -0.5, 6 s", "flat", "deforming",
         _wheel_surfaces(repeat))
+    add("surface", "wheel rig, held 22 mm deep at slip 0.5 (driven), 6 s", "flat", "deforming",
+        _wheel_surfaces(repeat, WHEEL_SURFACE_DRIVEN))
     lines = ["| choice | scene | A | B | what changes (B against A) | cost of B / A |", "|---|---|---|---|---|---:|"]
     for r in rows:
         change = ", ".join(f"{v:.2g} {unit}" for key, unit in (("angle_diff_deg", "° in angle"),

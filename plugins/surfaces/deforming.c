@@ -306,7 +306,6 @@ int finrft_deforming_sweep(int nrow, int ncol, double* heights, const double siz
   return failed;
 }
 
-
 // The edges that flow (2 a: from point a along x, 2 a + 1: along y), their first points' columns and their flows
 // (from the first point to the second).
 typedef struct {
@@ -315,8 +314,8 @@ typedef struct {
 } Flows;
 
 // Whether the edge from point a (in column c) to a + offset (1: along x, ncol: along y) is steeper than `rise` by
-// more than `over` with neither end blocked: then it is entry n of `flows`. (The count is the caller's, in a
-// register: kept in the struct, every entry's store might have changed it.)
+// more than `over` with neither end blocked: then it is entry n of `flows` (the count is the caller's: kept in the
+// struct, every entry's store might change it, and the compiler would reload it).
 static inline int add_if_flowing(Flows flows, int n, const double* heights, const unsigned char* blocked, int a,
                                  int offset, double rise, double over, int c) {
   int b = a + offset;
@@ -338,8 +337,8 @@ static inline int add_if_flowing(Flows flows, int n, const double* heights, cons
 static int relax_box(int nrow, int ncol, double* heights, double dx, double dy, double slope,
                      const unsigned char* blocked, double tolerance, int max_iterations, int box[4], int touched[4]) {
   int cells = nrow * ncol, result = -1, npoint = 0, low = cells, high = -1, left = ncol, right = -1;
-  // the points whose edges are looked at and their columns (carried along: an integer division per point was a
-  // third of the check's time), the flowing edges, whether a point is listed
+  // the points whose edges are looked at and their columns (carried along, as `touched` needs them), the flowing
+  // edges, whether a point is listed
   int* points = malloc(sizeof(int) * 6 * cells);
   double* flow = malloc(sizeof(double) * 2 * cells);
   unsigned char* listed = calloc(cells, 1);

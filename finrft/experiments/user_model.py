@@ -230,11 +230,12 @@ class RobotTrial:
 
         self.surface = deforming_surface(built, scene, d)
         self._applied = applied_state(built, scene.sim.method, self.surface)
+        self._surface_record: SurfaceRecord | None = None
         if self.surface is not None:
             surface, stepped = self.surface, after_step
             # its error estimate compares positions and forces; the surface is the run's record: a copy of its
             # heights as the run starts and after each change, at most one every record_dt (and the last), not at
-            # every recorded instant (a wheel's 121 x 121 grid, 632 instants, was a fifth of its run)
+            # every recorded instant (a wheel's 121 x 121 grid at 632 instants, 74 MB, was a tenth of its run)
             record = None if companion else SurfaceRecord(surface, scene.sim.record_dt, d.time)
             self._surface_record = record
 
@@ -339,9 +340,8 @@ class RobotTrial:
         if self.means.time < d.time - 1e-12:
             self._close(d)
         series = self._unpack(readings["state"])
-        record = getattr(self, "_surface_record", None)
-        if record is not None:
-            series["surface_time"], series["surface_height"] = record.finish(d.time)
+        if self._surface_record is not None:
+            series["surface_time"], series["surface_height"] = self._surface_record.finish(d.time)
         return series, {"model_size": model_size(self.built, m),
                                                  "model_mass": float(m.body_mass.sum()),
                                                  "gravity": float(np.linalg.norm(m.opt.gravity)),

@@ -394,11 +394,11 @@ class DeformingSurface:
         a body that starts in the sand sitting in its own hole (its volume is not conserved: 0 displaced)."""
         if self.berm == "facing" and normals is None:
             raise SceneError("the berm rule 'facing' needs the elements' normals (normals=)")
-        self.updates += 1
         if self.native:
             removed = _native_step(self, points3(points), np.asarray(areas, float), points3(velocities),
                                    np.asarray(gravity, float), imprint, None if normals is None else points3(normals))
             self.displaced += removed
+            self.updates += 1
             return removed
         before, entered = self.heights.copy(), self._under == 0
         under = self._covered(points3(points))
@@ -420,6 +420,7 @@ class DeformingSurface:
         self.level[...] = np.where(entered, before, np.where(under, self.level, self.heights))
         removed = 0.0 if imprint else self.cell * float(np.clip(before - self.heights, 0.0, None).sum())
         self.displaced += removed
+        self.updates += 1
         return removed
 
 

@@ -6,8 +6,7 @@ For each robot (an example or a battery robot, as `finrft bench steps --robot`),
 state `finrft bench steps` starts from (`finrft.studies.bench.step_start`, the stepper's history from the run), in
 one process under `valgrind --tool=callgrind --toggle-collect=implicit_step --toggle-collect=mj_step`, each ten
 bracketed by os.getppid(), where `--dump-before=getppid` closes a part. Prints a Markdown table: thousands of
-instructions a step and the implicit/explicit ratio. A step that is halved (implicit_step calling itself) toggles
-the collection off for its halves, which go uncounted.
+instructions a step and the implicit/explicit ratio.
 """
 
 import json

@@ -12,6 +12,7 @@ instructions a step and the implicit/explicit ratio.
 import json
 import os
 import re
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -29,7 +30,7 @@ def count(name: str) -> None:
     from finrft.studies.bench import step_start
     from finrft.studies.frontier import BATTERY, STEP_METHODS, battery_scene
     scene = load_scene(battery_scene(name) if name in BATTERY else example(name), cls=UserScene)
-    parts = []
+    parts: list[str] = []
 
     def part(label: str) -> None:
         os.getppid()
@@ -46,9 +47,17 @@ def count(name: str) -> None:
     print(json.dumps(parts))
 
 
-def main(names: list[str]) -> None:
+def main(names: list[str]) -> int:
     from finrft.experiments.user_model import EXAMPLES
-    from finrft.studies.frontier import STEP_METHODS
+    from finrft.studies.frontier import BATTERY, STEP_METHODS
+    unknown = [n for n in names if n not in EXAMPLES and n not in BATTERY]
+    if unknown:
+        print(f"step_counts: no robot named {', '.join(unknown)} (the examples and the battery: "
+              f"{', '.join((*EXAMPLES, *BATTERY))})", file=sys.stderr)
+        return 2
+    if shutil.which("valgrind") is None:
+        print("step_counts: valgrind is not on PATH; install it (apt-get install valgrind)", file=sys.stderr)
+        return 2
     print("| robot | explicit step, k instructions | " + " | ".join(f"`{m}`, k (ratio)" for m in STEP_METHODS)
           + " |\n|---|---:|" + "---:|" * len(STEP_METHODS))
     for name in names or EXAMPLES:
@@ -63,10 +72,11 @@ def main(names: list[str]) -> None:
         explicit = per_step["explicit"]
         print(f"| {name} | {explicit / 1e3:.0f} | " + " | ".join(
             f"{per_step[m] / 1e3:.0f} ({per_step[m] / explicit:.2f})" for m in STEP_METHODS) + " |")
+    return 0
 
 
 if __name__ == "__main__":
     if sys.argv[1:2] == ["--count"]:
         count(sys.argv[2])
     else:
-        main(sys.argv[1:])
+        sys.exit(main(sys.argv[1:]))

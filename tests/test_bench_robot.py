@@ -40,3 +40,13 @@ def test_step_costs_compare_one_step_of_each_from_the_same_state():
     assert costs["implicit_over_explicit_step"] == pytest.approx(costs["implicit_step_us"] / costs["explicit_step_us"])
     for kind in ("implicit", "explicit"):
         assert costs[f"{kind}_ns_per_element_step"] == pytest.approx(1e3 * costs[f"{kind}_step_us"] / elements)
+
+
+def test_step_counts_names_an_unknown_robot_in_one_line_and_exits_2():
+    import subprocess
+    import sys
+    from pathlib import Path
+    script = Path(__file__).parents[1] / "scripts" / "step_counts.py"
+    done = subprocess.run([sys.executable, str(script), "no_such_robot"], capture_output=True, text=True)
+    assert done.returncode == 2 and done.stdout == ""
+    assert done.stderr.count("\n") == 1 and "no_such_robot" in done.stderr and "hexapod" in done.stderr

@@ -606,9 +606,25 @@ STEP_ROUNDS = 5
 
 def _step_costs(scene: Any, explicit_dt: float, bare_s: float, elements: int) -> dict[str, float]:
     """One step of the scene's method at its step and one of MuJoCo's explicit step at ``explicit_dt``, each timed
-    in C from the same state (the run's at `STEP_COST_START` s or its settle, the earlier), with ``ctrl`` held
-    there, in one process: the wall seconds of each, the cost per element per step of each beyond the bare step
-    (``bare_s``, the model without the medium), and the implicit step's cost in explicit steps."""
+    in C from the same state (`step_start`), in one process: the wall seconds of each, the cost per element per
+    step of each beyond the bare step (``bare_s``, the model without the medium), and the implicit step's cost in
+    explicit steps."""
+    with native.untimed():
+        implicit, explicit = step_start(scene, explicit_dt)
+        walls = {k: min(v) / STEP_COST_STEPS
+                 for k, v in _interleaved({"implicit": lambda: implicit(STEP_COST_STEPS),
+                                           "explicit": lambda: explicit(STEP_COST_STEPS)}, STEP_ROUNDS).items()}
+    return {"implicit_step_us": 1e6 * walls["implicit"], "explicit_step_us": 1e6 * walls["explicit"],
+            "implicit_ns_per_element_step": 1e9 * (walls["implicit"] - bare_s) / elements,
+            "explicit_ns_per_element_step": 1e9 * (walls["explicit"] - bare_s) / elements,
+            "implicit_over_explicit_step": walls["implicit"] / walls["explicit"]}
+
+
+def step_start(scene: Any, explicit_dt: float) -> tuple[Callable[[int], None], Callable[[int], None]]:
+    """Steps of the scene's method at its step and of MuJoCo's explicit step at ``explicit_dt`` from the same state:
+    the run's at `STEP_COST_START` s or its settle, the earlier, with ``ctrl`` held there and the stepper's history
+    from the run. Each of the two returned functions sets that state and takes the steps it is given, in C
+    (`_step_costs` times them; scripts/step_counts.py counts their instructions)."""
     from ..callbacks import controlled
     from ..experiments.user_model import UserModel
     from ..integrate import stepper
@@ -621,25 +637,19 @@ def _step_costs(scene: Any, explicit_dt: float, bare_s: float, elements: int) ->
     advance = stepper(m, scene.sim, built.backend, built.groups, getattr(built, "attached", None))
     spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
     start = np.zeros(mujoco.mj_stateSize(m, spec))
-    with native.untimed():
-        with controlled(m, getattr(trial, "control", None)):
-            advance(d, max(1, round(min(STEP_COST_START, scene.sim.settle) / scene.sim.dt)))
-        mujoco.mj_getState(m, d, start, spec)
-        explicit_d = mujoco.MjData(explicit_m)
+    with controlled(m, getattr(trial, "control", None)):
+        advance(d, max(1, round(min(STEP_COST_START, scene.sim.settle) / scene.sim.dt)))
+    mujoco.mj_getState(m, d, start, spec)
+    explicit_d = mujoco.MjData(explicit_m)
 
-        def implicit() -> None:
-            mujoco.mj_setState(m, d, start, spec)
-            advance(d, STEP_COST_STEPS)
+    def implicit(steps: int) -> None:
+        mujoco.mj_setState(m, d, start, spec)
+        advance(d, steps)
 
-        def explicit() -> None:
-            mujoco.mj_setState(explicit_m, explicit_d, start, spec)
-            mujoco.mj_step(explicit_m, explicit_d, STEP_COST_STEPS)
-        walls = {k: min(v) / STEP_COST_STEPS
-                 for k, v in _interleaved({"implicit": implicit, "explicit": explicit}, STEP_ROUNDS).items()}
-    return {"implicit_step_us": 1e6 * walls["implicit"], "explicit_step_us": 1e6 * walls["explicit"],
-            "implicit_ns_per_element_step": 1e9 * (walls["implicit"] - bare_s) / elements,
-            "explicit_ns_per_element_step": 1e9 * (walls["explicit"] - bare_s) / elements,
-            "implicit_over_explicit_step": walls["implicit"] / walls["explicit"]}
+    def explicit(steps: int) -> None:
+        mujoco.mj_setState(explicit_m, explicit_d, start, spec)
+        mujoco.mj_step(explicit_m, explicit_d, steps)
+    return implicit, explicit
 
 
 def _elements(scene: Any) -> int:

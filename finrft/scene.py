@@ -26,7 +26,7 @@ from .attach import MAX_ELEMENT_SIZE
 from .errors import SceneError
 from .files import read_text, read_toml
 from .laws import drft, sandswim
-from .surfaces import hfield
+from .surfaces import deforming, hfield
 from .schema import field as _f
 # Importable from here as before; their homes are the schema engine, the errors and the file reader.
 from .schema import field_of, split_key, to_toml  # noqa: F401
@@ -174,6 +174,12 @@ Medium = schema.section("Medium", (
                      "velocity, ahead of each element along its horizontal motion and to its sides; facing, a leading "
                      "element's along its outward normal (the side it faces)", choices=("velocity", "facing"),
                      used_by=("surface", ("deforming",)))),
+    ("surface_update", float, _f(deforming.MOVE, "", "deforming: the surface steps once an element may have moved "
+                                 "this share of its grid's finer spacing", minimum=0.0,
+                                 used_by=("surface", ("deforming",)))),
+    ("relax_tolerance", float, _f(deforming.STEP_TOLERANCE, "", "deforming: the slope (tan) above tan(angle of "
+                                  "repose) that relaxation leaves", minimum=0.0,
+                                  used_by=("surface", ("deforming",)))),
     ("angle_of_repose", float, _f(0.0, "rad", "deforming: the slope the surface relaxes to; 0: the medium's "
                                   "catalogued angle_of_repose", minimum=0.0, exclusive=False,
                                   used_by=("surface", ("deforming",)))),

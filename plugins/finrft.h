@@ -151,7 +151,8 @@ typedef struct {
   int measured;          // gravity, level and frame are the model's as last read
   int upright;           // gravity along -z (or none): the laws' frame is the identity, their own
   double frame[9];       // otherwise the laws' frame, rows x, y, up (finrft_surface_frame)
-  double* scratch;       // 4 n: the elements' world centres, then their depths, at one evaluation
+  double* scratch;       // 4 n: the elements' world centres, then their depths, at one evaluation (on a deforming
+                         // surface 3 n more: the elements' centres by coordinate, deforming_elements)
   double v_reg;          // m/s, the ramp tanh(max(n.v, 0) / v_reg) of every element's force; 0: none
   double drft_lambda, bulk_density;  // drft_lambda = 0: no DRFT term
   int body;
@@ -162,7 +163,8 @@ typedef struct {
   int paused;       // as FinrftInstance's
   int has_applied;  // 1 when the last passive force computation on this mjData applied `applied` (not paused)
   double applied[6];
-  double reach;     // deforming surface: the elements' largest distance from the body's origin (0: not yet known)
+  double reach;      // deforming surface: the elements' largest distance from the body's origin
+  double extent[3];  // deforming surface: the elements' largest |coordinate| along each body axis
 } FinrftSurface;
 
 // The instance of finrft.surface with index `instance` for the model `m` that `d` is stepped with (made again for

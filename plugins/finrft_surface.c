@@ -515,10 +515,11 @@ FINRFT_EXPORT void finrft_drft_element_force(double drft_lambda, double rho_c, c
   for (int i = 0; i < 3; i++) force[i] = -pressure * n[i];
 }
 
-static const char* kSurfaceAttributes[] = {"law",         "coefficients", "zeta",  "xi",      "mu_surf",
-                                           "surface_z",   "v_reg",        "drft_lambda", "bulk_density",
-                                           "elements",    "geoms",        "surface", "surface_point",
-                                           "surface_normal", "hfield", "pile_factor"};
+// The two long texts last: MuJoCo finds a key's value by walking past every value before it.
+static const char* kSurfaceAttributes[] = {"law",          "coefficients",   "zeta",        "xi",
+                                           "mu_surf",      "surface_z",      "v_reg",       "drft_lambda",
+                                           "bulk_density", "geoms",          "surface",     "surface_point",
+                                           "surface_normal", "pile_factor",  "elements",    "hfield"};
 
 static void surface_free(FinrftSurface* p) {
   if (!p) return;
@@ -555,6 +556,21 @@ static int read_scalar(const mjModel* m, int instance, const char* key, double* 
     return -1;
   }
   return 0;
+}
+
+// A deforming surface's view of the elements, once: their largest distance from the body's origin, their largest
+// |coordinate| along each of its axes, and their centres by coordinate (p->scratch + 4 n: every x, every y, every z),
+// for loops over the elements that the compiler vectorises.
+static void deforming_elements(FinrftSurface* p) {
+  double* centres = p->scratch + 4 * p->n;
+  for (int i = 0; i < p->n; i++) {
+    const double* e = p->element + 7 * i;
+    p->reach = fmax(p->reach, mju_norm3(e));
+    for (int k = 0; k < 3; k++) {
+      p->extent[k] = fmax(p->extent[k], fabs(e[k]));
+      centres[k * p->n + i] = e[k];
+    }
+  }
 }
 
 // A surface law's scale keys read into the instance; 0, or -1 after a warning.
@@ -796,11 +812,13 @@ static int surface_init(const mjModel* m, mjData* d, int instance) {
     return -1;
   }
   read_numbers(text, p->element, count);
-  p->scratch = (double*)malloc(4 * p->n * sizeof(double));
+  int deforming = p->field.kind == FINRFT_FIELD_DEFORMING;
+  p->scratch = (double*)malloc((deforming ? 7 : 4) * p->n * sizeof(double));
   if (!p->scratch) {
     surface_free(p);
     return -1;
   }
+  if (deforming) deforming_elements(p);
   const char* geoms = mj_getPluginConfig(m, instance, "geoms");
   count = geoms && *geoms ? read_numbers(geoms, NULL, 0) : 0;
   if (count < 0 || count % 12) {
@@ -1035,13 +1053,9 @@ static inline double level_depth(double surface_z, double z, double r6, double r
 }
 
 // ---- The deforming surface's elements ----
-// The elements' largest distance from the body's origin, once.
-static void deforming_reach(FinrftSurface* p) {
-  for (int i = 0; i < p->n; i++) p->reach = fmax(p->reach, mju_norm3(p->element + 7 * i));
-}
 
 // Every element's depth below a deforming surface's level, into p->scratch + 3 n: an element's height in the grid's
-// frame costs three products, and only those below the highest grid point within the body's reach are interpolated
+// frame costs three products, and only those below the highest grid point under the body's box are interpolated
 // (finrft_deforming_body_depths); the rest (most of a wheel's) get a depth <= 0, no force. As finrft_deforming_depth
 // where the depth is positive.
 static const double* deforming_element_depths(const FinrftSurface* p, const mjData* d) {
@@ -1052,7 +1066,6 @@ static const double* deforming_element_depths(const FinrftSurface* p, const mjDa
   FinrftDeformingGrid grid;
   finrft_deforming_grid(&grid, f->nrow, f->ncol, f->heights, f->original, f->pile_factor, f->size, f->centre,
                         f->frame);
-  if (!(p->reach > 0)) deforming_reach((FinrftSurface*)p);
   // the body's origin in the grid's frame, and its axes turned into the grid's: frame^T R
   double at[3], turn[9];
   finrft_grid_local(&grid.grid, origin, at);
@@ -1061,7 +1074,7 @@ static const double* deforming_element_depths(const FinrftSurface* p, const mjDa
       turn[3 * j + k] = f->frame[j] * R[k] + f->frame[3 + j] * R[3 + k] + f->frame[6 + j] * R[6 + k];
     }
   }
-  finrft_deforming_body_depths(&grid, at, turn, p->reach, p->n, p->element, 7, depth);
+  finrft_deforming_body_depths(&grid, at, turn, p->extent, p->n, p->scratch + 4 * p->n, depth);
   return depth;
 }
 // ---- end of the deforming surface's elements ----
@@ -1201,7 +1214,6 @@ FINRFT_EXPORT int finrft_surface_deforming_step(const mjModel* m, mjData* d, Fin
     if (!p || p->field.kind != FINRFT_FIELD_DEFORMING || p->field.nrow != s->nrow || p->field.ncol != s->ncol) {
       return -1;
     }
-    if (!(p->reach > 0)) deforming_reach((FinrftSurface*)p);
     ps[k] = p;
     n += p->n;
   }

@@ -388,8 +388,9 @@ def deforming_surface(built: AttachedModel, scene: UserScene, d: mujoco.MjData) 
                  if attached.backend == "native" else [])
     return DeformingSurface(p["original"], p["size"], repose(scene.medium), p["centre"], p["frame"],
                             p["pile_factor"], native=attached.backend == "native", level=p["heights"],
-                            instances=instances, compaction=scene.medium.compaction,
-                            berm=scene.medium.berm).installed(built.model, d)
+                            instances=instances, compaction=scene.medium.compaction, berm=scene.medium.berm,
+                            tolerance=scene.medium.relax_tolerance,
+                            move=scene.medium.surface_update).installed(built.model, d)
 
 
 class WindowMeans:

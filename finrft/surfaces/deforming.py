@@ -225,15 +225,22 @@ def update(heights: Any, points: Any, areas: Any, velocities: Any, gravity: Any,
 # the body moves a small part of a grid spacing a step, so the surface relaxes as it goes, at a bounded cost (run to
 # convergence after every step, a rolling wheel's surface took a median of 334 iterations a step).
 STEP_ITERATIONS = 16
-# In a run, the surface is stepped once an element may have moved this share of the finer grid spacing: the sweep
-# lowers the grid to the elements and a body moving a small part of a spacing a step changes little between.
-MOVE = 0.5
+# In a run, the surface is stepped once an element may have moved this share of the finer grid spacing
+# (medium.surface_update): the sweep lowers the grid to the elements, which a move of less than a spacing changes
+# little. Both this and the next were made coarser to bring the surface's cost within half a flat run's; what that
+# moved is on docs/results/wheel.md, "Cost".
+MOVE = 1.0
+# In a run, relaxation leaves slopes this much (tan) above tan(repose) (medium.relax_tolerance): 1.7 degrees at the
+# wheel sand's 29, within what a catalogued angle of repose is known to.
+STEP_TOLERANCE = 0.03
 
 
 class DeformingSurface:
     """A deforming surface as a run's state: its heights (nrow, ncol, m) on a grid of half-extents ``size`` (m) at
     ``centre`` with ``frame`` (`finrft.surfaces.hfield`'s layout), displaced by the body's elements at every step
-    (`step`) and relaxed towards the angle of ``repose`` (rad) by at most ``step_iterations`` iterations a step.
+    (`step`) and relaxed towards the angle of ``repose`` (rad), to within ``tolerance`` (tan), by at most
+    ``step_iterations`` iterations a step; in a run (`step_model`) it steps once an element may have moved ``move``
+    of the finer grid spacing.
     ``native`` steps it with the C twins (plugins/surfaces/deforming.c), else with this module's numpy functions:
     the same heights to rounding. ``compaction``: the share of the swept sand compacted under the body (`sweep`),
     accumulated in ``compacted``; ``berm``: where the rest goes (`BERMS`). ``displaced`` is the volume (m^3) the
@@ -242,10 +249,10 @@ class DeformingSurface:
     instances that measure from it (`installed`)."""
 
     def __init__(self, heights: Any, size: Any, repose: float, centre: Any = (0.0, 0.0, 0.0), frame: Any = None,
-                 pile_factor: float | None = None, front_share: float = FRONT_SHARE, tolerance: float = TOLERANCE,
-                 step_iterations: int = STEP_ITERATIONS, native: bool = True, level: Any = None,
-                 instances: tuple[int, ...] | list[int] = (), compaction: float = 0.0,
-                 berm: str = "velocity") -> None:
+                 pile_factor: float | None = None, front_share: float = FRONT_SHARE,
+                 tolerance: float = STEP_TOLERANCE, step_iterations: int = STEP_ITERATIONS, native: bool = True,
+                 level: Any = None, instances: tuple[int, ...] | list[int] = (), compaction: float = 0.0,
+                 berm: str = "velocity", move: float = MOVE) -> None:
         g = grid(heights, size, (0.0, 0.0, -1.0) if frame is None else -np.asarray(frame, float)[:, 2], centre, frame)
         if not 0.0 < repose < np.pi / 2:
             raise SceneError(f"angle of repose {repose!r} rad must be between 0 and pi/2")
@@ -254,6 +261,10 @@ class DeformingSurface:
         if pile_factor is not None and not (np.isfinite(pile_factor) and pile_factor > 0):
             raise SceneError(f"pile_factor {pile_factor!r} must be a positive number (the wheel group's: "
                              f"{WHEEL_GROUP_PILE_FACTOR})")
+        if not (np.isfinite(move) and move > 0):
+            raise SceneError(f"surface update {move!r} must be a positive share of the grid spacing")
+        if not (np.isfinite(tolerance) and tolerance > 0):
+            raise SceneError(f"relaxation tolerance {tolerance!r} must be a positive slope")
         _check_compaction(compaction)
         if berm not in BERMS:
             raise SceneError(f"berm {berm!r} is not a berm rule: one of {', '.join(BERMS)}")
@@ -265,6 +276,7 @@ class DeformingSurface:
         self._spacing = g.spacing
         self.repose, self.pile_factor, self.front_share = float(repose), pile_factor, float(front_share)
         self.tolerance, self.step_iterations, self.native = float(tolerance), int(step_iterations), bool(native)
+        self.move = float(move)
         self.displaced = 0.0
         # how many times the level was set in the native instances' state: a copy of that state is current while
         # this has not changed (`finrft.experiments.attached_model.applied_state`)
@@ -308,7 +320,7 @@ class DeformingSurface:
 
     def step_model(self, attached: Any, m: Any, d: Any) -> float:
         """`step` with every element of an `finrft.attach.Attached` at the state of ``d`` (`body_elements`), then
-        the level set in the native instances (`installed`), once an element may have moved `MOVE` of the finer
+        the level set in the native instances (`installed`), once an element may have moved ``move`` of the finer
         grid spacing since the last (a bound from the bodies' motion: their origins' travel and their turn times
         their elements' reach); the volume (m^3) displaced."""
         if self.native and self.instances:
@@ -320,7 +332,7 @@ class DeformingSurface:
         if self._pose is not None:
             turn = 2 * np.arccos(np.clip(np.abs((pose[:, 3:] * self._pose[:, 3:]).sum(axis=1)), 0.0, 1.0))
             moved = np.linalg.norm(pose[:, :3] - self._pose[:, :3], axis=1) + turn * self._reach
-            if moved.max() < MOVE * min(self._spacing):
+            if moved.max() < self.move * min(self._spacing):
                 return 0.0
         first = self._pose is None
         self._pose = pose
@@ -333,7 +345,7 @@ class DeformingSurface:
         if self._pose is None:
             self._pose = np.full(7 * len(self.instances), np.nan)
             self._instance_array = np.array(self.instances, dtype=np.intc)
-            self._move = MOVE * min(self._spacing)
+            self._move = self.move * min(self._spacing)
         removed = ctypes.c_double(0.0)
         stepped = _native_functions()[2](m._address, d._address, ctypes.byref(self._state), len(self.instances),
                                          self._instance_array.ctypes.data, self._pose.ctypes.data, self._move,

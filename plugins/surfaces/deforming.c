@@ -42,36 +42,61 @@ static inline void cell_of(const FinrftDeformingGrid* g, double x, double y, int
   *fv = v - r;
 }
 
+// Linear along x on the cell's two rows, then along y (the twin's weights, rounded otherwise).
 static inline double bilinear(const double* h, int ncol, int i, double fu, double fv) {
-  return (1 - fu) * (1 - fv) * h[i] + fu * (1 - fv) * h[i + 1] + (1 - fu) * fv * h[i + ncol] +
-         fu * fv * h[i + ncol + 1];
+  double a = h[i] + fu * (h[i + 1] - h[i]), b = h[i + ncol] + fu * (h[i + ncol + 1] - h[i + ncol]);
+  return a + fv * (b - a);
+}
+
+// The depth at height z of the point at place (fu, fv) of the cell whose first point is i.
+static inline double depth_in(const FinrftDeformingGrid* g, int i, double fu, double fv, double z, int submerged_only) {
+  int ncol = g->grid.ncol;
+  double deformed = bilinear(g->grid.heights, ncol, i, fu, fv) - z;
+  if (!(g->pile_factor > 0) || (submerged_only && !(deformed > 0))) return deformed;
+  double below_original = bilinear(g->original, ncol, i, fu, fv) - z;
+  int pile = deformed > 0 && below_original <= 0;
+  return pile ? g->pile_factor * deformed : (deformed < below_original ? deformed : below_original);
 }
 
 static inline double local_depth(const FinrftDeformingGrid* g, const double local[3], int submerged_only) {
-  int i, ncol = g->grid.ncol;
+  int i;
   double fu, fv;
   cell_of(g, local[0], local[1], &i, &fu, &fv);
-  double deformed = bilinear(g->grid.heights, ncol, i, fu, fv) - local[2];
-  if (!(g->pile_factor > 0) || (submerged_only && !(deformed > 0))) return deformed;
-  double below_original = bilinear(g->original, ncol, i, fu, fv) - local[2];
-  int pile = deformed > 0 && below_original <= 0;
-  return pile ? g->pile_factor * deformed : fmin(deformed, below_original);
+  return depth_in(g, i, fu, fv, local[2], submerged_only);
 }
 
-void finrft_deforming_body_depths(const FinrftDeformingGrid* g, const double at[3], const double turn[9], double reach,
-                                  int n, const double* element, int stride, double* depth) {
-  double low[2] = {at[0] - reach, at[1] - reach}, high[2] = {at[0] + reach, at[1] + reach};
+void finrft_deforming_body_depths(const FinrftDeformingGrid* g, const double at[3], const double turn[9],
+                                  const double extent[3], int n, const double* centres, double* depth) {
+  // the body's box turned into the grid's frame, held in a box along the grid's axes
+  double half[2];
+  for (int j = 0; j < 2; j++) {
+    half[j] = fabs(turn[3 * j]) * extent[0] + fabs(turn[3 * j + 1]) * extent[1] + fabs(turn[3 * j + 2]) * extent[2];
+  }
+  double low[2] = {at[0] - half[0], at[1] - half[1]}, high[2] = {at[0] + half[0], at[1] + half[1]};
   double top = finrft_deforming_top(g, low, high) - at[2];  // as the elements' heights, from `at`
+  const double *x = centres, *y = centres + n, *z = centres + 2 * n;
+  // every element's height, in one pass the compiler vectorises; those below the top, interpolated
+  for (int i = 0; i < n; i++) depth[i] = turn[6] * x[i] + turn[7] * y[i] + turn[8] * z[i];
+  // A body a cell within the grid's edges places its elements without clamping them to it.
+  const double *size = g->grid.size, *scale = g->scale;
+  int ncol = g->grid.ncol, within = (low[0] + size[0]) * scale[0] >= 1 && (low[1] + size[1]) * scale[1] >= 1 &&
+                                    (high[0] + size[0]) * scale[0] <= ncol - 2 &&
+                                    (high[1] + size[1]) * scale[1] <= g->grid.nrow - 2;
   for (int i = 0; i < n; i++) {
-    const double* e = element + stride * i;
-    double height = turn[6] * e[0] + turn[7] * e[1] + turn[8] * e[2];
+    double height = depth[i];
     if (height >= top) {
       depth[i] = top - height;
       continue;
     }
-    double local[3] = {at[0] + turn[0] * e[0] + turn[1] * e[1] + turn[2] * e[2],
-                       at[1] + turn[3] * e[0] + turn[4] * e[1] + turn[5] * e[2], at[2] + height};
-    depth[i] = local_depth(g, local, 1);
+    double local[3] = {at[0] + turn[0] * x[i] + turn[1] * y[i] + turn[2] * z[i],
+                       at[1] + turn[3] * x[i] + turn[4] * y[i] + turn[5] * z[i], at[2] + height};
+    if (!within) {
+      depth[i] = local_depth(g, local, 1);
+      continue;
+    }
+    double u = (local[0] + size[0]) * scale[0], v = (local[1] + size[1]) * scale[1];
+    int c = (int)u, r = (int)v;  // floor: u, v >= 1
+    depth[i] = depth_in(g, r * ncol + c, u - c, v - r, local[2], 1);
   }
 }
 
@@ -116,10 +141,10 @@ static inline int floor_int(double x) {
 
 static int march(const unsigned char* occupied, int nrow, int ncol, int r, int c, double sx, double sy, double dx,
                  double dy) {
-  double step = dx < dy ? dx : dy;
+  double step = dx < dy ? dx : dy, du = step * sx / dx, dv = step * sy / dy;
   int last = r * ncol + c;
   for (int s = 1; s <= nrow + ncol; s++) {
-    int cc = floor_int(c + s * step * sx / dx + 0.5), rr = floor_int(r + s * step * sy / dy + 0.5);
+    int cc = floor_int(c + s * du + 0.5), rr = floor_int(r + s * dv + 0.5);
     if (cc < 0 || cc >= ncol || rr < 0 || rr >= nrow) return last;
     if (rr != r || cc != c) {
       last = rr * ncol + cc;
@@ -424,9 +449,16 @@ int finrft_deforming_step(FinrftDeforming* s, const double g[3], int n, const do
                           const double* velocities, const double* normals, int imprint, double* removed) {
   int nrow = s->nrow, ncol = s->ncol, cells = nrow * ncol;
   FinrftGrid grid = make_grid(nrow, ncol, s->heights, s->size, s->centre, s->frame);
+  // Heights are looked at once, at the imprint: after it every height is one of them, an element's, or sums of
+  // finite shares of them, so finite points keep them finite.
   if (relax_checked(nrow, ncol, s->size, s->repose, s->tolerance) || s->step_iterations < 0 ||
-      (s->facing && !normals) || finrft_grid_check(&grid, g)) {
+      (s->facing && !normals) || (imprint ? finrft_grid_check(&grid, g) : finrft_grid_placed(&grid, g))) {
     return FINRFT_SURFACE_BAD_INPUT;
+  }
+  for (int k = 0; k < 3 * n; k++) {
+    if (!isfinite(points[k]) || !isfinite(velocities[k]) || (s->facing && !isfinite(normals[k]))) {
+      return FINRFT_SURFACE_BAD_INPUT;
+    }
   }
   // the direction each element pushes its sand along (the sweep takes its horizontal part): with `facing`, a leading
   // element's normal, else its velocity

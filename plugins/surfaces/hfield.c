@@ -6,13 +6,18 @@
 #include "surfaces.h"
 
 int finrft_grid_check(const FinrftGrid* grid, const double g[3]) {
+  if (finrft_grid_placed(grid, g)) return FINRFT_SURFACE_BAD_INPUT;
+  for (int i = 0; i < grid->nrow * grid->ncol; i++) {
+    if (!isfinite(grid->heights[i])) return FINRFT_SURFACE_BAD_INPUT;
+  }
+  return 0;
+}
+
+int finrft_grid_placed(const FinrftGrid* grid, const double g[3]) {
   double up[3];
   if (finrft_surface_up(g, up) || grid->nrow < 2 || grid->ncol < 2) return FINRFT_SURFACE_BAD_INPUT;
   if (!(isfinite(grid->size[0]) && isfinite(grid->size[1]) && grid->size[0] > 0 && grid->size[1] > 0)) {
     return FINRFT_SURFACE_BAD_INPUT;
-  }
-  for (int i = 0; i < grid->nrow * grid->ncol; i++) {
-    if (!isfinite(grid->heights[i])) return FINRFT_SURFACE_BAD_INPUT;
   }
   const double* R = grid->frame;
   for (int a = 0; a < 3; a++) {

@@ -32,7 +32,8 @@ FINRFT_SURFACE_EXPORT int finrft_plane_depth(const double point[3], const double
                                              int n, const double* points, double* depth);
 
 // A heightfield's grid; finrft_grid_check: FINRFT_SURFACE_BAD_INPUT unless it is at least 2 x 2, its size
-// positive and its frame a rotation whose z axis is against gravity (finrft.surfaces.hfield.grid).
+// positive, its heights finite and its frame a rotation whose z axis is against gravity
+// (finrft.surfaces.hfield.grid); finrft_grid_placed: the same but for the heights.
 typedef struct {
   int nrow, ncol;
   const double* heights;
@@ -40,6 +41,7 @@ typedef struct {
 } FinrftGrid;
 
 int finrft_grid_check(const FinrftGrid* grid, const double g[3]);
+int finrft_grid_placed(const FinrftGrid* grid, const double g[3]);
 void finrft_grid_local(const FinrftGrid* grid, const double p[3], double local[3]);
 double finrft_grid_height(const FinrftGrid* grid, const double* heights, double x, double y);
 
@@ -65,11 +67,11 @@ void finrft_deforming_grid(FinrftDeformingGrid* g, int nrow, int ncol, const dou
                            const double* original, double pile_factor, const double size[2], const double centre[3],
                            const double frame[9]);
 // The depths (finrft_deforming_depth's, but not through the pile rule where <= 0: no force either way) of n points
-// of a body, `element` (every `stride` doubles, its first three) in the body's frame, whose origin is `at` in the
-// grid's frame and whose axes turn into the grid's by `turn` (3 x 3, row-major), all within `reach` of its origin;
-// a point above every grid point under it gets a depth <= 0 without interpolating the grid.
-void finrft_deforming_body_depths(const FinrftDeformingGrid* g, const double at[3], const double turn[9], double reach,
-                                  int n, const double* element, int stride, double* depth);
+// of a body, `centres` (3 n: every x, every y, every z) in the body's frame, whose origin is `at` in the grid's frame
+// and whose axes turn into the grid's by `turn` (3 x 3, row-major), each coordinate within `extent` of its origin;
+// a point above every grid point under that box gets a depth <= 0 without interpolating the grid.
+void finrft_deforming_body_depths(const FinrftDeformingGrid* g, const double at[3], const double turn[9],
+                                  const double extent[3], int n, const double* centres, double* depth);
 // The highest height of the grid points around the box [low, high] of the grid's frame (x, y; beyond the grid, of
 // its nearest edge): no point of the surface over the box is higher.
 double finrft_deforming_top(const FinrftDeformingGrid* g, const double low[2], const double high[2]);

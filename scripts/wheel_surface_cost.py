@@ -4,7 +4,7 @@ of two runs (the first makes the one-off costs of a process: imports, caches), t
 still on a shared machine (docs/results/wheel.md, Cost):
 
     valgrind --tool=callgrind --instr-atstart=no python scripts/wheel_surface_cost.py held deforming
-    # the count: the line "Collected" of valgrind's report; held or driven, flat or deforming
+    # the count: the line "Collected" of valgrind's report; held or driven; flat, deforming or first-run
 """
 
 import os
@@ -16,6 +16,8 @@ from finrft.studies.bench import WHEEL_SURFACE_DRIVEN, WHEEL_SURFACE_RUN
 
 RUNS = {"held": WHEEL_SURFACE_RUN, "driven": WHEEL_SURFACE_DRIVEN}
 SURFACES = {"flat": {}, "deforming": {"medium.surface": "deforming", "medium.pile_factor": 0.7, **DEFORMING_GRID}}
+# the deforming surface as first run: stepped every half grid spacing, relaxed to within 0.001 of the angle of repose
+SURFACES["first-run"] = {**SURFACES["deforming"], "medium.surface_update": 0.5, "medium.relax_tolerance": 0.001}
 
 
 def main(run: str, surface: str) -> None:

@@ -196,7 +196,7 @@ def _add_modelling(kinds: Any) -> argparse.ArgumentParser:
                             "segments, MuJoCo limit against penalty stops, the half against the full robot, and the "
                             "wheel on a deforming surface against the flat one: the largest change in segment angle "
                             "(deg), drive force (% of its peak) or efficiency (points), or the wheel's Fx (N), and "
-                            "the wall-time ratio. About 20 s.")
+                            "the cost ratio: wall time, CPU time for the wheel's runs. About 50 s.")
 
 
 def _add_fit(kinds: Any) -> argparse.ArgumentParser:

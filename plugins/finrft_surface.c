@@ -515,11 +515,12 @@ FINRFT_EXPORT void finrft_drft_element_force(double drft_lambda, double rho_c, c
   for (int i = 0; i < 3; i++) force[i] = -pressure * n[i];
 }
 
-// The two long texts last: MuJoCo finds a key's value by walking past every value before it.
+// The two long texts last, the elements (read once) after the grid (read three times): MuJoCo finds a key's value by
+// walking past every value before it.
 static const char* kSurfaceAttributes[] = {"law",          "coefficients",   "zeta",        "xi",
                                            "mu_surf",      "surface_z",      "v_reg",       "drft_lambda",
                                            "bulk_density", "geoms",          "surface",     "surface_point",
-                                           "surface_normal", "pile_factor",  "elements",    "hfield"};
+                                           "surface_normal", "pile_factor",  "hfield",      "elements"};
 
 static void surface_free(FinrftSurface* p) {
   if (!p) return;
@@ -1250,13 +1251,15 @@ FINRFT_EXPORT int finrft_surface_deforming_step(const mjModel* m, mjData* d, Fin
     mj_objectVelocity(m, d, mjOBJ_XBODY, p->body, twist, 0);
     for (int i = 0; i < p->n; i++, j++) {
       const double* e = p->element + 7 * i;
-      double arm[3], spin[3];
-      mju_mulMatVec3(arm, R, e);
-      mju_add3(points + 3 * j, arm, origin);
-      mju_cross(spin, twist, arm);
-      mju_add3(velocities + 3 * j, twist + 3, spin);
+      double arm[3], spin[3];  // (mju_mulMatVec3, mju_add3 and mju_cross inline: the same numbers)
+      finrft_mul_mat_vec3(arm, R, e);
+      finrft_cross(spin, twist, arm);
+      for (int k = 0; k < 3; k++) {
+        points[3 * j + k] = arm[k] + origin[k];
+        velocities[3 * j + k] = twist[3 + k] + spin[k];
+      }
       areas[j] = e[6];
-      mju_mulMatVec3(normals + 3 * j, R, e + 3);
+      finrft_mul_mat_vec3(normals + 3 * j, R, e + 3);
     }
   }
   int failed = finrft_deforming_step(s, m->opt.gravity, n, points, areas, velocities, normals, first, removed);

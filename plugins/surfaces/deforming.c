@@ -133,19 +133,16 @@ int finrft_deforming_depth(int nrow, int ncol, const double* heights, const doub
 
 // The first grid point not under the body from (r, c) along (sx, sy) in steps of the finer spacing; the last one
 // on the grid should the march leave it first.
-// floor(x) for |x| < 2^31, without a call
-static inline int floor_int(double x) {
-  int i = (int)x;
-  return x < i ? i - 1 : i;
-}
-
 static int march(const unsigned char* occupied, int nrow, int ncol, int r, int c, double sx, double sy, double dx,
                  double dy) {
   double step = dx < dy ? dx : dy, du = step * sx / dx, dv = step * sy / dy;
   int last = r * ncol + c;
   for (int s = 1; s <= nrow + ncol; s++) {
-    int cc = floor_int(c + s * du + 0.5), rr = floor_int(r + s * dv + 0.5);
-    if (cc < 0 || cc >= ncol || rr < 0 || rr >= nrow) return last;
+    // the nearest point's column and row are floor(u) and floor(v), on the grid exactly when 0 <= u < ncol and
+    // 0 <= v < nrow, where truncation is the floor
+    double u = c + s * du + 0.5, v = r + s * dv + 0.5;
+    if (!(u >= 0 && u < ncol && v >= 0 && v < nrow)) return last;
+    int cc = (int)u, rr = (int)v;
     if (rr != r || cc != c) {
       last = rr * ncol + cc;
       if (!occupied[last]) return last;
@@ -363,10 +360,10 @@ static int relax_box(int nrow, int ncol, double* heights, double dx, double dy, 
                      const unsigned char* blocked, double tolerance, int max_iterations, int box[4], int touched[4]) {
   int cells = nrow * ncol, result = -1, npoint = 0, low = cells, high = -1, left = ncol, right = -1;
   // the points whose edges are looked at and their columns (carried along, as `touched` needs them), the flowing
-  // edges, whether a point is listed
+  // edges, and the iteration (from 1) whose list a point is on
   int* points = malloc(sizeof(int) * 6 * cells);
   double* flow = malloc(sizeof(double) * 2 * cells);
-  unsigned char* listed = calloc(cells, 1);
+  int* listed = calloc(cells, sizeof(int));
   if (!points || !flow || !listed) {
     free(points), free(flow), free(listed);
     return -1;
@@ -383,20 +380,20 @@ static int relax_box(int nrow, int ncol, double* heights, double dx, double dy, 
     }
   }
   for (int iteration = 0; iteration <= max_iterations; iteration++) {
+    int on = iteration + 1, next = iteration + 2;
     nflow = 0;
     for (int k = 0; k < npoint; k++) {
       // the edges to the next point along x and y, and from the previous ones unless those are listed themselves
       int i = points[k], c = columns[k];
       if (c < ncol - 1) nflow += add_if_flowing(flows, nflow, heights, blocked, i, 1, rise[0], over[0], c);
-      if (c > 0 && !listed[i - 1]) {
+      if (c > 0 && listed[i - 1] != on) {
         nflow += add_if_flowing(flows, nflow, heights, blocked, i - 1, 1, rise[0], over[0], c - 1);
       }
       if (i + ncol < cells) nflow += add_if_flowing(flows, nflow, heights, blocked, i, ncol, rise[1], over[1], c);
-      if (i >= ncol && !listed[i - ncol]) {
+      if (i >= ncol && listed[i - ncol] != on) {
         nflow += add_if_flowing(flows, nflow, heights, blocked, i - ncol, ncol, rise[1], over[1], c);
       }
     }
-    for (int k = 0; k < npoint; k++) listed[points[k]] = 0;
     if (!nflow) {
       result = iteration;
       break;
@@ -408,8 +405,8 @@ static int relax_box(int nrow, int ncol, double* heights, double dx, double dy, 
       int a = flows.edge[k] >> 1, along_y = flows.edge[k] & 1, b = a + (along_y ? ncol : 1), c = flows.column[k];
       heights[a] -= flows.flow[k];
       heights[b] += flows.flow[k];
-      if (!listed[a]) listed[a] = 1, columns[npoint] = c, points[npoint++] = a;
-      if (!listed[b]) listed[b] = 1, columns[npoint] = c + !along_y, points[npoint++] = b;
+      if (listed[a] != next) listed[a] = next, columns[npoint] = c, points[npoint++] = a;
+      if (listed[b] != next) listed[b] = next, columns[npoint] = c + !along_y, points[npoint++] = b;
       // (edges run from lower to higher indices and columns)
       if (a < low) low = a;
       if (b > high) high = b;

@@ -375,3 +375,21 @@ def test_bad_compaction_and_berm_rules_are_refused():
     s = deforming.DeformingSurface(np.zeros((5, 5)), SIZE, REPOSE, berm="facing")
     with pytest.raises(SceneError, match="normals"):
         s.step(np.zeros((1, 3)), np.ones(1), np.ones((1, 3)), G)
+
+
+def test_bad_surface_steps_are_refused():
+    with pytest.raises(SceneError, match="surface update"):
+        deforming.DeformingSurface(np.zeros((5, 5)), SIZE, REPOSE, move=0.0)
+    with pytest.raises(SceneError, match="tolerance"):
+        deforming.DeformingSurface(np.zeros((5, 5)), SIZE, REPOSE, tolerance=float("nan"))
+    # the C step looks at the heights once, at the imprint; after it, an element's point or velocity that is not a
+    # number is refused before it can reach them
+    s = deforming.DeformingSurface(np.zeros((9, 9)), SIZE, REPOSE)
+    s.step(np.array([[0.0, 0.0, -0.001]]), np.ones(1) * 1e-6, np.array([[0.01, 0.0, 0.0]]), G, imprint=True)
+    before = s.heights.copy()
+    for bad in ("points", "velocities"):
+        points, velocities = np.array([[0.0, 0.0, -0.002]]), np.array([[0.01, 0.0, 0.0]])
+        (points if bad == "points" else velocities)[0, 0] = np.nan
+        with pytest.raises(SceneError, match="refused"):
+            s.step(points, np.ones(1) * 1e-6, velocities, G)
+        assert np.array_equal(s.heights, before)

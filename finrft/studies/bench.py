@@ -379,8 +379,10 @@ def _plate_pair(a: Scene, b: Scene, drive: Drive, repeat: int) -> dict[str, floa
             "wall_b_s": _best(lambda: simulate(b, drive, estimate_error=False), repeat)}
 
 
-# The wheel's runs on the two surfaces are taken in turn this many times, each keeping its best: on a shared 2-core
-# machine their wall-time ratio spread from 1.2 to 1.8 over a few minutes, their CPU-time ratio by 0.05.
+# The wheel's runs on the two surfaces are taken in turn this many times, each keeping its best. On a shared 2-core
+# machine their ratio still spread from 1.2 to 1.8 in wall time over a few minutes, and from 1.15 to 1.54 in CPU
+# time, which leaves out the waits for a core but not how fast the core runs; instruction counts held still
+# (scripts/wheel_surface_cost.py).
 WHEEL_SURFACE_ROUNDS = 8
 
 

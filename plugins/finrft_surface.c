@@ -1259,10 +1259,11 @@ FINRFT_EXPORT int finrft_surface_deforming_step(const mjModel* m, mjData* d, Fin
         velocities[3 * j + k] = twist[3 + k] + spin[k];
       }
       areas[j] = e[6];
-      finrft_mul_mat_vec3(normals + 3 * j, R, e + 3);
+      if (s->facing) finrft_mul_mat_vec3(normals + 3 * j, R, e + 3);  // read by the facing rule alone
     }
   }
-  int failed = finrft_deforming_step(s, m->opt.gravity, n, points, areas, velocities, normals, first, removed);
+  int failed = finrft_deforming_step(s, m->opt.gravity, n, points, areas, velocities, s->facing ? normals : NULL,
+                                     first, removed);
   free(buffer);
   if (failed) return -1;
   for (int k = 0; k < ninstance; k++) {

@@ -31,13 +31,6 @@ int finrft_grid_placed(const FinrftGrid* grid, const double g[3]) {
   return off > FINRFT_FRAME_TOLERANCE ? FINRFT_SURFACE_BAD_INPUT : 0;
 }
 
-void finrft_grid_local(const FinrftGrid* grid, const double p[3], double local[3]) {
-  double d[3] = {p[0] - grid->centre[0], p[1] - grid->centre[1], p[2] - grid->centre[2]};
-  for (int j = 0; j < 3; j++) {
-    local[j] = d[0] * grid->frame[j] + d[1] * grid->frame[3 + j] + d[2] * grid->frame[6 + j];
-  }
-}
-
 static double clamp(double x, double lo, double hi) { return x < lo ? lo : (x > hi ? hi : x); }
 
 double finrft_grid_height(const FinrftGrid* grid, const double* h, double x, double y) {

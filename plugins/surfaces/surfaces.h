@@ -42,7 +42,13 @@ typedef struct {
 
 int finrft_grid_check(const FinrftGrid* grid, const double g[3]);
 int finrft_grid_placed(const FinrftGrid* grid, const double g[3]);
-void finrft_grid_local(const FinrftGrid* grid, const double p[3], double local[3]);
+// A point's coordinates in the grid's frame (inline: the deforming surface places every element at each update).
+static inline void finrft_grid_local(const FinrftGrid* grid, const double p[3], double local[3]) {
+  double d[3] = {p[0] - grid->centre[0], p[1] - grid->centre[1], p[2] - grid->centre[2]};
+  for (int j = 0; j < 3; j++) {
+    local[j] = d[0] * grid->frame[j] + d[1] * grid->frame[3 + j] + d[2] * grid->frame[6 + j];
+  }
+}
 double finrft_grid_height(const FinrftGrid* grid, const double* heights, double x, double y);
 
 FINRFT_SURFACE_EXPORT int finrft_hfield_depth(int nrow, int ncol, const double* heights, const double size[2],

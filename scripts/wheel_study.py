@@ -65,11 +65,9 @@ VARIANTS = {
 GROUSER_DATA = str(wheel_dir() / "grouser_wheel_by_condition.csv")
 for _name in ("li2013-cmu-held", "li2013-cmu-free", "li2013-cmu-deforming-held"):
     VARIANTS[f"grouser-{_name}"] = ["--wheel", "grouser", *VARIANTS[_name]]
-# Free on the deforming surface: the grousered wheel over every condition. The smooth wheel's run over all 63 stops
-# at one of them on the error limit (position 44.5 % against 5 % at dt 10 ms); its free runs there were made
-# condition by condition at beta <= 60 deg (docs/results/wheel.md).
-VARIANTS["grouser-li2013-cmu-deforming-free"] = ["--wheel", "grouser", "--medium", "wheel_sand_cmu",
-                                                 "--load-from-data", *DEFORMING]
+# Free on the deforming surface, both wheels over every condition.
+VARIANTS["li2013-cmu-deforming-free"] = ["--medium", "wheel_sand_cmu", "--load-from-data", *DEFORMING]
+VARIANTS["grouser-li2013-cmu-deforming-free"] = ["--wheel", "grouser", *VARIANTS["li2013-cmu-deforming-free"]]
 # DRFT's term at the experiments' 10 mm/s: lambda = 1 on an assumed bulk density of 1600 kg/m^3 (the sand's is not
 # known), on the locked wheel at 60 deg (its largest leading normal speeds, 10 mm/s).
 DRFT = ["--slip", "-1", "--slip-angle", "60", "--sinkage", "30", "--medium", "wheel_sand_plate", "--set",

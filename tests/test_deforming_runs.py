@@ -2,6 +2,7 @@
 native plugin and the numpy backend step the same surface, the sand's volume is conserved over a run, the surface
 is recorded, and a second press at the same place meets the disturbed sand."""
 
+import json
 import math
 
 import h5py
@@ -121,6 +122,17 @@ def test_finrft_wheel_surface_deforming_puts_the_grid_under_the_wheel():
     assert x0 - half < -scene.wheel.radius - 0.02 and x0 + half > 6 * scene.wheel.speed + scene.wheel.radius + 0.05
     given = command.scene(build_parser().parse_args([*argv, "--set", "medium.hfield_spacing=0.004"]))
     assert given.medium.hfield_spacing == 0.004  # --set wins
+
+
+def test_finrft_wheel_surface_deforming_runs_as_written(capsys):
+    # the command alone: the scene's wheel (slip 0.5, free under its 21 N load) on sand it displaces, its JSON alone
+    # on stdout, every figure with its estimate
+    from finrft.cli import main
+
+    assert main(["wheel", "--surface", "deforming", "--json", "--quiet"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["slip"] == 0.5 and out["mode"] == "load" and out["Fz_N"] == pytest.approx(21.0, rel=0.01)
+    assert all(key in out["error_estimate"] for key in ("Fx_N", "Fy_N", "Fz_N", "sinkage_mm", "axle_torque_Nm"))
 
 
 def test_the_recording_draws_the_surface(runs, tmp_path):

@@ -225,9 +225,7 @@ def test_command_json_keys_and_files(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("argv, named", [
-    (["--slip", "0.5"], "--sinkage"),
     (["--slip", "0.5", "--sinkage", "20", "--load", "21"], "not both"),
-    (["--sinkage", "20"], "--slip"),
     (["--slip", "1.5", "--sinkage", "20"], "slip"),
     (["--slip", "0.5", "--slip-angle", "120", "--sinkage", "20"], "--slip-angle"),
     (["--slip", "0.5", "--sinkage", "-3"], "--sinkage"),
@@ -315,3 +313,14 @@ def test_a_failed_condition_of_a_conditions_file_is_named(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1
     assert f"run 1 of 2 (slip {first.slip:.3g}, slip angle {math.degrees(first.slip_angle):.3g} deg)" in err
+
+
+def test_the_flags_left_out_are_the_scenes():
+    from finrft.cli import build_parser
+    from finrft.experiments import REGISTRY
+
+    command = REGISTRY["wheel"]
+    bare = command.scene(build_parser().parse_args(["wheel"]))
+    assert (bare.wheel.slip, bare.wheel.sinkage, bare.wheel.load) == (0.5, 0.0, 21.0)  # driven, free under 21 N
+    held = command.scene(build_parser().parse_args(["wheel", "--sinkage", "20"]))
+    assert held.wheel.slip == 0.5 and held.wheel.sinkage == pytest.approx(0.02)

@@ -686,13 +686,14 @@ class WheelCommand(Command):
     def add_flags(self, p: argparse.ArgumentParser) -> None:
         g = p.add_argument_group("the run")
         g.add_argument("--slip", type=number("", minimum=-1.0, inclusive=True), metavar="S",
-                       help="slip s, -1 (locked) to < 1")
+                       help="slip s, -1 (locked) to < 1 (default 0.5, driven, or the --scene's wheel.slip)")
         g.add_argument("--slip-angle", type=number("deg", minimum=-90.0, inclusive=True), metavar="DEG",
                        help="slip angle beta in degrees, -90..90 (default 0)")
         g.add_argument("--sinkage", type=number("mm", inclusive=True), metavar="MM",
-                       help="hold the wheel's lowest point this deep (mm) below the free surface")
+                       help="hold the wheel's lowest point this deep (mm) below the free surface (default: "
+                       "free under --load)")
         g.add_argument("--load", type=number("N"), metavar="N", help="free vertical axis under this load (N, the "
-                       "wheel included)")
+                       "wheel included; default 21, the experiments')")
         g = p.add_argument_group("the wheel")
         g.add_argument("--radius", type=number("mm"), metavar="MM", help="rim radius, mm (default 62.5)")
         g.add_argument("--width", type=number("mm"), metavar="MM", help="width, mm (default 60)")
@@ -738,15 +739,10 @@ class WheelCommand(Command):
                                      f"--json and --plot)")
             if (args.sinkage_from_data or args.load_from_data) and (args.sinkage is not None or args.load):
                 raise UsageError("give --sinkage/--load or --sinkage-from-data/--load-from-data, not both")
-        else:
-            if args.slip is None:
-                raise UsageError("give the slip: --slip S (-1 locked, 0 rolling), or --data CONDITIONS.csv")
-            if args.sinkage_from_data or args.load_from_data or args.plot:
-                raise UsageError("--sinkage-from-data, --load-from-data and --plot go with --data")
+        elif args.sinkage_from_data or args.load_from_data or args.plot:
+            raise UsageError("--sinkage-from-data, --load-from-data and --plot go with --data")
         if args.sinkage is not None and args.load is not None:
             raise UsageError("give --sinkage MM (held) or --load N (free vertical axis), not both")
-        if not args.data and args.sinkage is None and args.load is None and not args.scene:
-            raise UsageError("give --sinkage MM (held) or --load N (free vertical axis)")
         overrides: dict[str, Any] = dict(WHEELS[args.wheel]) if args.wheel else {}
         for key, value, scale in (("wheel.slip", args.slip, 1.0), ("wheel.radius", args.radius, MM),
                                   ("wheel.width", args.width, MM), ("wheel.grousers", args.grousers, None),

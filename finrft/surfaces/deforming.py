@@ -350,16 +350,15 @@ class DeformingSurface:
             self._native_arguments = (ctypes.byref(self._state), len(self.instances),
                                       self._instance_array.ctypes.data, self._pose.ctypes.data,
                                       self.move * min(self._spacing), ctypes.byref(self._removed))
-        self._removed.value = 0.0
-        stepped = _native_functions()[2](m._address, d._address, *self._native_arguments)
-        removed = self._removed
+        stepped = _native_functions()[2](m._address, d._address, *self._native_arguments)  # (sets the volume)
+        removed = self._removed.value
         if stepped < 0:
             raise SceneError("the model's finrft.surface instances do not measure from this deforming surface "
                              "(attach it with its field: finrft.surfaces.deforming.field)")
         self.level_sets += stepped
         self.updates += stepped
-        self.displaced += removed.value
-        return removed.value
+        self.displaced += removed
+        return removed
 
     @property
     def cell(self) -> float:

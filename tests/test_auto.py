@@ -112,6 +112,32 @@ def test_an_explicit_choice_its_whole_run_refuses_falls_back_to_an_implicit_step
     assert run.summary()["Fz_N"] == pytest.approx(21.0, rel=1e-3)  # the medium carries the load
 
 
+def test_an_implicit_choice_its_whole_run_refuses_goes_on_down_the_ladder(tmp_path, monkeypatch):
+    # A pilot over the window can pass where the whole run chatters (the whegs' newton at 2 ms: in 40 % of its
+    # probes over its 0.75 s window, in over half of them in its second). Once every candidate that met the limits
+    # was refused so, the run stopped; the search goes on past them instead. Here the first two whole runs (newton
+    # at 0.5 and 0.25 ms, both of which met the limits) are made to chatter, the explicit step is priced out and
+    # newton is the one implicit method.
+    from finrft import choice as choosing
+    from finrft.errors import Chatter
+    cost, chosen, refused = choosing.Chooser.cost, choosing._chosen, []
+    monkeypatch.setattr(choosing, "IMPLICIT", ("newton",))
+    monkeypatch.setattr(choosing.Chooser, "cost", lambda self, method, dt:
+                        float("inf") if method == "explicit" else cost(self, method, dt))
+
+    def chatters(full, scene, candidate, chooser, fell_back):
+        if len(refused) < 2:
+            refused.append(candidate.dt)
+            raise Chatter("the RFT force chatters at t = 0.06 s (it reverses within a few steps)")
+        return chosen(full, scene, candidate, chooser, fell_back)
+    monkeypatch.setattr(choosing, "_chosen", chatters)
+    run = run_robot(load_scene(_sled(tmp_path), cls=UserScene))
+    choice = run.method_choice
+    assert len(refused) == 2 and choice.method == "newton" and choice.dt < min(refused)
+    assert all(f"newton at {dt:g} s, run whole, was refused" in choice.reason for dt in refused)
+    _converged(run, ErrorLimits())
+
+
 def test_pilots_that_span_the_run_are_the_run_and_its_companion(tmp_path, monkeypatch):
     # Where the pilots' window would span most of the run they run whole, and the chosen candidate's pilots are
     # its run and its companion: no run is made twice, and the result is the run of the method named.

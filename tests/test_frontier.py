@@ -88,6 +88,10 @@ def test_errors_against_the_reference_have_the_known_answer(monkeypatch, box):
     # auto's run is not a setting of the sweep: the fastest is still explicit at 1 ms, though auto's wall is less
     assert summary["auto"]["chosen"] == "explicit, 1 ms" and summary["auto_over_fastest"] == pytest.approx(0.5)
     assert summary["auto"]["errors"]["com_speed_m_s"] == pytest.approx(v0 * c * 7.5e-4 / reference)
+    # the fastest its own estimate passes: 2 c dt v0 within 2 % of v0 (1 + c dt) from 0.5 ms down, explicit there
+    # (0.2 s, against newton's 2 s), though explicit at 1 ms is within 2 % of the reference
+    assert (summary["known"]["method"], summary["known"]["dt"]) == ("explicit", pytest.approx(5e-4))
+    assert summary["auto_over_known"] == pytest.approx(0.05 / 0.2)
 
 
 def test_the_summary_gives_the_cost_of_a_step_per_element(monkeypatch, box):

@@ -91,9 +91,10 @@ def test_a_method_named_runs_as_named_and_auto_is_a_robots_default_only(tmp_path
         load_scene(preset_name="physical", overrides={"sim.method": "auto"})
 
 
-def test_an_explicit_choice_its_whole_run_refuses_is_not_run_again(monkeypatch):
+def test_an_explicit_choice_its_whole_run_refuses_falls_back_to_an_implicit_step(monkeypatch):
     # The wheel rig free under 21 N at 10 ms: the explicit step runs through the pilots' 0.16 s and chatters on its
-    # vertical axis from 0.09 s on, which the whole run's probe sees; the search goes on from there. Here the
+    # vertical axis from 0.09 s on, which the whole run's probe sees; the implicit steps are searched then (a finer
+    # explicit step would chatter after the window too, as the sand-swimmer's do down to 0.25 ms). Here the
     # explicit step is priced at nothing, as on a machine where it is the cheaper one (with the analytic Jacobian
     # the implicit step costs the less on the wheel: newton is chosen at once).
     from finrft import choice as choosing
@@ -107,11 +108,8 @@ def test_an_explicit_choice_its_whole_run_refuses_is_not_run_again(monkeypatch):
                                    "wheel.load": 21.0})
     run = experiment.run(wheel.Wheel.of(scene), scene)
     choice = run.method_choice
-    assert "run whole, was refused" in choice.reason
-    refused = [c for c in choice.candidates if c.method == "explicit" and c.failed.startswith("run whole")]
-    # the refused step is not run again: a finer explicit one (priced at nothing here) or an implicit one instead
-    assert refused and all((choice.method, choice.dt) != (c.method, c.dt) for c in refused)
-    assert methods.get(choice.method).implicit or choice.dt < min(c.dt for c in refused)
+    assert methods.get(choice.method).implicit and "run whole, was refused" in choice.reason
+    assert any(c.method == "explicit" and c.failed.startswith("run whole") for c in choice.candidates)
     assert run.summary()["Fz_N"] == pytest.approx(21.0, rel=1e-3)  # the medium carries the load
 
 

@@ -1,0 +1,87 @@
+"""`auto` against the runs of a sweep it competes with, timed alternately in one process.
+
+    python scripts/auto_against_sweep.py DIR [ROBOT ...]     (DIR: a `finrft bench robots --battery --out DIR`)
+
+For each robot (default: every one with DIR/NAME.csv), from its sweep: the fastest run within 2 % of the converged
+run (or the default's own error, as `finrft bench robots` says) and the fastest run whose own estimate keeps its
+headline figures within the default limits (the fastest a chooser can know is within them). Then `auto` (the
+code installed now, under the default limits) and those runs, each whole with its companion, in turn, twice, best
+of two: wall and CPU time (`time.process_time`, which other processes on the machine inflate less). Prints a
+Markdown table, one row per robot.
+"""
+
+import csv
+import sys
+import time
+from pathlib import Path
+
+from finrft.studies.frontier import ACCURACY, BATTERY, battery_scene, measure
+
+HEADLINE = ("com_speed_m_s", "cost_of_transport")
+ROUNDS = 2
+
+
+def _number(text: str) -> float | None:
+    return float(text) if text not in ("", "nan") else None
+
+
+def picks(rows: list[dict[str, str]]) -> dict[str, tuple[str, float] | None]:
+    """The sweep's fastest run within the accuracy (the default's own error where that is larger) and the fastest
+    its own estimate passes (every headline estimate within ACCURACY of its figure), as (method, dt)."""
+    swept = [r for r in rows if r["method"] != "auto" and not r["failed"]]
+    default = next(r for r in rows if r["default"] == "1")
+    target = max(ACCURACY, _number(default["headline_error"]) or 0.0)
+
+    def fastest(ok) -> tuple[str, float] | None:
+        found = [r for r in swept if ok(r)]
+        best = min(found, key=lambda r: float(r["wall_s"]), default=None)
+        return None if best is None else (best["method"], float(best["dt_s"]))
+
+    def within(r) -> bool:
+        error = _number(r["headline_error"])
+        return error is not None and error <= target
+
+    def passes(r) -> bool:
+        estimates = [_number(r[f"{k}_estimate"]) for k in HEADLINE]
+        return any(e is not None for e in estimates) and all(e is None or e <= ACCURACY for e in estimates)
+    return {"within 2 %": fastest(within), "its estimate passes": fastest(passes)}
+
+
+def timed(scene, method: str, dt: float) -> tuple[float, float, str]:
+    cpu = time.process_time()
+    row = measure(scene, method, dt)
+    return row.wall_s, time.process_time() - cpu, row.failed or row.chosen
+
+
+def main(folder: str, names: list[str]) -> None:
+    from finrft.experiments.user_model import example
+    from finrft.scene import UserScene, load_scene
+    names = names or [p.stem for p in sorted(Path(folder).glob("*.csv")) if not p.stem.endswith("_all_methods")]
+    print("| robot | auto's choice | auto CPU s (wall s) | fastest within 2 % | CPU s (wall s) | auto / it, CPU "
+          "(wall) | fastest its estimate passes | CPU s (wall s) | auto / it, CPU (wall) |")
+    print("|---|---|---:|---|---:|---:|---|---:|---:|")
+    for name in names:
+        with open(Path(folder) / f"{name}.csv") as f:
+            chosen = picks(list(csv.DictReader(f)))
+        scene = load_scene(battery_scene(name) if name in BATTERY else example(name), cls=UserScene)
+        runs = [("auto", scene.sim.dt)] + [p for p in dict.fromkeys(chosen.values()) if p is not None]
+        best: dict[tuple[str, float], tuple[float, float, str]] = {}
+        for _ in range(ROUNDS):
+            for method, dt in runs:
+                wall, cpu, said = timed(scene, method, dt)
+                old = best.get((method, dt))
+                best[(method, dt)] = (min(wall, old[0]), min(cpu, old[1]), said) if old else (wall, cpu, said)
+        auto = best[("auto", scene.sim.dt)]
+        cells = [name, auto[2], f"{auto[1]:.2f} ({auto[0]:.2f})"]
+        for pick in chosen.values():
+            if pick is None:
+                cells += ["none", "—", "—"]
+                continue
+            wall, cpu, _ = best[pick]
+            cells += [f"{pick[0]}, {1e3 * pick[1]:g} ms", f"{cpu:.2f} ({wall:.2f})",
+                      f"{auto[1] / cpu:.2f} ({auto[0] / wall:.2f})"]
+        print("| " + " | ".join(cells) + " |", flush=True)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1], sys.argv[2:])

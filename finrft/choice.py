@@ -29,8 +29,7 @@ A step longer than the scene's own keeps the medium's mean force within 2 % too 
 whole runs, the chosen candidate's pilot is the run and its pilot at half the step its companion: nothing runs
 twice. Else the cheapest candidate runs whole, with its companion estimate as every run has; should that
 estimate refuse it or the run chatter (a pilot's window is not the whole run), the next one runs, or the search goes
-on past it. The pilots' wall time counts in
-the result's ``wall_s`` (``method_choice.pilot_wall_s``). An explicit candidate whose chatter comes and goes
+on past it (`run_auto`). The pilots' wall time counts in the result's ``wall_s`` (``method_choice.pilot_wall_s``). An explicit candidate whose chatter comes and goes
 (`stepping.Chattering`) and leaves its figures within their limits is chosen, and its run reports the chatter.
 """
 
@@ -579,11 +578,12 @@ def run_auto(scene: Any, limits: ErrorLimits | None, pilot: Pilot, prepare: Call
              full: Callable[[Any], Any], duration: float, stroke_time: float, strokes: int,
              state: State | None = None) -> Any:
     """Choose (`choose`), then run the choice at the whole length with ``full(scene)`` (its companion estimate
-    included); where its estimate refuses it or it goes unstable, the next candidate that met the limits, or, where
-    none is left, the search goes on from there (a pilot over the window can pass where the whole run chatters: the
-    whegs' ``newton`` at 2 ms, chattering in 40 % of its probes over its 0.75 s window and in over half of them in
-    its second; a failure of the scene's own, a drive that cannot hold its profile, is raised as it comes). The result carries ``method_choice``, and the pilots' wall time in its
-    ``wall_s``."""
+    included); where its estimate refuses it or it goes unstable, the search goes on past it: the next candidate that
+    met the limits, or a finer step of its method where that is predicted cheaper, the implicit methods alone past
+    an explicit step (a pilot over the window can pass where the whole run chatters: the whegs' ``newton`` at 2 ms,
+    chattering in 40 % of its probes over its 0.75 s window and in over half of them in its first second). A failure
+    of the scene's own, a drive that cannot hold its profile, is raised as it comes. The result carries
+    ``method_choice``, and the pilots' wall time in its ``wall_s``."""
     passed, chooser = choose(scene, limits, pilot, prepare, duration, stroke_time, strokes, state)
     fell_back: list[str] = []
     while True:

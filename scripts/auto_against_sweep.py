@@ -14,6 +14,7 @@ import csv
 import sys
 import time
 from pathlib import Path
+from typing import Any, Callable
 
 from finrft.studies.frontier import ACCURACY, BATTERY, battery_scene, measure
 
@@ -32,22 +33,23 @@ def picks(rows: list[dict[str, str]]) -> dict[str, tuple[str, float] | None]:
     default = next(r for r in rows if r["default"] == "1")
     target = max(ACCURACY, _number(default["headline_error"]) or 0.0)
 
-    def fastest(ok) -> tuple[str, float] | None:
+    def fastest(ok: Callable[[dict[str, str]], bool]) -> tuple[str, float] | None:
         found = [r for r in swept if ok(r)]
         best = min(found, key=lambda r: float(r["wall_s"]), default=None)
         return None if best is None else (best["method"], float(best["dt_s"]))
 
-    def within(r) -> bool:
+    def within(r: dict[str, str]) -> bool:
         error = _number(r["headline_error"])
         return error is not None and error <= target
 
-    def passes(r) -> bool:
+    def passes(r: dict[str, str]) -> bool:
         estimates = [_number(r[f"{k}_estimate"]) for k in HEADLINE]
         return any(e is not None for e in estimates) and all(e is None or e <= ACCURACY for e in estimates)
     return {"within 2 %": fastest(within), "its estimate passes": fastest(passes)}
 
 
-def timed(scene, method: str, dt: float) -> tuple[float, float, str]:
+def timed(scene: Any, method: str, dt: float) -> tuple[float, float, str]:
+    """One whole run (`measure`): its wall and CPU time (s), and what `auto` chose or why it failed."""
     cpu = time.process_time()
     row = measure(scene, method, dt)
     return row.wall_s, time.process_time() - cpu, row.failed or row.chosen

@@ -113,6 +113,7 @@ def test_an_explicit_choice_its_whole_run_refuses_falls_back_to_an_implicit_step
     assert run.summary()["Fz_N"] == pytest.approx(21.0, rel=1e-3)  # the medium carries the load
 
 
+@pytest.mark.slow  # its pilots, three whole runs and the chosen method at an eighth of its step: about 20 s
 def test_an_implicit_choice_its_whole_run_refuses_goes_on_down_the_ladder(tmp_path, monkeypatch):
     # A pilot over the window can pass where the whole run chatters (the whegs' newton at 2 ms: in 40 % of its
     # probes over its 0.75 s window, in over half of them in its second). Once every candidate that met the limits

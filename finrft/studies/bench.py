@@ -123,12 +123,17 @@ def _stepping(scene: Scene, drive: Drive, steps: int, timed: bool = False) -> Ca
     return run
 
 
-def _interleaved(runs: dict[str, Callable[[], Any]], rounds: int) -> dict[str, list[float]]:
-    """Wall times of each run, taken in turn ``rounds`` times."""
+def _interleaved(runs: dict[str, Callable[[], Any]], rounds: int,
+                 cpu: dict[str, list[float]] | None = None) -> dict[str, list[float]]:
+    """Wall times of each run, taken in turn ``rounds`` times; with ``cpu``, each run's CPU time (this process's)
+    appended there under its name too."""
     times: dict[str, list[float]] = {name: [] for name in runs}
     for _ in range(rounds):
         for name, fn in runs.items():
+            start = time.process_time()
             times[name].append(_best(fn, 1))
+            if cpu is not None:
+                cpu.setdefault(name, []).append(time.process_time() - start)
     return times
 
 
@@ -397,14 +402,10 @@ def _wheel_surfaces(rounds: int = WHEEL_SURFACE_ROUNDS, run: dict[str, Any] = WH
               "b": default_scene(**run, **{"medium.surface": "deforming", "medium.pile_factor": 0.7},
                                  **DEFORMING_GRID)}
     pull = {name: run_wheel(scene).summary()["Fx_N"] for name, scene in scenes.items()}
-    best = {f"{clock}_{name}_s": math.inf for clock in ("wall", "cpu") for name in scenes}
-    for _ in range(rounds):
-        for name, scene in scenes.items():
-            wall, cpu = time.perf_counter(), time.process_time()
-            run_wheel(scene)
-            best[f"wall_{name}_s"] = min(best[f"wall_{name}_s"], time.perf_counter() - wall)
-            best[f"cpu_{name}_s"] = min(best[f"cpu_{name}_s"], time.process_time() - cpu)
-    return {"fx_diff_N": pull["b"] - pull["a"], **best}
+    cpu: dict[str, list[float]] = {}
+    wall = _interleaved({name: (lambda scene=scene: run_wheel(scene)) for name, scene in scenes.items()}, rounds, cpu)
+    return {"fx_diff_N": pull["b"] - pull["a"], **{f"wall_{name}_s": min(t) for name, t in wall.items()},
+            **{f"cpu_{name}_s": min(t) for name, t in cpu.items()}}
 
 
 def modelling(*, repeat: int = 3, log: Callable[[str], None] = print, progress: Progress = None) -> dict[str, Any]:

@@ -157,9 +157,10 @@ class Attached:
         wrench = self.wrenches(model)(data)
         return {s.body: (w[3:], w[:3]) for s, w in zip(self.surfaces, wrench)}
 
-    def check_data(self, model: mujoco.MjModel, data: mujoco.MjData, where: str = "Attached.forces") -> None:
-        """SceneError unless ``model`` is an MjModel whose geoms are those `attach` cut and ``data`` an MjData of
-        it: another model's MjData gives another model's numbers, or none."""
+    def check_data(self, model: mujoco.MjModel, data: mujoco.MjData, where: str = "Attached.forces",
+                   geoms: bool = True) -> None:
+        """SceneError unless ``model`` is an MjModel whose geoms are those `attach` cut (unless not ``geoms``) and
+        ``data`` an MjData of it: another model's MjData gives another model's numbers, or none."""
         if not isinstance(model, mujoco.MjModel):
             raise SceneError(f"{where}: model must be a mujoco.MjModel, got {type(model).__name__}")
         if not isinstance(data, mujoco.MjData):
@@ -167,7 +168,8 @@ class Attached:
         if data.model._address != model._address:
             raise SceneError(f"{where}: data is an MjData of another model: pass mujoco.MjData(model) of the model "
                              f"given")
-        self.check_geoms(model)
+        if geoms:
+            self.check_geoms(model)
 
     def check_geoms(self, model: mujoco.MjModel) -> None:
         """SceneError when a geom `attach` cut into elements has another type, size, position or orientation in
@@ -180,12 +182,18 @@ class Attached:
             if message:
                 raise SceneError(message)
 
-    def wrenches(self, model: mujoco.MjModel, applied: bool = False) -> Callable[[mujoco.MjData], np.ndarray]:
+    def wrenches(self, model: mujoco.MjModel, applied: bool = False,
+                 every_call: bool = True) -> Callable[[mujoco.MjData], np.ndarray]:
         """A reader of the medium's wrench on each attached body at the state of an MjData of ``model`` (after
         mj_forward): (B, 6), the torque about the body's origin (N m), then the force (N), world frame, in the order
         of ``surfaces``; from the native plugin's own sum with the native backend (a call per body, no law in
         Python), else from the Python backend's. With ``applied``, the native plugin's sum as its last forward pass
-        of the MjData applied it, where it applied one (no element summed again: a recording after mj_forward)."""
+        of the MjData applied it, where it applied one (no element summed again: a recording after mj_forward).
+        The geoms are checked (`check_geoms`) at every call, or, without ``every_call``, once, here: a run's own
+        reader, called at every step of its model, which nothing changes while it runs (the check was two thirds
+        of a sand-swimmer's run)."""
+        if not every_call:
+            self.check_geoms(model)
         if self.backend == "native":
             signature = (ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_int, ctypes.c_void_p)
             wrench = native.function("finrft_surface_body_wrench", *signature)
@@ -193,7 +201,7 @@ class Attached:
             instances = [int(model.body_plugin[model.body(s.body).id]) for s in self.surfaces]
 
             def native_read(data: mujoco.MjData) -> np.ndarray:
-                self.check_data(model, data, "Attached.wrenches")
+                self.check_data(model, data, "Attached.wrenches", every_call)
                 out = np.zeros((len(instances), 6))
                 for row, instance in zip(out, instances):
                     found = -2 if last is None else last(model._address, data._address, instance, row.ctypes.data)
@@ -207,7 +215,7 @@ class Attached:
         forces = SurfaceForces(self, model)
 
         def python_read(data: mujoco.MjData) -> np.ndarray:
-            self.check_data(model, data, "Attached.wrenches")
+            self.check_data(model, data, "Attached.wrenches", every_call)
             out = np.zeros((len(forces.bodies), 6))
             for row, (body, surface) in zip(out, forces.bodies):
                 force, arm = forces.element_forces(model, data, body, surface)

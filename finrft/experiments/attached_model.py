@@ -171,7 +171,7 @@ def surface_arguments(medium: Medium, gravity: Sequence[float]) -> dict[str, Any
 def medium_forces(built: AttachedModel) -> Callable[[mujoco.MjData], np.ndarray]:
     """The resultant of the medium's force on each attached body (B, 3), world frame, from the backend in use
     (after mj_forward: as that pass applied it)."""
-    wrenches = built.attached.wrenches(built.model, applied=True)
+    wrenches = built.attached.wrenches(built.model, applied=True, every_call=False)
     return lambda d: wrenches(d)[:, 3:]
 
 

@@ -2,7 +2,7 @@
 //   finrft_implicit_step     the "implicit", "newton" and "newton-midpoint" methods
 //   finrft_adaptive_advance  the "adaptive" and "adaptive-newton" methods
 //   finrft_explicit_record   MuJoCo's own step, recording the state at given steps (finrft.batch)
-//   finrft_explicit_from     MuJoCo's own step, each from the same state (what one costs there: finrft bench steps)
+//   finrft_explicit_from     MuJoCo's own step, each from one of given states (what one costs there: bench steps)
 // They return 0 or a code of finrft.native.Code (FINRFT_UNSTABLE, ...). A step allocates nothing on the heap: its
 // workspace lives on the mjData stack (mj_markStack ... mj_freeStack), sized once per call.
 //
@@ -983,12 +983,13 @@ FINRFT_EXPORT int finrft_explicit_record(const mjModel* m, mjData* d, int nstep,
   return 0;
 }
 
-// `nstep` of MuJoCo's steps, each from the mjSTATE_FULLPHYSICS state `start`: what one step costs at that state. A
-// run of explicit steps leaves it where the step is beyond its limit: the wheel rig's at its own 62.5 ms is out of
-// the sand in three steps, and its later steps cost nothing of the medium.
-FINRFT_EXPORT void finrft_explicit_from(const mjModel* m, mjData* d, const mjtNum* start, int nstep) {
+// `nstep` of MuJoCo's steps, step i from the i % nstate-th of the `nstate` mjSTATE_FULLPHYSICS states `states`:
+// what one step costs at those states. A run of explicit steps leaves them where the step is beyond its limit: the
+// wheel rig's at its own 62.5 ms is out of the sand in three steps, and its later steps cost nothing of the medium.
+FINRFT_EXPORT void finrft_explicit_from(const mjModel* m, mjData* d, const mjtNum* states, int nstate, int nstep) {
+  size_t size = mj_stateSize(m, mjSTATE_FULLPHYSICS);
   for (int i = 0; i < nstep; i++) {
-    mj_setState(m, d, start, mjSTATE_FULLPHYSICS);
+    mj_setState(m, d, states + size * (size_t)(i % nstate), mjSTATE_FULLPHYSICS);
     mj_step(m, d);
   }
 }

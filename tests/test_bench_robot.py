@@ -42,25 +42,31 @@ def test_step_costs_compare_one_step_of_each_from_the_same_state():
         assert costs[f"{kind}_ns_per_element_step"] == pytest.approx(1e3 * costs[f"{kind}_step_us"] / elements)
 
 
-def test_each_explicit_step_timed_starts_from_the_implicit_steps_state():
+def test_each_explicit_step_timed_starts_from_one_of_the_runs_states():
     # The wheel rig's explicit step at its own 62.5 ms throws the wheel out of the sand within three steps: steps
-    # taken on from there would be timed in the air. Each timed step starts where the implicit ones do.
+    # taken on from there would be timed in the air. Each timed step starts from one of the run's states, in turn.
     import mujoco
     from finrft.experiments.user_model import example
     from finrft.scene import UserScene, load_scene
     scene = load_scene(example("wheel_rig"), cls=UserScene)
     implicit, explicit = bench.step_start(scene, scene.sim.dt)
-    m, d, start = explicit.held
+    m, d, states = explicit.held
+    assert len(states) == bench.STEP_COST_STATES
     spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
     own = mujoco.MjData(m)
-    mujoco.mj_setState(m, own, start, spec)
+    for steps in (1, bench.STEP_COST_STATES + 3):
+        mujoco.mj_setState(m, own, states[(steps - 1) % len(states)], spec)
+        mujoco.mj_step(m, own)
+        explicit(steps)
+        np.testing.assert_array_equal(d.qpos, own.qpos)
+        np.testing.assert_array_equal(d.qvel, own.qvel)
+    mujoco.mj_setState(m, own, states[0], spec)
     mujoco.mj_step(m, own)
-    explicit(5)
-    np.testing.assert_array_equal(d.qpos, own.qpos)
-    np.testing.assert_array_equal(d.qvel, own.qvel)
     assert own.qpos[1] < 0  # still in the sand after one step: 27 mm deep at the start
     mujoco.mj_step(m, own, 3)
     assert own.qpos[1] > 0.1  # three steps on it has left it
+    # the run's states: the wheel rolls on between them (0.32 rad/s, 1 s over the ten)
+    assert np.ptp([s[1 + m.jnt_qposadr[m.joint("axle").id]] for s in states]) > 0.2
 
 
 def test_step_counts_names_an_unknown_robot_in_one_line_and_exits_2():

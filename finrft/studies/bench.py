@@ -617,24 +617,29 @@ def robots(names: tuple[str, ...] | None = None, *, duration: float = 0.0, log: 
     return out
 
 
-# The step costs (`_step_costs`): the run is stepped to this time, at most its settle, and its steps timed from
-# there, the medium's elements below the surface and moving as in the run; each kind of step this many at a time,
-# interleaved over STEP_ROUNDS rounds, the best of each kept.
+# The step costs (`_step_costs`): the run is stepped to this time, at most its settle, then on over STEP_COST_SPAN s
+# (at most to its end), its state kept at STEP_COST_STATES instants evenly over that; from each, STEP_COST_STEPS
+# steps of each kind are timed, the medium's elements below the surface and moving as in the run. The rounds
+# interleave the kinds, STEP_ROUNDS of them, the best of each kept. One instant's steps are not a run's: the
+# sand-swimmer's Newton steps just after its ramp-in cost four times its run's mean.
 STEP_COST_START = 0.5
-STEP_COST_STEPS = 50
+STEP_COST_SPAN = 1.0
+STEP_COST_STATES = 10
+STEP_COST_STEPS = 20
 STEP_ROUNDS = 5
 
 
 def _step_costs(scene: Any, explicit_dt: float, bare_s: float, elements: int) -> dict[str, float]:
     """One step of the scene's method at its step and one of MuJoCo's explicit step at ``explicit_dt``, each timed
-    in C from the same state (`step_start`), in one process: the wall seconds of each, the cost per element per
-    step of each beyond the bare step (``bare_s``, the model without the medium), and the implicit step's cost in
-    explicit steps."""
+    in C from the same states of the run (`step_start`), in one process: the wall seconds of each, the cost per
+    element per step of each beyond the bare step (``bare_s``, the model without the medium), and the implicit
+    step's cost in explicit steps."""
     with native.untimed():
         implicit, explicit = step_start(scene, explicit_dt)
-        walls = {k: min(v) / STEP_COST_STEPS
-                 for k, v in _interleaved({"implicit": lambda: implicit(STEP_COST_STEPS),
-                                           "explicit": lambda: explicit(STEP_COST_STEPS)}, STEP_ROUNDS).items()}
+        steps = STEP_COST_STATES * STEP_COST_STEPS
+        walls = {k: min(v) / steps
+                 for k, v in _interleaved({"implicit": lambda: implicit(steps),
+                                           "explicit": lambda: explicit(steps)}, STEP_ROUNDS).items()}
     return {"implicit_step_us": 1e6 * walls["implicit"], "explicit_step_us": 1e6 * walls["explicit"],
             "implicit_ns_per_element_step": 1e9 * (walls["implicit"] - bare_s) / elements,
             "explicit_ns_per_element_step": 1e9 * (walls["explicit"] - bare_s) / elements,
@@ -642,11 +647,12 @@ def _step_costs(scene: Any, explicit_dt: float, bare_s: float, elements: int) ->
 
 
 def step_start(scene: Any, explicit_dt: float) -> tuple[Callable[[int], None], Callable[[int], None]]:
-    """Steps of the scene's method at its step and of MuJoCo's explicit step at ``explicit_dt`` from the same state:
-    the run's at `STEP_COST_START` s or its settle, the earlier, with ``ctrl`` held there and the stepper's history
-    from the run. Each of the two returned functions takes the steps it is given in C (`_step_costs` times them;
-    scripts/step_counts.py counts their instructions): the implicit method's from that state on, as its run takes
-    them (a Newton step starts from its last one's change), each explicit one from that state again
+    """Steps of the scene's method at its step and of MuJoCo's explicit step at ``explicit_dt`` from the same states
+    of its run: `STEP_COST_STATES` instants evenly over `STEP_COST_SPAN` s from `STEP_COST_START` s or its settle,
+    the earlier (at most to its end), with ``ctrl`` held at each and the stepper's history from the run. Each of the
+    two returned functions takes the steps it is given in C, an equal share from each instant (`_step_costs` times
+    them; scripts/step_counts.py counts their instructions): the implicit method's from the instant on, as its run
+    takes them (a Newton step starts from its last one's change), each explicit one from the instant again
     (`finrft_explicit_from`), as an explicit step beyond its limit leaves the sand: the wheel rig's at its own
     62.5 ms within three steps, after which a step cost a seventh of one in the sand."""
     from ..callbacks import controlled
@@ -659,23 +665,39 @@ def step_start(scene: Any, explicit_dt: float) -> tuple[Callable[[int], None], C
     d = mujoco.MjData(m)
     trial = experiment.start(scene, built, d, False)
     advance = stepper(m, scene.sim, built.backend, built.groups, getattr(built, "attached", None))
+    history = getattr(advance, "history", None)
     spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
-    start = np.zeros(mujoco.mj_stateSize(m, spec))
+    dt, start = scene.sim.dt, min(STEP_COST_START, scene.sim.settle)
+    span = max(0.0, min(STEP_COST_SPAN, scene.sim.duration - start - STEP_COST_STEPS * dt))
+    at = [max(1, round((start + span * i / STEP_COST_STATES) / dt)) for i in range(STEP_COST_STATES)]
+    states = np.zeros((STEP_COST_STATES, mujoco.mj_stateSize(m, spec)))
+    histories = [None] * STEP_COST_STATES
+    if hasattr(trial, "on_stroke"):  # the drives set going, as the run's first stroke does
+        trial.on_stroke(0)
     with controlled(m, getattr(trial, "control", None)):
-        advance(d, max(1, round(min(STEP_COST_START, scene.sim.settle) / scene.sim.dt)))
-    mujoco.mj_getState(m, d, start, spec)
+        done = 0
+        for i, step in enumerate(at):
+            if step > done:
+                advance(d, step - done)
+                done = step
+            mujoco.mj_getState(m, d, states[i], spec)
+            histories[i] = None if history is None else history.copy()
     explicit_d = mujoco.MjData(explicit_m)
-    from_start = native.function("finrft_explicit_from", None, ctypes.c_void_p, ctypes.c_void_p,
-                                 ctypes.POINTER(ctypes.c_double), ctypes.c_int)
-    explicit_args = (explicit_m._address, explicit_d._address, start.ctypes.data_as(ctypes.POINTER(ctypes.c_double)))
+    from_states = native.function("finrft_explicit_from", None, ctypes.c_void_p, ctypes.c_void_p,
+                                  ctypes.POINTER(ctypes.c_double), ctypes.c_int, ctypes.c_int)
+    explicit_args = (explicit_m._address, explicit_d._address,
+                     states.ctypes.data_as(ctypes.POINTER(ctypes.c_double)), STEP_COST_STATES)
 
     def implicit(steps: int) -> None:
-        mujoco.mj_setState(m, d, start, spec)
-        advance(d, steps)
+        for i in range(STEP_COST_STATES):
+            mujoco.mj_setState(m, d, states[i], spec)
+            if history is not None:
+                history[:] = histories[i]
+            advance(d, steps // STEP_COST_STATES + (i < steps % STEP_COST_STATES))
 
     def explicit(steps: int) -> None:
-        from_start(*explicit_args, steps)
-    explicit.held = (explicit_m, explicit_d, start)  # type: ignore[attr-defined]  # what the addresses point to
+        from_states(*explicit_args, steps)
+    explicit.held = (explicit_m, explicit_d, states)  # type: ignore[attr-defined]  # what the addresses point to
     return implicit, explicit
 
 

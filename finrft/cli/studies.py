@@ -157,7 +157,8 @@ def _add_steps(kinds: Any) -> argparse.ArgumentParser:
     p = kinds.add_parser("steps", help="what one step of each implicit method costs against the explicit step",
                          description="For each robot at its own step: one step of each fixed-step implicit method ("
                          f"{', '.join(STEP_METHODS)}) and one of MuJoCo's explicit step at the same step, from the "
-                         "same state 0.5 s into the run, timed in C in one process: microseconds a step, nanoseconds "
+                         "same ten states of the run over a second from 0.5 s in, timed in C in one process: "
+                         "microseconds a step, nanoseconds "
                          "per element per step beyond the bare step (the model without the medium), and the implicit "
                          "step's cost in explicit steps. A few seconds a robot.")
     p.add_argument("--robot", action="append", choices=[*EXAMPLES, *BATTERY],

@@ -407,8 +407,9 @@ def steps(names: tuple[str, ...] | None = None, *, log: Callable[[str], None] = 
           progress: Callable[[int, int], None] | None = None) -> dict[str, Any]:
     """What one step costs, for each robot (an example, `finrft run --example NAME`, or one of the battery,
     `BATTERY`; default: the examples) at its own step: one step of each fixed-step implicit
-    method (`STEP_METHODS`) and one of MuJoCo's explicit step at the same step, from the same state (the run's 0.5 s
-    in, or its settle), timed in C in one process, each the best of several interleaved rounds (`_step_costs`):
+    method (`STEP_METHODS`) and one of MuJoCo's explicit step at the same step, from the same states of the run (ten
+    over a second from 0.5 s in, or its settle: `bench.step_start`), timed in C in one process, each the best of
+    several interleaved rounds (`_step_costs`):
     microseconds a step, nanoseconds per element per step beyond the bare step (the model without the medium), and
     the implicit step's cost in explicit steps. A few seconds a robot."""
     from ..experiments.user_model import EXAMPLES, example

@@ -190,7 +190,7 @@ class Attached:
         Python), else from the Python backend's. With ``applied``, the native plugin's sum as its last forward pass
         of the MjData applied it, where it applied one (no element summed again: a recording after mj_forward).
         The geoms are checked (`check_geoms`) at every call, or, without ``every_call``, once, here: a run's own
-        reader, called at every step of its model, which nothing changes while it runs (the check was two thirds
+        reader, called at every step of its model, which nothing changes while it runs (the check was two fifths
         of a sand-swimmer's run)."""
         if not every_call:
             self.check_geoms(model)

@@ -171,6 +171,11 @@ class RobotTrial:
         self.actuators = [m.actuator(c.actuator).id for c in scene.control]
         self.tables = experiment.tables
         self.loops = experiment.loops
+        # the open-loop entries, a function of time alone: taken once per instant, though MuJoCo's control callback
+        # runs at each forward pass (a newton step's, then the recording's at the same state: a tenth of a run)
+        self._open = [i for i, loop in enumerate(self.loops) if loop is None]
+        self._open_actuators = np.array([self.actuators[i] for i in self._open], dtype=int)
+        self._open_at: tuple[float, np.ndarray] = (math.nan, np.zeros(len(self._open)))
         # a sensor loop's last reading (time, value, rate): its rate is the change over the last step
         self._readings: dict[int, tuple[float, float, float]] = {}
         self.controller = experiment.control
@@ -274,10 +279,15 @@ class RobotTrial:
         t = d.time
         if self.controller is not None:
             d.ctrl[:] = self._checked(self.controller(t, d))
+        if self._open:
+            if self._open_at[0] != t:
+                self._open_at = (t, np.array([control_value(self.scene.control[i], self.tables[i], t)
+                                              for i in self._open]))
+            d.ctrl[self._open_actuators] = self._open_at[1]
         for i, (a, c, table, loop) in enumerate(zip(self.actuators, self.scene.control, self.tables, self.loops)):
             if loop is None:
-                d.ctrl[a] = control_value(c, table, t)
-            elif c.kind == "pd":
+                continue
+            if c.kind == "pd":
                 d.ctrl[a] = closed_loop(c, t, d.qpos[loop[0]], d.qvel[loop[1]])
             else:
                 d.ctrl[a] = closed_loop(c, t, *self._reading(i, d.sensordata[loop[0]], t))

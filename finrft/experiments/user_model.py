@@ -174,6 +174,7 @@ class RobotTrial:
         # the open-loop entries, a function of time alone: taken once per instant, though MuJoCo's control callback
         # runs at each forward pass (a newton step's, then the recording's at the same state: a tenth of a run)
         self._open = [i for i, loop in enumerate(self.loops) if loop is None]
+        self._closed = [i for i, loop in enumerate(self.loops) if loop is not None]
         self._open_actuators = np.array([self.actuators[i] for i in self._open], dtype=int)
         self._open_at: tuple[float, np.ndarray] = (math.nan, np.zeros(len(self._open)))
         # a sensor loop's last reading (time, value, rate): its rate is the change over the last step
@@ -284,9 +285,8 @@ class RobotTrial:
                 self._open_at = (t, np.array([control_value(self.scene.control[i], self.tables[i], t)
                                               for i in self._open]))
             d.ctrl[self._open_actuators] = self._open_at[1]
-        for i, (a, c, table, loop) in enumerate(zip(self.actuators, self.scene.control, self.tables, self.loops)):
-            if loop is None:
-                continue
+        for i in self._closed:
+            a, c, loop = self.actuators[i], self.scene.control[i], self.loops[i]
             if c.kind == "pd":
                 d.ctrl[a] = closed_loop(c, t, d.qpos[loop[0]], d.qvel[loop[1]])
             else:

@@ -672,8 +672,7 @@ def step_start(scene: Any, explicit_dt: float) -> tuple[Callable[[int], None], C
     at = [max(1, round((start + span * i / STEP_COST_STATES) / dt)) for i in range(STEP_COST_STATES)]
     states = np.zeros((STEP_COST_STATES, mujoco.mj_stateSize(m, spec)))
     histories = [None] * STEP_COST_STATES
-    if hasattr(trial, "on_stroke"):  # the drives set going, as the run's first stroke does
-        trial.on_stroke(0)
+    trial.on_stroke(0)  # the drives set going, as the run's first stroke does
     with controlled(m, getattr(trial, "control", None)):
         done = 0
         for i, step in enumerate(at):

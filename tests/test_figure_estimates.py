@@ -36,14 +36,37 @@ def test_means_do_not_depend_on_record_dt_and_are_the_integral_over_every_step(n
     sparse, dense, every = _summaries(scene)
     for key in MEANS:  # the means of the 10 ms samples differed by 5e-5 W of 0.70 W here, 9 % over 5 s
         assert np.allclose(sparse[key], dense[key], rtol=1e-9, atol=1e-12), key
-    # an independent integration: the trapezoid rule over the samples of every step
+    # an independent integration: the trapezoid rule over the samples of every step, each actuator's power the
+    # force its step applied (the force read at the step's start, its damping kv at the new velocity: both
+    # examples' servos have an affine bias, no force range and no gain in velocity) times its velocity
     t, settle = every.time, scene.sim.settle
-    power = every.actuator_force * every.actuator_velocity
-    assert dense["actuator_power_W"] == pytest.approx(window_mean(t, power.sum(axis=1), settle), rel=1e-9)
+    kv = -UserModel.of(scene).build(scene).model.actuator_biasprm[:, 2]
+    force, velocity = every.actuator_force, every.actuator_velocity
+    assert kv.min() > 0
+    power = (force[:-1] - kv * (velocity[1:] - velocity[:-1])) * velocity[1:]
+    assert dense["actuator_power_W"] == pytest.approx(window_mean(t[1:], power.sum(axis=1), settle), rel=1e-9)
     assert dense["positive_power_W"] == pytest.approx(
-        window_mean(t, np.maximum(power, 0).sum(axis=1), settle), rel=1e-9)
+        window_mean(t[1:], np.maximum(power, 0).sum(axis=1), settle), rel=1e-9)
     assert dense["medium_force_N"] == pytest.approx(window_mean(t, every.medium_force, settle).sum(axis=0),
                                                     rel=1e-9, abs=1e-12)
+
+
+@pytest.mark.slow
+def test_a_stiff_servos_power_is_the_force_its_step_applied_and_converges_at_1_ms():
+    # The sand-swimmer's 10 g links on servos of kp = 50 N m/rad: a force read at the state itself, kp (ctrl - q)
+    # with q a step further on, put its positive power 12 % above the run at 1/8 of the step over this window (15 %
+    # over the example's); the force each step applied (`StepPower`) 1.1 % (0.3 %), and its net power too.
+    figures = {}
+    for dt in (1e-3, 1.25e-4):
+        scene = load_scene(example("sand_swimmer"), cls=UserScene, overrides={
+            "sim.duration": 2.0, "sim.settle": 1.0, "sim.method": "newton-midpoint", "sim.dt": dt})
+        figures[dt] = run(UserModel.of(scene), scene, estimate_error=False).summary()
+    coarse, fine = figures[1e-3], figures[1.25e-4]
+    assert coarse["positive_power_W"] == pytest.approx(fine["positive_power_W"], rel=0.02)
+    assert coarse["actuator_power_W"] == pytest.approx(fine["actuator_power_W"], rel=0.02)
+    assert coarse["cost_of_transport"] == pytest.approx(fine["cost_of_transport"], rel=0.02)
+    # and the step's power is not the state's: positive power clips a power that changes sign within a stroke
+    assert fine["positive_power_W"] > 1.05 * fine["actuator_power_W"]
 
 
 def test_the_mean_velocity_does_not_depend_on_the_instants_recorded():

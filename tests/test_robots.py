@@ -53,8 +53,9 @@ def test_scene_names_what_the_model_has(name):
     for drive in scene.get("drive", []):
         joint = model.joint(drive["joint"])
         assert int(joint.type[0]) in (mujoco.mjtJoint.mjJNT_SLIDE, mujoco.mjtJoint.mjJNT_HINGE), drive
-    # a robot's numerics: implicit steps of 1 ms or longer (their accuracy: `finrft bench robots`)
-    assert scene["sim"]["dt"] >= 0.001 and scene["sim"]["method"] in ("newton", "newton-midpoint")
+    # a robot's numerics: implicit steps of 0.5 ms or longer, where their figures are estimated within the default
+    # limits (the hexapod's cost of transport at 1 ms is not: docs/guide/methods.md)
+    assert scene["sim"]["dt"] >= 0.0005 and scene["sim"]["method"] in ("newton", "newton-midpoint")
 
 
 MEDIA = {"sand_swimmer": ([f"link{i}" for i in range(1, 8)], 0.005, dict(law="li2013", medium="glass_beads_treers2021")),

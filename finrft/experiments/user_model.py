@@ -31,8 +31,8 @@ from ..models import ARMATURE_RATIO, compile_spec, mjcf_path
 from ..scene import Control, JointDrive, SceneError, UserScene, drive_timing, load_scene, parse_override, repose
 from ..stepping import DRIVE_LAG, jump_velocities
 from ..surfaces.deforming import DeformingSurface
-from .attached_model import (DRIVEN, AttachedModel, applied_state, build_attached, driven_joint, medium_forces,
-                             record_forward, scene_spec)
+from .attached_model import (DRIVEN, AttachedModel, StepPower, applied_state, build_attached, driven_joint,
+                             medium_forces, record_forward, scene_spec)
 from .command import Command, choice_lines, register, steps_line
 from .flags import add_max_error, add_result_files, add_scene_flags
 
@@ -207,10 +207,12 @@ class RobotTrial:
         self.reads = {"state": lambda d: np.concatenate([v.ravel() for v in state(d).values()])}
         self._unpack = lambda flat: _unpack(flat, m, len(built.bodies), len(self.dofs))
 
-        def rates(d: mujoco.MjData, at: mujoco.MjData, velocity: np.ndarray) -> np.ndarray:
-            # what the window means integrate, at a state as `state` reads it (WindowMeans.parts)
+        step_power = StepPower(m, scene.sim.method)
+
+        def rates(d: mujoco.MjData, at: mujoco.MjData, velocity: np.ndarray, t: float) -> np.ndarray:
+            # what the window means integrate, at a state of time t as `state` reads it (WindowMeans.parts)
             load = at.qfrc_applied[self.dofs] - self.armature * at.qacc[self.dofs]
-            power = d.actuator_force * d.actuator_velocity
+            power = step_power(d, t)
             return np.concatenate([force(at).ravel(), load, np.maximum(load * velocity, 0), power,
                                    np.maximum(power, 0), d.sensordata])
 
@@ -221,18 +223,19 @@ class RobotTrial:
         # recording of that state reads, without a second forward pass per step.
         self._start_velocity = np.zeros(len(self.dofs))
         self._explicit = not (method.implicit or method.adaptive) and built.backend == "native"
-        # the longest interval between after_step's calls: the value just before the window opens is needed
-        self._span = (scene.sim.max_step if method.adaptive else 0.0) + scene.sim.dt
+        # the longest interval between after_step's calls, twice: the value just before the window opens is needed,
+        # and a fixed step's actuator power needs the state before it (`StepPower`)
+        self._span = (scene.sim.max_step if method.adaptive else 0.0) + 2 * scene.sim.dt
         forward = self.forward
 
         def after_step(d: mujoco.MjData) -> None:
             if self._explicit:
                 if d.time - m.opt.timestep + self._span > scene.sim.settle:
-                    self.means.add(d.time - m.opt.timestep, rates(d, d, self._start_velocity),
-                                   d.subtree_com[0].copy())
+                    t = d.time - m.opt.timestep
+                    self.means.add(t, rates(d, d, self._start_velocity, t), d.subtree_com[0].copy())
             elif d.time + self._span > scene.sim.settle:
                 forward(m, d)
-                self.means.add(d.time, rates(d, self._applied(d), d.qvel[self.dofs]), d.subtree_com[0].copy())
+                self.means.add(d.time, rates(d, self._applied(d), d.qvel[self.dofs], d.time), d.subtree_com[0].copy())
 
         self.surface = deforming_surface(built, scene, d)
         self._applied = applied_state(built, scene.sim.method, self.surface)
@@ -253,7 +256,7 @@ class RobotTrial:
 
         self.after_step = after_step
         # the run's last state, after its recording's forward pass: the explicit step's value at the window's end
-        self._close = lambda d: self.means.add(d.time, rates(d, self._applied(d), d.qvel[self.dofs]))
+        self._close = lambda d: self.means.add(d.time, rates(d, self._applied(d), d.qvel[self.dofs], d.time))
 
     def _checked(self, ctrl: Any) -> np.ndarray:
         try:

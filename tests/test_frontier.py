@@ -36,10 +36,11 @@ def test_relative_error_is_the_norm_of_the_difference_over_the_reference():
     assert relative_error(None, 0.5) == pytest.approx(1.0)
 
 
-def _first_order(monkeypatch, walls):
+def _first_order(monkeypatch, walls, midpoint=(40.0, 1)):
     """`frontier.measure` replaced by runs whose speed is v0 (1 + c dt) (first order in the step), estimated at
     2 c dt v0, taking ``walls[method] / dt`` seconds; explicit fails above 1 ms. `auto` chooses explicit at 1 ms
-    and takes ``walls["auto"]`` seconds."""
+    and takes ``walls["auto"]`` seconds. newton-midpoint, a candidate of the converged run only, is v0 (1 + k
+    dt^order), ``midpoint`` = (k, order): by default first order and further off than newton."""
     v0, c = 0.1, 20.0
 
     def measure(scene, method, dt, *, estimate=True):
@@ -47,11 +48,12 @@ def _first_order(monkeypatch, walls):
             row = measure(scene, "explicit", 1e-3)
             row.method, row.dt, row.wall_s, row.chosen = "auto", dt, walls["auto"], "explicit, 1 ms"
             return row
-        row = Run(method, dt, wall_s=walls[method] / dt)
+        row = Run(method, dt, wall_s=walls.get(method, walls["newton"]) / dt)
         if method == "explicit" and dt > 1e-3:
             row.failed = "Chatter: at the step"
             return row
-        row.figures = {"com_speed_m_s": v0 * (1 + c * dt), "cost_of_transport": 2.0}
+        error = midpoint[0] * dt ** midpoint[1] if method == "newton-midpoint" else c * dt
+        row.figures = {"com_speed_m_s": v0 * (1 + error), "cost_of_transport": 2.0}
         row.estimates = {"com_speed_m_s": 2 * c * dt * v0, "cost_of_transport": 0.0}
         return row
     monkeypatch.setattr(frontier, "measure", measure)
@@ -92,6 +94,21 @@ def test_errors_against_the_reference_have_the_known_answer(monkeypatch, box):
     # (0.2 s, against newton's 2 s), though explicit at 1 ms is within 2 % of the reference
     assert (summary["known"]["method"], summary["known"]["dt"]) == ("explicit", pytest.approx(5e-4))
     assert summary["auto_over_known"] == pytest.approx(0.05 / 0.2)
+
+
+def test_the_converged_run_is_the_method_that_differs_less_from_itself(monkeypatch, box):
+    # newton-midpoint second order (v0 (1 + 1e4 dt^2)): at 0.25 and 0.5 ms it differs from itself by 1.9e-3 v0,
+    # newton by 5e-3 v0, so the reference is newton-midpoint at 0.25 ms, v0 (1 + 6.25e-4)
+    v0, c = _first_order(monkeypatch, {"newton": 1e-3, "explicit": 1e-4, "auto": 0.05}, midpoint=(1e4, 2))
+    scene = load_scene(str(box), cls=UserScene)
+    result = frontier.frontier(scene, method_names=("newton", "explicit"), steps=(2e-3, 1e-3, 5e-4), log=lambda s: None)
+    reference = v0 * (1 + 6.25e-4)
+    assert (result["reference"].method, result["reference"].dt) == ("newton-midpoint", pytest.approx(2.5e-4))
+    summary = result["summary"]
+    assert summary["reference"]["method"] == "newton-midpoint"
+    assert summary["reference_error"]["com_speed_m_s"] == pytest.approx(v0 * 1e4 * (5e-4**2 - 2.5e-4**2) / reference)
+    newton = next(r for r in result["rows"] if (r.method, r.dt) == ("newton", 1e-3))
+    assert newton.errors["com_speed_m_s"] == pytest.approx(v0 * (c * 1e-3 - 6.25e-4) / reference)
 
 
 def test_the_summary_gives_the_cost_of_a_step_per_element(monkeypatch, box):

@@ -134,8 +134,9 @@ def _add_robots(kinds: Any) -> argparse.ArgumentParser:
         "speed-accuracy frontier", "With --scene or --battery: run each robot scene with every method (--method) "
         "over a range of steps (--dt; default: the scene's step times 2, 1, 1/2 and 1/4), at its default setting "
         "(the scene's own method and step) and with the method auto from the scene's step, and measure each whole run's wall time (its error "
-        "estimate's companion included) and the error of every figure it reports against a converged run (newton "
-        "at half the finest step, its own error stated: its difference from newton at the finest step). Writes "
+        "estimate's companion included) and the error of every figure it reports against a converged run (newton or "
+        "newton-midpoint at half the finest step, whichever differs less from itself at the finest step, that "
+        "difference stated as its own error). Writes "
         "DIR/NAME.csv (one row per run), DIR/NAME.json (its summary), DIR/NAME.png (wall time against error, one "
         "panel per headline figure and one for each run's worst figure, the default's run ringed, auto's a star) and "
         "DIR/frontier.md (one table row per robot).")

@@ -983,13 +983,14 @@ FINRFT_EXPORT int finrft_explicit_record(const mjModel* m, mjData* d, int nstep,
   return 0;
 }
 
-// `nstep` of MuJoCo's steps, step i from the i % nstate-th of the `nstate` mjSTATE_FULLPHYSICS states `states`:
-// what one step costs at those states. A run of explicit steps leaves them where the step is beyond its limit: the
+// `nstep` of MuJoCo's steps, step i from the i % nstate-th of the `nstate` mjSTATE_INTEGRATION states `states`
+// (the controls and applied forces with the physics: a servo's ctrl from another instant is a violent step): what
+// one step costs at those states. A run of explicit steps leaves them where the step is beyond its limit: the
 // wheel rig's at its own 62.5 ms is out of the sand in three steps, and its later steps cost nothing of the medium.
 FINRFT_EXPORT void finrft_explicit_from(const mjModel* m, mjData* d, const mjtNum* states, int nstate, int nstep) {
-  size_t size = mj_stateSize(m, mjSTATE_FULLPHYSICS);
+  size_t size = mj_stateSize(m, mjSTATE_INTEGRATION);
   for (int i = 0; i < nstep; i++) {
-    mj_setState(m, d, states + size * (size_t)(i % nstate), mjSTATE_FULLPHYSICS);
+    mj_setState(m, d, states + size * (size_t)(i % nstate), mjSTATE_INTEGRATION);
     mj_step(m, d);
   }
 }

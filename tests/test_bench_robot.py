@@ -52,7 +52,7 @@ def test_each_explicit_step_timed_starts_from_one_of_the_runs_states():
     implicit, explicit = bench.step_start(scene, scene.sim.dt)
     m, d, states = explicit.held
     assert len(states) == bench.STEP_COST_STATES
-    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    spec = mujoco.mjtState.mjSTATE_INTEGRATION
     own = mujoco.MjData(m)
     for steps in (1, bench.STEP_COST_STATES + 3):
         mujoco.mj_setState(m, own, states[(steps - 1) % len(states)], spec)
@@ -67,6 +67,25 @@ def test_each_explicit_step_timed_starts_from_one_of_the_runs_states():
     assert own.qpos[1] > 0.1  # three steps on it has left it
     # the run's states: the wheel rolls on between them (0.32 rad/s, 1 s over the ten)
     assert np.ptp([s[1 + m.jnt_qposadr[m.joint("axle").id]] for s in states]) > 0.2
+
+
+def test_the_states_steps_are_timed_from_carry_their_own_instants_controls():
+    # A step from one instant with a sine servo's ctrl of another is a violent step: the sandfish's newton-midpoint
+    # step cost 100 explicit steps so. Each state holds the ctrl of its own time: 60 deg sin(2 pi t + phase_j) on
+    # the sand-swimmer's joints j, past its 0.5 s ramp-in.
+    import math
+    import mujoco
+    from finrft.experiments.user_model import example
+    from finrft.scene import UserScene, load_scene
+    scene = load_scene(example("sand_swimmer"), cls=UserScene)
+    implicit, explicit = bench.step_start(scene, scene.sim.dt)
+    m, d, states = explicit.held
+    own = mujoco.MjData(m)
+    for state in states:
+        mujoco.mj_setState(m, own, state, mujoco.mjtState.mjSTATE_INTEGRATION)
+        assert own.time >= 0.5
+        wave = [math.radians(60) * math.sin(2 * math.pi * own.time - math.pi / 3 * (j + 1)) for j in range(m.nu)]
+        np.testing.assert_allclose(own.ctrl, wave, atol=1e-6)
 
 
 def test_step_counts_names_an_unknown_robot_in_one_line_and_exits_2():

@@ -686,8 +686,8 @@ def robot_summary(experiment: UserModel, run: Result) -> dict[str, Any]:
     - ``medium_force_N``: the mean total force of the medium on the attached bodies; ``body_medium_force_N``: per
       body.
     - ``drive_load``: per [[drive]], the mean force (N) or torque (N m) it applies (``drive_load_units``).
-    - ``actuator_power_W``: the mean mechanical power of the actuators, sum of actuator_force x
-      actuator_velocity (negative: they absorb work).
+    - ``actuator_power_W``: the mean mechanical power of the actuators, the sum over them of the force each step
+      applied times the actuator's velocity (`attached_model.StepPower`; negative: they absorb work).
     - ``sensors`` (a model with MJCF ``<sensor>``s only): each sensor's mean reading, a list of its values in its
       own unit, by its name (``sensor<id>`` when it has none).
     - ``chatter``: null, or where the chatter probe saw chatter that came and went (`stepping.Chattering`): the

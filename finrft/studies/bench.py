@@ -649,7 +649,7 @@ def _step_costs(scene: Any, explicit_dt: float, bare_s: float, elements: int) ->
 def step_start(scene: Any, explicit_dt: float) -> tuple[Callable[[int], None], Callable[[int], None]]:
     """Steps of the scene's method at its step and of MuJoCo's explicit step at ``explicit_dt`` from the same states
     of its run: `STEP_COST_STATES` instants evenly over `STEP_COST_SPAN` s from `STEP_COST_START` s or its settle,
-    the earlier (at most to its end), with ``ctrl`` held at each and the stepper's history from the run. Each of the
+    the earlier (at most to its end), with the controls of each instant held and the stepper's history from the run. Each of the
     two returned functions takes the steps it is given in C, an equal share from each instant (`_step_costs` times
     them; scripts/step_counts.py counts their instructions): the implicit method's from the instant on, as its run
     takes them (a Newton step starts from its last one's change), each explicit one from the instant again
@@ -666,7 +666,9 @@ def step_start(scene: Any, explicit_dt: float) -> tuple[Callable[[int], None], C
     trial = experiment.start(scene, built, d, False)
     advance = stepper(m, scene.sim, built.backend, built.groups, getattr(built, "attached", None))
     history = getattr(advance, "history", None)
-    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    # the controls and applied forces too: steps from one instant with a sine servo's ctrl of another were violent
+    # (the sandfish's newton-midpoint step, 100 explicit steps' cost with the last instant's ctrl at each)
+    spec = mujoco.mjtState.mjSTATE_INTEGRATION
     dt, start = scene.sim.dt, min(STEP_COST_START, scene.sim.settle)
     span = max(0.0, min(STEP_COST_SPAN, scene.sim.duration - start - STEP_COST_STEPS * dt))
     at = [max(1, round((start + span * i / STEP_COST_STATES) / dt)) for i in range(STEP_COST_STATES)]
@@ -679,6 +681,7 @@ def step_start(scene: Any, explicit_dt: float) -> tuple[Callable[[int], None], C
             if step > done:
                 advance(d, step - done)
                 done = step
+            mujoco.mj_forward(m, d)  # the instant's controls, as the step from it sets them
             mujoco.mj_getState(m, d, states[i], spec)
             histories[i] = None if history is None else history.copy()
     explicit_d = mujoco.MjData(explicit_m)

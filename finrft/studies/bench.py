@@ -649,9 +649,10 @@ def _step_costs(scene: Any, explicit_dt: float, bare_s: float, elements: int) ->
 def step_start(scene: Any, explicit_dt: float) -> tuple[Callable[[int], None], Callable[[int], None]]:
     """Steps of the scene's method at its step and of MuJoCo's explicit step at ``explicit_dt`` from the same states
     of its run: `STEP_COST_STATES` instants evenly over `STEP_COST_SPAN` s from `STEP_COST_START` s or its settle,
-    the earlier (at most to its end), with the controls of each instant held and the stepper's history from the run. Each of the
-    two returned functions takes the steps it is given in C, an equal share from each instant (`_step_costs` times
-    them; scripts/step_counts.py counts their instructions): the implicit method's from the instant on, as its run
+    the earlier (at most to its end), with the controls of each instant held and the stepper's history from the
+    run. Each of the two returned functions takes the steps it is given in C, an equal share from each instant
+    (`_step_costs` times them; scripts/step_counts.py counts their instructions): the implicit method's from the
+    instant on, as its run
     takes them (a Newton step starts from its last one's change), each explicit one from the instant again
     (`finrft_explicit_from`), as an explicit step beyond its limit leaves the sand: the wheel rig's at its own
     62.5 ms within three steps, after which a step cost a seventh of one in the sand."""

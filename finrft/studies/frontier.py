@@ -352,7 +352,8 @@ def chart(path: str | Path, result: dict[str, Any], accuracy: float = ACCURACY) 
     axes[0].set_ylabel("wall time of the whole run (s)")
     axes[0].legend(fontsize=7)
     own = result["check"].headline_error()
-    fig.suptitle(f"{result['name']}: wall time against error (reference: {result['reference'].method} at {result['reference'].dt:g} s"
+    reference = result["reference"]
+    fig.suptitle(f"{result['name']}: wall time against error (reference: {reference.method} at {reference.dt:g} s"
                  + ("" if own is None else f", its own headline error about {100 * own:.2g} %") + ")", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=100)

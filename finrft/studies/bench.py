@@ -652,10 +652,9 @@ def step_start(scene: Any, explicit_dt: float) -> tuple[Callable[[int], None], C
     the earlier (at most to its end), with the controls of each instant held and the stepper's history from the
     run. Each of the two returned functions takes the steps it is given in C, an equal share from each instant
     (`_step_costs` times them; scripts/step_counts.py counts their instructions): the implicit method's from the
-    instant on, as its run
-    takes them (a Newton step starts from its last one's change), each explicit one from the instant again
-    (`finrft_explicit_from`), as an explicit step beyond its limit leaves the sand: the wheel rig's at its own
-    62.5 ms within three steps, after which a step cost a seventh of one in the sand."""
+    instant on, as its run takes them (a Newton step starts from its last one's change), each explicit one from the
+    instant again (`finrft_explicit_from`), as an explicit step beyond its limit leaves the sand: the wheel rig's at
+    its own 62.5 ms within three steps, after which a step cost a seventh of one in the sand."""
     from ..callbacks import controlled
     from ..experiments.user_model import UserModel
     from ..integrate import stepper

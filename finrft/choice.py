@@ -89,13 +89,21 @@ EXPLICIT_ROOM = 1.0
 # A body slower than STILL counts as standing too: the rover's 150 g wheels starting from rest at 3-7 mm/s set
 # 0.04-0.18 ms where its explicit step at 0.5 ms is within 2 %, the hexapod's 4 g legs at 9-12 mm/s 0.1 ms where
 # its explicit step at 0.5 ms is 1 % off; the slowest gaits here are 30 mm/s.
+# An explicit step within this share of the bodies' explicit limit has an error that falls with the step (first
+# order): there a body's velocity relaxes towards the medium's without overshooting it, as for a damper of slope k
+# on a mass m where dt < m / k. Between it and the limit the velocity overshoots and rings, and the error can fall
+# much faster.
+ORDERLY = 0.5
 LIMIT_SAMPLES = 40
 LIMIT_STRETCH = 0.1
 MOVING = 0.25
 STILL = 0.02
 # The power of the step a step's cost goes with, as measured between two pilots of a method (`Chooser.predicted`),
 # kept within these: a Newton step costs less where it is shorter (fewer iterations: the sand-swimmer's `newton` at
-# 1 ms costs 0.82 of its step at 2 ms), none costs more.
+# 1 ms costs 0.82 of its step at 2 ms), none costs more. The power holds over one halving past the steps it was
+# measured between: a step costs at least one iteration (the sandfish's `newton` per step: 0.87, 0.68, 0.54 and
+# 0.55 ms of CPU at 2, 1, 0.5 and 0.25 ms; the power of its first halving taken three halvings on put the step at
+# 0.125 ms at 0.31 ms).
 PER_STEP = (0.0, 1.0)
 # A run's cost against its pilot's: the run itself and its companion at half the step (`convergence.checked`).
 COMPANION_COST = 1 + 1 / FINER
@@ -138,7 +146,8 @@ class Candidate:
 
 @dataclass
 class MethodChoice:
-    """What ``sim.method = "auto"`` chose, why, and the candidates it weighed (`Candidate`)."""
+    """What ``sim.method = "auto"`` chose, why, and the candidates it weighed (`Candidate`); the wall time of its
+    pilots and of the runs whole it refused (s), both part of the result's ``wall_s``."""
 
     method: str
     dt: float
@@ -146,6 +155,7 @@ class MethodChoice:
     candidates: list[Candidate]
     window_s: float
     pilot_wall_s: float
+    refused_wall_s: float = 0.0
 
     def line(self) -> str:
         """The choice in one line of text."""
@@ -154,7 +164,8 @@ class MethodChoice:
 
     def to_json(self) -> dict[str, Any]:
         return {"method": self.method, "dt": self.dt, "reason": self.reason, "window_s": self.window_s,
-                "pilot_wall_s": self.pilot_wall_s, "candidates": [c.to_json() for c in self.candidates]}
+                "pilot_wall_s": self.pilot_wall_s, "refused_wall_s": self.refused_wall_s,
+                "candidates": [c.to_json() for c in self.candidates]}
 
 
 def window(scene: Any, duration: float, stroke_time: float, strokes: int) -> tuple[float, float]:
@@ -277,7 +288,8 @@ class Chooser:
         self.candidates: list[Candidate] = []
         # the implicit methods extend MuJoCo's implicitfast integrator; with another, the explicit step alone
         self.allowed = IMPLICIT if scene.sim.integrator == "implicitfast" else ()
-        self.wall = 0.0
+        self.wall = 0.0          # the pilots' wall time (s)
+        self.refused_wall = 0.0  # the wall time of the runs whole that were refused (`run_auto`, s)
         self.whole = self.window >= duration  # the pilots are whole runs (`WHOLE_SHARE`)
         self.budget = math.inf                 # the CPU time a pilot may take before it stops (`_timed`)
         self.top = START * scene.sim.dt       # the longest step tried first
@@ -430,8 +442,9 @@ class Chooser:
 
     def predicted(self, method: str, dt: float) -> float:
         """A candidate's predicted cost (s): from its own pilot, else from the nearest step of its method that ran,
-        its cost per step scaled as a power of the step measured between the two nearest whole pilots of the method
-        (a Newton step costs less where it is shorter: fewer iterations; `PER_STEP`), else priced (`price`) where it
+        its cost per step scaled as a power of the step measured between the two nearest whole pilots of the method,
+        over one halving at most (a Newton step costs less where it is shorter: fewer iterations; `PER_STEP`), else
+        priced (`price`) where it
         is the method's first."""
         known = sorted((h for (m, h), rate in self._rates.items() if m == method and not math.isnan(rate)),
                        key=lambda h: abs(math.log(h / dt)))
@@ -443,7 +456,8 @@ class Chooser:
         step = (self.cost(method, near) * near, self.cost(method, whole[0]) * whole[0]) if whole else (0.0, 0.0)
         if (method, near) in self._whole and min(step) > 0:  # per step, alike
             power = min(max(math.log(step[0] / step[1]) / math.log(near / whole[0]), PER_STEP[0]), PER_STEP[1])
-        return self.cost(method, near) * near / dt * (dt / near) ** power
+        reach = min(max(dt / near, FINER), 1 / FINER)
+        return self.cost(method, near) * near / dt * reach ** power
 
     def _sample(self, scene: Any, t: float) -> None:
         """The bodies' limits at time ``t`` of an implicit pilot (`body_limits`), where its state is finite and no
@@ -475,10 +489,11 @@ class Chooser:
     def search(self, allowed: tuple[str, ...]) -> list[Candidate]:
         """The candidates of ``allowed`` methods that met the limits, cheapest first, found best first: each method's
         ladder from START x sim.dt down, the cheapest predicted candidate measured next, until none left could cost
-        less than `SAVING` of the cheapest that met the limits. A step that misses them goes down one halving; an
-        implicit method is ranked by the predicted cost of the step its error asks for (first order, aimed at SAFE of
-        the limit), the explicit step by its next one (beyond its stability limit its error does not fall with the
-        step)."""
+        less than `SAVING` of the cheapest that met the limits. A step that misses them goes down one halving; its
+        method is ranked by the predicted cost of the step its error asks for (first order, aimed at SAFE of the
+        limit): the explicit step's too where its error falls with the step (`_orderly`; the sandfish's: 5.9 % off
+        at 0.25 ms, 2.7 % at 0.125 ms, each a pilot of its whole run, while newton-midpoint at 1 ms meets 2 % at half
+        their cost), else by its next step."""
         finest = {m: self.top * FINER ** (EXPLICIT_HALVINGS if m == "explicit" else HALVINGS) for m in allowed}
         ladder: dict[str, float | None] = {m: self.top for m in allowed}
         aim = dict(ladder)  # the step each method is ranked by
@@ -491,7 +506,7 @@ class Chooser:
                 if m == "explicit" and ladder[m] is not None:
                     ladder[m] = self.screen(ladder[m], finest[m])
                 if ladder[m] is not None:
-                    cost = self.predicted(m, ladder[m] if m == "explicit" else aim[m])
+                    cost = self.predicted(m, min(aim[m], ladder[m]))
                     options.append((cost if cost == cost else 0.0, m, ladder[m]))  # NaN: it failed at once
             if not options:
                 break
@@ -511,7 +526,7 @@ class Chooser:
                 ladder[method] = None  # its finer steps cost more
                 continue
             need = 1
-            if method != "explicit" and candidate.measured and SAFE < candidate.excess < math.inf:
+            if self._orderly(candidate) and candidate.measured and SAFE < candidate.excess < math.inf:
                 need = max(1, math.ceil(math.log2(candidate.excess / SAFE)))
             # an aim past the finest step still walks the ladder, ranked as the finest: from a coarse step the error
             # can fall much faster than first order (the sand-swimmer's newton-midpoint: estimated 44 % off at 2 ms,
@@ -520,6 +535,18 @@ class Chooser:
             finer = dt * FINER
             ladder[method] = finer if finer >= finest[method] * (1 - 1e-9) else None
         return sorted((c for c in self.candidates if c.passed and c.method in allowed), key=lambda c: c.cost_s)
+
+    def _orderly(self, candidate: Candidate) -> bool:
+        """Whether a candidate's error is taken to fall with its step (first order): an implicit method's, and an
+        explicit step's within `ORDERLY` of the bodies' explicit limit whose error is below that of its step twice as
+        long where that was measured (a velocity slope is not every stiffness a step must resolve: the sled's limit
+        from its slope is 3.8 ms, and it hops out of the sand at 1 and 2 ms)."""
+        if candidate.method != "explicit":
+            return True
+        longer = [c for c in self.candidates if c.method == "explicit" and c.measured
+                  and math.isclose(c.dt, candidate.dt / FINER, rel_tol=1e-9)]
+        return (candidate.dt <= ORDERLY * self.explicit_limit() * (1 + 1e-9)
+                and all(candidate.excess < c.excess for c in longer))
 
     def coarsen(self, chosen: Candidate) -> Candidate:
         """The chosen candidate at twice its step, while its estimate is below `COARSEN` of its limit and the
@@ -590,14 +617,16 @@ def run_auto(scene: Any, limits: ErrorLimits | None, pilot: Pilot, prepare: Call
     an explicit step (a pilot over the window can pass where the whole run chatters: the whegs' ``newton`` at 2 ms,
     chattering in 40 % of its probes over its 0.75 s window and in over half of them in its first second). A failure
     of the scene's own, a drive that cannot hold its profile, is raised as it comes. The result carries
-    ``method_choice``, and the pilots' wall time in its ``wall_s``."""
+    ``method_choice``, and the pilots' and the refused runs' wall time in its ``wall_s``."""
     passed, chooser = choose(scene, limits, pilot, prepare, duration, stroke_time, strokes, state)
     fell_back: list[str] = []
     while True:
         chosen, *passed = passed
+        start = time.perf_counter()
         try:
             return _chosen(full, scene, chosen, chooser, fell_back)
         except (InaccurateResult, SimulationUnstable) as exc:
+            chooser.refused_wall += time.perf_counter() - start
             why = ("its estimate exceeded the limits" if isinstance(exc, InaccurateResult)
                    else _first_line(exc).split(" (")[0])
             chosen.failed = f"run whole, it was refused: {why}"
@@ -618,6 +647,7 @@ def _chosen(full: Callable[[Any], Any], scene: Any, chosen: Candidate, chooser: 
     if result is None:
         result = full(scene.replace(**{"sim.method": chosen.method, "sim.dt": chosen.dt}))
         result.wall_s += chooser.wall
+    result.wall_s += chooser.refused_wall
     result.method_choice = MethodChoice(chosen.method, chosen.dt, reason(chosen, chooser, fell_back),
-                                        chooser.candidates, chooser.window, chooser.wall)
+                                        chooser.candidates, chooser.window, chooser.wall, chooser.refused_wall)
     return result

@@ -123,6 +123,8 @@ def test_an_explicit_choice_its_whole_run_refuses_falls_back_to_an_implicit_step
     choice = run.method_choice
     assert methods.get(choice.method).implicit and "run whole, was refused" in choice.reason
     assert any(c.method == "explicit" and c.failed.startswith("run whole") for c in choice.candidates)
+    # the refused run's time is the run's too
+    assert choice.refused_wall_s > 0 and run.wall_s > choice.pilot_wall_s + choice.refused_wall_s
     assert run.summary()["Fz_N"] == pytest.approx(21.0, rel=1e-3)  # the medium carries the load
 
 
@@ -245,9 +247,60 @@ def test_a_method_is_walked_down_by_halvings_and_one_far_off_not_at_all():
     assert (passed[0].method, passed[0].dt) == ("newton-midpoint", 1e-3)
 
 
+def _searched(errors: dict, prices: dict, limit: float) -> list:
+    """The candidates a search measures, in turn, where each method's error (of its limit) and cost go with its
+    step as ``errors`` and ``prices`` say (s at 2 ms, as 1 / dt), the bodies' explicit limit ``limit`` s."""
+    from finrft import choice as choosing
+    tried = []
+
+    class Fake(choosing.Chooser):
+        def __init__(self):
+            self.top, self.candidates, self.budget = 2e-3, [], float("inf")
+
+        def predicted(self, method, dt):
+            return prices[method] * 2e-3 / dt
+
+        def explicit_limit(self):
+            return limit
+
+        def try_step(self, method, dt, *_):
+            tried.append((method, dt))
+            c = choosing.Candidate(method, dt, cost_s=self.predicted(method, dt), measured=True,
+                                   excess=errors[method](dt))
+            c.over = ["over"] if c.excess > 1 else []
+            self.candidates.append(c)
+            return c
+    passed = Fake().search(("explicit", "newton"))
+    return tried, (passed[0].method, passed[0].dt)
+
+
+def test_an_explicit_step_whose_error_falls_with_it_is_ranked_by_the_step_it_needs():
+    # The sandfish's explicit step, within its bodies' limit (0.73 ms; the steps beyond it skipped): 2.9 times its
+    # limit at 0.25 ms, falling first order. Ranked at the 0.0625 ms it needs, it loses to newton at 1 ms; walked
+    # down step by step, its pilots at 0.125 ms, predicted cheaper than newton's at 1 ms, would run first.
+    errors = {"explicit": lambda dt: 2.9 * dt / 2.5e-4, "newton": lambda dt: 1.5 * dt / 2e-3}
+    tried, chosen = _searched(errors, {"explicit": 0.05, "newton": 0.5}, 7.3e-4)
+    assert tried == [("explicit", 5e-4), ("explicit", 2.5e-4), ("newton", 2e-3), ("newton", 1e-3)]
+    assert chosen == ("newton", 1e-3)
+
+
+def test_an_explicit_step_near_its_limit_or_whose_error_does_not_fall_goes_down_step_by_step():
+    # A sled that hops out of the sand at 2 and 1 ms (75 and 79 % off its cost of transport) and settles at 0.5 ms:
+    # its error does not fall with the step, and the step at 0.5 ms is tried next, not ranked by a first-order aim.
+    # Likewise a step beyond half the bodies' explicit limit, its first.
+    hops = {"explicit": lambda dt: 0.01 if dt < 1e-3 else 37.0 + 2e3 * (2e-3 - dt), "newton": lambda dt: 0.3}
+    tried, chosen = _searched(hops, {"explicit": 0.1, "newton": 0.5}, 3.8e-3)
+    assert tried[:3] == [("explicit", 2e-3), ("explicit", 1e-3), ("explicit", 5e-4)]
+    assert chosen == ("explicit", 5e-4)
+    near = {"explicit": lambda dt: 0.01 if dt < 1e-3 else 37.0, "newton": lambda dt: 0.3}
+    tried, chosen = _searched(near, {"explicit": 0.1, "newton": 0.5}, 2.5e-3)
+    assert tried[:2] == [("explicit", 2e-3), ("explicit", 1e-3)] and chosen == ("explicit", 5e-4)
+
+
 def test_a_step_is_priced_by_the_cost_per_step_its_method_showed_at_two_steps(tmp_path):
     # Whole pilots at 2 and 1 ms whose cost per step goes as the square root of the step (Newton's iterations fewer
-    # at shorter steps): the step at 0.25 ms costs c sqrt(0.25 ms) per step, not the 1 ms step's per step.
+    # at shorter steps): the step at 0.5 ms costs c sqrt(0.5 ms) per step, not the 1 ms step's per step; one at
+    # 0.25 ms no less (a step costs at least one iteration: the power is taken one halving on, no further).
     import math
 
     from finrft import choice as choosing
@@ -257,8 +310,10 @@ def test_a_step_is_priced_by_the_cost_per_step_its_method_showed_at_two_steps(tm
     for h in (2e-3, 1e-3):
         chooser._rates[("newton", h)] = per_step(h) / h
         chooser._whole.add(("newton", h))
+    assert chooser.predicted("newton", 5e-4) == pytest.approx(
+        per_step(5e-4) / 5e-4 * 0.6 * choosing.COMPANION_COST, rel=1e-9)
     assert chooser.predicted("newton", 2.5e-4) == pytest.approx(
-        per_step(2.5e-4) / 2.5e-4 * 0.6 * choosing.COMPANION_COST, rel=1e-9)
+        per_step(5e-4) / 2.5e-4 * 0.6 * choosing.COMPANION_COST, rel=1e-9)
     chooser._whole.clear()  # a price's stretch, not a whole pilot: the nearest step's cost per step
     assert chooser.predicted("newton", 2.5e-4) == pytest.approx(
         per_step(1e-3) / 2.5e-4 * 0.6 * choosing.COMPANION_COST, rel=1e-9)

@@ -6,7 +6,7 @@ No method wins everywhere: the implicit steps win on light links, whose explicit
 2 m v_reg / F (the example sand-swimmer's 10 g links chatter down to 6.6 µs), and MuJoCo's explicit step wins
 on heavy, slow robots, as an implicit step costs several explicit ones. Which one a robot is shows as it runs, so
 the choice is measured, not predicted: pilot runs over the run's first `window` (past the controls' ramp-in, a
-tenth of the rest or a sine's period, whole strokes; the whole run where that would be half of it or more), each
+tenth of the rest or a sine's period, whole strokes; the whole run where that would be a fifth of it or more), each
 candidate at its step and at half of it, their reported figures compared as the run's companion compares them
 (`convergence.companion_estimate`). The candidates are ``explicit`` and, on MuJoCo's implicitfast integrator,
 ``newton-midpoint`` and ``newton``, each on a ladder of steps from `START` x sim.dt down (`Chooser.search`):
@@ -23,8 +23,10 @@ candidate at its step and at half of it, their reported figures compared as the 
 - an explicit step beyond the bodies' explicit limit (`window_limit`, over the implicit methods' pilots so far,
   which are priced first) is neither priced nor piloted: its candidate is skipped, and the ladder goes on below
   the limit;
-- once one meets the limits, only candidates predicted to cost less than `SAVING` of it are measured;
-- the cheapest that met them is tried at twice its step while its estimate is below `COARSEN` of its limit.
+- once one meets the limits, only candidates predicted to cost less than `SAVING` of it are measured, and the
+  cheapest that met them is tried at twice its step while its estimate is below `COARSEN` of its limit; where the
+  pilots are whole runs, the first that meets them is chosen: its run and its companion are made, and any other
+  would cost more.
 
 A step longer than the scene's own keeps the medium's mean force within 2 % too (`LONGER`). Where the pilots were
 whole runs, the chosen candidate's pilot is the run and its pilot at half the step its companion: nothing runs
@@ -50,8 +52,15 @@ from .errors import InaccurateResult, SceneError, SimulationUnstable
 PILOT_SHARE = 0.1
 PILOT_STEPS = 16
 # A window that would span this share of the run spans all of it: the pilots are then whole runs, and the chosen
-# candidate's pilot and its pilot at half the step are the run and its companion (no run is made twice).
-WHOLE_SHARE = 0.5
+# candidate's pilot and its pilot at half the step are the run and its companion (no run is made twice). A pilot's
+# figures are means over its window, and their errors over a window shorter than the run's were 0.1 to 10 times
+# the whole run's: the sand-swimmer's cost of transport by newton-midpoint at 2 ms estimated 5.3 % off over its
+# 1.5 s window, 1.8 % over its run (a transient's offset weighs more on a short mean), the quadruped's explicit step
+# at 2 ms 1.6 % and 7.0 % (its drift grows over the run). A window of a fifth of the run costs, at its step and half
+# of it, 0.6 of the run and its companion, and a run whole that its pilots misjudged costs them all again: on the
+# battery of `finrft bench robots` `auto` took a median 1.8 times the fastest run within 2 % at this share, 2.5 at
+# one half (`scripts/auto_against_sweep.py`).
+WHOLE_SHARE = 0.2
 IMPLICIT = ("newton-midpoint", "newton")
 # Every ladder starts at START times sim.dt: a scene's step is often set with room to spare (eight of the eleven
 # robots of `finrft bench robots --battery` meet 2 % fastest at twice it), and the pilot at START x sim.dt shares
@@ -89,11 +98,6 @@ EXPLICIT_ROOM = 1.0
 # A body slower than STILL counts as standing too: the rover's 150 g wheels starting from rest at 3-7 mm/s set
 # 0.04-0.18 ms where its explicit step at 0.5 ms is within 2 %, the hexapod's 4 g legs at 9-12 mm/s 0.1 ms where
 # its explicit step at 0.5 ms is 1 % off; the slowest gaits here are 30 mm/s.
-# An explicit step within this share of the bodies' explicit limit has an error that falls with the step (first
-# order): there a body's velocity relaxes towards the medium's without overshooting it, as for a damper of slope k
-# on a mass m where dt < m / k. Between it and the limit the velocity overshoots and rings, and the error can fall
-# much faster.
-ORDERLY = 0.5
 LIMIT_SAMPLES = 40
 LIMIT_STRETCH = 0.1
 MOVING = 0.25
@@ -444,8 +448,7 @@ class Chooser:
         """A candidate's predicted cost (s): from its own pilot, else from the nearest step of its method that ran,
         its cost per step scaled as a power of the step measured between the two nearest whole pilots of the method,
         over one halving at most (a Newton step costs less where it is shorter: fewer iterations; `PER_STEP`), else
-        priced (`price`) where it
-        is the method's first."""
+        priced (`price`) where it is the method's first."""
         known = sorted((h for (m, h), rate in self._rates.items() if m == method and not math.isnan(rate)),
                        key=lambda h: abs(math.log(h / dt)))
         if (method, dt) in self._rates or not known:
@@ -490,10 +493,10 @@ class Chooser:
         """The candidates of ``allowed`` methods that met the limits, cheapest first, found best first: each method's
         ladder from START x sim.dt down, the cheapest predicted candidate measured next, until none left could cost
         less than `SAVING` of the cheapest that met the limits. A step that misses them goes down one halving; its
-        method is ranked by the predicted cost of the step its error asks for (first order, aimed at SAFE of the
-        limit): the explicit step's too where its error falls with the step (`_orderly`; the sandfish's: 5.9 % off
-        at 0.25 ms, 2.7 % at 0.125 ms, each a pilot of its whole run, while newton-midpoint at 1 ms meets 2 % at half
-        their cost), else by its next step."""
+        implicit method is ranked by the predicted cost of the step its error asks for (first order, aimed at SAFE of
+        the limit), the explicit step by its next one: its error can fall much faster, as a body's stability margin
+        is crossed (the quadruped's: 6.5 % off at 2 ms, 0.95 % at 1 ms; a 2 kg sled's: 79 % off at 1 ms, 0.02 % at
+        0.5 ms)."""
         finest = {m: self.top * FINER ** (EXPLICIT_HALVINGS if m == "explicit" else HALVINGS) for m in allowed}
         ladder: dict[str, float | None] = {m: self.top for m in allowed}
         aim = dict(ladder)  # the step each method is ranked by
@@ -524,9 +527,11 @@ class Chooser:
             if candidate.passed:
                 best = candidate if best is None or candidate.cost_s < best.cost_s else best
                 ladder[method] = None  # its finer steps cost more
+                if self.whole:  # its run and its companion are made: any other would cost more
+                    break
                 continue
             need = 1
-            if self._orderly(candidate) and candidate.measured and SAFE < candidate.excess < math.inf:
+            if method != "explicit" and candidate.measured and SAFE < candidate.excess < math.inf:
                 need = max(1, math.ceil(math.log2(candidate.excess / SAFE)))
             # an aim past the finest step still walks the ladder, ranked as the finest: from a coarse step the error
             # can fall much faster than first order (the sand-swimmer's newton-midpoint: estimated 44 % off at 2 ms,
@@ -535,18 +540,6 @@ class Chooser:
             finer = dt * FINER
             ladder[method] = finer if finer >= finest[method] * (1 - 1e-9) else None
         return sorted((c for c in self.candidates if c.passed and c.method in allowed), key=lambda c: c.cost_s)
-
-    def _orderly(self, candidate: Candidate) -> bool:
-        """Whether a candidate's error is taken to fall with its step (first order): an implicit method's, and an
-        explicit step's within `ORDERLY` of the bodies' explicit limit whose error is below that of its step twice as
-        long where that was measured (a velocity slope is not every stiffness a step must resolve: the sled's limit
-        from its slope is 3.8 ms, and it hops out of the sand at 1 and 2 ms)."""
-        if candidate.method != "explicit":
-            return True
-        longer = [c for c in self.candidates if c.method == "explicit" and c.measured
-                  and math.isclose(c.dt, candidate.dt / FINER, rel_tol=1e-9)]
-        return (candidate.dt <= ORDERLY * self.explicit_limit() * (1 + 1e-9)
-                and all(candidate.excess < c.excess for c in longer))
 
     def coarsen(self, chosen: Candidate) -> Candidate:
         """The chosen candidate at twice its step, while its estimate is below `COARSEN` of its limit and the
@@ -580,7 +573,7 @@ def choose(scene: Any, limits: ErrorLimits | None, pilot: Pilot, prepare: Callab
     (`Chooser.search`: the explicit step and, on MuJoCo's implicitfast integrator, the implicit methods)."""
     chooser = Chooser(scene, limits or ErrorLimits(), pilot, prepare, duration, stroke_time, strokes, state)
     passed = chooser.search(("explicit", *chooser.allowed))
-    if passed:
+    if passed and not chooser.whole:  # whole pilots: the run is made, a coarser one would be another
         coarser = chooser.coarsen(passed[0])
         passed = [coarser, *(c for c in passed if c is not coarser)]
     else:  # the closest: the smallest excess, then the finest step

@@ -271,6 +271,11 @@ class Attached:
             yield
 
 
+# `SurfaceForces.switch_slopes` takes a face's force moving into the medium at this many ramp widths along its
+# normal (tanh(3) = 0.995 of the full force), divided by tanh of it.
+FULL_RAMP = 3.0
+
+
 class SurfaceForces:
     """The Python backend: every element's force, summed per body into one force and one torque about the body's
     origin and added to ``qfrc_passive``, as the native plugin does."""
@@ -299,6 +304,23 @@ class SurfaceForces:
         normal = surface.normal @ rotation.T
         velocity = twist[3:] + np.cross(twist[:3], arm)
         return a.element_forces(normal, velocity, self.depths(d, body, arm), surface.area, self.frame()), arm
+
+    def switch_slopes(self, d: mujoco.MjData, body: int, surface: Surface, twist: np.ndarray, width: float
+                      ) -> tuple[np.ndarray, np.ndarray]:
+        """Each element's force slope (N s/m) across its leading-face switch, and its normal (world frame), had the
+        body the ``twist``: the force
+        it would carry moving into the medium along its face, over the switch's ramp ``width`` (m/s; the laws'
+        v_reg, `laws.regularised`), weighted by the ramp's slope at the element's normal speed, 1 - tanh^2(n.v /
+        width). A face grazing the medium (the top and bottom of a plate swimming level) carries no force and has
+        the full slope: a velocity along its normal of ``width`` switches its whole force on."""
+        rotation = d.xmat[body].reshape(3, 3)
+        arm = surface.centre @ rotation.T
+        normal = surface.normal @ rotation.T
+        velocity = twist[3:] + np.cross(twist[:3], arm)
+        into = np.einsum("ij,ij->i", normal, velocity)
+        leading = velocity + (FULL_RAMP * width - into)[:, None] * normal
+        force = self.attached.element_forces(normal, leading, self.depths(d, body, arm), surface.area, self.frame())
+        return np.linalg.norm(force, axis=1) / np.tanh(FULL_RAMP) / width * (1 - np.tanh(into / width) ** 2), normal
 
     def level(self) -> bool:
         """Whether the surface is the flat one and gravity along -z (or none): today's depth, z's alone, and the

@@ -88,7 +88,8 @@ SAVING = 0.85
 PRICE_SHARE = 0.1
 # An explicit candidate whose step exceeds this share of the bodies' explicit limit (`window_limit`) is not
 # piloted: beyond it a light link's velocity reverses each step, and its figures are off however they pass the
-# chatter probe (the sandfish's 10 g links at 1 ms: 35 % off its speed).
+# chatter probe and their estimate (the sandfish's 10 g links, their limit 3 us: 16-27 % off its speed from 10 us to
+# 0.25 ms, estimated 2-6 %; MuJoCo's explicit step at 2.5 and 1 us agrees with newton-midpoint at 0.125 ms to 0.1 %).
 EXPLICIT_ROOM = 1.0
 # The bodies' explicit limit is taken over the implicit pilots' run (`window_limit`), not at one instant: sampled
 # LIMIT_SAMPLES times over the pilots' window, in stretches of LIMIT_STRETCH of it, each stretch's the median over
@@ -202,8 +203,9 @@ def explicit_limit(m: Any, d: Any, groups: Any, attached: Any) -> float:
     """The longest explicit step that keeps every RFT body's velocity from reversing in one step (s; inf where no
     element carries a force), at the positions and velocities of ``d``: min over the bodies of 2 m / k, m the body's
     mass and k the medium force's slope, sum over its elements of |F| / max(|v|, v_reg) (a rate-independent law's
-    force turns with the velocity: its slope across it is |F| / |v|, F / v_reg inside the regularisation). An
-    explicit step damps a damper of slope k on a mass m only for dt < 2 m / k."""
+    force turns with the velocity: its slope across it is |F| / |v|, F / v_reg inside the regularisation), and of
+    the limit of its faces' leading-face switch (`_switch_limit`). An explicit step damps a damper of slope k on a
+    mass m only for dt < 2 m / k."""
     return float(body_limits(m, d, groups, attached)[0].min(initial=math.inf))
 
 
@@ -251,7 +253,10 @@ def body_limits(m: Any, d: Any, groups: Any, attached: Any) -> tuple[Any, Any]:
         np.add.at(slope, bodies, fn / np.maximum(vn, group.law.v_reg))
         np.add.at(force, bodies, fn)
         np.add.at(power, bodies, fn * vn)
+    switch = np.full(m.nbody, np.inf)
     if attached is not None:
+        mujoco.mj_crb(m, d)  # the mass matrix, for the bodies' mobility (`_switch_limit`)
+        mujoco.mj_factorM(m, d)
         forces = attached.callback(m)
         floor = attached.v_reg if attached.v_reg > 0 else SURFACE_SPEED
         twist = np.zeros(6)
@@ -263,12 +268,37 @@ def body_limits(m: Any, d: Any, groups: Any, attached: Any) -> tuple[Any, Any]:
             slope[body] += float(np.sum(fn / np.maximum(vn, floor)))
             force[body] += float(fn.sum())
             power[body] += float(fn @ vn)
+            switch[body] = _switch_limit(m, d, body, *forces.switch_slopes(d, body, surface, twist, floor))
     held = slope > 0
     limits = np.full(m.nbody, np.inf)
     limits[held] = 2 * m.body_mass[held] / slope[held]
+    limits = np.minimum(limits, switch)
     speeds = np.zeros(m.nbody)
     speeds[force > 0] = power[force > 0] / force[force > 0]
     return limits, speeds
+
+
+def _switch_limit(m: Any, d: Any, body: int, slopes: Any, normals: Any) -> float:
+    """The longest explicit step that keeps a body's faces from switching their force on and off each step (s; inf
+    where none can): 2 / the largest eigenvalue of A K, K = sum over its elements of slope n n^T (their slopes
+    across the leading-face switch, `SurfaceForces.switch_slopes`) and A = J M^-1 J^T the mobility of the body's
+    origin (m/s per N s): a face grazing the medium, as a plate's top and bottom swimming level, switches its whole
+    force on at a normal speed of v_reg, and a body free to move along its normal, the sandfish's 10 g links
+    floating in the sand, chatters there unless dt < about 2 m v_reg / F (1.7 us where MuJoCo's explicit step
+    needs 2.5 us, and at 10 us to 0.25 ms swims 16-27 % slower than at 1 us, its cost of transport half of it,
+    each estimated within 2-6 %); one held along it by the rest of the robot (a wheel's sides, by the chassis on
+    its axle) does not."""
+    import mujoco
+    import numpy as np
+    if not np.any(slopes > 0):
+        return math.inf
+    jac = np.zeros((3, m.nv))
+    mujoco.mj_jacBody(m, d, jac, None, body)
+    solved = jac.copy()
+    mujoco.mj_solveM(m, d, solved, jac)
+    stiffness = (normals * slopes[:, None]).T @ normals
+    largest = float(np.max(np.linalg.eigvals((jac @ solved.T) @ stiffness).real))
+    return 2 / largest if largest > 0 else math.inf
 
 
 class Chooser:

@@ -274,6 +274,8 @@ class Attached:
 # `SurfaceForces.switch_slopes` takes a face's force moving into the medium at this many ramp widths along its
 # normal (tanh(3) = 0.995 of the full force), divided by tanh of it.
 FULL_RAMP = 3.0
+# ... and only where the element's normal speed is within this many widths of the switch (1 - tanh^2(8) = 4.5e-7).
+NEAR_SWITCH = 8.0
 
 
 class SurfaceForces:
@@ -318,9 +320,14 @@ class SurfaceForces:
         normal = surface.normal @ rotation.T
         velocity = twist[3:] + np.cross(twist[:3], arm)
         into = np.einsum("ij,ij->i", normal, velocity)
-        leading = velocity + (FULL_RAMP * width - into)[:, None] * normal
-        force = self.attached.element_forces(normal, leading, self.depths(d, body, arm), surface.area, self.frame())
-        return np.linalg.norm(force, axis=1) / np.tanh(FULL_RAMP) / width * (1 - np.tanh(into / width) ** 2), normal
+        depth = self.depths(d, body, arm)
+        near = (np.abs(into) < NEAR_SWITCH * width) & (depth > 0)  # the others' slopes are below 1e-6 of theirs
+        slopes = np.zeros(len(into))
+        leading = velocity[near] + (FULL_RAMP * width - into[near])[:, None] * normal[near]
+        force = self.attached.element_forces(normal[near], leading, depth[near], surface.area[near], self.frame())
+        slopes[near] = (np.linalg.norm(force, axis=1) / np.tanh(FULL_RAMP) / width
+                        * (1 - np.tanh(into[near] / width) ** 2))
+        return slopes, normal
 
     def level(self) -> bool:
         """Whether the surface is the flat one and gravity along -z (or none): today's depth, z's alone, and the

@@ -88,8 +88,8 @@ SAVING = 0.85
 PRICE_SHARE = 0.1
 # An explicit candidate whose step exceeds this share of the bodies' explicit limit (`window_limit`) is not
 # piloted: beyond it a light link's velocity reverses each step, and its figures are off however they pass the
-# chatter probe and their estimate (the sandfish's 10 g links, their limit 3 us: 16-27 % off its speed from 10 us to
-# 0.25 ms, estimated 2-6 %; MuJoCo's explicit step at 2.5 and 1 us agrees with newton-midpoint at 0.125 ms to 0.1 %).
+# chatter probe and their estimate (the sandfish's 10 g links, their limit 3 us: its speed 25-27 % low from 8 us to
+# 0.25 ms, estimated 1.8-5.9 % off; MuJoCo's explicit step at 2.5 and 1 us agrees with newton at 10 us to 0.05 %).
 EXPLICIT_ROOM = 1.0
 # The bodies' explicit limit is taken over the implicit pilots' run (`window_limit`), not at one instant: sampled
 # LIMIT_SAMPLES times over the pilots' window, in stretches of LIMIT_STRETCH of it, each stretch's the median over
@@ -285,8 +285,8 @@ def _switch_limit(m: Any, d: Any, body: int, slopes: Any, normals: Any) -> float
     origin (m/s per N s): a face grazing the medium, as a plate's top and bottom swimming level, switches its whole
     force on at a normal speed of v_reg, and a body free to move along its normal, the sandfish's 10 g links
     floating in the sand, chatters there unless dt < about 2 m v_reg / F (1.7 us where MuJoCo's explicit step
-    needs 2.5 us, and at 10 us to 0.25 ms swims 16-27 % slower than at 1 us, its cost of transport half of it,
-    each estimated within 2-6 %); one held along it by the rest of the robot (a wheel's sides, by the chassis on
+    needs 2.5 us, and at 8 us to 0.25 ms swims 25-27 % slower than newton-midpoint's converged run, its cost of
+    transport under half of it, each estimated 1.8-5.9 % off); one held along it by the rest of the robot (a wheel's sides, by the chassis on
     its axle) does not."""
     import mujoco
     import numpy as np

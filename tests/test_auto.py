@@ -350,7 +350,7 @@ def test_the_explicit_limit_of_a_box_free_to_rise_or_sink_is_its_faces_switch():
     # The box on a vertical slide, at rest: its bottom face (35 mm deep) takes li2013's force moving down
     # (alpha(0, pi/2)), its top (5 mm) moving up (alpha(0, -pi/2)), each switched on over v_reg of vertical speed. An
     # explicit step longer than 2 m v_reg / (their sum) lets the box's vertical velocity flip each step, and the
-    # deeper face pushes harder than the shallower: the box rises (the sandfish's 10 g links, free to: 16-27 %
+    # deeper face pushes harder than the shallower: the box rises (the sandfish's 10 g links, free to: 25-27 %
     # faster and half the cost of transport at explicit steps of 10 us to 0.25 ms than at 1 us).
     import math
 
@@ -402,7 +402,7 @@ def test_the_explicit_limit_over_a_run_ignores_a_body_creeping_and_one_reversal_
 @pytest.mark.slow  # two robots' auto runs end to end; explicit_limit itself is checked above
 def test_auto_pilots_no_explicit_step_beyond_a_light_robots_limit_and_does_below_a_heavy_ones(tmp_path):
     # The sandfish's 10 g links, free to rise and sink, have a limit of ~3 us (their top and bottom faces' switch):
-    # its explicit step is 16-27 % off at 10 us to 0.25 ms, and is not piloted at any step of its ladder.
+    # its explicit step is 25-27 % off at 8 us to 0.25 ms, and is not piloted at any step of its ladder.
     # The 2 kg sled's limit is ~1.1 ms (SLED): its explicit step at the scene's 1 ms is still piloted.
     from finrft.studies.frontier import battery_scene
     fish = load_scene(battery_scene("sandfish"), cls=UserScene,

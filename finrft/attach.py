@@ -310,11 +310,11 @@ class SurfaceForces:
     def switch_slopes(self, d: mujoco.MjData, body: int, surface: Surface, twist: np.ndarray, width: float
                       ) -> tuple[np.ndarray, np.ndarray]:
         """Each element's force slope (N s/m) across its leading-face switch, and its normal (world frame), had the
-        body the ``twist``: the force
-        it would carry moving into the medium along its face, over the switch's ramp ``width`` (m/s; the laws'
-        v_reg, `laws.regularised`), weighted by the ramp's slope at the element's normal speed, 1 - tanh^2(n.v /
-        width). A face grazing the medium (the top and bottom of a plate swimming level) carries no force and has
-        the full slope: a velocity along its normal of ``width`` switches its whole force on."""
+        body the ``twist``: the force it would carry moving into the medium along its face, over the switch's ramp
+        ``width`` (m/s; the laws' v_reg, `laws.regularised`), weighted by the ramp's slope at the element's normal
+        speed, 1 - tanh^2(n.v / width). A face grazing the medium (the top and bottom of a plate swimming level)
+        carries no force and has the full slope: a velocity along its normal of ``width`` switches its whole force
+        on."""
         rotation = d.xmat[body].reshape(3, 3)
         arm = surface.centre @ rotation.T
         normal = surface.normal @ rotation.T

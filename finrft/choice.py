@@ -284,10 +284,10 @@ def _switch_limit(m: Any, d: Any, body: int, slopes: Any, normals: Any) -> float
     across the leading-face switch, `SurfaceForces.switch_slopes`) and A = J M^-1 J^T the mobility of the body's
     origin (m/s per N s): a face grazing the medium, as a plate's top and bottom swimming level, switches its whole
     force on at a normal speed of v_reg, and a body free to move along its normal, the sandfish's 10 g links
-    floating in the sand, chatters there unless dt < about 2 m v_reg / F (1.7 us where MuJoCo's explicit step
-    needs 2.5 us, and at 8 us to 0.25 ms swims 25-27 % slower than newton-midpoint's converged run, its cost of
-    transport under half of it, each estimated 1.8-5.9 % off); one held along it by the rest of the robot (a wheel's sides, by the chassis on
-    its axle) does not."""
+    floating in the sand, chatters there unless dt < about 2 m v_reg / F (3 us where MuJoCo's explicit step needs
+    2.5 us, and at 8 us to 0.25 ms swims 25-27 % slower than newton-midpoint's converged run, its cost of transport
+    under half of it, each estimated 1.8-5.9 % off); one held along it by the rest of the robot (a wheel's sides,
+    by the chassis on its axle) does not."""
     import mujoco
     import numpy as np
     if not np.any(slopes > 0):
@@ -606,7 +606,7 @@ def choose(scene: Any, limits: ErrorLimits | None, pilot: Pilot, prepare: Callab
     if passed and not chooser.whole:  # whole pilots: the run is made, a coarser one would be another
         coarser = chooser.coarsen(passed[0])
         passed = [coarser, *(c for c in passed if c is not coarser)]
-    else:  # the closest: the smallest excess, then the finest step
+    elif not passed:  # the closest: the smallest excess, then the finest step
         passed = [min(chooser.candidates, key=lambda c: (c.excess, c.dt))]
     return passed, chooser
 

@@ -223,38 +223,10 @@ def test_a_pilot_stops_once_it_costs_more_than_it_may(tmp_path):
     assert isinstance(run, Exception) and "cost more than" in str(run)
 
 
-def test_a_method_is_walked_down_by_halvings_and_one_far_off_not_at_all():
-    # The sandfish's pilots over its 2 s run (estimates as measured): newton 19 % off at 2 ms (first order: 0.125 ms
-    # would do), newton-midpoint 3.3 % at 2 ms and 0.33 % at 1 ms. Each pilot costs as 1 / dt. newton-midpoint is
-    # judged at 1 ms, whose pilot at half the step is all it takes, not sent to 0.5 ms as its first-order error
-    # asks (pilots at 0.5 and 0.25 ms); newton's next steps are ranked by the 0.125 ms it would need, and not run.
-    from finrft import choice as choosing
-    error = {"newton": lambda dt: 18.9 * dt / 2e-3, "newton-midpoint": lambda dt: 3.3 * (dt / 2e-3) ** 3.3}
-    price = {"newton": 2.0, "newton-midpoint": 4.5}  # s, at 2 ms: newton the cheaper
-    tried = []
-
-    class Fake(choosing.Chooser):
-        def __init__(self):
-            self.top, self.candidates, self.budget, self.whole = 2e-3, [], float("inf"), False
-
-        def predicted(self, method, dt):
-            return price[method] * 2e-3 / dt
-
-        def try_step(self, method, dt, *_):
-            tried.append((method, dt))
-            c = choosing.Candidate(method, dt, cost_s=self.predicted(method, dt), measured=True,
-                                   excess=error[method](dt) / 2.0)
-            c.over = ["over"] if c.excess > 1 else []
-            self.candidates.append(c)
-            return c
-    passed = Fake().search(("newton-midpoint", "newton"))
-    assert tried == [("newton", 2e-3), ("newton-midpoint", 2e-3), ("newton-midpoint", 1e-3)]
-    assert (passed[0].method, passed[0].dt) == ("newton-midpoint", 1e-3)
-
-
-def _searched(errors: dict, prices: dict, limit: float) -> list:
-    """The candidates a search measures, in turn, where each method's error (of its limit) and cost go with its
-    step as ``errors`` and ``prices`` say (s at 2 ms, as 1 / dt), the bodies' explicit limit ``limit`` s."""
+def _searched(errors: dict, prices: dict, limit: float = float("inf")) -> tuple[list, tuple]:
+    """The candidates a search of the methods of ``errors`` measures, in turn, and the one it chose, where each
+    method's error (of its limit) and cost go with its step as ``errors`` and ``prices`` say (s at 2 ms, as 1 / dt),
+    the bodies' explicit limit ``limit`` s."""
     from finrft import choice as choosing
     tried = []
 
@@ -275,8 +247,19 @@ def _searched(errors: dict, prices: dict, limit: float) -> list:
             c.over = ["over"] if c.excess > 1 else []
             self.candidates.append(c)
             return c
-    passed = Fake().search(("explicit", "newton"))
+    passed = Fake().search(tuple(errors))
     return tried, (passed[0].method, passed[0].dt)
+
+
+def test_a_method_is_walked_down_by_halvings_and_one_far_off_not_at_all():
+    # The sandfish's pilots over its 2 s run (estimates as measured): newton 19 % off at 2 ms (first order: 0.125 ms
+    # would do), newton-midpoint 3.3 % at 2 ms and 0.33 % at 1 ms. Each pilot costs as 1 / dt. newton-midpoint is
+    # judged at 1 ms, whose pilot at half the step is all it takes, not sent to 0.5 ms as its first-order error
+    # asks (pilots at 0.5 and 0.25 ms); newton's next steps are ranked by the 0.125 ms it would need, and not run.
+    errors = {"newton-midpoint": lambda dt: 3.3 * (dt / 2e-3) ** 3.3 / 2.0, "newton": lambda dt: 18.9 * dt / 2e-3 / 2.0}
+    tried, chosen = _searched(errors, {"newton": 2.0, "newton-midpoint": 4.5})  # s, at 2 ms: newton the cheaper
+    assert tried == [("newton", 2e-3), ("newton-midpoint", 2e-3), ("newton-midpoint", 1e-3)]
+    assert chosen == ("newton-midpoint", 1e-3)
 
 
 def test_an_explicit_step_is_walked_down_step_by_step():

@@ -300,12 +300,8 @@ class SurfaceForces:
                      ) -> tuple[np.ndarray, np.ndarray]:
         """As `element_forces`, had the body the ``twist`` (angular velocity, velocity of its origin; world
         frame) at the positions of ``d``."""
-        a = self.attached
-        rotation = d.xmat[body].reshape(3, 3)
-        arm = surface.centre @ rotation.T
-        normal = surface.normal @ rotation.T
-        velocity = twist[3:] + np.cross(twist[:3], arm)
-        return a.element_forces(normal, velocity, self.depths(d, body, arm), surface.area, self.frame()), arm
+        arm, normal, velocity, depth = self._moving(d, body, surface, twist)
+        return self.attached.element_forces(normal, velocity, depth, surface.area, self.frame()), arm
 
     def switch_slopes(self, d: mujoco.MjData, body: int, surface: Surface, twist: np.ndarray, width: float
                       ) -> tuple[np.ndarray, np.ndarray]:
@@ -315,12 +311,8 @@ class SurfaceForces:
         speed, 1 - tanh^2(n.v / width). A face grazing the medium (the top and bottom of a plate swimming level)
         carries no force and has the full slope: a velocity along its normal of ``width`` switches its whole force
         on."""
-        rotation = d.xmat[body].reshape(3, 3)
-        arm = surface.centre @ rotation.T
-        normal = surface.normal @ rotation.T
-        velocity = twist[3:] + np.cross(twist[:3], arm)
+        _, normal, velocity, depth = self._moving(d, body, surface, twist)
         into = np.einsum("ij,ij->i", normal, velocity)
-        depth = self.depths(d, body, arm)
         near = (np.abs(into) < NEAR_SWITCH * width) & (depth > 0)  # the others' slopes are below 1e-6 of theirs
         slopes = np.zeros(len(into))
         leading = velocity[near] + (FULL_RAMP * width - into[near])[:, None] * normal[near]
@@ -328,6 +320,15 @@ class SurfaceForces:
         slopes[near] = (np.linalg.norm(force, axis=1) / np.tanh(FULL_RAMP) / width
                         * (1 - np.tanh(into[near] / width) ** 2))
         return slopes, normal
+
+    def _moving(self, d: mujoco.MjData, body: int, surface: Surface, twist: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """A body's elements at the positions of ``d``, had it the ``twist``: their arms from its origin, normals
+        and velocities (world frame) and depths."""
+        rotation = d.xmat[body].reshape(3, 3)
+        arm = surface.centre @ rotation.T
+        velocity = twist[3:] + np.cross(twist[:3], arm)
+        return arm, surface.normal @ rotation.T, velocity, self.depths(d, body, arm)
 
     def level(self) -> bool:
         """Whether the surface is the flat one and gravity along -z (or none): today's depth, z's alone, and the

@@ -11,15 +11,16 @@ candidate at its step and at half of it, their reported figures compared as the 
 (`convergence.companion_estimate`). The candidates are ``explicit`` and, on MuJoCo's implicitfast integrator,
 ``newton-midpoint`` and ``newton``, each on a ladder of steps from `START` x sim.dt down (`Chooser.search`):
 
-- each method is priced by the start of its first pilot (the second half of `PRICE_SHARE` of the run), its
-  other steps by its cost per step, as it went with the step between two whole pilots of the method (`PER_STEP`);
-- the method whose next candidate is predicted cheapest is measured next; one that misses the limits gives its
-  method's next step, half of it: its pilot at half the step is there already, and the one that judges it is the
-  run of the next. An implicit method is ranked by the cost of the step its error asks for (first order, aimed at
-  `SAFE` of the limit), reached halving by halving: a leap there needs pilots at it and half of it, which cost more
-  than the halvings between (the sandfish's newton-midpoint, estimated 3.3 % off at 2 ms, was sent to 0.5 ms
-  where 1 ms is within 0.3 %), and a method far off is not walked down (its newton, estimated 19 % off at 2 ms,
-  would need 0.125 ms);
+- each method is priced by the start of its first pilot (the second half of `PRICE_SHARE` of the run, no further
+  than shows it dearer than a method priced before it), its other steps by its cost per step, as it went with the
+  step between two whole pilots of the method (`PER_STEP`);
+- the method whose verdict is predicted cheapest is measured next (`Chooser.verdict`: the pilots it has still to
+  run, and its run where the pilots are not); one that misses the limits gives its method's next step, half of
+  it: its pilot at half the step is there already, and the one that judges it is the run of the next. An implicit
+  method is ranked by the step its error asks for (first order, aimed at `SAFE` of the limit), reached halving by
+  halving: a leap there needs pilots at it and half of it, which cost more than the halvings between (the
+  sandfish's newton-midpoint, estimated 3.3 % off at 2 ms, was sent to 0.5 ms where 1 ms is within 0.3 %), and a
+  method far off is not walked down (its newton, estimated 19 % off at 2 ms, would need 0.125 ms);
 - an explicit step beyond the bodies' explicit limit (`window_limit`, over the implicit methods' pilots so far,
   which are priced first) is neither priced nor piloted: its candidate is skipped, and the ladder goes on below
   the limit;
@@ -501,6 +502,21 @@ class Chooser:
         reach = min(max(dt / near, FINER), 1 / FINER)
         return self.cost(method, near) * near / dt * reach ** power
 
+    def verdict(self, method: str, dt: float, aim: float, dearer_than: float = math.inf) -> float:
+        """The predicted cost (s) of knowing whether ``method`` meets the limits at ``aim``, walked down from its
+        ladder's ``dt``: its pilots not run yet, at each step from dt to aim and at half of aim, and, where the pilots
+        are not whole runs, the run at aim with its companion. A method aimed far down costs its walk there, not its
+        last step's alone (the sandfish's newton, 19 % off at 2 ms, aimed at 0.125 ms: pilots at 0.5 ms to 62.5 us, a
+        quarter more than its run at 0.125 ms with its companion), and a step whose pilot ran as the one that judged
+        the step before it costs its pilot at half the step alone. A price is taken no further than shows it costs more
+        than ``dearer_than`` (`price`)."""
+        cost, step = 0.0, dt
+        while step >= aim * FINER * (1 - 1e-9):
+            if (method, step) not in self._runs:
+                cost += self.predicted(method, step, dearer_than) / COMPANION_COST * self.window / self.duration
+            step *= FINER
+        return cost if self.whole else cost + self.predicted(method, aim, dearer_than)
+
     def _sample(self, scene: Any, t: float) -> None:
         """The bodies' limits at time ``t`` of an implicit pilot (`body_limits`), where its state is finite and no
         pilot was sampled within half a `LIMIT_SAMPLES`-th of the window (a pilot at half the step follows its own)."""
@@ -532,8 +548,8 @@ class Chooser:
         """The candidates of ``allowed`` methods that met the limits, cheapest first, found best first: each method's
         ladder from START x sim.dt down, the cheapest predicted candidate measured next, until none left could cost
         less than `SAVING` of the cheapest that met the limits. A step that misses them goes down one halving; its
-        implicit method is ranked by the predicted cost of the step its error asks for (first order, aimed at SAFE of
-        the limit), the explicit step by its next one: its error can fall much faster, as a body's stability margin
+        implicit method is ranked by the predicted cost of a verdict at the step its error asks for (first order,
+        aimed at SAFE of the limit; `verdict`), the explicit step by its next one: its error can fall much faster, as a body's stability margin
         is crossed (the quadruped's: 6.5 % off at 2 ms, 0.95 % at 1 ms; a 2 kg sled's: 79 % off at 1 ms, 0.02 % at
         0.5 ms)."""
         finest = {m: self.top * FINER ** (EXPLICIT_HALVINGS if m == "explicit" else HALVINGS) for m in allowed}
@@ -548,17 +564,22 @@ class Chooser:
                 if m == "explicit" and ladder[m] is not None:
                     ladder[m] = self.screen(ladder[m], finest[m])
                 if ladder[m] is not None:
-                    cost = self.predicted(m, min(aim[m], ladder[m]), min((o[0] for o in options), default=math.inf))
-                    options.append((cost if cost == cost else 0.0, m, ladder[m]))  # NaN: it failed at once
+                    target = min(aim[m], ladder[m])
+                    cheapest = min((o[1] for o in options), default=math.inf)
+                    cost = self.predicted(m, target, cheapest)
+                    if cost != cost:  # NaN: it failed at once, its pilot is all it costs
+                        options.append((0.0, 0.0, m, ladder[m]))
+                    else:
+                        options.append((self.verdict(m, ladder[m], target, cheapest), cost, m, ladder[m]))
+            dearer = [o for o in options if best is not None and not o[1] < SAVING * best.cost_s]
+            for _, cost, method, dt in dearer:
+                if not any((c.method, c.dt) == (method, dt) for c in self.candidates):
+                    self.candidates.append(Candidate(method, dt, cost_s=cost, skipped="not run: predicted to "
+                                                     "cost more than the cheapest that met the limits"))
+            options = [o for o in options if o not in dearer]
             if not options:
                 break
-            cost, method, dt = min(options, key=lambda o: o[0])
-            if best is not None and not cost < SAVING * best.cost_s:
-                for cost, method, dt in options:
-                    if not any((c.method, c.dt) == (method, dt) for c in self.candidates):
-                        self.candidates.append(Candidate(method, dt, cost_s=cost, skipped="not run: predicted to "
-                                                         "cost more than the cheapest that met the limits"))
-                break
+            _, cost, method, dt = min(options, key=lambda o: o[0])
             # once one met the limits, a pilot stops where it has cost what a cheaper candidate's pilots may
             self.budget = math.inf if best is None else SAVING * best.cost_s * (1 - 1 / COMPANION_COST)
             candidate = self.try_step(method, dt)

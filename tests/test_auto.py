@@ -234,25 +234,30 @@ def test_a_pilot_stops_once_it_costs_more_than_it_may(tmp_path):
     assert isinstance(run, Exception) and "cost more than" in str(run)
 
 
-def _searched(errors: dict, prices: dict, limit: float = float("inf")) -> tuple[list, tuple]:
+def _searched(errors: dict, prices: dict, limit: float = float("inf"), whole: bool = False,
+              costs: dict | None = None) -> tuple[list, tuple]:
     """The candidates a search of the methods of ``errors`` measures, in turn, and the one it chose, where each
-    method's error (of its limit) and cost go with its step as ``errors`` and ``prices`` say (s at 2 ms, as 1 / dt),
-    the bodies' explicit limit ``limit`` s."""
+    method's error (of its limit) and cost go with its step as ``errors`` and ``prices`` say (s at 2 ms, as 1 / dt;
+    once a pilot of it ran, as ``costs`` say where they do), the bodies' explicit limit ``limit`` s; its pilots
+    ``whole`` runs or windows of a tenth of the run."""
     from finrft import choice as choosing
     tried = []
 
     class Fake(choosing.Chooser):
         def __init__(self):
-            self.top, self.candidates, self.budget, self.whole = 2e-3, [], float("inf"), False
+            self.top, self.candidates, self.budget, self.whole = 2e-3, [], float("inf"), whole
+            self._runs, self.window, self.duration = {}, 1.0 if whole else 0.1, 1.0
 
         def predicted(self, method, dt, *_):
-            return prices[method] * 2e-3 / dt
+            ran = any(m == method for m, _ in tried)
+            return (costs or {}).get(method, prices[method]) * 2e-3 / dt if ran else prices[method] * 2e-3 / dt
 
         def explicit_limit(self):
             return limit
 
         def try_step(self, method, dt, *_):
             tried.append((method, dt))
+            self._runs[(method, dt)] = self._runs[(method, dt / 2)] = None
             c = choosing.Candidate(method, dt, cost_s=self.predicted(method, dt), measured=True,
                                    excess=errors[method](dt))
             c.over = ["over"] if c.excess > 1 else []
@@ -269,6 +274,18 @@ def test_a_method_is_walked_down_by_halvings_and_one_far_off_not_at_all():
     # asks (pilots at 0.5 and 0.25 ms); newton's next steps are ranked by the 0.125 ms it would need, and not run.
     errors = {"newton-midpoint": lambda dt: 3.3 * (dt / 2e-3) ** 3.3 / 2.0, "newton": lambda dt: 18.9 * dt / 2e-3 / 2.0}
     tried, chosen = _searched(errors, {"newton": 2.0, "newton-midpoint": 4.5})  # s, at 2 ms: newton the cheaper
+    assert tried == [("newton", 2e-3), ("newton-midpoint", 2e-3), ("newton-midpoint", 1e-3)]
+    assert chosen == ("newton-midpoint", 1e-3)
+
+
+def test_a_method_aimed_far_down_is_ranked_by_the_pilots_of_its_walk_there():
+    # Whole pilots: newton 19 % off at 2 ms, aimed at 0.125 ms, where its run and companion would cost 32 s and
+    # the pilots still to run on the way there (0.5 ms to 62.5 us) 40 s; newton-midpoint priced at 36 s at 2 ms (the
+    # sandfish's, priced over a burst of Newton's iterations at four times its cost, 9 s). It is measured before
+    # newton's walk, and meets the limits at 1 ms.
+    errors = {"newton-midpoint": lambda dt: 3.3 * (dt / 2e-3) ** 3.3 / 2.0, "newton": lambda dt: 18.9 * dt / 2e-3 / 2.0}
+    tried, chosen = _searched(errors, {"newton": 2.0, "newton-midpoint": 36.0}, whole=True,
+                              costs={"newton-midpoint": 9.0})
     assert tried == [("newton", 2e-3), ("newton-midpoint", 2e-3), ("newton-midpoint", 1e-3)]
     assert chosen == ("newton-midpoint", 1e-3)
 

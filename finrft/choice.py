@@ -24,6 +24,8 @@ candidate at its step and at half of it, their reported figures compared as the 
 - an explicit step beyond the bodies' explicit limit (`window_limit`, over the implicit methods' pilots so far,
   which are priced first) is neither priced nor piloted: its candidate is skipped, and the ladder goes on below
   the limit;
+- a pilot at half a candidate's step stops once its robot's speed since the settling is held far off its pilot at
+  the step's (`OFF_LIMIT`): the candidate misses the limits, and the rest of the pilot would only confirm it;
 - once one meets the limits, only candidates predicted to cost less than `SAVING` of it are measured, and the
   cheapest that met them is tried at twice its step while its estimate is below `COARSEN` of its limit; where the
   pilots are whole runs, the first that meets them is chosen: its run and its companion are made, and any other
@@ -45,7 +47,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
-from .convergence import FINER, ErrorLimits, FigureLimit, companion_estimate, magnitude
+from .convergence import FINER, SAFETY, ErrorLimits, FigureLimit, companion_estimate, magnitude
 from .errors import InaccurateResult, SceneError, SimulationUnstable
 
 # The pilots' window (`window`): the controls' ramp-in and this share of the rest of the run (or a sine's
@@ -113,6 +115,17 @@ STILL = 0.02
 PER_STEP = (0.0, 1.0)
 # A run's cost against its pilot's: the run itself and its companion at half the step (`convergence.checked`).
 COMPANION_COST = 1 + 1 / FINER
+# A pilot at half the step stops once the horizontal speed its robot has made since the settling, compared with its
+# pilot at the step's at the same instant, is estimated (as the companion estimates it, SAFETY / (1 - FINER) times
+# the difference) above OFF_LIMIT times what the speed's limit allows, at every check over OFF_HELD of the window,
+# from OFF_FROM of it on (`Chooser._off`): its candidate misses the limits, and the rest of its pilot would only
+# confirm it. Over their whole runs such differences held from a tenth of the window on (the sandfish's newton at 2
+# ms: 4.4-5.0 % from 0.1 to 1 of its window, 4.95 % at its end; the sand-swimmer's 2.8-3.1 %, 2.8 %), or grew (the
+# paddle sled's newton-midpoint at 0.5 ms: 0.6-2.2 % to 0.4, 3.6 % at 0.5, 7.9 % at its end); one fell 2.5 times
+# (the spoke hexapod's newton-midpoint at 2 ms: 1.6 % at 0.2, 0.6 % at its end), within OFF_LIMIT.
+OFF_LIMIT = 3.0
+OFF_FROM = 0.25
+OFF_HELD = 0.1
 
 
 @dataclass
@@ -333,28 +346,78 @@ class Chooser:
         self._walls: dict[tuple[str, float], float] = {}  # its wall time
         self._whole: set[tuple[str, float]] = set()       # the pilots timed over the window, not a price's stretch
         self._bounds: set[tuple[str, float]] = set()      # the prices stopped dearer than another (`price`)
+        self._tracks: dict[tuple[str, float], list] = {}  # each whole pilot's robot's track (`_off`)
 
     def at(self, method: str, dt: float) -> Any:
         """The scene of a candidate's pilot."""
         window = {} if self.whole else {"sim.duration": self.window, "sim.settle": self.settle, **self.strokes}
         return self.scene.replace(**{"sim.method": method, "sim.dt": dt, **window})
 
-    def _run(self, method: str, dt: float) -> Any:
+    def _run(self, method: str, dt: float, against: tuple[str, float] | None = None) -> Any:
+        """A candidate's pilot at dt (its result, or its step's failure), run once; its robot's track kept, and,
+        ``against`` the pilot of another step, stopped where it is off by far (`_off`: its `Off` is returned, the
+        pilot is not kept)."""
         key = (method, dt)
-        if key not in self._runs:
-            start = time.perf_counter()
-            try:
-                scene = self.at(method, dt)
-                self.prepare(scene)  # the model's build, outside the cost of a step
-                self._runs[key], self._rates[key] = self._timed(scene, self.window, sample=method in IMPLICIT)
-                self._whole.add(key)
-            except SceneError as exc:  # a step longer than the scene's that does not resolve its strokes
-                if not dt > self.scene.sim.dt:
-                    raise
-                self._runs[key], self._rates[key] = exc, math.nan
-            self._walls[key] = time.perf_counter() - start
-            self.wall += self._walls[key]
-        return self._runs[key]
+        if key in self._runs:
+            return self._runs[key]
+        start = time.perf_counter()
+        try:
+            scene = self.at(method, dt)
+            self.prepare(scene)  # the model's build, outside the cost of a step
+            track: list[tuple[float, float, float]] = []
+            run, self._rates[key] = self._timed(scene, self.window, sample=method in IMPLICIT,
+                                                watch=self._off(scene, track, against))
+            self._whole.add(key)
+            if not isinstance(run, Off):
+                self._runs[key], self._tracks[key] = run, track
+        except SceneError as exc:  # a step longer than the scene's that does not resolve its strokes
+            if not dt > self.scene.sim.dt:
+                raise
+            run = self._runs[key] = exc
+            self._rates[key] = math.nan
+        self._walls[key] = time.perf_counter() - start
+        self.wall += self._walls[key]
+        return run
+
+    def _off(self, scene: Any, track: list[tuple[float, float, float]],
+             against: tuple[str, float] | None) -> Callable[[], None] | None:
+        """What a pilot does at each of its samples: keeps its robot's track (time, centre of mass x and y) and,
+        ``against`` another step's pilot, raises `Off` once its speed since the settling is estimated off by more
+        than `OFF_LIMIT` times the speed's limit over `OFF_HELD` of the window (None: no robot's state to read)."""
+        if self.state is None:
+            return None
+        import numpy as np
+        other = self._runs.get(against) if against is not None else None
+        limit, theirs = None, None
+        settle, span = scene.sim.settle, self.duration if self.whole else self.window
+        if other is not None and not isinstance(other, Exception) and against in self._tracks:
+            named = other.headline() if self.limits.figures is None else self.limits.figures
+            speed_limit = next((f for f in named if f.key == "com_speed_m_s"), None)
+            speed = other.figure_values().get("com_speed_m_s")
+            past = np.array(self._tracks[against])
+            if speed_limit is not None and speed is not None and len(past) and past[0, 0] <= settle:
+                limit = speed_limit.allowed(speed)
+                theirs = lambda t: np.array([np.interp(t, past[:, 0], past[:, k]) for k in (1, 2)])  # noqa: E731
+        start: list[Any] = []  # the robot's position at the settling
+        held: list[float] = []  # since when it has been off by far
+
+        def watch() -> None:
+            _, d, *_ = self.state(scene)
+            t, here = d.time, d.subtree_com[0][:2].copy()
+            if not start and t >= settle and track and track[-1][0] <= settle:
+                before, at = track[-1][0], np.array(track[-1][1:])
+                start.append(at + (here - at) * ((settle - before) / (t - before) if t > before else 1.0))
+            track.append((t, *here))
+            if theirs is None or not start or t < settle + OFF_FROM * (span - settle):
+                return
+            ours = np.hypot(*(here - start[0])) / (t - settle)
+            off = SAFETY / (1 - FINER) * abs(ours - np.hypot(*(theirs(t) - theirs(settle))) / (t - settle))
+            held[:] = [held[0] if held else t] if off > OFF_LIMIT * limit else []
+            if held and t - held[0] >= OFF_HELD * (span - settle):
+                raise Off(f"com_speed_m_s: its pilot at half the step, stopped at {t:.3g} s, was off by an "
+                          f"estimated {off:.3g} m/s, over {OFF_LIMIT:g} times its limit {limit:.3g}",
+                          "com_speed_m_s", float(off), float(off / limit))
+        return watch
 
     def reused(self, candidate: Candidate) -> Any:
         """The chosen candidate's run, where its pilots were whole runs: its pilot, with the estimate from its pilot
@@ -391,8 +454,11 @@ class Chooser:
             candidate.skipped = dearer
         else:
             candidate.skipped = ""
-            fine = self._run(method, dt * FINER)
-            if isinstance(fine, Exception):
+            fine = self._run(method, dt * FINER, against=(method, dt))
+            if isinstance(fine, Off):
+                candidate.measured = True
+                candidate.error, candidate.excess, candidate.over = {fine.key: fine.off}, fine.excess, [str(fine)]
+            elif isinstance(fine, Exception):
                 candidate.failed = f"its pilot at half the step failed: {_first_line(fine)}"
             else:
                 candidate.measured = True
@@ -444,12 +510,13 @@ class Chooser:
         return self.cost(method, dt)
 
     def _timed(self, scene: Any, span: float, share: float = 1.0, skip: float = 0.0,
-               sample: bool = False) -> tuple[Any, float]:
+               sample: bool = False, watch: Callable[[], None] | None = None) -> tuple[Any, float]:
         """A pilot's result (or its step's failure; None where it stopped at ``share`` of its run) and its CPU time
         per simulated second, from its first recorded sample at or past ``skip`` of it on (a run's set-up, a fixed
         cost, would weigh on a short stretch) as far as it got (NaN: nowhere). CPU time, not wall time: the choice
         must not follow the load of other processes. With ``sample``, the bodies' limits (`body_limits`) are
-        sampled as it goes, outside its timing, once in `LIMIT_SAMPLES` of the window."""
+        sampled as it goes, outside its timing, once in `LIMIT_SAMPLES` of the window; ``watch`` is called at
+        each sample (`_off`)."""
         marks: list[tuple[float, float]] = []
         spent = [0.0]  # CPU time spent sampling
 
@@ -470,6 +537,8 @@ class Chooser:
             if marks[1][0] - begin > self.budget:
                 raise _Enough(f"stopped at {fraction * span:.3g} s: it cost more than {self.budget:.3g} s, more "
                               f"than the cheaper candidate that met the limits")
+            if watch is not None:
+                watch()
         begin = clock()
         try:
             run: Any = self.pilot(scene, False, progress)
@@ -620,6 +689,15 @@ class Chooser:
 class _Enough(Exception):
     """Stops a pilot that prices a candidate (`Chooser.price`) once it has run far enough, or, with a message, one
     that costs more than it may (`Chooser.budget`)."""
+
+
+class Off(_Enough):
+    """Stops a pilot at half a candidate's step once it shows the candidate off by far (`Chooser._off`): the figure's
+    key, its estimated error so far and that error over its limit."""
+
+    def __init__(self, message: str, key: str, off: float, excess: float) -> None:
+        super().__init__(message)
+        self.key, self.off, self.excess = key, off, excess
 
 
 def _first_line(exc: Exception) -> str:

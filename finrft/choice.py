@@ -24,8 +24,9 @@ candidate at its step and at half of it, their reported figures compared as the 
 - an explicit step beyond the bodies' explicit limit (`window_limit`, over the implicit methods' pilots so far,
   which are priced first) is neither priced nor piloted: its candidate is skipped, and the ladder goes on below
   the limit;
-- a pilot at half a candidate's step stops once its robot's speed since the settling is held far off its pilot at
-  the step's (`OFF_LIMIT`): the candidate misses the limits, and the rest of the pilot would only confirm it;
+- a pilot at half a candidate's step stops once its robot's speed since the settling, over whole periods of its
+  gait, is far off its pilot at the step's (`OFF_LIMIT`): the candidate misses the limits, and the rest of the
+  pilot would only confirm it;
 - once one meets the limits, only candidates predicted to cost less than `SAVING` of it are measured, and the
   cheapest that met them is tried at twice its step while its estimate is below `COARSEN` of its limit; where the
   pilots are whole runs, the first that meets them is chosen: its run and its companion are made, and any other
@@ -115,17 +116,14 @@ STILL = 0.02
 PER_STEP = (0.0, 1.0)
 # A run's cost against its pilot's: the run itself and its companion at half the step (`convergence.checked`).
 COMPANION_COST = 1 + 1 / FINER
-# A pilot at half the step stops once the horizontal speed its robot has made since the settling, compared with its
-# pilot at the step's at the same instant, is estimated (as the companion estimates it, SAFETY / (1 - FINER) times
-# the difference) above OFF_LIMIT times what the speed's limit allows, at every check over OFF_HELD of the window,
-# from OFF_FROM of it on (`Chooser._off`): its candidate misses the limits, and the rest of its pilot would only
-# confirm it. Over their whole runs such differences held from a tenth of the window on (the sandfish's newton at 2
-# ms: 4.4-5.0 % from 0.1 to 1 of its window, 4.95 % at its end; the sand-swimmer's 2.8-3.1 %, 2.8 %), or grew (the
-# paddle sled's newton-midpoint at 0.5 ms: 0.6-2.2 % to 0.4, 3.6 % at 0.5, 7.9 % at its end); one fell 2.5 times
-# (the spoke hexapod's newton-midpoint at 2 ms: 1.6 % at 0.2, 0.6 % at its end), within OFF_LIMIT.
+# A pilot at half the step stops once the horizontal speed its robot has made since the settling, over a whole
+# number of its gait's periods (`period`), is estimated off its pilot at the step's over as long (as the companion
+# estimates it, SAFETY / (1 - FINER) times the difference) by over OFF_LIMIT times what the speed's limit allows
+# (`Chooser._off`): its candidate misses the limits, and the rest of its pilot would only confirm it. Over whole
+# periods such differences held (the sandfish's newton at 2 ms: 4.4-5.0 % of its speed over its window's first
+# tenth to its end; the sand-swimmer's 2.8-3.1 %); over parts of a period they swing with the gait's phase, which
+# the step shifts (the eel's newton at 1 ms: 0.3-2.3 % over parts of its 1 s period, 0.24 % over all of it).
 OFF_LIMIT = 3.0
-OFF_FROM = 0.25
-OFF_HELD = 0.1
 
 
 @dataclass
@@ -198,14 +196,19 @@ def window(scene: Any, duration: float, stroke_time: float, strokes: int) -> tup
     2.1 kg axis on the sand's stiffness for about half a second: over its whole first second its cost of transport
     was estimated 29 % off at 125 ms, 0.3 % over its second half, and its whole run at 125 ms 0.03 %)."""
     ramp = max((c.ramp for c in getattr(scene, "control", ())), default=0.0)
-    sines = [c.frequency for c in getattr(scene, "control", ()) if c.kind == "sine"]
-    sines += [j.frequency for j in getattr(scene, "drive", ()) if j.profile == "sine"]
-    span = ramp + max(PILOT_SHARE * (duration - ramp), PILOT_STEPS * scene.sim.dt, 1 / min(sines, default=math.inf))
+    span = ramp + max(PILOT_SHARE * (duration - ramp), PILOT_STEPS * scene.sim.dt, period(scene))
     if strokes > 1:
         span = math.ceil(span / stroke_time - 1e-9) * stroke_time
     if span >= WHOLE_SHARE * duration:
         return duration, scene.sim.settle
     return span, min(ramp if ramp > 0 else math.inf, scene.sim.settle, span / 2)
+
+
+def period(scene: Any) -> float:
+    """The period of the slowest sine control or drive (s; 0 where there is none): a gait's."""
+    sines = [c.frequency for c in getattr(scene, "control", ()) if c.kind == "sine"]
+    sines += [j.frequency for j in getattr(scene, "drive", ()) if j.profile == "sine"]
+    return 1 / min(sines) if sines and min(sines) > 0 else 0.0
 
 
 Pilot = Callable[[Any, bool, Callable[[float], None]], Any]
@@ -382,15 +385,15 @@ class Chooser:
     def _off(self, scene: Any, track: list[tuple[float, float, float]],
              against: tuple[str, float] | None) -> Callable[[], None] | None:
         """What a pilot does at each of its samples: keeps its robot's track (time, centre of mass x and y) and,
-        ``against`` another step's pilot, raises `Off` once its speed since the settling is estimated off by more
-        than `OFF_LIMIT` times the speed's limit over `OFF_HELD` of the window (None: no robot's state to read)."""
+        ``against`` another step's pilot, raises `Off` where its speed since the settling over whole periods of its
+        gait is estimated off by more than `OFF_LIMIT` times the speed's limit (None: no robot's state to read)."""
         if self.state is None:
             return None
         import numpy as np
         other = self._runs.get(against) if against is not None else None
-        limit, theirs = None, None
-        settle, span = scene.sim.settle, self.duration if self.whole else self.window
-        if other is not None and not isinstance(other, Exception) and against in self._tracks:
+        limit, theirs, every = None, None, period(scene)
+        settle = scene.sim.settle
+        if other is not None and not isinstance(other, Exception) and against in self._tracks and every > 0:
             named = other.headline() if self.limits.figures is None else self.limits.figures
             speed_limit = next((f for f in named if f.key == "com_speed_m_s"), None)
             speed = other.figure_values().get("com_speed_m_s")
@@ -399,7 +402,7 @@ class Chooser:
                 limit = speed_limit.allowed(speed)
                 theirs = lambda t: np.array([np.interp(t, past[:, 0], past[:, k]) for k in (1, 2)])  # noqa: E731
         start: list[Any] = []  # the robot's position at the settling
-        held: list[float] = []  # since when it has been off by far
+        periods = [1]          # the next whole number of periods to check at
 
         def watch() -> None:
             _, d, *_ = self.state(scene)
@@ -408,12 +411,12 @@ class Chooser:
                 before, at = track[-1][0], np.array(track[-1][1:])
                 start.append(at + (here - at) * ((settle - before) / (t - before) if t > before else 1.0))
             track.append((t, *here))
-            if theirs is None or not start or t < settle + OFF_FROM * (span - settle):
+            if theirs is None or not start or t < settle + periods[0] * every:
                 return
+            periods[0] = math.floor((t - settle) / every) + 1
             ours = np.hypot(*(here - start[0])) / (t - settle)
             off = SAFETY / (1 - FINER) * abs(ours - np.hypot(*(theirs(t) - theirs(settle))) / (t - settle))
-            held[:] = [held[0] if held else t] if off > OFF_LIMIT * limit else []
-            if held and t - held[0] >= OFF_HELD * (span - settle):
+            if off > OFF_LIMIT * limit:
                 raise Off(f"com_speed_m_s: its pilot at half the step, stopped at {t:.3g} s, was off by an "
                           f"estimated {off:.3g} m/s, over {OFF_LIMIT:g} times its limit {limit:.3g}",
                           "com_speed_m_s", float(off), float(off / limit))

@@ -348,23 +348,29 @@ def test_a_price_stops_where_it_shows_its_candidate_dearer_and_goes_on_where_it_
     assert ("explicit", 1e-5) not in chooser._bounds
 
 
-def test_a_pilot_at_half_the_step_stops_once_its_speed_is_held_far_off_its_runs(tmp_path):
-    # The robot of the pilot at the step moves along x at 50 mm/s throughout; that at half the step as far plus an
-    # offset from the settling on. The companion would estimate the speed's error SAFETY / (1 - 1/2) times the
-    # difference of their speeds since the settling: above OFF_LIMIT times its 2 % limit (3 mm/s estimated, 0.75
-    # mm/s apart) for OFF_HELD of the window from OFF_FROM of it on, the pilot stops there; at 0.5 mm/s apart, or
-    # far ahead for a moment only (a lurch, then back), it runs through.
+SWAY = SLED_SCENE.replace('speed = 0.02\nstroke = 0.0', 'profile = "sine"\namplitude = 0.01\nfrequency = 5.0')
+
+
+def test_a_pilot_at_half_the_step_stops_where_its_speed_over_whole_periods_is_far_off_its_runs(tmp_path):
+    # The sled swayed at 5 Hz (its gait's period 0.2 s; the pilots are its whole 0.6 s run, settled at 0.3 s). The
+    # robot of the pilot at the step moves along x at 50 mm/s; that at half the step as far plus an offset from the
+    # settling on. The companion would estimate the speed's error SAFETY / (1 - 1/2) times the difference of their
+    # speeds since the settling: where that is above OFF_LIMIT times its 2 % limit (3 mm/s estimated, 0.75 mm/s
+    # apart) after a whole period, the pilot stops there; at 0.5 mm/s apart, or far ahead within the period only (a
+    # lurch, then back), it runs through.
     from types import SimpleNamespace
 
     import numpy as np
 
     from finrft import choice as choosing
+    (tmp_path / "sled.xml").write_text(SLED)
+    (tmp_path / "sway.toml").write_text(SWAY)
     d = SimpleNamespace(time=0.0, subtree_com=np.zeros((1, 3)))
-    chooser = choosing.Chooser(load_scene(_sled(tmp_path), cls=UserScene), ErrorLimits(), None, lambda s: None,
-                               0.6, 0.6, 1, state=lambda scene: (None, d, None, None))
+    chooser = choosing.Chooser(load_scene(str(tmp_path / "sway.toml"), cls=UserScene), ErrorLimits(), None,
+                               lambda s: None, 0.6, 0.6, 1, state=lambda scene: (None, d, None, None))
     scene = chooser.at("newton", 1e-3)
-    settle, end = scene.sim.settle, chooser.duration if chooser.whole else chooser.window
-    times = np.linspace(0.0, end, 601)
+    assert chooser.whole and choosing.period(scene) == pytest.approx(0.2)
+    times = np.linspace(0.0, 0.6, 601)
     run = SimpleNamespace(figure_values=lambda: {"com_speed_m_s": 0.05},
                           headline=lambda: (FigureLimit("com_speed_m_s", 2.0),))
     chooser._runs[("newton", 2e-3)] = run
@@ -373,18 +379,17 @@ def test_a_pilot_at_half_the_step_stops_once_its_speed_is_held_far_off_its_runs(
     def stopped(offset) -> float | None:  # where the pilot at half the step stops (s), None where it runs through
         watch = chooser._off(scene, [], ("newton", 2e-3))
         for t in times:
-            d.time, d.subtree_com[0, 0] = t, 0.05 * t + offset(t - settle)
+            d.time, d.subtree_com[0, 0] = t, 0.05 * t + offset(t - 0.3)
             try:
                 watch()
             except choosing.Off as off:
-                assert off.off == pytest.approx(4 * abs(offset(t - settle)) / (t - settle), rel=1e-6)
+                assert off.off == pytest.approx(4 * abs(offset(t - 0.3)) / (t - 0.3), rel=1e-6)
                 assert off.excess == pytest.approx(off.off / 1e-3, rel=1e-6)
                 return t
         return None
-    first, held = choosing.OFF_FROM * (end - settle), choosing.OFF_HELD * (end - settle)
-    assert stopped(lambda s: 0.001 * max(s, 0.0)) == pytest.approx(settle + first + held, abs=2 * end / 600)
+    assert stopped(lambda s: 0.001 * max(s, 0.0)) == pytest.approx(0.5, abs=1.5e-3)
     assert stopped(lambda s: -0.0005 * max(s, 0.0)) is None
-    assert stopped(lambda s: 0.002 * s if 0 < s < first + held / 2 else 0.0) is None
+    assert stopped(lambda s: 0.01 * s if 0 < s < 0.15 else 0.0) is None
 
 
 BOX = """<mujoco><worldbody><body name="box" pos="0 0 -0.02"><joint type="slide" axis="{axis}"/>

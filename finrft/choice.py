@@ -492,7 +492,8 @@ class Chooser:
         if key not in self._rates or (key in self._bounds and self.cost(method, dt) < dearer_than):
             start = time.perf_counter()
             share = min(1.0, max(PRICE_SHARE * self.duration, PILOT_STEPS * dt) / self.window)
-            self.budget = dearer_than / (self.duration * COMPANION_COST) * share * self.window
+            # the CPU its timed stretch (its second half) would take at the cost of ``dearer_than``
+            self.budget = dearer_than / (self.duration * COMPANION_COST) * share / 2 * self.window
             try:
                 scene = self.at(method, dt)
                 self.prepare(scene)
@@ -537,7 +538,9 @@ class Chooser:
             marks[1:] = [(clock(), fraction)]
             if fraction >= share and share < 1:
                 raise _Enough
-            if marks[1][0] - begin > self.budget:
+            # a stretch timed past ``skip`` is held to the budget from its opening (a price's first half, a
+            # robot's landing, would weigh on it unlike on the prices it is compared with)
+            if marks[0][1] >= skip and marks[1][0] - (marks[0][0] if skip > 0 else begin) > self.budget:
                 raise _Enough(f"stopped at {fraction * span:.3g} s: it cost more than {self.budget:.3g} s, more "
                               f"than the cheaper candidate that met the limits")
             if watch is not None:

@@ -325,26 +325,27 @@ def test_a_step_is_priced_by_the_cost_per_step_its_method_showed_at_two_steps(tm
 
 def test_a_price_stops_where_it_shows_its_candidate_dearer_and_goes_on_where_it_comes_to_rank_first(tmp_path):
     # A candidate whose run costs 40 s of CPU a simulated second against another's 0.5 s: its price stops once its
-    # stretch has cost what the other's whole run with its companion would (its cost then a bound below that, never
-    # a failure), and is taken further, from its start again, once the other costs more.
+    # timed stretch (the second half of PRICE_SHARE of the run) has cost what the other's would at the other's cost
+    # (its cost then a bound below that, never a failure), and is taken further, from its start again, once the
+    # other costs more.
     from finrft import choice as choosing
     chooser = choosing.Chooser(load_scene(_sled(tmp_path), cls=UserScene), ErrorLimits(), None, lambda s: None,
                                0.6, 0.6, 1)
     spent = []
 
-    def timed(scene, span, share=1.0, skip=0.0, sample=False):  # a run costing 40 s a second, stopped at budget
-        reached = min(share * span, chooser.budget / 40.0)
+    def timed(scene, span, share=1.0, skip=0.0, sample=False, watch=None):  # 40 s a second, its timed stretch
+        reached = min((share - skip) * span, chooser.budget / 40.0)              # held to the budget
         spent.append(40.0 * reached)
-        stopped = reached < share * span * (1 - 1e-9)
+        stopped = reached < (share - skip) * span * (1 - 1e-9)
         return (choosing._Enough("dearer") if stopped else None), 40.0
     chooser._timed = timed
     other = 0.5 * 0.6 * choosing.COMPANION_COST  # the other candidate's run and companion, CPU s
     assert chooser.price("explicit", 1e-5, other) >= other
-    assert spent[0] == pytest.approx(other * choosing.PRICE_SHARE / choosing.COMPANION_COST, rel=1e-9)
+    assert spent[0] == pytest.approx(other * choosing.PRICE_SHARE / 2 / choosing.COMPANION_COST, rel=1e-9)
     assert ("explicit", 1e-5) not in chooser._runs  # no failure stored for it: it may yet run
     assert chooser.price("explicit", 1e-5, other) >= other and len(spent) == 1  # not priced again while dearer
     chooser.price("explicit", 1e-5, 1e3)  # the other now dearer than its bound: priced over its whole stretch
-    assert spent[1] == pytest.approx(40.0 * choosing.PRICE_SHARE * 0.6, rel=1e-9)
+    assert spent[1] == pytest.approx(40.0 * choosing.PRICE_SHARE / 2 * 0.6, rel=1e-9)
     assert ("explicit", 1e-5) not in chooser._bounds
 
 

@@ -290,6 +290,16 @@ def test_a_method_aimed_far_down_is_ranked_by_the_pilots_of_its_walk_there():
     assert chosen == ("newton-midpoint", 1e-3)
 
 
+def test_newton_is_piloted_before_newton_midpoint_priced_alike_within_the_noise_of_cpu_time():
+    # Whole pilots, both methods within the limits at 2 ms: newton-midpoint's pilot goes first only where it is
+    # priced cheaper than newton's by more than NEWTON_FIRST (1.5) times, and the first that meets the limits is run.
+    from finrft import choice as choosing
+    both = {"newton-midpoint": lambda dt: 0.5, "newton": lambda dt: 0.5}
+    for midpoint, first in ((2.0 / 1.25, "newton"), (2.0 / (1.01 * choosing.NEWTON_FIRST), "newton-midpoint")):
+        tried, chosen = _searched(both, {"newton": 2.0, "newton-midpoint": midpoint}, whole=True)
+        assert tried == [(first, 2e-3)] and chosen == (first, 2e-3)
+
+
 def test_an_explicit_step_is_walked_down_step_by_step():
     # A sled that hops out of the sand at 2 and 1 ms (75 and 79 % off its cost of transport) and settles at 0.5 ms:
     # the explicit step's error need not fall with the step, and can collapse at the next halving (the quadruped's:

@@ -115,10 +115,11 @@ STILL = 0.02
 # 0.125 ms at 0.31 ms).
 PER_STEP = (0.0, 1.0)
 # Before either is piloted, newton-midpoint's pilot at a step is run before newton's only where it is predicted
-# cheaper by more than this factor. The two cost alike (the spoke hexapod's: 0.573 s of CPU a simulated second each at 2 ms), their prices
-# over a tenth of the run differed by up to 1.2 times either way, and which ran first decided the choice's cost
-# (the paddle sled's 1.3 or 2.5 times the fastest run that passes) and at times the choice (the whegs'): among
-# equals the pilots go in one order, newton's first, the L-stable step whose first-order error each halving halves.
+# cheaper by more than this factor. The two cost alike (the spoke hexapod's: 0.573 s of CPU a simulated second
+# each at 2 ms), their prices over a tenth of the run differed by up to 1.2 times either way, and which ran first
+# decided the choice's cost (the paddle sled's 1.3 or 2.5 times the fastest run that passes) and at times the
+# choice (the whegs'): among equals the pilots go in one order, newton's first, the L-stable step whose
+# first-order error each halving halves.
 NEWTON_FIRST = 1.5
 # A run's cost against its pilot's: the run itself and its companion at half the step (`convergence.checked`).
 COMPANION_COST = 1 + 1 / FINER
@@ -589,8 +590,8 @@ class Chooser:
         are not whole runs, the run at aim with its companion. A method aimed far down costs its walk there, not its
         last step's alone (the sandfish's newton, 19 % off at 2 ms, aimed at 0.125 ms: pilots at 0.5 ms to 62.5 us, a
         quarter more than its run at 0.125 ms with its companion), and a step whose pilot ran as the one that judged
-        the step before it costs its pilot at half the step alone. A price is taken no further than shows it costs more
-        than ``dearer_than`` (`price`)."""
+        the step before it costs its pilot at half the step alone. A price is taken no further than shows it costs
+        more than ``dearer_than`` (`price`)."""
         cost, step = 0.0, dt
         while step >= aim * FINER * (1 - 1e-9):
             if (method, step) not in self._runs:
@@ -628,11 +629,12 @@ class Chooser:
     def search(self, allowed: tuple[str, ...]) -> list[Candidate]:
         """The candidates of ``allowed`` methods that met the limits, cheapest first, found best first: each method's
         ladder from START x sim.dt down, the cheapest predicted candidate measured next, until none left could cost
-        less than `SAVING` of the cheapest that met the limits. A step that misses them goes down one halving; its
-        implicit method is ranked by the predicted cost of a verdict at the step its error asks for (first order,
-        aimed at SAFE of the limit; `verdict`), the explicit step by its next one: its error can fall much faster, as a body's stability margin
-        is crossed (the quadruped's: 6.5 % off at 2 ms, 0.95 % at 1 ms; a 2 kg sled's: 79 % off at 1 ms, 0.02 % at
-        0.5 ms)."""
+        less than `SAVING` of the cheapest that met the limits (before either implicit method is piloted, newton
+        first among equals: `NEWTON_FIRST`). A step that misses them goes down one halving; its implicit method is
+        ranked by the predicted cost of a verdict at the step its error asks for (first order, aimed at SAFE of the
+        limit; `verdict`), the explicit step by its next one: its error can fall much faster, as a body's stability
+        margin is crossed (the quadruped's: 6.5 % off at 2 ms, 0.95 % at 1 ms; a 2 kg sled's: 79 % off at 1 ms,
+        0.02 % at 0.5 ms)."""
         finest = {m: self.top * FINER ** (EXPLICIT_HALVINGS if m == "explicit" else HALVINGS) for m in allowed}
         ladder: dict[str, float | None] = {m: self.top for m in allowed}
         aim = dict(ladder)  # the step each method is ranked by

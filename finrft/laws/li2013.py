@@ -31,7 +31,7 @@ alpha_x changes sign. Public codes differ from the paper's fit in two ways this 
 from __future__ import annotations
 
 import math
-from dataclasses import astuple, dataclass
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -75,7 +75,8 @@ class Coefficients:
         return cls(*(v * N_PER_CM3 for v in values))
 
     def values(self) -> tuple[float, ...]:
-        return astuple(self)
+        # the fields themselves: dataclasses.astuple deep-copies each, half the cost of a law call in numpy
+        return tuple(getattr(self, f.name) for f in fields(self))
 
 
 # Generic coefficients of Li et al. 2013 (their Table S2), as transcribed identically by independent public codes;

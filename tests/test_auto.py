@@ -404,6 +404,29 @@ def test_a_pilot_at_half_the_step_stops_where_its_speed_over_whole_periods_is_fa
     assert stopped(lambda s: 0.01 * s if 0 < s < 0.15 else 0.0) is None
 
 
+def test_a_candidate_whose_pilot_at_half_the_step_stopped_misses_and_that_pilot_runs_again_when_wanted(tmp_path):
+    # The pilot at half the step stops far off (`Off`): the candidate is measured and misses the limits by its
+    # estimate, and the stopped pilot is not kept: the next candidate of the method, at that step, runs it whole.
+    from types import SimpleNamespace
+
+    from finrft import choice as choosing
+    chooser = choosing.Chooser(load_scene(_sled(tmp_path), cls=UserScene), ErrorLimits(), None, lambda s: None,
+                               0.6, 0.6, 1)
+    runs = []
+
+    def timed(scene, span, share=1.0, skip=0.0, sample=False, watch=None):
+        runs.append(scene.sim.dt)
+        if scene.sim.dt == 1e-3 and runs.count(1e-3) == 1:
+            return choosing.Off("com_speed_m_s: off", "com_speed_m_s", 0.004, 4.0), 1.0
+        return SimpleNamespace(), 1.0
+    chooser._timed = timed
+    candidate = chooser.try_step("newton", 2e-3)
+    assert candidate.measured and not candidate.passed and candidate.excess == 4.0
+    assert candidate.error == {"com_speed_m_s": 0.004} and candidate.over == ["com_speed_m_s: off"]
+    assert ("newton", 1e-3) not in chooser._runs and runs == [2e-3, 1e-3]
+    assert not isinstance(chooser._run("newton", 1e-3), Exception) and runs == [2e-3, 1e-3, 1e-3]
+
+
 BOX = """<mujoco><worldbody><body name="box" pos="0 0 -0.02"><joint type="slide" axis="{axis}"/>
   <geom type="box" size="0.02 0.01 0.015" mass="0.2"/></body></worldbody></mujoco>"""
 

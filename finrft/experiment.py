@@ -268,12 +268,15 @@ def run(experiment: Experiment, scene: Any, *, progress: Callable[[float], None]
             mujoco.mj_resetData(built.model, d)
         return _once(experiment, s, built, d, p, companion)
     # The model depends on the numerics only through the step (`convergence.checked`): sim.method = "auto"'s pilots
-    # and the run share their models.
+    # and the run share their models, and one at another step is the first one at that step where the built model
+    # can say so (its ``at_step``; None: built again).
     models: dict[float, Any] = {}
 
     def build(s: Any) -> Any:
         if s.sim.dt not in models:
-            models[s.sim.dt] = experiment.build(s)
+            first = next(iter(models.values()), None)
+            again = getattr(first, "at_step", lambda dt: None)(s.sim.dt)
+            models[s.sim.dt] = again if again is not None else experiment.build(s)
         return models[s.sim.dt]
     # A signal is raised between the run's steps (`interrupts.check` in step_through), never inside MuJoCo's calls.
     with interrupts.deferred():

@@ -256,3 +256,31 @@ def test_values_take_unit_suffixes_in_the_toml_and_in_set(tmp_path):
     # a key set back to its default is no key the kind ignores: a dumped scene reads back
     assert load_scene(scene, cls=UserScene, overrides={"drive.amplitude": 0.0}).drive[0].amplitude == 0.0
 
+
+
+def test_a_model_at_another_step_steps_as_the_one_built_at_it_and_a_run_builds_once(monkeypatch):
+    # The run's model at half its step (its companion's, `auto`'s pilots') is the run's own with the step changed
+    # (`AttachedModel.at_step`): the wheel rig stepped 300 times by MuJoCo with the native plugin from the same
+    # state is bitwise the model built again at that step; a run and its companion build the model once.
+    import mujoco
+
+    from finrft import experiment
+    from finrft.experiments.user_model import example
+    scene = load_scene(example("wheel_rig"), cls=UserScene)
+    half = scene.replace(**{"sim.dt": scene.sim.dt / 2})
+    built = UserModel.of(scene).build(scene)
+    again, fresh = built.at_step(half.sim.dt), UserModel.of(half).build(half)
+    assert again.model is not built.model and built.model.opt.timestep == scene.sim.dt
+    states = []
+    for m in (again.model, fresh.model):
+        d = mujoco.MjData(m)
+        d.qvel[:] = 0.1
+        for _ in range(300):
+            mujoco.mj_step(m, d)
+        states.append(np.concatenate([d.qpos, d.qvel]))
+    assert np.array_equal(states[0], states[1]) and np.abs(states[0]).max() > 0
+    calls = []
+    monkeypatch.setattr(UserModel, "build", lambda self, s, build=UserModel.build: calls.append(s.sim.dt) or
+                        build(self, s))
+    run = experiment.run(UserModel.of(scene), scene)
+    assert calls == [scene.sim.dt] and run.error_companion

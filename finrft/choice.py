@@ -393,14 +393,16 @@ class Chooser:
              against: tuple[str, float] | None) -> Callable[[], None] | None:
         """What a pilot does at each of its samples: keeps its robot's track (time, centre of mass x and y) and,
         ``against`` another step's pilot, raises `Off` where its speed since the settling over whole periods of its
-        gait is estimated off by more than `OFF_LIMIT` times the speed's limit (None: no robot's state to read)."""
-        if self.state is None:
+        gait is estimated off by more than `OFF_LIMIT` times the speed's limit (None: no robot's state to read, or no
+        gait's period to compare over)."""
+        every = period(scene)
+        if self.state is None or not every > 0:
             return None
         import numpy as np
         other = self._runs.get(against) if against is not None else None
-        limit, theirs, every = None, None, period(scene)
+        limit, theirs = None, None
         settle = scene.sim.settle
-        if other is not None and not isinstance(other, Exception) and against in self._tracks and every > 0:
+        if other is not None and not isinstance(other, Exception) and against in self._tracks:
             named = other.headline() if self.limits.figures is None else self.limits.figures
             speed_limit = next((f for f in named if f.key == "com_speed_m_s"), None)
             speed = other.figure_values().get("com_speed_m_s")
@@ -584,20 +586,20 @@ class Chooser:
         reach = min(max(dt / near, FINER), 1 / FINER)
         return self.cost(method, near) * near / dt * reach ** power
 
-    def verdict(self, method: str, dt: float, aim: float, dearer_than: float = math.inf) -> float:
+    def verdict(self, method: str, dt: float, aim: float, run: float, dearer_than: float = math.inf) -> float:
         """The predicted cost (s) of knowing whether ``method`` meets the limits at ``aim``, walked down from its
         ladder's ``dt``: its pilots not run yet, at each step from dt to aim and at half of aim, and, where the pilots
-        are not whole runs, the run at aim with its companion. A method aimed far down costs its walk there, not its
-        last step's alone (the sandfish's newton, 19 % off at 2 ms, aimed at 0.125 ms: pilots at 0.5 ms to 62.5 us, a
-        quarter more than its run at 0.125 ms with its companion), and a step whose pilot ran as the one that judged
-        the step before it costs its pilot at half the step alone. A price is taken no further than shows it costs
-        more than ``dearer_than`` (`price`)."""
+        are not whole runs, ``run``, the run at aim with its companion (`predicted`). A method aimed far down costs
+        its walk there, not its last step's alone (the sandfish's newton, 19 % off at 2 ms, aimed at 0.125 ms: pilots
+        at 0.5 ms to 62.5 us, a quarter more than its run at 0.125 ms with its companion), and a step whose pilot ran
+        as the one that judged the step before it costs its pilot at half the step alone. A price is taken no
+        further than shows it costs more than ``dearer_than`` (`price`)."""
         cost, step = 0.0, dt
         while step >= aim * FINER * (1 - 1e-9):
             if (method, step) not in self._runs:
                 cost += self.predicted(method, step, dearer_than) / COMPANION_COST * self.window / self.duration
             step *= FINER
-        return cost if self.whole else cost + self.predicted(method, aim, dearer_than)
+        return cost if self.whole else cost + run
 
     def _sample(self, scene: Any, t: float) -> None:
         """The bodies' limits at time ``t`` of an implicit pilot (`body_limits`), where its state is finite and no
@@ -653,7 +655,7 @@ class Chooser:
                     if cost != cost:  # NaN: it failed at once, its pilot is all it costs
                         options.append((0.0, 0.0, m, ladder[m]))
                     else:
-                        options.append((self.verdict(m, ladder[m], target, cheapest), cost, m, ladder[m]))
+                        options.append((self.verdict(m, ladder[m], target, cost, cheapest), cost, m, ladder[m]))
             dearer = [o for o in options if best is not None and not o[1] < SAVING * best.cost_s]
             for _, cost, method, dt in dearer:
                 if not any((c.method, c.dt) == (method, dt) for c in self.candidates):

@@ -6,10 +6,9 @@ from __future__ import annotations
 
 import copy
 import ctypes
-import dataclasses
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Callable, Sequence
 from xml.etree import ElementTree
@@ -57,7 +56,7 @@ class AttachedModel:
             return None
         model = copy.copy(self.model)
         model.opt.timestep = dt
-        return dataclasses.replace(self, model=model)
+        return replace(self, model=model)
 
 
 def read_spec(path: str) -> mujoco.MjSpec:

@@ -90,6 +90,12 @@ SAVING = 0.85
 # its second half: a robot's first moments (a sled landing on the sand) can cost a Newton step several times its
 # gait's (the paddle sled's newton-midpoint priced at 4 times its cost from its first 5 %).
 PRICE_SHARE = 0.1
+# An explicit step's price stops in the first half of its stretch, before the half it times, where at its pace so
+# far the half it times would cost EARLY times its budget (`Chooser.price`): the sandfish's explicit step at 4 us
+# spent 0.9 s of its 4.4 s choice on the half it does not time. Not a Newton method's: there a landing can cost
+# several times the gait (stopped so at 4 times, the paddle sled's newton at 0.5 ms was priced at 3 times its
+# cost, and newton-midpoint, 24 times over the limits, ran first: 12.5 s against 6).
+EARLY = 4.0
 # An explicit candidate whose step exceeds this share of the bodies' explicit limit (`window_limit`) is not
 # piloted: beyond it a light link's velocity reverses each step, and its figures are off however they pass the
 # chatter probe and their estimate (the sandfish's 10 g links, their limit 3 us: its speed 25-27 % low from 8 us to
@@ -356,6 +362,7 @@ class Chooser:
         self._walls: dict[tuple[str, float], float] = {}  # its wall time
         self._whole: set[tuple[str, float]] = set()       # the pilots timed over the window, not a price's stretch
         self._bounds: set[tuple[str, float]] = set()      # the prices stopped dearer than another (`price`)
+        self._priced: dict[tuple[str, float], float] = {}  # each price's own rate (`calibration`)
         self._tracks: dict[tuple[str, float], list] = {}  # each whole pilot's robot's track (`_off`)
 
     def at(self, method: str, dt: float) -> Any:
@@ -444,8 +451,23 @@ class Chooser:
 
     def cost(self, method: str, dt: float) -> float:
         """The predicted time of the whole run with its companion (CPU s, the wall time of an idle machine), from the
-        pilot at dt (NaN: none got far)."""
-        return self._rates.get((method, dt), math.nan) * self.duration * COMPANION_COST
+        pilot at dt (NaN: none got far), a price's times its kind's `calibration`."""
+        key = (method, dt)
+        rate = self._rates.get(key, math.nan) * (1.0 if key in self._whole else self.calibration(method))
+        return rate * self.duration * COMPANION_COST
+
+    def calibration(self, method: str) -> float:
+        """What a price's rate is to be multiplied by to be a whole pilot's: the geometric mean, over the candidates
+        of ``method``'s kind (the explicit step, or the implicit methods) both priced and run through whole, of the
+        whole pilot's rate over its price's; 1 where none is. A price times its run's start, which may cost other
+        than the rest: the eel's, where its gait ramps in, cost its Newton methods 0.20-0.21 s a simulated second,
+        their whole pilots 0.43-0.47; priced as they were, newton-midpoint's pilots at 2 ms were ranked below
+        newton's at 0.5 ms, which cost less, measured after newton's at 2 ms."""
+        explicit = method == "explicit"
+        ratios = [math.log(self._rates[key] / rate) for key, rate in self._priced.items()
+                  if (key[0] == "explicit") == explicit and key in self._whole and rate > 0
+                  and self._rates[key] > 0 and not isinstance(self._runs.get(key, None), Exception | type(None))]
+        return math.exp(sum(ratios) / len(ratios)) if ratios else 1.0
 
     def try_step(self, method: str, dt: float, cheaper_than: float = math.inf,
                  dearer: str = "predicted to cost more than the cheapest that met the limits") -> Candidate:
@@ -502,11 +524,13 @@ class Chooser:
             start = time.perf_counter()
             share = min(1.0, max(PRICE_SHARE * self.duration, PILOT_STEPS * dt) / self.window)
             # the CPU its timed stretch (its second half) would take at the cost of ``dearer_than``
-            self.budget = dearer_than / (self.duration * COMPANION_COST) * share / 2 * self.window
+            self.budget = (dearer_than / self.calibration(method) / (self.duration * COMPANION_COST) * share / 2
+                           * self.window)
             try:
                 scene = self.at(method, dt)
                 self.prepare(scene)
-                run, self._rates[key] = self._timed(scene, self.window, share, share / 2, sample=method in IMPLICIT)
+                run, self._rates[key] = self._timed(scene, self.window, share, share / 2, sample=method in IMPLICIT,
+                                                    early=method == "explicit")
             except SceneError as exc:  # as `_run`
                 if not dt > self.scene.sim.dt:
                     raise
@@ -514,6 +538,7 @@ class Chooser:
             finally:
                 self.budget = math.inf
             self._bounds.discard(key)
+            self._priced[key] = self._rates[key]
             if isinstance(run, _Enough):  # stopped dearer: its rate so far
                 self._bounds.add(key)
             elif run is not None:  # it failed there, or ran through: the pilot itself, the same run
@@ -523,14 +548,16 @@ class Chooser:
         return self.cost(method, dt)
 
     def _timed(self, scene: Any, span: float, share: float = 1.0, skip: float = 0.0,
-               sample: bool = False, watch: Callable[[], None] | None = None) -> tuple[Any, float]:
+               sample: bool = False, watch: Callable[[], None] | None = None,
+               early: bool = False) -> tuple[Any, float]:
         """A pilot's result (or its step's failure; None where it stopped at ``share`` of its run) and its CPU time
         per simulated second, from its first recorded sample at or past ``skip`` of it on (a run's set-up, a fixed
         cost, would weigh on a short stretch) as far as it got (NaN: nowhere). CPU time, not wall time: the choice
         must not follow the load of other processes. With ``sample``, the bodies' limits (`body_limits`) are
         sampled as it goes, outside its timing, once in `LIMIT_SAMPLES` of the window; ``watch`` is called at
-        each sample (`_off`)."""
+        each sample (`_off`). With ``early``, the budget holds before ``skip`` too, as `EARLY` times it."""
         marks: list[tuple[float, float]] = []
+        first: list[tuple[float, float]] = []  # the first sample
         spent = [0.0]  # CPU time spent sampling
 
         def clock() -> float:
@@ -545,11 +572,20 @@ class Chooser:
             if not marks or marks[0][1] < skip:  # the first sample at or past ``skip`` opens the stretch timed
                 marks[:] = [(clock(), fraction)]
             marks[1:] = [(clock(), fraction)]
+            first[:] = first or marks[:1]
             if fraction >= share and share < 1:
                 raise _Enough
             # a stretch timed past ``skip`` is held to the budget from its opening (a price's first half, a
             # robot's landing, would weigh on it unlike on the prices it is compared with)
-            if marks[0][1] >= skip and marks[1][0] - (marks[0][0] if skip > 0 else begin) > self.budget:
+            if marks[0][1] >= skip:
+                over = marks[1][0] - (marks[0][0] if skip > 0 else begin) > self.budget
+            else:  # before it, the explicit step: where the stretch it times would cost EARLY times the budget at
+                # its pace since its first sample (the run's set-up before it, a fixed cost, is not its pace)
+                ran = fraction - first[0][1]
+                over = early and ran > 0 and (marks[1][0] - first[0][0]) / ran * (share - skip) > EARLY * self.budget
+                if over:  # its rate: its pace since
+                    marks[:] = [first[0], marks[1]]
+            if over:
                 raise _Enough(f"stopped at {fraction * span:.3g} s: it cost more than {self.budget:.3g} s, more "
                               f"than the cheaper candidate that met the limits")
             if watch is not None:

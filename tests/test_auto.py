@@ -344,7 +344,7 @@ def test_a_price_stops_where_it_shows_its_candidate_dearer_and_goes_on_where_it_
                                0.6, 0.6, 1)
     spent = []
 
-    def timed(scene, span, share=1.0, skip=0.0, sample=False, watch=None):  # 40 s a second, its timed stretch
+    def timed(scene, span, share=1.0, skip=0.0, sample=False, watch=None, early=False):  # 40 s a second, timed
         reached = min((share - skip) * span, chooser.budget / 40.0)              # held to the budget
         spent.append(40.0 * reached)
         stopped = reached < (share - skip) * span * (1 - 1e-9)
@@ -358,6 +358,62 @@ def test_a_price_stops_where_it_shows_its_candidate_dearer_and_goes_on_where_it_
     chooser.price("explicit", 1e-5, 1e3)  # the other now dearer than its bound: priced over its whole stretch
     assert spent[1] == pytest.approx(40.0 * choosing.PRICE_SHARE / 2 * 0.6, rel=1e-9)
     assert ("explicit", 1e-5) not in chooser._bounds
+
+
+def test_a_price_is_scaled_by_what_its_kinds_whole_pilots_cost_over_their_prices(tmp_path):
+    # Newton priced at 0.2 s a simulated second, run whole at 0.44 (2.2 times: the eel's start, its gait ramping in,
+    # costs less than the rest); newton-midpoint, priced alike at 0.21, is then predicted at 0.21 x 2.2, not 0.21.
+    # A second pair at 1.8 times: the geometric mean of the two, 1.99. The explicit step's price, of another kind
+    # (no Newton iterations to follow the gait), stays as priced; a whole pilot's cost is its own.
+    import math
+
+    from finrft import choice as choosing
+    chooser = choosing.Chooser(load_scene(_sled(tmp_path), cls=UserScene), ErrorLimits(), None, lambda s: None,
+                               0.6, 0.6, 1)
+    whole = lambda rate: rate * 0.6 * choosing.COMPANION_COST  # noqa: E731  a rate's run with its companion
+    chooser._priced.update({("newton", 2e-3): 0.2, ("newton-midpoint", 2e-3): 0.21, ("explicit", 1e-4): 3.0})
+    chooser._rates.update({("newton", 2e-3): 0.44, ("newton-midpoint", 2e-3): 0.21, ("explicit", 1e-4): 3.0})
+    chooser._whole.add(("newton", 2e-3))
+    chooser._runs[("newton", 2e-3)] = object()  # ran through
+    assert chooser.cost("newton", 2e-3) == pytest.approx(whole(0.44), rel=1e-12)
+    assert chooser.cost("newton-midpoint", 2e-3) == pytest.approx(whole(0.21 * 2.2), rel=1e-12)
+    assert chooser.cost("explicit", 1e-4) == pytest.approx(whole(3.0), rel=1e-12)
+    chooser._priced[("newton", 1e-3)] = 0.5
+    chooser._rates[("newton", 1e-3)] = 0.9
+    chooser._whole.add(("newton", 1e-3))
+    chooser._runs[("newton", 1e-3)] = choosing.SimulationUnstable("it failed")  # no whole pilot's pace: left out
+    assert chooser.cost("newton-midpoint", 2e-3) == pytest.approx(whole(0.21 * 2.2), rel=1e-12)
+    chooser._runs[("newton", 1e-3)] = object()
+    assert chooser.cost("newton-midpoint", 2e-3) == pytest.approx(whole(0.21 * math.sqrt(2.2 * 1.8)), rel=1e-12)
+
+
+def test_an_explicit_price_stops_before_the_half_it_times_where_its_pace_shows_it_dearer(tmp_path, monkeypatch):
+    # A fake CPU clock: a pilot set up in 50 s, then every 1 % of its run costs 1 s. Budget 0.1 s for the stretch it
+    # times (5 % to 10 %, 5 s at its pace): held EARLY times over from the start, the explicit step's price stops at
+    # its first sample past 0, its rate its pace since its first sample; a Newton method's (a landing may cost it
+    # several times its gait) runs to its timed half, and stops there at its budget. With a budget of 2 s, 8 s at
+    # EARLY times, its pace runs it to its timed half: the set-up is not its pace.
+    from finrft import choice as choosing
+    chooser = choosing.Chooser(load_scene(_sled(tmp_path), cls=UserScene), ErrorLimits(), None, lambda s: None,
+                               0.6, 0.6, 1)
+    now = [0.0]
+    monkeypatch.setattr(choosing.time, "process_time", lambda: now[0])
+    reached = []
+
+    def pilot(scene, companion, progress):
+        for i in range(101):
+            now[0] = 50.0 + i
+            reached.append(i / 100)
+            progress(i / 100)
+    chooser.pilot, chooser.budget = pilot, 0.1
+    run, rate = chooser._timed(None, 0.6, 0.1, 0.05, early=True)
+    assert isinstance(run, choosing._Enough) and run.args and reached[-1] == 0.01
+    assert rate == pytest.approx(1.0 / (0.01 * 0.6), rel=1e-9)
+    for early, budget, stop in ((False, 0.1, 0.06), (True, 2.0, 0.08)):
+        reached.clear()
+        now[0], chooser.budget = 0.0, budget
+        run, _ = chooser._timed(None, 0.6, 0.1, 0.05, early=early)
+        assert isinstance(run, choosing._Enough) and run.args and reached[-1] == stop
 
 
 SWAY = SLED_SCENE.replace('speed = 0.02\nstroke = 0.0', 'profile = "sine"\namplitude = 0.01\nfrequency = 5.0')

@@ -39,6 +39,7 @@ class AttachedModel:
     drive_qpos: np.ndarray
     armature: np.ndarray       # each driven joint's armature (kg or kg m^2)
     bodies: np.ndarray         # ids of the attached bodies, in the order named
+    size: float                # the attached bodies' size at rest (m, `rest_size`)
     groups: tuple = ()         # no segment force groups: the forces are the attached surfaces'
 
     @property
@@ -159,9 +160,21 @@ def build_attached(spec: mujoco.MjSpec, joints: Sequence[str], bodies: tuple[str
     model = compile_spec(spec)
     ids = [model.joint(name).id for name in joints]
     dofs = np.array([model.jnt_dofadr[j] for j in ids], dtype=int)
+    attached_bodies = np.array([model.body(s.body).id for s in attached.surfaces], dtype=int)
     return AttachedModel(model, attached, dofs, np.array([model.jnt_qposadr[j] for j in ids], dtype=int),
-                         np.array(model.dof_armature[dofs], dtype=float),
-                         np.array([model.body(s.body).id for s in attached.surfaces], dtype=int))
+                         np.array(model.dof_armature[dofs], dtype=float), attached_bodies,
+                         rest_size(model, attached_bodies))
+
+
+def rest_size(m: mujoco.MjModel, bodies: np.ndarray) -> float:
+    """The diagonal (m) of the box around ``bodies``' geoms' bounding spheres at the model's rest pose: computed
+    once a build, as a new MjData costs 3-9 ms (the wheel rig's, made for each of its ten pilots)."""
+    d = mujoco.MjData(m)
+    mujoco.mj_kinematics(m, d)
+    geoms = np.flatnonzero(np.isin(m.geom_bodyid, bodies))
+    low = (d.geom_xpos[geoms] - m.geom_rbound[geoms, None]).min(axis=0)
+    high = (d.geom_xpos[geoms] + m.geom_rbound[geoms, None]).max(axis=0)
+    return float(np.linalg.norm(high - low))
 
 
 def surface_arguments(medium: Medium, gravity: Sequence[float]) -> dict[str, Any]:

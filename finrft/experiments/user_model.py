@@ -355,10 +355,8 @@ class RobotTrial:
         series = self._unpack(readings["state"])
         if self._surface_record is not None:
             series["surface_time"], series["surface_height"] = self._surface_record.finish(d.time)
-        return series, {"model_size": model_size(self.built, m),
-                                                 "model_mass": float(m.body_mass.sum()),
-                                                 "gravity": float(np.linalg.norm(m.opt.gravity)),
-                                                 "window_means": self.means.parts(d.time)}
+        return series, {"model_size": self.built.size, "model_mass": float(m.body_mass.sum()),
+                        "gravity": float(np.linalg.norm(m.opt.gravity)), "window_means": self.means.parts(d.time)}
 
 
 class SurfaceRecord:
@@ -463,16 +461,6 @@ def _unpack(flat: np.ndarray, m: mujoco.MjModel, attached: int, drives: int) -> 
         out[name] = flat[:, at:at + size].reshape(len(flat), *shape)
         at += size
     return out
-
-
-def model_size(built: AttachedModel, m: mujoco.MjModel) -> float:
-    """The diagonal (m) of the box around the attached bodies' geoms' bounding spheres at the model's rest pose."""
-    d = mujoco.MjData(m)
-    mujoco.mj_kinematics(m, d)
-    geoms = np.flatnonzero(np.isin(m.geom_bodyid, built.bodies))
-    low = (d.geom_xpos[geoms] - m.geom_rbound[geoms, None]).min(axis=0)
-    high = (d.geom_xpos[geoms] + m.geom_rbound[geoms, None]).max(axis=0)
-    return float(np.linalg.norm(high - low))
 
 
 def window_mean(time: np.ndarray, values: np.ndarray, start: float) -> np.ndarray:

@@ -367,6 +367,7 @@ class Chooser:
         self._whole: set[tuple[str, float]] = set()       # the pilots timed over the window, not a price's stretch
         self._bounds: set[tuple[str, float]] = set()      # the prices stopped dearer than another (`price`)
         self._priced: dict[tuple[str, float], float] = {}  # each price's own rate (`calibration`)
+        self._partial: set[tuple[str, float]] = set()      # the rates of a failed run's start alone (`predicted`)
         self._tracks: dict[tuple[str, float], list] = {}  # each whole pilot's robot's track (`_off`)
 
     def at(self, method: str, dt: float) -> Any:
@@ -388,7 +389,12 @@ class Chooser:
             track: list[tuple[float, float, float]] = []
             run, self._rates[key] = self._timed(scene, self.window, sample=method in IMPLICIT,
                                                 watch=self._off(scene, track, against))
-            self._whole.add(key)
+            if not isinstance(run, SimulationUnstable):
+                self._whole.add(key)
+            elif key in self._priced and key not in self._partial:  # its price's stretch: past its start
+                self._rates[key] = self._priced[key]
+            else:
+                self._partial.add(key)
             if not isinstance(run, Off):
                 self._runs[key], self._tracks[key] = run, track
         except SceneError as exc:  # a step longer than the scene's that does not resolve its strokes
@@ -543,6 +549,8 @@ class Chooser:
                 self.budget = math.inf
             self._bounds.discard(key)
             self._priced[key] = self._rates[key]
+            if isinstance(run, SimulationUnstable):
+                self._partial.add(key)
             if isinstance(run, _Enough):  # stopped dearer: its rate so far
                 self._bounds.add(key)
             elif run is not None:  # it failed there, or ran through: the pilot itself, the same run
@@ -613,8 +621,13 @@ class Chooser:
         """A candidate's predicted cost (s): from its own pilot, else from the nearest step of its method that ran,
         its cost per step scaled as a power of the step measured between the two nearest whole pilots of the method,
         over one halving at most (a Newton step costs less where it is shorter: fewer iterations; `PER_STEP`), else
-        priced (`price`, no further than shows it costs more than ``dearer_than``) where it is the method's first."""
-        known = sorted((h for (m, h), rate in self._rates.items() if m == method and not math.isnan(rate)),
+        priced (`price`, no further than shows it costs more than ``dearer_than``) where it is the method's first.
+        A pilot that failed counts by its price where it had one, else not at all: its own rate is its run's start
+        alone (the whegs' explicit step at 0.5 ms, failed in its first 0.1 s before its feet bore on the sand, cost
+        0.6 of its price's cost a step, and its run at 0.25 ms was predicted at half its cost, below newton's at
+        1 ms, which cost less)."""
+        known = sorted((h for (m, h), rate in self._rates.items()
+                        if m == method and not math.isnan(rate) and (m, h) not in self._partial),
                        key=lambda h: abs(math.log(h / dt)))
         if (method, dt) in self._rates or not known:
             return self.price(method, dt, dearer_than)

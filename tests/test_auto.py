@@ -334,6 +334,24 @@ def test_a_step_is_priced_by_the_cost_per_step_its_method_showed_at_two_steps(tm
         per_step(1e-3) / 2.5e-4 * 0.6 * choosing.COMPANION_COST, rel=1e-9)
 
 
+def test_a_failed_pilot_counts_by_its_price_or_not_at_all_in_predicting_other_steps(tmp_path):
+    # The explicit step priced at 2 ms at 1 s of CPU a simulated second; its pilots at 2 and 1 ms fail at their
+    # start, where they ran at 0.6 and 1.2 (a robot not yet bearing on the sand). The step at 0.5 ms is predicted
+    # from the price at 2 ms, per step alike (4 times its rate), not from the failed pilot at 1 ms (twice 1.2).
+    from finrft import choice as choosing
+    from finrft.errors import SimulationUnstable
+    chooser = choosing.Chooser(load_scene(_sled(tmp_path), cls=UserScene), ErrorLimits(), None, lambda s: None,
+                               0.6, 0.6, 1)
+    chooser._priced[("explicit", 2e-3)] = chooser._rates[("explicit", 2e-3)] = 1.0
+    rates = {2e-3: 0.6, 1e-3: 1.2}
+    chooser._timed = lambda scene, span, sample=False, watch=None: (SimulationUnstable("it chatters"),
+                                                                    rates[scene.sim.dt])
+    for dt in rates:
+        assert isinstance(chooser._run("explicit", dt), SimulationUnstable)
+    assert chooser._rates[("explicit", 2e-3)] == 1.0 and not chooser._whole
+    assert chooser.predicted("explicit", 5e-4) == pytest.approx(4 * 1.0 * 0.6 * choosing.COMPANION_COST, rel=1e-12)
+
+
 def test_a_price_stops_where_it_shows_its_candidate_dearer_and_goes_on_where_it_comes_to_rank_first(tmp_path):
     # A candidate whose run costs 40 s of CPU a simulated second against another's 0.5 s: its price stops once its
     # timed stretch (the second half of PRICE_SHARE of the run) has cost what the other's would at the other's cost

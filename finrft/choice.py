@@ -94,7 +94,7 @@ PRICE_SHARE = 0.1
 # far the half it times would cost EARLY times its budget (`Chooser.price`): the sandfish's explicit step at 4 us
 # spent 0.9 s of its 4.4 s choice on the half it does not time. Not a Newton method's: there a landing can cost
 # several times the gait (stopped so at 4 times, the paddle sled's newton at 0.5 ms was priced at 3 times its
-# cost, and newton-midpoint, 24 times over the limits, ran first: 12.5 s against 6).
+# cost, and newton-midpoint, 24 times over the limits, ran first: 12.5 s against 5.7).
 EARLY = 4.0
 # An explicit candidate whose step exceeds this share of the bodies' explicit limit (`window_limit`) is not
 # piloted: beyond it a light link's velocity reverses each step, and its figures are off however they pass the
@@ -468,15 +468,14 @@ class Chooser:
 
     def calibration(self, method: str) -> float:
         """What a price's rate is to be multiplied by to be a whole pilot's: the geometric mean, over the candidates
-        of ``method``'s kind (the explicit step, or the implicit methods) both priced and run through whole, of the
-        whole pilot's rate over its price's; 1 where none is. A price times its run's start, which may cost other
-        than the rest: the eel's, where its gait ramps in, cost its Newton methods 0.20-0.21 s a simulated second,
-        their whole pilots 0.43-0.47; priced as they were, newton-midpoint's pilots at 2 ms were ranked below
-        newton's at 0.5 ms, which cost less, measured after newton's at 2 ms."""
+        of ``method``'s kind (the explicit step, or the implicit methods) both priced and then run as whole pilots
+        (not failed), of the whole pilot's rate over its price's; 1 where none is. A price times its run's start,
+        which may cost other than the rest: the eel's, where its gait ramps in, cost its Newton methods 0.20-0.21 s
+        a simulated second, their whole pilots 0.43-0.47; priced as they were, newton-midpoint's pilots at 2 ms were
+        ranked below newton's at 0.5 ms, which cost less, measured after newton's at 2 ms."""
         explicit = method == "explicit"
         ratios = [math.log(self._rates[key] / rate) for key, rate in self._priced.items()
-                  if (key[0] == "explicit") == explicit and key in self._whole and rate > 0
-                  and self._rates[key] > 0 and not isinstance(self._runs.get(key, None), Exception | type(None))]
+                  if (key[0] == "explicit") == explicit and key in self._whole and rate > 0 and self._rates[key] > 0]
         return math.exp(sum(ratios) / len(ratios)) if ratios else 1.0
 
     def try_step(self, method: str, dt: float, cheaper_than: float = math.inf,
@@ -567,8 +566,8 @@ class Chooser:
         cost, would weigh on a short stretch) as far as it got (NaN: nowhere). CPU time, not wall time: the choice
         must not follow the load of other processes. With ``sample``, the bodies' limits (`body_limits`) are
         sampled as it goes, outside its timing, once in `LIMIT_SAMPLES` of the window while they cost at most
-        `LIMIT_COST` of it; ``watch`` is called at
-        each sample (`_off`). With ``early``, the budget holds before ``skip`` too, as `EARLY` times it."""
+        `LIMIT_COST` of it; ``watch`` is called at each sample (`_off`). With ``early``, the budget holds before
+        ``skip`` too, as `EARLY` times it."""
         marks: list[tuple[float, float]] = []
         first: list[tuple[float, float]] = []  # the first sample
         spent = [0.0]  # CPU time spent sampling

@@ -391,17 +391,14 @@ def test_a_price_is_scaled_by_what_its_kinds_whole_pilots_cost_over_their_prices
     whole = lambda rate: rate * 0.6 * choosing.COMPANION_COST  # noqa: E731  a rate's run with its companion
     chooser._priced.update({("newton", 2e-3): 0.2, ("newton-midpoint", 2e-3): 0.21, ("explicit", 1e-4): 3.0})
     chooser._rates.update({("newton", 2e-3): 0.44, ("newton-midpoint", 2e-3): 0.21, ("explicit", 1e-4): 3.0})
-    chooser._whole.add(("newton", 2e-3))
-    chooser._runs[("newton", 2e-3)] = object()  # ran through
+    chooser._whole.add(("newton", 2e-3))  # ran whole
     assert chooser.cost("newton", 2e-3) == pytest.approx(whole(0.44), rel=1e-12)
     assert chooser.cost("newton-midpoint", 2e-3) == pytest.approx(whole(0.21 * 2.2), rel=1e-12)
     assert chooser.cost("explicit", 1e-4) == pytest.approx(whole(3.0), rel=1e-12)
     chooser._priced[("newton", 1e-3)] = 0.5
     chooser._rates[("newton", 1e-3)] = 0.9
+    assert chooser.cost("newton-midpoint", 2e-3) == pytest.approx(whole(0.21 * 2.2), rel=1e-12)  # not run whole
     chooser._whole.add(("newton", 1e-3))
-    chooser._runs[("newton", 1e-3)] = choosing.SimulationUnstable("it failed")  # no whole pilot's pace: left out
-    assert chooser.cost("newton-midpoint", 2e-3) == pytest.approx(whole(0.21 * 2.2), rel=1e-12)
-    chooser._runs[("newton", 1e-3)] = object()
     assert chooser.cost("newton-midpoint", 2e-3) == pytest.approx(whole(0.21 * math.sqrt(2.2 * 1.8)), rel=1e-12)
 
 

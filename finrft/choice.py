@@ -111,10 +111,6 @@ EXPLICIT_ROOM = 1.0
 # its explicit step at 0.5 ms is 1 % off; the slowest gaits here are 30 mm/s.
 LIMIT_SAMPLES = 40
 LIMIT_STRETCH = 0.1
-# A pilot samples the bodies' limits only while its samples have cost at most LIMIT_COST of its own steps' CPU time:
-# a sample costs 3-7 ms (each element's force, the mass matrix), and where the steps are cheap, the screw probe's
-# (3 s at 4 ms), 39 samples took 0.12 s of its choice's 0.31 s (0.135 s, 16 samples, with the cap).
-LIMIT_COST = 0.5
 MOVING = 0.25
 STILL = 0.02
 # The power of the step a step's cost goes with, as measured between two pilots of a method (`Chooser.predicted`),
@@ -565,9 +561,8 @@ class Chooser:
         per simulated second, from its first recorded sample at or past ``skip`` of it on (a run's set-up, a fixed
         cost, would weigh on a short stretch) as far as it got (NaN: nowhere). CPU time, not wall time: the choice
         must not follow the load of other processes. With ``sample``, the bodies' limits (`body_limits`) are
-        sampled as it goes, outside its timing, once in `LIMIT_SAMPLES` of the window while they cost at most
-        `LIMIT_COST` of it; ``watch`` is called at each sample (`_off`). With ``early``, the budget holds before
-        ``skip`` too, as `EARLY` times it."""
+        sampled as it goes, outside its timing, once in `LIMIT_SAMPLES` of the window; ``watch`` is called at each
+        sample (`_off`). With ``early``, the budget holds before ``skip`` too, as `EARLY` times it."""
         marks: list[tuple[float, float]] = []
         first: list[tuple[float, float]] = []  # the first sample
         spent = [0.0]  # CPU time spent sampling
@@ -577,7 +572,7 @@ class Chooser:
         sample = sample and self.state is not None and bool(self.allowed)
 
         def progress(fraction: float) -> None:
-            if sample and spent[0] <= LIMIT_COST * (clock() - begin):
+            if sample:
                 start = time.process_time()
                 self._sample(scene, fraction * span)
                 spent[0] += time.process_time() - start

@@ -431,31 +431,6 @@ def test_an_explicit_price_stops_before_the_half_it_times_where_its_pace_shows_i
         assert isinstance(run, choosing._Enough) and run.args and reached[-1] == stop
 
 
-def test_a_pilot_samples_the_bodies_limits_while_they_cost_at_most_a_share_of_its_steps(tmp_path, monkeypatch):
-    # A fake CPU clock: a pilot whose every 1 % costs 1 s, a sample of the bodies' limits 10 s. Offered a sample at
-    # each of its 101 progress reports, it takes one where those so far cost at most LIMIT_COST of its steps' time:
-    # the first, then one each 20 s of its own (6 in all), and its rate is its steps' alone.
-    from finrft import choice as choosing
-    chooser = choosing.Chooser(load_scene(_sled(tmp_path), cls=UserScene), ErrorLimits(), None, lambda s: None,
-                               0.6, 0.6, 1, state=lambda scene: None)
-    now, own, taken = [0.0], [0.0], []
-    monkeypatch.setattr(choosing.time, "process_time", lambda: now[0])
-
-    def sample(scene, t):
-        taken.append(t)
-        now[0] += 10.0
-
-    def pilot(scene, companion, progress):
-        for i in range(101):
-            now[0] += 1.0 if i else 0.0
-            own[0] += 1.0 if i else 0.0
-            progress(i / 100)
-    chooser.pilot, chooser._sample = pilot, sample
-    _, rate = chooser._timed(None, 0.6, sample=True)
-    assert len(taken) == 1 + int(own[0] * choosing.LIMIT_COST // 10.0) == 6
-    assert rate == pytest.approx(100.0 / 0.6, rel=1e-9)
-
-
 SWAY = SLED_SCENE.replace('speed = 0.02\nstroke = 0.0', 'profile = "sine"\namplitude = 0.01\nfrequency = 5.0')
 
 

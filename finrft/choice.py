@@ -387,7 +387,7 @@ class Chooser:
                                                 watch=self._off(scene, track, against))
             if not isinstance(run, SimulationUnstable):
                 self._whole.add(key)
-            elif key in self._priced and key not in self._partial:  # its price's stretch: past its start
+            elif key in self._priced:  # its price's stretch, past its start (a price that failed is its pilot)
                 self._rates[key] = self._priced[key]
             else:
                 self._partial.add(key)
@@ -617,9 +617,8 @@ class Chooser:
         over one halving at most (a Newton step costs less where it is shorter: fewer iterations; `PER_STEP`), else
         priced (`price`, no further than shows it costs more than ``dearer_than``) where it is the method's first.
         A pilot that failed counts by its price where it had one, else not at all: its own rate is its run's start
-        alone (the whegs' explicit step at 0.5 ms, failed in its first 0.1 s before its feet bore on the sand, cost
-        0.6 of its price's cost a step, and its run at 0.25 ms was predicted at half its cost, below newton's at
-        1 ms, which cost less)."""
+        alone (the whegs' explicit step at 0.5 ms, failed in its first 0.1 s, cost there 0.6 of its price's cost a
+        step, and its run at 0.25 ms was predicted at half its cost, below newton's at 1 ms, which cost less)."""
         known = sorted((h for (m, h), rate in self._rates.items()
                         if m == method and not math.isnan(rate) and (m, h) not in self._partial),
                        key=lambda h: abs(math.log(h / dt)))

@@ -271,7 +271,7 @@ class Attached:
             yield
 
 
-# `SurfaceForces.switch_slopes` takes a face's force moving into the medium at this many ramp widths along its
+# `SurfaceForces.limit_terms` takes a face's force moving into the medium at this many ramp widths along its
 # normal (tanh(3) = 0.995 of the full force), divided by tanh of it.
 FULL_RAMP = 3.0
 # ... and only where the element's normal speed is within this many widths of the switch (1 - tanh^2(8) = 4.5e-7).
@@ -303,23 +303,39 @@ class SurfaceForces:
         arm, normal, velocity, depth = self._moving(d, body, surface, twist)
         return self.attached.element_forces(normal, velocity, depth, surface.area, self.frame()), arm
 
-    def switch_slopes(self, d: mujoco.MjData, body: int, surface: Surface, twist: np.ndarray, width: float
-                      ) -> tuple[np.ndarray, np.ndarray]:
-        """Each element's force slope (N s/m) across its leading-face switch, and its normal (world frame), had the
-        body the ``twist``: the force it would carry moving into the medium along its face, over the switch's ramp
-        ``width`` (m/s; the laws' v_reg, `laws.regularised`), weighted by the ramp's slope at the element's normal
-        speed, 1 - tanh^2(n.v / width). A face grazing the medium (the top and bottom of a plate swimming level)
-        carries no force and has the full slope: a velocity along its normal of ``width`` switches its whole force
-        on."""
-        _, normal, velocity, depth = self._moving(d, body, surface, twist)
-        into = np.einsum("ij,ij->i", normal, velocity)
-        near = (np.abs(into) < NEAR_SWITCH * width) & (depth > 0)  # the others' slopes are below 1e-6 of theirs
-        slopes = np.zeros(len(into))
-        leading = velocity[near] + (FULL_RAMP * width - into[near])[:, None] * normal[near]
-        force = self.attached.element_forces(normal[near], leading, depth[near], surface.area[near], self.frame())
-        slopes[near] = (np.linalg.norm(force, axis=1) / np.tanh(FULL_RAMP) / width
-                        * (1 - np.tanh(into[near] / width) ** 2))
-        return slopes, normal
+    def limit_terms(self, d: mujoco.MjData, twists: Sequence[np.ndarray], width: float
+                    ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+        """For each of `bodies`, had it the twist of ``twists`` (angular velocity, velocity of its origin; world
+        frame) at the positions of ``d``: its elements' forces and velocities (world frame), their force slopes (N
+        s/m) across the leading-face switch: the force an element would carry moving into the medium along its face,
+        over the switch's ramp ``width`` (m/s; the laws' v_reg, `laws.regularised`), weighted by the ramp's slope at
+        its normal speed, 1 - tanh^2(n.v / width), and their normals (world frame). A face grazing the medium (the
+        top and bottom of a plate swimming level) carries no force and has the full slope: a velocity along its
+        normal of ``width`` switches its whole force on. One call of the law for all of them: its cost is mostly per
+        call."""
+        moving = [self._moving(d, body, surface, twist) for (body, surface), twist in zip(self.bodies, twists)]
+        if not moving:
+            return []
+        parts, near, into = [], [], []
+        for (_, surface), (_, normal, velocity, depth) in zip(self.bodies, moving):
+            along = np.einsum("ij,ij->i", normal, velocity)
+            # the others' slopes are below 1e-6 of theirs
+            close = (np.abs(along) < NEAR_SWITCH * width) & (depth > 0)
+            leading = velocity[close] + (FULL_RAMP * width - along[close])[:, None] * normal[close]
+            parts += [(normal, velocity, depth, surface.area),
+                      (normal[close], leading, depth[close], surface.area[close])]
+            near.append(close)
+            into.append(along)
+        force = self.attached.element_forces(*(np.concatenate(k) for k in zip(*parts)), self.frame())
+        ends = np.cumsum([len(part[2]) for part in parts])[:-1]
+        forces = np.split(force, ends)
+        terms = []
+        for i, (_, normal, velocity, _) in enumerate(moving):
+            slopes = np.zeros(len(into[i]))
+            slopes[near[i]] = (np.linalg.norm(forces[2 * i + 1], axis=1) / np.tanh(FULL_RAMP) / width
+                               * (1 - np.tanh(into[i][near[i]] / width) ** 2))
+            terms.append((forces[2 * i], velocity, slopes, normal))
+        return terms
 
     def _moving(self, d: mujoco.MjData, body: int, surface: Surface, twist: np.ndarray
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

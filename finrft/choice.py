@@ -289,16 +289,15 @@ def body_limits(m: Any, d: Any, groups: Any, attached: Any) -> tuple[Any, Any]:
         mujoco.mj_factorM(m, d)
         forces = attached.callback(m)
         floor = attached.v_reg if attached.v_reg > 0 else SURFACE_SPEED
-        twist = np.zeros(6)
-        for body, surface in forces.bodies:
+        twists = [np.zeros(6) for _ in forces.bodies]
+        for (body, _), twist in zip(forces.bodies, twists):
             mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_XBODY, body, twist, 0)
-            f, arm = forces.twist_forces(d, body, surface, twist)
-            v = twist[3:] + np.cross(twist[:3], arm)
+        for (body, _), (f, v, slopes, normals) in zip(forces.bodies, forces.limit_terms(d, twists, floor)):
             fn, vn = np.linalg.norm(f, axis=1), np.linalg.norm(v, axis=1)
             slope[body] += float(np.sum(fn / np.maximum(vn, floor)))
             force[body] += float(fn.sum())
             power[body] += float(fn @ vn)
-            switch[body] = _switch_limit(m, d, body, *forces.switch_slopes(d, body, surface, twist, floor))
+            switch[body] = _switch_limit(m, d, body, slopes, normals)
     held = slope > 0
     limits = np.full(m.nbody, np.inf)
     limits[held] = 2 * m.body_mass[held] / slope[held]
@@ -311,7 +310,7 @@ def body_limits(m: Any, d: Any, groups: Any, attached: Any) -> tuple[Any, Any]:
 def _switch_limit(m: Any, d: Any, body: int, slopes: Any, normals: Any) -> float:
     """The longest explicit step that keeps a body's faces from switching their force on and off each step (s; inf
     where none can): 2 / the largest eigenvalue of A K, K = sum over its elements of slope n n^T (their slopes
-    across the leading-face switch, `SurfaceForces.switch_slopes`) and A = J M^-1 J^T the mobility of the body's
+    across the leading-face switch, `SurfaceForces.limit_terms`) and A = J M^-1 J^T the mobility of the body's
     origin (m/s per N s): a face grazing the medium, as a plate's top and bottom swimming level, switches its whole
     force on at a normal speed of v_reg, and a body free to move along its normal, the sandfish's 10 g links
     floating in the sand, chatters there unless dt < about 2 m v_reg / F (3 us where MuJoCo's explicit step needs

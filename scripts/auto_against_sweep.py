@@ -1,6 +1,7 @@
-"""`auto` against the runs of a sweep it competes with, timed alternately in one process.
+"""`auto` against the runs of a sweep it competes with, timed alternately (in this process, or each as its own).
 
-    python scripts/auto_against_sweep.py DIR [ROBOT ...]     (DIR: a `finrft bench robots --battery --out DIR`)
+    python scripts/auto_against_sweep.py [--process] DIR [ROBOT ...]
+        (DIR: a `finrft bench robots --battery --out DIR`)
 
 For each robot (default: every one with DIR/NAME.csv), from its sweep: the fastest run within 2 % of the converged
 run (or the default's own error, as `finrft bench robots` says) and the fastest run whose own estimate keeps its
@@ -8,9 +9,15 @@ headline figures within the default limits (the fastest a chooser can know is wi
 code installed now, under the default limits) and those runs, each whole with its companion, in turn, twice, best
 of two: wall and CPU time (`time.process_time`, which other processes on the machine inflate less). Prints a
 Markdown table, one row per robot.
+
+With --process, each run is a whole process, as a user starts it: ``finrft run --scene FILE --json --quiet --set
+sim.method=M --set sim.dt=DT`` (M auto, DT the scene's step, for `auto`), its wall time and its CPU time (the
+child's user and system time), imports, the scene's load and the model's build included.
 """
 
 import csv
+import os
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -55,9 +62,32 @@ def timed(scene: Any, method: str, dt: float) -> tuple[float, float, str]:
     return row.wall_s, time.process_time() - cpu, row.failed or row.chosen
 
 
-def main(folder: str, names: list[str]) -> None:
+def in_process(path: str, method: str, dt: float) -> tuple[float, float, str]:
+    """One whole run (`measure`): its wall and CPU time (s), and what `auto` chose or why it failed."""
+    from finrft.scene import UserScene, load_scene
+    return timed(load_scene(path, cls=UserScene), method, dt)
+
+
+def as_process(path: str, method: str, dt: float) -> tuple[float, float, str]:
+    """One whole run as ``finrft run``: its wall and CPU time (s, the child's user and system time), and what `auto`
+    chose or why it failed."""
+    import json
+    command = [sys.executable, "-m", "finrft", "run", "--scene", path, "--json", "--quiet",
+               "--set", f"sim.method={method}", "--set", f"sim.dt={dt!r}"]
+    before, start = os.times(), time.perf_counter()
+    done = subprocess.run(command, capture_output=True, text=True)
+    wall, after = time.perf_counter() - start, os.times()
+    cpu = (after.children_user - before.children_user) + (after.children_system - before.children_system)
+    if done.returncode != 0:
+        return wall, cpu, f"exit {done.returncode}: {done.stderr.strip().splitlines()[-1:]}"
+    choice = json.loads(done.stdout).get("method_choice")
+    return wall, cpu, f"{choice['method']}, {1e3 * choice['dt']:g} ms" if choice else ""
+
+
+def main(folder: str, names: list[str], process: bool = False) -> None:
     from finrft.experiments.user_model import example
     from finrft.scene import UserScene, load_scene
+    one = as_process if process else in_process
     names = names or [p.stem for p in sorted(Path(folder).glob("*.csv")) if not p.stem.endswith("_all_methods")]
     print("| robot | auto's choice | auto CPU s (wall s) | fastest within 2 % | CPU s (wall s) | auto / it, CPU "
           "(wall) | fastest its estimate passes | CPU s (wall s) | auto / it, CPU (wall) |")
@@ -65,12 +95,13 @@ def main(folder: str, names: list[str]) -> None:
     for name in names:
         with open(Path(folder) / f"{name}.csv") as f:
             chosen = picks(list(csv.DictReader(f)))
-        scene = load_scene(battery_scene(name) if name in BATTERY else example(name), cls=UserScene)
+        path = str(battery_scene(name) if name in BATTERY else example(name))
+        scene = load_scene(path, cls=UserScene)
         runs = [("auto", scene.sim.dt)] + [p for p in dict.fromkeys(chosen.values()) if p is not None]
         best: dict[tuple[str, float], tuple[float, float, str]] = {}
         for _ in range(ROUNDS):
             for method, dt in runs:
-                wall, cpu, said = timed(scene, method, dt)
+                wall, cpu, said = one(path, method, dt)
                 old = best.get((method, dt))
                 best[(method, dt)] = (min(wall, old[0]), min(cpu, old[1]), said) if old else (wall, cpu, said)
         auto = best[("auto", scene.sim.dt)]
@@ -86,4 +117,6 @@ def main(folder: str, names: list[str]) -> None:
 
 
 if __name__ == "__main__":
-    main(sys.argv[1], sys.argv[2:])
+    process = "--process" in sys.argv[1:]
+    args = [a for a in sys.argv[1:] if a != "--process"]
+    main(args[0], args[1:], process)

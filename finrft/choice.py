@@ -696,7 +696,9 @@ class Chooser:
                     ladder[m] = self.screen(ladder[m], finest[m])
                 if ladder[m] is not None:
                     target = min(aim[m], ladder[m])
-                    cheapest = min((o[1] for o in options), default=math.inf)
+                    # a price goes no further than shows its candidate dearer than another priced, or than SAVING of
+                    # the cheapest that met the limits: past that it would not be measured
+                    cheapest = min([o[1] for o in options] + [SAVING * best.cost_s if best else math.inf])
                     cost = self.predicted(m, target, cheapest)
                     if cost != cost:  # NaN: it failed at once, its pilot is all it costs
                         options.append((0.0, 0.0, m, ladder[m]))

@@ -236,11 +236,12 @@ def test_a_pilot_stops_once_it_costs_more_than_it_may(tmp_path):
 
 
 def _searched(errors: dict, prices: dict, limit: float = float("inf"), whole: bool = False,
-              costs: dict | None = None) -> tuple[list, tuple]:
+              costs: dict | None = None, asked: list | None = None) -> tuple[list, tuple]:
     """The candidates a search of the methods of ``errors`` measures, in turn, and the one it chose, where each
     method's error (of its limit) and cost go with its step as ``errors`` and ``prices`` say (s at 2 ms, as 1 / dt;
     once a pilot of it ran, as ``costs`` say where they do), the bodies' explicit limit ``limit`` s; its pilots
-    ``whole`` runs or windows of a tenth of the run."""
+    ``whole`` runs or windows of a tenth of the run. Each cost it asks for goes to ``asked``: (method, step, the
+    cost past which its price may stop, how many candidates it had measured)."""
     from finrft import choice as choosing
     tried = []
 
@@ -249,7 +250,12 @@ def _searched(errors: dict, prices: dict, limit: float = float("inf"), whole: bo
             self.top, self.candidates, self.budget, self.whole = 2e-3, [], float("inf"), whole
             self._runs, self.window, self.duration = {}, 1.0 if whole else 0.1, 1.0
 
-        def predicted(self, method, dt, *_):
+        def predicted(self, method, dt, dearer_than=float("inf")):
+            if asked is not None:
+                asked.append((method, dt, dearer_than, len(tried)))
+            return self.cost(method, dt)
+
+        def cost(self, method, dt):
             ran = any(m == method for m, _ in tried)
             return (costs or {}).get(method, prices[method]) * 2e-3 / dt if ran else prices[method] * 2e-3 / dt
 
@@ -259,7 +265,7 @@ def _searched(errors: dict, prices: dict, limit: float = float("inf"), whole: bo
         def try_step(self, method, dt, *_):
             tried.append((method, dt))
             self._runs[(method, dt)] = self._runs[(method, dt / 2)] = None
-            c = choosing.Candidate(method, dt, cost_s=self.predicted(method, dt), measured=True,
+            c = choosing.Candidate(method, dt, cost_s=self.cost(method, dt), measured=True,
                                    excess=errors[method](dt))
             c.over = ["over"] if c.excess > 1 else []
             self.candidates.append(c)
@@ -299,6 +305,24 @@ def test_newton_is_piloted_before_newton_midpoint_priced_alike_within_the_noise_
     for midpoint, first in ((2.0 / 1.25, "newton"), (2.0 / (1.01 * choosing.NEWTON_FIRST), "newton-midpoint")):
         tried, chosen = _searched(both, {"newton": 2.0, "newton-midpoint": midpoint}, whole=True)
         assert tried == [(first, 2e-3)] and chosen == (first, 2e-3)
+
+
+def test_every_price_stops_where_it_shows_its_candidate_dearer_than_one_priced_or_one_that_met_the_limits():
+    # Each price is bounded by the cheapest option priced before it, and once one candidate met the limits, by what
+    # another may cost and still be measured (SAVING of it): none runs unbounded after a candidate met the limits
+    # (newton-midpoint's, where newton at its step met them and its own ladder ended).
+    from finrft import choice as choosing
+    asked = []
+    order = ("explicit", *choosing.IMPLICIT)  # as a search is given them
+    prices = {"newton": 2.0, "newton-midpoint": 2.2, "explicit": 3.0}
+    tried, chosen = _searched({m: lambda dt: 0.5 for m in order}, {m: prices[m] for m in order}, asked=asked)
+    first = list(dict.fromkeys(a[:3] for a in asked if a[1] == 2e-3 and a[3] == 0))  # before any pilot ran
+    assert sorted(a[0] for a in first) == sorted(order)
+    assert [a[2] for a in first] == [min((prices[b[0]] for b in first[:i]), default=float("inf"))
+                                     for i in range(len(first))]
+    assert tried[0] == ("newton", 2e-3) and chosen == ("newton", 2e-3)
+    after = [a for a in asked if a[3] > 0]  # newton met the limits at 2 s: the others' prices stop past SAVING of it
+    assert after and all(a[2] <= choosing.SAVING * 2.0 * (1 + 1e-9) for a in after)
 
 
 def test_an_explicit_step_is_walked_down_step_by_step():

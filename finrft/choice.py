@@ -120,6 +120,13 @@ STILL = 0.02
 # 0.55 ms of CPU at 2, 1, 0.5 and 0.25 ms; the power of its first halving taken three halvings on put the step at
 # 0.125 ms at 0.31 ms).
 PER_STEP = (0.0, 1.0)
+# A Newton method's price is held within ALIKE times the cost of the other's whole pilot at its step, where that
+# ran (`Chooser.cost`): over the sweep of `finrft bench robots --battery`, newton-midpoint's run with its companion
+# cost 0.63-1.71 times newton's at the same step, while a price times the run's start alone, where one of them may
+# struggle: the sandfish's newton-midpoint at 2 ms, priced at 2.6-2.9 times its cost, calibrated by newton's pilot
+# (`calibration`) at up to 4, was at times ranked above newton's walk down to 0.125 ms, which ran instead (11-14 s
+# of CPU against 3.4-4.3).
+ALIKE = 2.0
 # Before either is piloted, newton-midpoint's pilot at a step is run before newton's only where it is predicted
 # cheaper by more than this factor. The two cost alike (the spoke hexapod's: 0.573 s of CPU a simulated second
 # each at 2 ms), their prices over a tenth of the run differed by up to 1.2 times either way, and which ran first
@@ -456,9 +463,15 @@ class Chooser:
 
     def cost(self, method: str, dt: float) -> float:
         """The predicted time of the whole run with its companion (CPU s, the wall time of an idle machine), from the
-        pilot at dt (NaN: none got far), a price's times its kind's `calibration`."""
+        pilot at dt (NaN: none got far), a price's times its kind's `calibration`, and an implicit method's within
+        `ALIKE` times the other's whole pilot at its step, where that ran."""
         key = (method, dt)
-        rate = self._rates.get(key, math.nan) * (1.0 if key in self._whole else self.calibration(method))
+        rate = self._rates.get(key, math.nan)
+        if key not in self._whole:
+            rate *= self.calibration(method)
+            rival = [self._rates[(m, dt)] for m in IMPLICIT if m != method and (m, dt) in self._whole]
+            if method in IMPLICIT and rival and rate == rate:
+                rate = min(max(rate, rival[0] / ALIKE), rival[0] * ALIKE)
         return rate * self.duration * COMPANION_COST
 
     def calibration(self, method: str) -> float:

@@ -426,6 +426,28 @@ def test_a_price_is_scaled_by_what_its_kinds_whole_pilots_cost_over_their_prices
     assert chooser.cost("newton-midpoint", 2e-3) == pytest.approx(whole(0.21 * math.sqrt(2.2 * 1.8)), rel=1e-12)
 
 
+def test_a_newton_methods_price_is_held_within_alike_times_the_others_whole_pilot_at_its_step(tmp_path):
+    # Newton priced at 0.1 s a simulated second and run whole at 0.12; newton-midpoint priced at 0.8, eight times
+    # newton's price (the sandfish's, over its landing): calibrated, 0.96, but held at ALIKE x 0.12. At 1.5 times
+    # newton's price it stays as calibrated; at another step, or before newton ran whole, as calibrated too.
+    from finrft import choice as choosing
+    chooser = choosing.Chooser(load_scene(_sled(tmp_path), cls=UserScene), ErrorLimits(), None, lambda s: None,
+                               0.6, 0.6, 1)
+    whole = lambda rate: rate * 0.6 * choosing.COMPANION_COST  # noqa: E731  a rate's run with its companion
+    chooser._priced.update({("newton", 2e-3): 0.1, ("newton-midpoint", 2e-3): 0.8, ("newton-midpoint", 1e-3): 0.8})
+    chooser._rates.update({("newton", 2e-3): 0.1, ("newton-midpoint", 2e-3): 0.8, ("newton-midpoint", 1e-3): 0.8})
+    assert chooser.cost("newton-midpoint", 2e-3) == pytest.approx(whole(0.8), rel=1e-12)  # newton not run whole
+    chooser._rates[("newton", 2e-3)] = 0.12
+    chooser._whole.add(("newton", 2e-3))
+    assert chooser.calibration("newton-midpoint") == pytest.approx(1.2)
+    assert chooser.cost("newton-midpoint", 2e-3) == pytest.approx(whole(choosing.ALIKE * 0.12), rel=1e-12)
+    assert chooser.cost("newton-midpoint", 1e-3) == pytest.approx(whole(0.8 * 1.2), rel=1e-12)  # another step
+    chooser._rates[("newton-midpoint", 2e-3)] = chooser._priced[("newton-midpoint", 2e-3)] = 0.15
+    assert chooser.cost("newton-midpoint", 2e-3) == pytest.approx(whole(0.15 * 1.2), rel=1e-12)
+    chooser._rates[("newton-midpoint", 2e-3)] = chooser._priced[("newton-midpoint", 2e-3)] = 0.01
+    assert chooser.cost("newton-midpoint", 2e-3) == pytest.approx(whole(0.12 / choosing.ALIKE), rel=1e-12)
+
+
 def test_an_explicit_price_stops_before_the_half_it_times_where_its_pace_shows_it_dearer(tmp_path, monkeypatch):
     # A fake CPU clock: a pilot set up in 50 s, then every 1 % of its run costs 1 s. Budget 0.1 s for the stretch it
     # times (5 % to 10 %, 5 s at its pace): held EARLY times over from the start, the explicit step's price stops at

@@ -127,12 +127,13 @@ PER_STEP = (0.0, 1.0)
 # (`calibration`) at up to 4, was at times ranked above newton's walk down to 0.125 ms, which ran instead (11-14 s
 # of CPU against 3.4-4.3).
 ALIKE = 2.0
-# Before either is piloted, newton-midpoint's pilot at a step is run before newton's only where it is predicted
-# cheaper by more than this factor. The two cost alike (the spoke hexapod's: 0.573 s of CPU a simulated second
-# each at 2 ms), their prices over a tenth of the run differed by up to 1.2 times either way, and which ran first
-# decided the choice's cost (the paddle sled's 1.3 or 2.5 times the fastest run that passes) and at times the
-# choice (the whegs'): among equals the pilots go in one order, newton's first, the L-stable step whose
-# first-order error each halving halves.
+# Before either has run a pilot through (both known by their prices, and by pilots that failed at their start),
+# newton-midpoint's pilot at a step is run before newton's only where it is predicted cheaper by more than this
+# factor. The two cost alike (the spoke hexapod's: 0.573 s of CPU a simulated second each at 2 ms), their prices
+# over a tenth of the run differed by up to 1.2 times either way, and which ran first decided the choice's cost
+# (the paddle sled's 1.3 or 2.5 times the fastest run that passes) and at times the choice (the whegs', whose
+# Newton methods both chatter at 2 ms, at 1 ms: newton-midpoint's run there costs 1.6 times newton's): among equals
+# the pilots go in one order, newton's first, the L-stable step whose first-order error each halving halves.
 NEWTON_FIRST = 1.5
 # A run's cost against its pilot's: the run itself and its companion at half the step (`convergence.checked`).
 COMPANION_COST = 1 + 1 / FINER
@@ -725,7 +726,7 @@ class Chooser:
             options = [o for o in options if o not in dearer]
             if not options:
                 break
-            fresh = not any(c.method in IMPLICIT for c in self.candidates)
+            fresh = not any(c.method in IMPLICIT and c.measured for c in self.candidates)
             _, cost, method, dt = min(options, key=lambda o: _rank(o, options, fresh))
             # once one met the limits, a pilot stops where it has cost what a cheaper candidate's pilots may
             self.budget = math.inf if best is None else SAVING * best.cost_s * (1 - 1 / COMPANION_COST)
@@ -768,7 +769,7 @@ def _rank(option: tuple[float, float, str, float], options: list[tuple[float, fl
           fresh: bool) -> float:
     """An option's rank in `Chooser.search` (its verdict's predicted cost, its cost, its method, its step): its
     verdict's cost, newton-midpoint's times `NEWTON_FIRST` where newton is an option at the same step and neither
-    implicit method has been piloted (``fresh``)."""
+    implicit method has run a pilot through (``fresh``)."""
     verdict, _, method, dt = option
     tied = fresh and method == "newton-midpoint" and any((o[2], o[3]) == ("newton", dt) for o in options)
     return verdict * NEWTON_FIRST if tied else verdict

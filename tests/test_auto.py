@@ -3,6 +3,7 @@ MuJoCo's explicit step, each says what it chose and why, and the choice's figure
 at 1/8 of its step."""
 
 import json
+import math
 
 import pytest
 
@@ -239,9 +240,9 @@ def _searched(errors: dict, prices: dict, limit: float = float("inf"), whole: bo
               costs: dict | None = None, asked: list | None = None) -> tuple[list, tuple]:
     """The candidates a search of the methods of ``errors`` measures, in turn, and the one it chose, where each
     method's error (of its limit) and cost go with its step as ``errors`` and ``prices`` say (s at 2 ms, as 1 / dt;
-    once a pilot of it ran, as ``costs`` say where they do), the bodies' explicit limit ``limit`` s; its pilots
-    ``whole`` runs or windows of a tenth of the run. Each cost it asks for goes to ``asked``: (method, step, the
-    cost past which its price may stop, how many candidates it had measured)."""
+    once a pilot of it ran, as ``costs`` say where they do; an error None: its pilot fails), the bodies' explicit
+    limit ``limit`` s; its pilots ``whole`` runs or windows of a tenth of the run. Each cost it asks for goes to
+    ``asked``: (method, step, the cost past which its price may stop, how many candidates it had measured)."""
     from finrft import choice as choosing
     tried = []
 
@@ -265,9 +266,11 @@ def _searched(errors: dict, prices: dict, limit: float = float("inf"), whole: bo
         def try_step(self, method, dt, *_):
             tried.append((method, dt))
             self._runs[(method, dt)] = self._runs[(method, dt / 2)] = None
-            c = choosing.Candidate(method, dt, cost_s=self.cost(method, dt), measured=True,
-                                   excess=errors[method](dt))
-            c.over = ["over"] if c.excess > 1 else []
+            excess = errors[method](dt)
+            c = choosing.Candidate(method, dt, cost_s=self.cost(method, dt), measured=excess is not None,
+                                   excess=math.inf if excess is None else excess)
+            c.over = ["over"] if c.measured and c.excess > 1 else []
+            c.failed = "" if c.measured else "chatters"
             self.candidates.append(c)
             return c
     passed = Fake().search(tuple(errors))
@@ -305,6 +308,10 @@ def test_newton_is_piloted_before_newton_midpoint_priced_alike_within_the_noise_
     for midpoint, first in ((2.0 / 1.25, "newton"), (2.0 / (1.01 * choosing.NEWTON_FIRST), "newton-midpoint")):
         tried, chosen = _searched(both, {"newton": 2.0, "newton-midpoint": midpoint}, whole=True)
         assert tried == [(first, 2e-3)] and chosen == (first, 2e-3)
+    # the whegs': both fail at 2 ms (they chatter), both known by their prices alone still, and at 1 ms alike again
+    chatter = {m: lambda dt: None if dt > 1.5e-3 else 0.5 for m in both}
+    tried, chosen = _searched(chatter, {"newton": 2.0, "newton-midpoint": 2.0 / 1.25}, whole=True)
+    assert tried == [("newton", 2e-3), ("newton-midpoint", 2e-3), ("newton", 1e-3)] and chosen == ("newton", 1e-3)
 
 
 def test_every_price_stops_where_it_shows_its_candidate_dearer_than_one_priced_or_one_that_met_the_limits():
@@ -340,8 +347,6 @@ def test_a_step_is_priced_by_the_cost_per_step_its_method_showed_at_two_steps(tm
     # Whole pilots at 2 and 1 ms whose cost per step goes as the square root of the step (Newton's iterations fewer
     # at shorter steps): the step at 0.5 ms costs c sqrt(0.5 ms) per step, not the 1 ms step's per step; one at
     # 0.25 ms no less (a step costs at least one iteration: the power is taken one halving on, no further).
-    import math
-
     from finrft import choice as choosing
     chooser = choosing.Chooser(load_scene(_sled(tmp_path), cls=UserScene), ErrorLimits(), None, lambda s: None,
                                0.6, 0.6, 1)
@@ -407,8 +412,6 @@ def test_a_price_is_scaled_by_what_its_kinds_whole_pilots_cost_over_their_prices
     # costs less than the rest); newton-midpoint, priced alike at 0.21, is then predicted at 0.21 x 2.2, not 0.21.
     # A second pair at 1.8 times: the geometric mean of the two, 1.99. The explicit step's price, of another kind
     # (no Newton iterations to follow the gait), stays as priced; a whole pilot's cost is its own.
-    import math
-
     from finrft import choice as choosing
     chooser = choosing.Chooser(load_scene(_sled(tmp_path), cls=UserScene), ErrorLimits(), None, lambda s: None,
                                0.6, 0.6, 1)
@@ -565,8 +568,6 @@ def test_the_explicit_limit_of_a_box_dragged_through_the_sand_is_2_m_v_over_its_
     # force, li2013's (alpha_x, alpha_z)(pi/2, 0) |z| on each element. A rate-independent force turns with the
     # velocity, so its slope across it is |F| / v: dt < 2 m v / |F|. At rest its front and back faces graze the
     # sand, and a speed of v_reg along x switches either's whole force on: dt < 2 m v_reg / (2 |F|).
-    import math
-
     from finrft.choice import explicit_limit
     from finrft.laws import li2013
     m, d, attached = _box("1 0 0")
@@ -584,8 +585,6 @@ def test_the_explicit_limit_of_a_box_free_to_rise_or_sink_is_its_faces_switch():
     # explicit step longer than 2 m v_reg / (their sum) lets the box's vertical velocity flip each step, and the
     # deeper face pushes harder than the shallower: the box rises (the sandfish's 10 g links, free to, rose and swam
     # 25-27 % slow at explicit steps of 8 us to 0.25 ms, their cost of transport under half the converged one).
-    import math
-
     from finrft.choice import explicit_limit
     from finrft.laws import li2013
     m, d, attached = _box("0 0 1")
@@ -600,7 +599,6 @@ def test_the_explicit_limit_over_a_run_ignores_a_body_creeping_and_one_reversal_
     # each takes the same rate-independent force F, so the creeping one's limit at one instant is 2 m 2 mm/s / F,
     # the run's limit the dragged box's, 2 m v / F: at its slowest stretch, its ramp-in at 30 mm/s, not at one
     # instant's reversal (25 mm/s) inside its gait at 0.1 m/s.
-    import math
 
     import mujoco
 

@@ -407,26 +407,39 @@ def test_a_price_stops_where_it_shows_its_candidate_dearer_and_goes_on_where_it_
     assert ("explicit", 1e-5) not in chooser._bounds
 
 
+def _priced(tmp_path, prices: dict):
+    """A chooser of the sled's 0.6 s run whose candidates have been priced at ``prices`` (CPU s a simulated second,
+    by (method, dt)), none run whole yet."""
+    from finrft import choice as choosing
+    chooser = choosing.Chooser(load_scene(_sled(tmp_path), cls=UserScene), ErrorLimits(), None, lambda s: None,
+                               0.6, 0.6, 1)
+    chooser._priced.update(prices)
+    chooser._rates.update(prices)
+    return chooser
+
+
+def _whole(rate: float) -> float:
+    """A rate's run of the sled's 0.6 s with its companion (CPU s)."""
+    from finrft import choice as choosing
+    return rate * 0.6 * choosing.COMPANION_COST
+
+
 def test_a_price_is_scaled_by_what_its_kinds_whole_pilots_cost_over_their_prices(tmp_path):
     # Newton priced at 0.2 s a simulated second, run whole at 0.44 (2.2 times: the eel's start, its gait ramping in,
     # costs less than the rest); newton-midpoint, priced alike at 0.21, is then predicted at 0.21 x 2.2, not 0.21.
     # A second pair at 1.8 times: the geometric mean of the two, 1.99. The explicit step's price, of another kind
     # (no Newton iterations to follow the gait), stays as priced; a whole pilot's cost is its own.
-    from finrft import choice as choosing
-    chooser = choosing.Chooser(load_scene(_sled(tmp_path), cls=UserScene), ErrorLimits(), None, lambda s: None,
-                               0.6, 0.6, 1)
-    whole = lambda rate: rate * 0.6 * choosing.COMPANION_COST  # noqa: E731  a rate's run with its companion
-    chooser._priced.update({("newton", 2e-3): 0.2, ("newton-midpoint", 2e-3): 0.21, ("explicit", 1e-4): 3.0})
-    chooser._rates.update({("newton", 2e-3): 0.44, ("newton-midpoint", 2e-3): 0.21, ("explicit", 1e-4): 3.0})
+    chooser = _priced(tmp_path, {("newton", 2e-3): 0.2, ("newton-midpoint", 2e-3): 0.21, ("explicit", 1e-4): 3.0})
+    chooser._rates[("newton", 2e-3)] = 0.44
     chooser._whole.add(("newton", 2e-3))  # ran whole
-    assert chooser.cost("newton", 2e-3) == pytest.approx(whole(0.44), rel=1e-12)
-    assert chooser.cost("newton-midpoint", 2e-3) == pytest.approx(whole(0.21 * 2.2), rel=1e-12)
-    assert chooser.cost("explicit", 1e-4) == pytest.approx(whole(3.0), rel=1e-12)
+    assert chooser.cost("newton", 2e-3) == pytest.approx(_whole(0.44), rel=1e-12)
+    assert chooser.cost("newton-midpoint", 2e-3) == pytest.approx(_whole(0.21 * 2.2), rel=1e-12)
+    assert chooser.cost("explicit", 1e-4) == pytest.approx(_whole(3.0), rel=1e-12)
     chooser._priced[("newton", 1e-3)] = 0.5
     chooser._rates[("newton", 1e-3)] = 0.9
-    assert chooser.cost("newton-midpoint", 2e-3) == pytest.approx(whole(0.21 * 2.2), rel=1e-12)  # not run whole
+    assert chooser.cost("newton-midpoint", 2e-3) == pytest.approx(_whole(0.21 * 2.2), rel=1e-12)  # not run whole
     chooser._whole.add(("newton", 1e-3))
-    assert chooser.cost("newton-midpoint", 2e-3) == pytest.approx(whole(0.21 * math.sqrt(2.2 * 1.8)), rel=1e-12)
+    assert chooser.cost("newton-midpoint", 2e-3) == pytest.approx(_whole(0.21 * math.sqrt(2.2 * 1.8)), rel=1e-12)
 
 
 def test_a_newton_methods_price_is_held_within_alike_times_the_others_whole_pilot_at_its_step(tmp_path):
@@ -434,21 +447,17 @@ def test_a_newton_methods_price_is_held_within_alike_times_the_others_whole_pilo
     # newton's price (the sandfish's, over its landing): calibrated, 0.96, but held at ALIKE x 0.12. At 1.5 times
     # newton's price it stays as calibrated; at another step, or before newton ran whole, as calibrated too.
     from finrft import choice as choosing
-    chooser = choosing.Chooser(load_scene(_sled(tmp_path), cls=UserScene), ErrorLimits(), None, lambda s: None,
-                               0.6, 0.6, 1)
-    whole = lambda rate: rate * 0.6 * choosing.COMPANION_COST  # noqa: E731  a rate's run with its companion
-    chooser._priced.update({("newton", 2e-3): 0.1, ("newton-midpoint", 2e-3): 0.8, ("newton-midpoint", 1e-3): 0.8})
-    chooser._rates.update({("newton", 2e-3): 0.1, ("newton-midpoint", 2e-3): 0.8, ("newton-midpoint", 1e-3): 0.8})
-    assert chooser.cost("newton-midpoint", 2e-3) == pytest.approx(whole(0.8), rel=1e-12)  # newton not run whole
+    chooser = _priced(tmp_path, {("newton", 2e-3): 0.1, ("newton-midpoint", 2e-3): 0.8, ("newton-midpoint", 1e-3): 0.8})
+    assert chooser.cost("newton-midpoint", 2e-3) == pytest.approx(_whole(0.8), rel=1e-12)  # newton not run whole
     chooser._rates[("newton", 2e-3)] = 0.12
     chooser._whole.add(("newton", 2e-3))
     assert chooser.calibration("newton-midpoint") == pytest.approx(1.2)
-    assert chooser.cost("newton-midpoint", 2e-3) == pytest.approx(whole(choosing.ALIKE * 0.12), rel=1e-12)
-    assert chooser.cost("newton-midpoint", 1e-3) == pytest.approx(whole(0.8 * 1.2), rel=1e-12)  # another step
+    assert chooser.cost("newton-midpoint", 2e-3) == pytest.approx(_whole(choosing.ALIKE * 0.12), rel=1e-12)
+    assert chooser.cost("newton-midpoint", 1e-3) == pytest.approx(_whole(0.8 * 1.2), rel=1e-12)  # another step
     chooser._rates[("newton-midpoint", 2e-3)] = chooser._priced[("newton-midpoint", 2e-3)] = 0.15
-    assert chooser.cost("newton-midpoint", 2e-3) == pytest.approx(whole(0.15 * 1.2), rel=1e-12)
+    assert chooser.cost("newton-midpoint", 2e-3) == pytest.approx(_whole(0.15 * 1.2), rel=1e-12)
     chooser._rates[("newton-midpoint", 2e-3)] = chooser._priced[("newton-midpoint", 2e-3)] = 0.01
-    assert chooser.cost("newton-midpoint", 2e-3) == pytest.approx(whole(0.12 / choosing.ALIKE), rel=1e-12)
+    assert chooser.cost("newton-midpoint", 2e-3) == pytest.approx(_whole(0.12 / choosing.ALIKE), rel=1e-12)
 
 
 def test_an_explicit_price_stops_before_the_half_it_times_where_its_pace_shows_it_dearer(tmp_path, monkeypatch):

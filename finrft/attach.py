@@ -319,7 +319,7 @@ class SurfaceForces:
         parts, near, into = [], [], []
         for (_, surface), (_, normal, velocity, depth) in zip(self.bodies, moving):
             along = np.einsum("ij,ij->i", normal, velocity)
-            # the others' slopes are below 1e-6 of theirs
+            # those near the switch alone: the others' slopes are below 1e-6 of theirs
             close = (np.abs(along) < NEAR_SWITCH * width) & (depth > 0)
             leading = velocity[close] + (FULL_RAMP * width - along[close])[:, None] * normal[close]
             parts += [(normal, velocity, depth, surface.area),

@@ -123,9 +123,9 @@ PER_STEP = (0.0, 1.0)
 # A Newton method's price is held within ALIKE times the cost of the other's whole pilot at its step, where that
 # ran (`Chooser.cost`): over the sweep of `finrft bench robots --battery`, newton-midpoint's run with its companion
 # cost 0.63-1.71 times newton's at the same step, while a price times the run's start alone, where one of them may
-# struggle: the sandfish's newton-midpoint at 2 ms, priced at 2.6-2.9 times its cost, calibrated by newton's pilot
-# (`calibration`) at up to 4, was at times ranked above newton's walk down to 0.125 ms, which ran instead (11-14 s
-# of CPU against 3.4-4.3).
+# struggle: the sandfish's newton-midpoint at 2 ms, priced over its landing at 2.6-2.9 times its cost and scaled by
+# newton's whole pilot over its price (`calibration`, 0.6-1.4 between runs) to up to 4 times, was at times ranked
+# above newton's walk down to 0.125 ms, which ran instead (11-14 s of CPU against 3.4-4.3).
 ALIKE = 2.0
 # Before either has run a pilot through (both known by their prices, and by pilots that failed at their start),
 # newton-midpoint's pilot at a step is run before newton's only where it is predicted cheaper by more than this
@@ -726,7 +726,7 @@ class Chooser:
             options = [o for o in options if o not in dearer]
             if not options:
                 break
-            fresh = not any(c.method in IMPLICIT and c.measured for c in self.candidates)
+            fresh = not any(m in IMPLICIT for m, _ in self._whole)
             _, cost, method, dt = min(options, key=lambda o: _rank(o, options, fresh))
             # once one met the limits, a pilot stops where it has cost what a cheaper candidate's pilots may
             self.budget = math.inf if best is None else SAVING * best.cost_s * (1 - 1 / COMPANION_COST)

@@ -249,6 +249,7 @@ def _searched(errors: dict, prices: dict, limit: float = float("inf"), whole: bo
     class Fake(choosing.Chooser):
         def __init__(self):
             self.top, self.candidates, self.budget, self.whole = 2e-3, [], float("inf"), whole
+            self._whole = set()  # the pilots that ran through
             self._runs, self.window, self.duration = {}, 1.0 if whole else 0.1, 1.0
 
         def predicted(self, method, dt, dearer_than=float("inf")):
@@ -271,6 +272,8 @@ def _searched(errors: dict, prices: dict, limit: float = float("inf"), whole: bo
                                    excess=math.inf if excess is None else excess)
             c.over = ["over"] if c.measured and c.excess > 1 else []
             c.failed = "" if c.measured else "chatters"
+            if c.measured:
+                self._whole.add((method, dt))
             self.candidates.append(c)
             return c
     passed = Fake().search(tuple(errors))

@@ -79,7 +79,7 @@ def as_process(path: str, method: str, dt: float) -> tuple[float, float, str]:
     wall, after = time.perf_counter() - start, os.times()
     cpu = (after.children_user - before.children_user) + (after.children_system - before.children_system)
     if done.returncode != 0:
-        return wall, cpu, f"exit {done.returncode}: {done.stderr.strip().splitlines()[-1:]}"
+        return wall, cpu, f"exit {done.returncode}: {(done.stderr.strip().splitlines() or [''])[-1]}"
     choice = json.loads(done.stdout).get("method_choice")
     return wall, cpu, f"{choice['method']}, {1e3 * choice['dt']:g} ms" if choice else ""
 

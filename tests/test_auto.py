@@ -35,6 +35,17 @@ def _sled(tmp_path) -> str:
     return str(tmp_path / "sled.toml")
 
 
+def _chooser(tmp_path, prices: dict | None = None):
+    """A chooser of the sled's 0.6 s run with no pilot of its own, its candidates priced at ``prices`` (CPU s a
+    simulated second, by (method, dt)), none run whole yet."""
+    from finrft import choice as choosing
+    chooser = choosing.Chooser(load_scene(_sled(tmp_path), cls=UserScene), ErrorLimits(), None, lambda s: None,
+                               0.6, 0.6, 1)
+    chooser._priced.update(prices or {})
+    chooser._rates.update(prices or {})
+    return chooser
+
+
 def _converged(run, limits: ErrorLimits) -> None:
     """The run's bounded figures are within their limits of the chosen method at 1/8 of the chosen step."""
     choice = run.method_choice
@@ -351,8 +362,7 @@ def test_a_step_is_priced_by_the_cost_per_step_its_method_showed_at_two_steps(tm
     # at shorter steps): the step at 0.5 ms costs c sqrt(0.5 ms) per step, not the 1 ms step's per step; one at
     # 0.25 ms no less (a step costs at least one iteration: the power is taken one halving on, no further).
     from finrft import choice as choosing
-    chooser = choosing.Chooser(load_scene(_sled(tmp_path), cls=UserScene), ErrorLimits(), None, lambda s: None,
-                               0.6, 0.6, 1)
+    chooser = _chooser(tmp_path)
     per_step = lambda h: 1e-4 * math.sqrt(h)  # noqa: E731  CPU s a step
     for h in (2e-3, 1e-3):
         chooser._rates[("newton", h)] = per_step(h) / h
@@ -372,9 +382,7 @@ def test_a_failed_pilot_counts_by_its_price_or_not_at_all_in_predicting_other_st
     # from the price at 2 ms, per step alike (4 times its rate), not from the failed pilot at 1 ms (twice 1.2).
     from finrft import choice as choosing
     from finrft.errors import SimulationUnstable
-    chooser = choosing.Chooser(load_scene(_sled(tmp_path), cls=UserScene), ErrorLimits(), None, lambda s: None,
-                               0.6, 0.6, 1)
-    chooser._priced[("explicit", 2e-3)] = chooser._rates[("explicit", 2e-3)] = 1.0
+    chooser = _chooser(tmp_path, {("explicit", 2e-3): 1.0})
     rates = {2e-3: 0.6, 1e-3: 1.2}
     chooser._timed = lambda scene, span, sample=False, watch=None: (SimulationUnstable("it chatters"),
                                                                     rates[scene.sim.dt])
@@ -390,8 +398,7 @@ def test_a_price_stops_where_it_shows_its_candidate_dearer_and_goes_on_where_it_
     # (its cost then a bound below that, never a failure), and is taken further, from its start again, once the
     # other costs more.
     from finrft import choice as choosing
-    chooser = choosing.Chooser(load_scene(_sled(tmp_path), cls=UserScene), ErrorLimits(), None, lambda s: None,
-                               0.6, 0.6, 1)
+    chooser = _chooser(tmp_path)
     spent = []
 
     def timed(scene, span, share=1.0, skip=0.0, sample=False, watch=None, early=False):  # 40 s a second, timed
@@ -410,17 +417,6 @@ def test_a_price_stops_where_it_shows_its_candidate_dearer_and_goes_on_where_it_
     assert ("explicit", 1e-5) not in chooser._bounds
 
 
-def _priced(tmp_path, prices: dict):
-    """A chooser of the sled's 0.6 s run whose candidates have been priced at ``prices`` (CPU s a simulated second,
-    by (method, dt)), none run whole yet."""
-    from finrft import choice as choosing
-    chooser = choosing.Chooser(load_scene(_sled(tmp_path), cls=UserScene), ErrorLimits(), None, lambda s: None,
-                               0.6, 0.6, 1)
-    chooser._priced.update(prices)
-    chooser._rates.update(prices)
-    return chooser
-
-
 def _whole(rate: float) -> float:
     """A rate's run of the sled's 0.6 s with its companion (CPU s)."""
     from finrft import choice as choosing
@@ -432,7 +428,7 @@ def test_a_price_is_scaled_by_what_its_kinds_whole_pilots_cost_over_their_prices
     # costs less than the rest); newton-midpoint, priced alike at 0.21, is then predicted at 0.21 x 2.2, not 0.21.
     # A second pair at 1.8 times: the geometric mean of the two, 1.99. The explicit step's price, of another kind
     # (no Newton iterations to follow the gait), stays as priced; a whole pilot's cost is its own.
-    chooser = _priced(tmp_path, {("newton", 2e-3): 0.2, ("newton-midpoint", 2e-3): 0.21, ("explicit", 1e-4): 3.0})
+    chooser = _chooser(tmp_path, {("newton", 2e-3): 0.2, ("newton-midpoint", 2e-3): 0.21, ("explicit", 1e-4): 3.0})
     chooser._rates[("newton", 2e-3)] = 0.44
     chooser._whole.add(("newton", 2e-3))  # ran whole
     assert chooser.cost("newton", 2e-3) == pytest.approx(_whole(0.44), rel=1e-12)
@@ -450,7 +446,8 @@ def test_a_newton_methods_price_is_held_within_alike_times_the_others_whole_pilo
     # newton's price (the sandfish's, over its landing): calibrated, 0.96, but held at ALIKE x 0.12. At 1.5 times
     # newton's price it stays as calibrated; at another step, or before newton ran whole, as calibrated too.
     from finrft import choice as choosing
-    chooser = _priced(tmp_path, {("newton", 2e-3): 0.1, ("newton-midpoint", 2e-3): 0.8, ("newton-midpoint", 1e-3): 0.8})
+    chooser = _chooser(tmp_path, {("newton", 2e-3): 0.1, ("newton-midpoint", 2e-3): 0.8,
+                                  ("newton-midpoint", 1e-3): 0.8})
     assert chooser.cost("newton-midpoint", 2e-3) == pytest.approx(_whole(0.8), rel=1e-12)  # newton not run whole
     chooser._rates[("newton", 2e-3)] = 0.12
     chooser._whole.add(("newton", 2e-3))
@@ -470,8 +467,7 @@ def test_an_explicit_price_stops_before_the_half_it_times_where_its_pace_shows_i
     # several times its gait) runs to its timed half, and stops there at its budget. With a budget of 2 s, 8 s at
     # EARLY times, its pace runs it to its timed half: the set-up is not its pace.
     from finrft import choice as choosing
-    chooser = choosing.Chooser(load_scene(_sled(tmp_path), cls=UserScene), ErrorLimits(), None, lambda s: None,
-                               0.6, 0.6, 1)
+    chooser = _chooser(tmp_path)
     now = [0.0]
     monkeypatch.setattr(choosing.time, "process_time", lambda: now[0])
     reached = []
@@ -542,8 +538,7 @@ def test_a_candidate_whose_pilot_at_half_the_step_stopped_misses_and_that_pilot_
     from types import SimpleNamespace
 
     from finrft import choice as choosing
-    chooser = choosing.Chooser(load_scene(_sled(tmp_path), cls=UserScene), ErrorLimits(), None, lambda s: None,
-                               0.6, 0.6, 1)
+    chooser = _chooser(tmp_path)
     runs = []
 
     def timed(scene, span, share=1.0, skip=0.0, sample=False, watch=None):

@@ -470,9 +470,9 @@ class Chooser:
         rate = self._rates.get(key, math.nan)
         if key not in self._whole:
             rate *= self.calibration(method)
-            rival = [self._rates[(m, dt)] for m in IMPLICIT if m != method and (m, dt) in self._whole]
-            if method in IMPLICIT and rival and rate == rate:
-                rate = min(max(rate, rival[0] / ALIKE), rival[0] * ALIKE)
+            rival = next((self._rates[(m, dt)] for m in IMPLICIT if m != method and (m, dt) in self._whole), None)
+            if method in IMPLICIT and rival is not None and rate == rate:
+                rate = min(max(rate, rival / ALIKE), rival * ALIKE)
         return rate * self.duration * COMPANION_COST
 
     def calibration(self, method: str) -> float:

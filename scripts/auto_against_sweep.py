@@ -1,6 +1,6 @@
 """`auto` against the runs of a sweep it competes with, timed alternately (in this process, or each as its own).
 
-    python scripts/auto_against_sweep.py [--process] DIR [ROBOT ...]
+    python scripts/auto_against_sweep.py [--process | --bound] DIR [ROBOT ...]
         (DIR: a `finrft bench robots --battery --out DIR`)
 
 For each robot (default: every one with DIR/NAME.csv), from its sweep: the fastest run within 2 % of the converged
@@ -9,6 +9,9 @@ headline figures within the default limits (the fastest a chooser can know is wi
 code installed now, under the default limits) and those runs, each whole with its companion, in turn, twice, best
 of two: wall and CPU time (`time.process_time`, which other processes on the machine inflate less). Prints a
 Markdown table, one row per robot.
+
+With --bound, no run of `auto`: the least a chooser that verifies its choice by pilots would spend, from the sweep
+alone (`bound`), in one process and as whole processes (the fastest run as a process, and the pilots added to it).
 
 With --process, each run is a whole process, as a user starts it: ``finrft run --scene FILE --json --quiet --set
 sim.method=M --set sim.dt=DT`` (M auto, DT the scene's step, for `auto`), its wall time and its CPU time (the
@@ -49,10 +52,43 @@ def picks(rows: list[dict[str, str]]) -> dict[str, tuple[str, float] | None]:
         error = _number(r["headline_error"])
         return error is not None and error <= target
 
-    def passes(r: dict[str, str]) -> bool:
-        estimates = [_number(r[f"{k}_estimate"]) for k in HEADLINE]
-        return any(e is not None for e in estimates) and all(e is None or e <= ACCURACY for e in estimates)
     return {"within 2 %": fastest(within), "its estimate passes": fastest(passes)}
+
+
+def passes(r: dict[str, str]) -> bool:
+    """A swept run whose own estimate keeps every headline figure within ACCURACY of it."""
+    estimates = [_number(r[f"{k}_estimate"]) for k in HEADLINE]
+    return any(e is not None for e in estimates) and all(e is None or e <= ACCURACY for e in estimates)
+
+
+def bound(rows: list[dict[str, str]], scene: Any) -> tuple[float, float, list[str]]:
+    """The least a chooser that verifies its choice by pilots would spend (s), the fastest run whose own estimate
+    passes (F, s, with its companion) and the candidates it would have to rule out first, from a robot's sweep: a
+    chooser that knows every run's cost, not its error, and, as `auto`, measures a candidate only where it would cost
+    less than SAVING of F. It makes F's run and its companion, and for each Newton candidate on `auto`'s ladder (at
+    most START x sim.dt) that would cost less and misses the limits by its own estimate, its pilot and its pilot at
+    half the step as far as the first instant a figure can tell them apart (the settle and one period of the gait,
+    or the settle alone: `choice.period`), each pilot counted once, at its sweep's cost. The explicit step and the
+    runs that failed (chatter) are left out, as if ruled out for nothing: a bound below."""
+    from finrft.choice import FINER, IMPLICIT, SAVING, START, period
+    swept = [r for r in rows if r["method"] != "auto" and not r["failed"]]
+    fastest = min((r for r in swept if passes(r)), key=lambda r: float(r["wall_s"]))
+    whole = float(fastest["wall_s"])
+    q = min(1.0, (scene.sim.settle + period(scene)) / scene.sim.duration)
+    key = (fastest["method"], float(fastest["dt_s"]))
+    companion = float(fastest["companion_wall_s"])
+    spent = {key: whole - companion, (key[0], key[1] * FINER): companion}
+    ruled: list[str] = []
+    for r in swept:
+        dt = float(r["dt_s"])
+        if (r["method"] not in IMPLICIT or passes(r) or dt > START * scene.sim.dt * (1 + 1e-9)
+                or not float(r["wall_s"]) < SAVING * whole):
+            continue
+        ruled.append(f"{r['method']}, {1e3 * dt:g} ms")
+        half = float(r["companion_wall_s"])
+        for pilot, cost in (((r["method"], dt), float(r["wall_s"]) - half), ((r["method"], dt * FINER), half)):
+            spent[pilot] = max(spent.get(pilot, 0.0), q * cost)
+    return sum(spent.values()), whole, ruled
 
 
 def timed(scene: Any, method: str, dt: float) -> tuple[float, float, str]:
@@ -84,11 +120,30 @@ def as_process(path: str, method: str, dt: float) -> tuple[float, float, str]:
     return wall, cpu, f"{choice['method']}, {1e3 * choice['dt']:g} ms" if choice else ""
 
 
+def bounds(folder: str, names: list[str]) -> None:
+    """The `bound` of each robot as a Markdown table, in one process and as whole processes: the fastest run as a
+    process (its CPU time, the best of two) and the pilots the bound adds to it, at the sweep's cost."""
+    from finrft.experiments.user_model import example
+    from finrft.scene import UserScene, load_scene
+    print("| robot | fastest its estimate passes (s) | to rule out first | bound (s) | bound / it, one process | "
+          "it as a process (CPU s) | bound / it, whole processes |")
+    print("|---|---:|---|---:|---:|---:|---:|")
+    for name in names:
+        with open(Path(folder) / f"{name}.csv") as f:
+            rows = list(csv.DictReader(f))
+        path = str(battery_scene(name) if name in BATTERY else example(name))
+        least, whole, ruled = bound(rows, load_scene(path, cls=UserScene))
+        pick = picks(rows)["its estimate passes"]
+        process = min(as_process(path, *pick)[1] for _ in range(ROUNDS))
+        print(f"| {name} | {pick[0]}, {1e3 * pick[1]:g} ms ({whole:.2f}) | {', '.join(ruled) or 'none'} | "
+              f"{least:.2f} | {least / whole:.2f} | {process:.2f} | {(process + least - whole) / process:.2f} |",
+              flush=True)
+
+
 def main(folder: str, names: list[str], process: bool = False) -> None:
     from finrft.experiments.user_model import example
     from finrft.scene import UserScene, load_scene
     one = as_process if process else in_process
-    names = names or [p.stem for p in sorted(Path(folder).glob("*.csv")) if not p.stem.endswith("_all_methods")]
     print("| robot | auto's choice | auto CPU s (wall s) | fastest within 2 % | CPU s (wall s) | auto / it, CPU "
           "(wall) | fastest its estimate passes | CPU s (wall s) | auto / it, CPU (wall) |")
     print("|---|---|---:|---|---:|---:|---|---:|---:|")
@@ -117,6 +172,9 @@ def main(folder: str, names: list[str], process: bool = False) -> None:
 
 
 if __name__ == "__main__":
-    process = "--process" in sys.argv[1:]
-    args = [a for a in sys.argv[1:] if a != "--process"]
-    main(args[0], args[1:], process)
+    args = [a for a in sys.argv[1:] if a not in ("--process", "--bound")]
+    robots = args[1:] or [p.stem for p in sorted(Path(args[0]).glob("*.csv")) if not p.stem.endswith("_all_methods")]
+    if "--bound" in sys.argv[1:]:
+        bounds(args[0], robots)
+    else:
+        main(args[0], robots, "--process" in sys.argv[1:])

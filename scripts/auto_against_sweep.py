@@ -39,7 +39,7 @@ def _number(text: str) -> float | None:
 def picks(rows: list[dict[str, str]]) -> dict[str, tuple[str, float] | None]:
     """The sweep's fastest run within the accuracy (the default's own error where that is larger) and the fastest
     its own estimate passes (every headline estimate within ACCURACY of its figure), as (method, dt)."""
-    swept = [r for r in rows if r["method"] != "auto" and not r["failed"]]
+    swept = _swept(rows)
     default = next(r for r in rows if r["default"] == "1")
     target = max(ACCURACY, _number(default["headline_error"]) or 0.0)
 
@@ -55,29 +55,33 @@ def picks(rows: list[dict[str, str]]) -> dict[str, tuple[str, float] | None]:
     return {"within 2 %": fastest(within), "its estimate passes": fastest(passes)}
 
 
+def _swept(rows: list[dict[str, str]]) -> list[dict[str, str]]:
+    """A sweep's runs of a fixed method that ran through."""
+    return [r for r in rows if r["method"] != "auto" and not r["failed"]]
+
+
 def passes(r: dict[str, str]) -> bool:
     """A swept run whose own estimate keeps every headline figure within ACCURACY of it."""
     estimates = [_number(r[f"{k}_estimate"]) for k in HEADLINE]
     return any(e is not None for e in estimates) and all(e is None or e <= ACCURACY for e in estimates)
 
 
-def bound(rows: list[dict[str, str]], scene: Any) -> tuple[float, float, list[str]]:
+def bound(rows: list[dict[str, str]], scene: Any, pick: tuple[str, float]) -> tuple[float, float, list[str]]:
     """The least a chooser that verifies its choice by pilots would spend (s), the fastest run whose own estimate
-    passes (F, s, with its companion) and the candidates it would have to rule out first, from a robot's sweep: a
-    chooser that knows every run's cost, not its error, and, as `auto`, measures a candidate only where it would cost
-    less than SAVING of F. It makes F's run and its companion, and for each Newton candidate on `auto`'s ladder (at
-    most START x sim.dt) that would cost less and misses the limits by its own estimate, its pilot and its pilot at
-    half the step as far as the first instant a figure can tell them apart (the settle and one period of the gait,
-    or the settle alone: `choice.period`), each pilot counted once, at its sweep's cost. The explicit step and the
-    runs that failed (chatter) are left out, as if ruled out for nothing: a bound below."""
+    passes (F, ``pick``: its cost s, with its companion) and the candidates it would have to rule out first, from a
+    robot's sweep: a chooser that knows every run's cost, not its error, and, as `auto`, measures a candidate only
+    where it would cost less than SAVING of F. It makes F's run and its companion, and for each Newton candidate on
+    `auto`'s ladder (at most START x sim.dt) that would cost less and misses the limits by its own estimate, its
+    pilot and its pilot at half the step as far as the first instant a figure can tell them apart (the settle and
+    one period of the gait, or the settle alone: `choice.period`), each pilot counted once, at its sweep's cost. The
+    explicit step and the runs that failed (chatter) are left out, as if ruled out for nothing: a bound below."""
     from finrft.choice import FINER, IMPLICIT, SAVING, START, period
-    swept = [r for r in rows if r["method"] != "auto" and not r["failed"]]
-    fastest = min((r for r in swept if passes(r)), key=lambda r: float(r["wall_s"]))
+    swept = _swept(rows)
+    fastest = next(r for r in swept if (r["method"], float(r["dt_s"])) == pick)
     whole = float(fastest["wall_s"])
     q = min(1.0, (scene.sim.settle + period(scene)) / scene.sim.duration)
-    key = (fastest["method"], float(fastest["dt_s"]))
     companion = float(fastest["companion_wall_s"])
-    spent = {key: whole - companion, (key[0], key[1] * FINER): companion}
+    spent = {pick: whole - companion, (pick[0], pick[1] * FINER): companion}
     ruled: list[str] = []
     for r in swept:
         dt = float(r["dt_s"])
@@ -132,8 +136,8 @@ def bounds(folder: str, names: list[str]) -> None:
         with open(Path(folder) / f"{name}.csv") as f:
             rows = list(csv.DictReader(f))
         path = str(battery_scene(name) if name in BATTERY else example(name))
-        least, whole, ruled = bound(rows, load_scene(path, cls=UserScene))
         pick = picks(rows)["its estimate passes"]
+        least, whole, ruled = bound(rows, load_scene(path, cls=UserScene), pick)
         process = min(as_process(path, *pick)[1] for _ in range(ROUNDS))
         print(f"| {name} | {pick[0]}, {1e3 * pick[1]:g} ms ({whole:.2f}) | {', '.join(ruled) or 'none'} | "
               f"{least:.2f} | {least / whole:.2f} | {process:.2f} | {(process + least - whole) / process:.2f} |",
